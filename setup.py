@@ -1,0 +1,36 @@
+"""ament_python package dynenv_ros: the simulator core, its ROS 2 nodes, the agent (policy_node) and benchmarks."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "dynenv_ros"
+
+# Nodes started with `ros2 run dynenv_ros <name>` (colcon installs them under lib/dynenv_ros, see setup.cfg)
+# and, in the project venv, as commands of the same name.
+NODES = [
+    "selfcheck_talker = dynenv_ros.nodes.selfcheck_talker:main",
+    "selfcheck_listener = dynenv_ros.nodes.selfcheck_listener:main",
+]
+TOOLS = [
+    "dynenv-run = dynenv_ros.main_job:main",
+    "dynenv-bench = benchmarks.__main__:main",
+]
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=["dynenv_ros*", "policy_node*", "benchmarks*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="dynenv_ros maintainers",
+    maintainer_email="maintainers@dynenv-ros.org",
+    description="ROS 2 emulation of a robot vision pipeline with realistic perception failures, for multi-agent RL.",
+    license="Apache-2.0",
+    python_requires=">=3.11",
+    entry_points={"console_scripts": NODES + TOOLS},
+)
