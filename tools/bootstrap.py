@@ -121,7 +121,9 @@ def install_dependencies(state: dict[str, str]) -> bool:
 
 
 def install_package(state: dict[str, str]) -> None:
-    key = fingerprint(ROOT / "setup.py", ROOT / "setup.cfg", extra=state.get("dependencies", ""))
+    # The editable finder maps top-level packages found at install time: a new package needs a reinstall.
+    packages = sorted(p.parent.name for p in ROOT.glob("*/__init__.py"))
+    key = fingerprint(ROOT / "setup.py", ROOT / "setup.cfg", extra=state.get("dependencies", "") + str(packages))
     if state.get("package") == key:
         return
     log("installing dynenv_ros (editable)")

@@ -23,8 +23,9 @@ from dynenv_ros.ros.selfcheck import InterfaceCheck, build_report, expected_mess
 
 
 class SelfCheckListener(Node):
-    def __init__(self) -> None:
-        super().__init__("selfcheck_listener")
+    def __init__(self, **node_options: Any) -> None:
+        """``node_options`` go to rclpy's Node (context, parameter_overrides, ...) for in-process tests."""
+        super().__init__("selfcheck_listener", **node_options)
         self.seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed the talker used.")
         self.samples_per_type = declare_int(self, "samples_per_type", 3, 1, 1000, "Samples expected per type.")
         self.timeout_s = declare_float(self, "timeout_s", 30.0, 0.1, 3600.0, "Give up after this long (wall s).")

@@ -14,8 +14,9 @@ from dynenv_ros.ros.selfcheck import expected_message, expected_response, servic
 
 
 class SelfCheckTalker(Node):
-    def __init__(self) -> None:
-        super().__init__("selfcheck_talker")
+    def __init__(self, **node_options: Any) -> None:
+        """``node_options`` go to rclpy's Node (context, parameter_overrides, ...) for in-process tests."""
+        super().__init__("selfcheck_talker", **node_options)
         self.seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed of the published samples.")
         self.samples_per_type = declare_int(self, "samples_per_type", 3, 1, 1000,
                                             "Messages published per message type (kept for late joiners).")

@@ -3,7 +3,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
+import sys
+
 import rclpy
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
@@ -28,6 +31,9 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
         executor.spin()
     except NodeExit as stop:
         status = stop.status
+    except ParameterException as error:  # out of range or wrong type: refuse with the reason
+        print(f"parameter error: {error}", file=sys.stderr, flush=True)
+        status = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

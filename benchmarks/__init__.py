@@ -1,0 +1,1 @@
+"""Benchmarks: `dynenv-bench <suite>` (or `make bench ARGS=<suite>`) prints figures; docs/benchmarks.md keeps them."""

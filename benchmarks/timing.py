@@ -1,0 +1,22 @@
+"""Small timing helpers shared by the suites."""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+
+def best_rate(work: Callable[[], int], repeat: int) -> float:
+    """Items per second of ``work`` (which returns how many items it processed), best of ``repeat``."""
+    best = 0.0
+    for _ in range(repeat):
+        start = time.perf_counter()
+        items = work()
+        best = max(best, items / (time.perf_counter() - start))
+    return best
+
+
+def print_table(title: str, rows: list[tuple[str, str]]) -> None:
+    width = max(len(name) for name, _ in rows)
+    print(title)
+    for name, value in rows:
+        print(f"  {name:<{width}}  {value}")

@@ -1,0 +1,22 @@
+"""The core stays usable without ROS: importing it loads neither rclpy nor generated messages."""
+from __future__ import annotations
+
+import pkgutil
+import subprocess
+import sys
+
+import dynenv_ros.bags
+import dynenv_ros.core
+
+ROS_FREE_PACKAGES = [dynenv_ros.core, dynenv_ros.bags]
+
+
+def test_core_and_bag_tooling_import_no_ros():
+    modules = [f"{pkg.__name__}.{info.name}" for pkg in ROS_FREE_PACKAGES
+               for info in pkgutil.iter_modules(pkg.__path__)]
+    assert modules, "no modules found to check"
+    probe = (f"import sys\nfor m in {modules!r}: __import__(m)\n"
+             "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'dynenv_msgs', 'rosidl_parser'))\n"
+             "print(bad)")
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert result.stdout.strip() == "[]", result.stdout

@@ -1,0 +1,85 @@
+"""The main job runs the self-check graph end to end, refuses bad settings, and reports failures honestly."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from dynenv_ros.graph.process_graph import NodeLaunch, run_graph
+from dynenv_ros.main_job import ConfigError, MainJobConfig, load_config, main
+
+
+def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
+    status = main(["--output-dir", str(tmp_path), "--set", "samples_per_type=3", "--set",
+                   f"domain_id={os.environ['ROS_DOMAIN_ID']}"])
+    output = capsys.readouterr().out
+    assert status == 0, output
+    report = json.loads((tmp_path / "selfcheck.json").read_text())
+    assert report["ok"] and not report["hash_problems"]
+    assert len(report["interfaces"]) == 9
+    assert all(entry["received"] == 3 for entry in report["interfaces"].values())
+    assert "interfaces verified: 9/9" in output and "dynenv-run: OK" in output
+
+
+def test_graph_reports_a_listener_that_does_not_get_what_it_expects(tmp_path):
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    nodes = [NodeLaunch("talker", "dynenv_ros.nodes.selfcheck_talker", {"seed": 1, "samples_per_type": 2}),
+             NodeLaunch("listener", "dynenv_ros.nodes.selfcheck_listener",
+                        {"seed": 2, "samples_per_type": 2, "timeout_s": 10.0,
+                         "report_path": str(tmp_path / "report.json")}, ends_run=True)]
+    outcome = run_graph(nodes, tmp_path, domain, timeout_s=30.0)
+    assert not outcome.ok
+    listener = next(n for n in outcome.nodes if n.name == "listener")
+    assert listener.exit_code == 1
+    report = json.loads((tmp_path / "report.json").read_text())
+    # Different seeds: every message differs field by field (service answers depend on the request only).
+    messages = {name: entry for name, entry in report["interfaces"].items() if "/msg/" in name}
+    assert len(messages) == 6
+    assert all(entry["problems"] and not entry["ok"] for entry in messages.values())
+
+
+def test_graph_times_out_and_stops_every_process(tmp_path):
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    nodes = [NodeLaunch("lonely_listener", "dynenv_ros.nodes.selfcheck_listener", {"timeout_s": 600.0},
+                        ends_run=True)]
+    outcome = run_graph(nodes, tmp_path, domain, timeout_s=2.0)
+    assert outcome.timed_out and not outcome.ok
+    assert outcome.nodes[0].exit_code is None  # had to be stopped
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"graph": "nonexistent"}, "graph must be one of"),
+    ({"samples_per_type": 0}, "samples_per_type must be in"),
+    ({"timeout_s": "long"}, "timeout_s must be float"),
+    ({"domain_id": 500}, "domain_id must be"),
+    ({"sample_per_type": 3}, "unknown key"),
+])
+def test_bad_settings_are_refused_with_a_reason(settings, message):
+    with pytest.raises(ConfigError, match=message):
+        MainJobConfig.from_mapping(settings)
+
+
+def test_malformed_config_file_is_refused(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("main_job: [unclosed\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_config(bad, {})
+    result = subprocess.run([sys.executable, "-m", "dynenv_ros.main_job", "--config", str(bad)],
+                            capture_output=True, text=True)
+    assert result.returncode == 2 and "configuration error" in result.stderr
+
+
+def test_repository_config_is_valid():
+    from dynenv_ros.main_job import REPO_CONFIG
+    assert load_config(REPO_CONFIG, {}) == MainJobConfig()
+
+
+@pytest.mark.parametrize("value, reason", [("0", "out of range"), ("abc", "expecting type 'INTEGER'")])
+def test_node_refuses_bad_parameter_with_reason(value, reason):
+    result = subprocess.run([sys.executable, "-m", "dynenv_ros.nodes.selfcheck_talker", "--ros-args", "-p",
+                             f"samples_per_type:={value}"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert "parameter error" in result.stderr and reason in result.stderr
