@@ -21,6 +21,12 @@ from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch, run_graph
 from dynenv_ros.ros.selfcheck import format_report
 
 REPO_CONFIG = Path(__file__).resolve().parent.parent / "config" / "main_job.yaml"
+INSTALLED_CONFIG = Path(sys.prefix) / "share" / "dynenv_ros" / "config" / "main_job.yaml"
+
+
+def default_config_path() -> Path:
+    """The repository's config in a source checkout; the installed share/ copy in a colcon install."""
+    return REPO_CONFIG if REPO_CONFIG.exists() else INSTALLED_CONFIG
 
 
 class ConfigError(ValueError):
@@ -67,8 +73,10 @@ class MainJobConfig:
 
 
 def load_config(path: Path, overrides: dict[str, Any]) -> MainJobConfig:
+    if not path.is_file():
+        raise ConfigError(f"config file {path} does not exist")
     try:
-        raw = yaml.safe_load(path.read_text()) if path.exists() else {}
+        raw = yaml.safe_load(path.read_text())
     except yaml.YAMLError as error:
         raise ConfigError(f"{path} is not valid YAML: {error}") from error
     if raw is None:
@@ -112,7 +120,8 @@ GRAPHS: dict[str, Graph] = {"selfcheck": Graph(selfcheck_graph, summarise_selfch
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="dynenv-run", description=__doc__.splitlines()[0])
-    parser.add_argument("--config", type=Path, default=REPO_CONFIG, help="YAML settings (default: %(default)s)")
+    parser.add_argument("--config", type=Path, default=None,
+                        help=f"YAML settings (default: {REPO_CONFIG.relative_to(REPO_CONFIG.parents[1])})")
     parser.add_argument("--output-dir", type=Path, default=None, help="run directory (default: runs/<time>)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a setting, value in YAML syntax (repeatable)")
@@ -132,7 +141,7 @@ def parse_overrides(pairs: list[str]) -> dict[str, Any]:
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     try:
-        config = load_config(args.config, parse_overrides(args.set))
+        config = load_config(args.config or default_config_path(), parse_overrides(args.set))
     except ConfigError as error:
         print(f"dynenv-run: configuration error: {error}", file=sys.stderr)
         return 2

@@ -72,6 +72,11 @@ def test_malformed_config_file_is_refused(tmp_path):
     assert result.returncode == 2 and "configuration error" in result.stderr
 
 
+def test_missing_config_file_is_an_error_not_a_silent_default(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_config(tmp_path / "nope.yaml", {})
+
+
 def test_repository_config_is_valid():
     from dynenv_ros.main_job import REPO_CONFIG
     assert load_config(REPO_CONFIG, {}) == MainJobConfig()
