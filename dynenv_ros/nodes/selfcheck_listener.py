@@ -19,7 +19,7 @@ from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_float, declare_int, declare_str
 from dynenv_ros.ros.qos import latched
 from dynenv_ros.ros.selfcheck import InterfaceCheck, build_report, expected_message, expected_response, \
-    format_report, message_checks, sample_seed, service_name_for, topic_for
+    format_report, message_checks, sample_seed, service_check_name, service_name_for, topic_for
 
 
 class SelfCheckListener(Node):
@@ -35,10 +35,10 @@ class SelfCheckListener(Node):
         self.receivers = [
             self.create_subscription(t.cls, topic_for(t), self._receiver(t), latched(self.samples_per_type))
             for t in message_types()]
-        self.service_clients = {name: self.create_client(cls, service_name_for(name)) for name, cls in
-                         service_types().items()}
+        self.service_clients = {name: self.create_client(cls, service_name_for(name))
+                                for name, cls in service_types().items()}
         for name in self.service_clients:
-            self.checks[f"dynenv_msgs/srv/{name}"] = InterfaceCheck(f"dynenv_msgs/srv/{name}", self.samples_per_type)
+            self.checks[service_check_name(name)] = InterfaceCheck(service_check_name(name), self.samples_per_type)
         self._pending: list[Any] = []
         self._started = time.monotonic()
         self._timer = self.create_timer(0.05, self._tick)
@@ -55,7 +55,7 @@ class SelfCheckListener(Node):
 
     def _call_services(self) -> None:
         for name, client in self.service_clients.items():
-            check = self.checks[f"dynenv_msgs/srv/{name}"]
+            check = self.checks[service_check_name(name)]
             busy = any(pending[0] == name for pending in self._pending)  # one call in flight per service
             if busy or check.received >= check.expected or not client.service_is_ready():
                 continue
@@ -69,7 +69,7 @@ class SelfCheckListener(Node):
             if not future.done():
                 still_pending.append((name, request, future))
                 continue
-            self.checks[f"dynenv_msgs/srv/{name}"].record(expected_response(service_types()[name], request),
+            self.checks[service_check_name(name)].record(expected_response(service_types()[name], request),
                                                            future.result())
         self._pending = still_pending
 

@@ -24,6 +24,10 @@ def service_name_for(service: str) -> str:
     return f"{TOPIC_PREFIX}/{snake}"
 
 
+def service_check_name(service: str) -> str:
+    return f"dynenv_msgs/srv/{service}"
+
+
 def sample_seed(base_seed: int, index: int) -> int:
     return base_seed * 100_003 + index
 
