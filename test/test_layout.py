@@ -7,11 +7,13 @@ import sys
 
 import dynenv_ros.bags
 import dynenv_ros.core
+import dynenv_ros.sim
+import dynenv_ros.soccer
 
-ROS_FREE_PACKAGES = [dynenv_ros.core, dynenv_ros.bags]
+ROS_FREE_PACKAGES = [dynenv_ros.core, dynenv_ros.bags, dynenv_ros.sim, dynenv_ros.soccer]
 
 
-def test_core_and_bag_tooling_import_no_ros():
+def test_ros_free_packages_import_no_ros():
     modules = [f"{pkg.__name__}.{info.name}" for pkg in ROS_FREE_PACKAGES
                for info in pkgutil.iter_modules(pkg.__path__)]
     assert modules, "no modules found to check"

@@ -1,0 +1,1 @@
+"""ROS-free, scenario-independent simulation building blocks (clocks and rates today)."""
