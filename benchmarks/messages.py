@@ -10,13 +10,14 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 
+from dynenv_msgs.msg import Detection, DetectionArray
+
 from benchmarks.timing import best_rate, print_table
 
 DETECTIONS_PER_FRAME = 12  # the original's mean at noise 1, 2v2 (facts sheet 4.2) rounded up
 
 
 def vision_frame():
-    from dynenv_msgs.msg import Detection, DetectionArray
     frame = DetectionArray(robot_id=3, frames_per_period=5)
     frame.header.frame_id = "robot_3/camera"
     for index in range(DETECTIONS_PER_FRAME):
@@ -28,7 +29,6 @@ def vision_frame():
 
 
 def pubsub_rate(count: int) -> float:
-    from dynenv_msgs.msg import DetectionArray
     context = Context()
     rclpy.init(context=context)
     try:
@@ -59,7 +59,6 @@ def run(repeat: int) -> int:
     data = serialize_message(frame)
     build = best_rate(lambda: [vision_frame() for _ in range(2000)] and 2000, repeat)
     serialise = best_rate(lambda: [serialize_message(frame) for _ in range(5000)] and 5000, repeat)
-    from dynenv_msgs.msg import DetectionArray
     deserialise = best_rate(lambda: [deserialize_message(data, DetectionArray) for _ in range(5000)] and 5000, repeat)
     pubsub = max(pubsub_rate(3000) for _ in range(repeat))
     print_table(f"DetectionArray with {DETECTIONS_PER_FRAME} detections ({len(data)} B CDR), one core", [

@@ -35,8 +35,9 @@ class SelfCheckListener(Node):
         self.receivers = [
             self.create_subscription(t.cls, topic_for(t), self._receiver(t), latched(self.samples_per_type))
             for t in message_types()]
+        self.service_classes = service_types()
         self.service_clients = {name: self.create_client(cls, service_name_for(name))
-                                for name, cls in service_types().items()}
+                                for name, cls in self.service_classes.items()}
         for name in self.service_clients:
             self.checks[service_check_name(name)] = InterfaceCheck(service_check_name(name), self.samples_per_type)
         self._pending: list[Any] = []
@@ -59,7 +60,7 @@ class SelfCheckListener(Node):
             busy = any(pending[0] == name for pending in self._pending)  # one call in flight per service
             if busy or check.received >= check.expected or not client.service_is_ready():
                 continue
-            service_cls = service_types()[name]
+            service_cls = self.service_classes[name]
             request = sample_message(service_cls.Request, sample_seed(self.seed, check.received))
             self._pending.append((name, request, client.call_async(request)))
 
@@ -69,7 +70,7 @@ class SelfCheckListener(Node):
             if not future.done():
                 still_pending.append((name, request, future))
                 continue
-            self.checks[service_check_name(name)].record(expected_response(service_types()[name], request),
+            self.checks[service_check_name(name)].record(expected_response(self.service_classes[name], request),
                                                            future.result())
         self._pending = still_pending
 
