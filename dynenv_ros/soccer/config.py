@@ -1,0 +1,212 @@
+"""Every number of the soccer world in one validated place: motions, kicks, falls, penalties, ball, rewards.
+
+Defaults reproduce the motions and rules measured in the original DynEnv (shared/reference/dynenv_facts.md §2, §6),
+converted to SI units; docs/differences.md lists where we depart from it on purpose.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, is_dataclass, replace
+from dataclasses import field as _default
+from typing import Any, Mapping
+
+from dynenv_ros.sim.timing import Rates
+from dynenv_ros.soccer.field import FieldGeometry
+
+MAX_PLAYERS_PER_TEAM = 5
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """What one motion period of each high-level action achieves for a free robot."""
+    forward_step: float = 0.055        # m per period (DynEnv: ≈5.5 cm)
+    backward_step: float = 0.036       # m per period (≈3.6 cm)
+    side_step: float = 0.036           # m per period (≈3.6 cm)
+    turn_step: float = 0.1             # rad per period (≈5.7°)
+    head_step: float = math.radians(12.5)   # rad per period for one discrete head unit
+    head_units: int = 3                # discrete head command d ∈ {-units..units}
+    head_limit: float = math.radians(120.0)  # |head yaw| clamp, rad
+    drive_max_force: float = 200.0     # N: how hard a walking robot holds its commanded velocity
+    drive_max_torque: float = 20.0     # N·m
+
+    @property
+    def head_max_delta(self) -> float:
+        """Largest head turn in one period, rad (the continuous mode's bound)."""
+        return self.head_step * self.head_units
+
+
+@dataclass(frozen=True)
+class KickConfig:
+    """A kick spans two motion periods: wind-up, then the foot strikes forward and returns (DynEnv timing)."""
+    strike_speed: float = 1.65         # m/s; a stationary ball leaves at about twice this (≈3.3 m/s)
+    strike_seconds: float = 0.1        # forward stroke, then the same time back
+    periods: int = 2
+
+
+@dataclass(frozen=True)
+class FallConfig:
+    enabled: bool = True
+    p_walk: float = 0.001              # per walking action
+    p_turn: float = 0.001              # per turning action
+    p_kick: float = 0.01               # per kick
+    getup_seconds: float = 4.0
+    p_fall_again: float = 0.1          # when trying to get up
+    falls_to_penalty: int = 3          # consecutive falls without getting up
+    contact_base: float = 0.9999       # robot–robot: falls this tick if U > base**contact_ticks
+    contact_base_pusher: float = 0.99995
+    goalpost_base: float = 0.9998
+    push_min_speed: float = 0.01       # m/s commanded speed to count as moving into the other robot
+    push_cos: float = 0.4              # cos of the angle between motion and the direction to the other robot
+    knock_radius: float = 0.4          # m: a falling robot shoves what is this close
+    knock_speed: float = 0.4           # m/s given to each shoved body
+
+
+@dataclass(frozen=True)
+class PenaltyConfig:
+    first_seconds: float = 20.0
+    increment_seconds: float = 10.0    # each further penalty of the same team lasts this much longer
+    sideline_spacing: float = 0.525    # m between sideline spots
+    spots_per_side: int = 7
+    max_in_own_penalty_area: int = 2   # illegal defender beyond this
+
+
+@dataclass(frozen=True)
+class BallConfig:
+    radius: float = 0.05               # SPL ball: 10 cm diameter
+    mass: float = 0.045
+    elasticity: float = 0.98
+    friction: float = 0.5
+    deceleration: float = 1.18         # m/s²: a 3.3 m/s kick rolls ≈4.6 m, as in DynEnv
+    spin_deceleration: float = 20.0    # rad/s²
+    kickoff_ownership_seconds: float = 10.0
+    free_kick_ownership_seconds: float = 25.0  # DynEnv: 15 s grace, then 10 s
+    sideline_out_shift: float = 0.5    # m toward the goal of the team that touched it last
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights in SI units. DynEnv's per-pixel weights × 100 px/m give the per-metre defaults."""
+    goal: float = 25.0
+    ball_progress_per_m: float = 5.0   # DynEnv Δx/20 per px
+    team_share: float = 0.1            # of the team's ball reward to every teammate
+    chain_decay: float = 0.5           # i-th most recent toucher gets decay**i
+    chain_length: int = 4
+    bystander_share: float = 0.5       # of a loss, to the closest or nearby robots outside the chain
+    bystander_radius: float = 1.5      # m
+    approach_per_m: float = 5.0        # DynEnv 0.05 per px, for the closest robot of each team
+    fall: float = -2.0
+    penalty_per_second: float = -0.5   # -10 for 20 s, -15 for 30 s, ...
+    observation_robot: float = 0.0025
+    observation_landmark: float = 0.0025
+    observation_ball: float = 0.01
+    observation_robot_cap: int = 2
+    observation_landmark_cap: int = 3
+    observation_ball_cap: int = 3
+
+
+@dataclass(frozen=True)
+class SoccerConfig:
+    players_per_team: int = 2
+    episode_seconds: float = 120.0
+    rates: Rates = _default(default_factory=Rates)
+    field: FieldGeometry = _default(default_factory=FieldGeometry)
+    motion: MotionConfig = _default(default_factory=MotionConfig)
+    kick: KickConfig = _default(default_factory=KickConfig)
+    falls: FallConfig = _default(default_factory=FallConfig)
+    penalties: PenaltyConfig = _default(default_factory=PenaltyConfig)
+    ball: BallConfig = _default(default_factory=BallConfig)
+    rewards: RewardConfig = _default(default_factory=RewardConfig)
+    head_mode: str = "discrete"        # or "continuous"
+    robot_mass: float = 5.2            # kg (NAO)
+
+    def __post_init__(self) -> None:
+        n = self.players_per_team
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_PLAYERS_PER_TEAM:
+            raise ValueError(f"players_per_team must be an integer in 1..{MAX_PLAYERS_PER_TEAM}, got {n!r}")
+        if self.head_mode not in ("discrete", "continuous"):
+            raise ValueError(f"head_mode must be 'discrete' or 'continuous', got {self.head_mode!r}")
+        _check_numbers(self)
+        period = self.rates.motion_period_ticks * self.rates.tick_seconds
+        if self.episode_seconds < period:
+            raise ValueError(f"episode_seconds ({self.episode_seconds}) is shorter than one motion period ({period})")
+        if 2 * self.kick.strike_seconds > period:
+            raise ValueError("kick.strike_seconds: the stroke forward and back must fit in one motion period")
+        for name in ("p_walk", "p_turn", "p_kick", "p_fall_again"):
+            if not 0.0 <= getattr(self.falls, name) <= 1.0:
+                raise ValueError(f"falls.{name} must be a probability in [0, 1]")
+        for name in ("contact_base", "contact_base_pusher", "goalpost_base"):
+            if not 0.0 < getattr(self.falls, name) <= 1.0:
+                raise ValueError(f"falls.{name} must be in (0, 1]")
+
+    @property
+    def n_robots(self) -> int:
+        return 2 * self.players_per_team
+
+    @property
+    def period_seconds(self) -> float:
+        return self.rates.motion_period_ticks * self.rates.tick_seconds
+
+    @property
+    def episode_periods(self) -> int:
+        return max(1, round(self.episode_seconds / self.period_seconds))
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any] | None = None) -> "SoccerConfig":
+        """Build from nested plain values (YAML, keyword arguments); unknown keys are refused by name."""
+        return _build(cls, dict(values or {}), prefix="")
+
+
+def _check_numbers(config: Any, prefix: str = "") -> None:
+    for f in fields(config):
+        value = getattr(config, f.name)
+        if is_dataclass(value):
+            _check_numbers(value, f"{prefix}{f.name}.")
+        elif isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f"{prefix}{f.name} must be finite, got {value}")
+        elif isinstance(value, (int, float)) and not isinstance(value, bool) and value < 0 \
+                and f.name not in ("fall", "penalty_per_second"):
+            raise ValueError(f"{prefix}{f.name} must not be negative, got {value}")
+
+
+def _build(cls: type, values: dict[str, Any], prefix: str) -> Any:
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(values) - set(known))
+    if unknown:
+        raise ValueError(f"unknown soccer setting(s): {', '.join(prefix + u for u in unknown)}; "
+                         f"known: {', '.join(prefix + k for k in known)}")
+    kwargs: dict[str, Any] = {}
+    defaults = cls()
+    for name, value in values.items():
+        default = getattr(defaults, name)
+        if is_dataclass(default) and isinstance(value, Mapping):
+            kwargs[name] = _build(type(default), dict(value), f"{prefix}{name}.")
+        elif is_dataclass(default) and not is_dataclass(value):
+            raise ValueError(f"{prefix}{name} must be a mapping of settings, got {value!r}")
+        else:
+            kwargs[name] = _coerce(f"{prefix}{name}", value, default)
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:  # a wrong type deep inside a nested dataclass
+        raise ValueError(f"{prefix or 'soccer'}: {exc}") from None
+
+
+def _coerce(name: str, value: Any, default: Any) -> Any:
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"{name} must be true or false, got {value!r}")
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"{name} must be an integer, got {value!r}")
+        return value
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        return float(value)
+    if isinstance(default, str) and not isinstance(value, str):
+        raise ValueError(f"{name} must be a string, got {value!r}")
+    return value
+
+
+__all__ = ["SoccerConfig", "MotionConfig", "KickConfig", "FallConfig", "PenaltyConfig", "BallConfig",
+           "RewardConfig", "MAX_PLAYERS_PER_TEAM", "replace"]
