@@ -14,6 +14,7 @@ NODES = [
 TOOLS = [
     "dynenv-run = dynenv_ros.main_job:main",
     "dynenv-bench = benchmarks.__main__:main",
+    "dynenv-play = dynenv_ros.envs.play:main",
 ]
 
 setup(

@@ -1,23 +1,35 @@
-"""dynenv-bench: speed and size figures of dynenv_ros. Each suite prints a table; results go in docs/benchmarks.md."""
+"""dynenv-bench: speed and size figures of dynenv_ros. Each suite prints its figures; results go in docs/benchmarks.md.
+
+Suites are imported only when chosen, so a suite's memory figures carry nothing of the others (no rclpy, no torch).
+"""
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from collections.abc import Sequence
 
-from benchmarks import messages, setup_cost
-
-SUITES = {"msgs": messages.run, "setup": setup_cost.run}
+# suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
+SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="dynenv-bench", description=__doc__)
-    parser.add_argument("suite", choices=sorted(SUITES), help="which benchmark to run")
-    parser.add_argument("--repeat", type=int, default=3, help="repetitions; the best is reported")
+    suites = parser.add_subparsers(dest="suite", required=True, metavar="SUITE",
+                                   help=f"one of: {', '.join(SUITES)}")
+    modules = {}
+    for name, module_name in SUITES.items():
+        sub = suites.add_parser(name)
+        modules[name] = module_name
+        sub.add_argument("--repeat", type=int, default=3, help="repetitions; the best is reported")
+        if name == "sim":   # its options are cheap to declare without importing the simulator
+            from benchmarks.sim_options import add_arguments
+            add_arguments(sub)
     args = parser.parse_args(argv)
     if args.repeat < 1:
         parser.error("--repeat must be at least 1")
-    return SUITES[args.suite](args.repeat)
+    module = importlib.import_module(f"benchmarks.{modules[args.suite]}")
+    return module.run(args)
 
 
 if __name__ == "__main__":

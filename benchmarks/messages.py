@@ -54,7 +54,8 @@ def pubsub_rate(count: int) -> float:
         rclpy.try_shutdown(context=context)
 
 
-def run(repeat: int) -> int:
+def run(args) -> int:
+    repeat = args.repeat
     frame = vision_frame()
     data = serialize_message(frame)
     build = best_rate(lambda: [vision_frame() for _ in range(2000)] and 2000, repeat)

@@ -15,7 +15,8 @@ def directory_size(path: Path) -> int:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file() and not p.is_symlink())
 
 
-def run(repeat: int) -> int:
+def run(args) -> int:
+    repeat = args.repeat
     host_python = "python3.11"
     durations = []
     for _ in range(repeat):

@@ -57,6 +57,7 @@ class RobotRules:
     contact_ticks: int = 0
     entered_own_area_tick: int | None = None
     last_ball_distance: float | None = None
+    approach_candidate: float = 0.0
     penalty_reasons: list[str] = field(default_factory=list)
 
 

@@ -7,8 +7,7 @@ pymunk callbacks and resolved right after the tick they happen in, so per tick t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import pymunk
@@ -17,37 +16,17 @@ from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
 from dynenv_ros.sim.ground_truth import BodyState, WorldSnapshot
 from dynenv_ros.sim.physics import PhysicsWorld
 from dynenv_ros.sim.reward_terms import RewardLedger, RewardTerm
+from dynenv_ros.sim.scenario import FrameCallback, GameEvent, PeriodResult
 from dynenv_ros.soccer.actions import Kick, SoccerAction, parse_action
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.placement import free_spot, kickoff_poses, sideline_spots
 from dynenv_ros.soccer.referee import GameState, Phase, decide_out
-from dynenv_ros.soccer.rewards import closest_to_ball, share_ball_value
+from dynenv_ros.soccer.rewards import share_ball_value
 from dynenv_ros.soccer.robot import BODY_RADIUS, Category, CollisionType, Robot
 
 SCENARIO_SOCCER = 0
 TEAM_A, TEAM_B = 1, -1
 _EPS = 1e-9
-
-
-@dataclass(frozen=True)
-class GameEvent:
-    """Something the referee saw: 'fall', 'penalty', 'goal', 'out', 'touch', 'get_up', 'return'."""
-    kind: str
-    tick: int
-    robot: int | None = None
-    team: int = 0
-    detail: str = ""
-
-
-@dataclass
-class PeriodResult:
-    rewards: np.ndarray                    # (len(RewardTerm), n_robots)
-    terminated: bool
-    truncated: bool
-    events: list[GameEvent] = field(default_factory=list)
-
-
-FrameCallback = Callable[[int], None]
 
 
 class SoccerWorld:
@@ -73,7 +52,11 @@ class SoccerWorld:
 
     def _build(self, kickoff_team: int) -> None:
         c = self.config
-        self.physics = PhysicsWorld(c.rates.tick_seconds)
+        self._tick_seconds = c.rates.tick_seconds
+        self._vision_seconds = c.rates.vision_period_ticks * self._tick_seconds
+        self._period_seconds = c.period_seconds
+        self._episode_seconds = c.episode_periods * self._period_seconds
+        self.physics = PhysicsWorld(self._tick_seconds)
         space = self.physics.space
         self.tick = 0
         self.period = 0
@@ -85,7 +68,7 @@ class SoccerWorld:
         self._progress_anchor: float | None = None
         self.robots = [Robot(i, TEAM_A if i < c.players_per_team else TEAM_B, i % c.players_per_team, c)
                        for i in range(c.n_robots)]
-        self._robot_of_body: dict[pymunk.Body, Robot] = {r.body: r for r in self.robots}
+        self._robot_of_shape: dict[pymunk.Shape, Robot] = {r.shape: r for r in self.robots}
         for robot in self.robots:
             robot.add_to(space)
         self._add_goalposts(space)
@@ -143,11 +126,11 @@ class SoccerWorld:
 
     @property
     def game_time(self) -> float:
-        return self.tick * self.config.rates.tick_seconds
+        return self.tick * self._tick_seconds
 
     @property
     def time_remaining(self) -> float:
-        return max(0.0, self.config.episode_periods * self.config.period_seconds - self.game_time)
+        return max(0.0, self._episode_seconds - self.game_time)
 
     @property
     def ball_xy(self) -> tuple[float, float]:
@@ -225,7 +208,7 @@ class SoccerWorld:
         period_ticks = rates.motion_period_ticks
         strikes = self._start_period(parsed)
         schedule: dict[int, list[tuple[Robot, int]]] = {}
-        strike_ticks = max(1, round(self.config.kick.strike_seconds / rates.tick_seconds))
+        strike_ticks = max(1, round(self.config.kick.strike_seconds / self._tick_seconds))
         for robot in strikes:
             for offset, stroke in ((0, 1), (strike_ticks, -1), (2 * strike_ticks, 0)):
                 schedule.setdefault(min(offset, period_ticks), []).append((robot, stroke))
@@ -254,7 +237,7 @@ class SoccerWorld:
     def _start_period(self, actions: list[SoccerAction]) -> list[Robot]:
         """Apply each robot's action (or not: fallen, penalized, kicking); return the robots that strike now."""
         falls = self.config.falls
-        period_seconds = self.config.period_seconds
+        period_seconds = self._period_seconds
         strikes = []
         for robot, action in zip(self.robots, actions):
             robot.begin_head_turn(action.head_yaw_delta)
@@ -294,9 +277,9 @@ class SoccerWorld:
 
     def _vision_instant(self, fraction: float) -> None:
         """Clocks, timers and positional rules, evaluated at every vision frame."""
-        c = self.config
-        dt = c.rates.vision_period_ticks * c.rates.tick_seconds
-        f = c.field
+        dt = self._vision_seconds
+        f = self.config.field
+        world_x, world_y = f.half_length + f.border, f.half_width + f.border
         area_front = f.half_length - f.penalty_area_length
         area_half_width = f.penalty_area_width / 2
         for robot in self.robots:
@@ -311,8 +294,8 @@ class SoccerWorld:
                 rules.fall_timer -= dt
                 if rules.fall_timer <= _EPS:
                     self._try_get_up(robot)
-            x, y = robot.x, robot.y
-            if not f.is_inside_world(x, y):
+            x, y = robot.body.position
+            if abs(x) > world_x or abs(y) > world_y:
                 self._penalize(robot, "left the field")
                 continue
             if robot.team * x < -area_front and abs(y) < area_half_width:
@@ -339,17 +322,25 @@ class SoccerWorld:
                     self._penalize(robot, "illegal defender")
 
     def _approach_rewards(self) -> None:
+        """The robot of each team closest to the ball is paid for closing in on it (DynEnv §6.1)."""
         weight = self.config.rewards.approach_per_m
-        bx, by = self.ball_xy
-        closest = set(closest_to_ball(self.robots, (bx, by)).values())
+        bx, by = self.ball.position
+        best: dict[int, tuple[float, Robot]] = {}
         for robot in self.robots:
             if robot.rules.penalized:
                 continue
-            d = math.hypot(robot.x - bx, robot.y - by)
+            x, y = robot.body.position
+            d = math.hypot(x - bx, y - by)
+            if robot.team not in best or d < best[robot.team][0]:
+                best[robot.team] = (d, robot)
+            robot.rules.approach_candidate = d
+        for d, robot in best.values():
             last = robot.rules.last_ball_distance
-            if robot.index in closest and last is not None:
+            if last is not None:
                 self.ledger.add(RewardTerm.AUXILIARY, robot.index, -weight * (d - last))
-            robot.rules.last_ball_distance = d
+        for robot in self.robots:
+            if not robot.rules.penalized:
+                robot.rules.last_ball_distance = robot.rules.approach_candidate
 
     # -- contacts (pymunk callbacks: record now, act right after the tick) -----------------------------------------
     def _defer(self, *event: Any) -> None:
@@ -363,7 +354,7 @@ class SoccerWorld:
 
     def _on_ball_touch(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         shape = arbiter.shapes[0]
-        robot = self._robot_of_body.get(shape.body)
+        robot = self._robot_of_shape.get(shape)
         if robot is None:   # a kicking foot
             robot = next((r for r in self.robots if r.kick is not None and r.kick.foot_shape is shape), None)
         if robot is not None:
@@ -372,8 +363,15 @@ class SoccerWorld:
     def _on_ball_out(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         self._defer("out")
 
+    def _robot_pair(self, arbiter: pymunk.Arbiter) -> tuple[Robot, Robot] | None:
+        a, b = (self._robot_of_shape.get(s) for s in arbiter.shapes)
+        return (a, b) if a is not None and b is not None else None
+
     def _on_robot_contact(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        a, b = (self._robot_of_body[s.body] for s in arbiter.shapes)
+        pair = self._robot_pair(arbiter)
+        if pair is None:
+            return
+        a, b = pair
         falls = self.config.falls
         for robot, other in ((a, b), (b, a)):
             vx, vy = robot.commanded_velocity()
@@ -386,9 +384,10 @@ class SoccerWorld:
 
     def _on_robot_pressing(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         falls = self.config.falls
-        if not falls.enabled:
+        pair = self._robot_pair(arbiter)
+        if not falls.enabled or pair is None:
             return
-        a, b = (self._robot_of_body[s.body] for s in arbiter.shapes)
+        a, b = pair
         for robot, other in ((a, b), (b, a)):
             if robot.rules.fallen or robot.rules.penalized:
                 continue
@@ -399,7 +398,10 @@ class SoccerWorld:
                 self._defer("fall", robot, pushing, "fell in a robot contact")
 
     def _on_robot_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        a, b = (self._robot_of_body[s.body] for s in arbiter.shapes)
+        pair = self._robot_pair(arbiter)
+        if pair is None:
+            return
+        a, b = pair
         a.pushing.discard(b.index)
         b.pushing.discard(a.index)
         a.rules.contact_ticks = b.rules.contact_ticks = 0
@@ -407,15 +409,17 @@ class SoccerWorld:
 
     def _on_post_pressing(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         falls = self.config.falls
-        robot = self._robot_of_body[arbiter.shapes[0].body]
-        if not falls.enabled or robot.rules.fallen or robot.rules.penalized:
+        robot = self._robot_of_shape.get(arbiter.shapes[0])
+        if robot is None or not falls.enabled or robot.rules.fallen or robot.rules.penalized:
             return
         robot.rules.contact_ticks += 1
         if self.rng.random() > falls.goalpost_base ** robot.rules.contact_ticks:
             self._defer("fall", robot, True, "fell against a goalpost")
 
     def _on_post_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        self._robot_of_body[arbiter.shapes[0].body].rules.contact_ticks = 0
+        robot = self._robot_of_shape.get(arbiter.shapes[0])
+        if robot is not None:
+            robot.rules.contact_ticks = 0
 
     # -- rule decisions ----------------------------------------------------------------------------------------------
     def _resolve_fall(self, robot: Robot, punish: bool, reason: str) -> None:

@@ -1,0 +1,123 @@
+"""dynenv-bench sim: env steps per second and peak memory of the in-process simulator.
+
+One env step is one motion period (50 physics ticks by default) for every robot. Random high-level actions come
+from a pre-drawn pool, so the policy costs nothing; the first 50 steps warm up and are not timed.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import resource
+import sys
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from benchmarks.timing import print_table
+
+WARMUP_STEPS = 50
+ACTION_POOL = 256
+
+
+def _pin(cores: int) -> list[int]:
+    allowed = sorted(os.sched_getaffinity(0))
+    if cores > 0:
+        allowed = allowed[:cores]
+        os.sched_setaffinity(0, allowed)
+    return allowed
+
+
+def _world_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
+    from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk
+    from dynenv_ros.soccer.world import SoccerWorld
+    world = SoccerWorld(config, seed=args.seed)
+    units, step_rad = config.motion.head_units, config.motion.head_step
+    actions = [[SoccerAction(Walk(a[0]), Turn(a[1]), Kick(a[2]), (a[3] - units) * step_rad) for a in row]
+               for row in pool]
+    encode = None
+    if args.observation == "ground_truth":
+        from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder
+        encode = GroundTruthEncoder(config).observations
+
+    def run(steps: int) -> None:
+        for k in range(steps):
+            result = world.step(actions[k % ACTION_POOL])
+            if encode is not None:
+                encode(world)
+            if result.truncated:
+                world.reset()
+    return run
+
+
+def _pettingzoo_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
+    from dynenv_ros.envs.robocup_v0 import parallel_env
+    env = parallel_env(players_per_team=args.players_per_team)
+    env.reset(seed=args.seed)
+    names = env.possible_agents
+    actions = [dict(zip(names, row)) for row in pool]
+
+    def run(steps: int) -> None:
+        for k in range(steps):
+            env.step(actions[k % ACTION_POOL])
+            if not env.agents:
+                env.reset()
+    return run
+
+
+def _vector_stepper(args: Any, config: Any, pool: np.ndarray) -> tuple[Callable[[int], None], Any]:
+    from dynenv_ros.envs.vector import SoccerVectorEnv
+    env = SoccerVectorEnv(args.envs, backend=args.backend, config=config)
+    env.reset(seed=args.seed)
+    batches = np.stack([np.roll(pool, e, axis=0) for e in range(args.envs)], axis=1)
+
+    def run(steps: int) -> None:
+        for k in range(steps):
+            env.step(batches[k % ACTION_POOL])
+    return run, env
+
+
+def run(args: Any) -> int:
+    if not 1 <= args.players_per_team <= 5:
+        print("--players-per-team must be in 1..5", file=sys.stderr)
+        return 2
+    if args.steps < 1 or args.envs < 1:
+        print("--steps and --envs must be at least 1", file=sys.stderr)
+        return 2
+    cores = _pin(args.cores)
+    from dynenv_ros.soccer.config import SoccerConfig
+    config = SoccerConfig(players_per_team=args.players_per_team)
+    rng = np.random.default_rng(args.seed)
+    pool = rng.integers([0, 0, 0, 0], [5, 3, 3, 2 * config.motion.head_units + 1],
+                        size=(ACTION_POOL, config.n_robots, 4))
+    closer = None
+    if args.envs > 1:
+        stepper, closer = _vector_stepper(args, config, pool)
+    elif args.observation == "pettingzoo":
+        stepper = _pettingzoo_stepper(args, config, pool)
+    else:
+        stepper = _world_stepper(args, config, pool)
+    stepper(WARMUP_STEPS)
+    best = 0.0
+    for _ in range(args.repeat):
+        start = time.perf_counter()
+        stepper(args.steps)
+        best = max(best, args.steps * args.envs / (time.perf_counter() - start))
+    if closer is not None:
+        closer.close()
+    figures = {
+        "scenario": args.scenario, "players_per_team": args.players_per_team, "steps": args.steps,
+        "observation": args.observation, "noise": args.noise, "envs": args.envs,
+        "backend": args.backend if args.envs > 1 else "single", "cores": len(cores),
+        "env_steps_per_s": round(best, 1), "ms_per_env_step": round(1000.0 / best, 4),
+        "physics_ticks_per_s": round(best * config.rates.motion_period_ticks),
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "torch_imported": "torch" in sys.modules, "python": platform.python_version(),
+    }
+    if args.json:
+        print(json.dumps(figures))
+    else:
+        print_table(f"dynenv-bench sim: {args.scenario} {args.players_per_team}v{args.players_per_team}",
+                    [(k, str(v)) for k, v in figures.items()])
+    return 0

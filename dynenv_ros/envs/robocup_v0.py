@@ -1,0 +1,124 @@
+"""RoboCup SPL soccer through PettingZoo's Parallel API: ``parallel_env(**config)``.
+
+| | |
+|---|---|
+| agents | ``team_a_0`` … ``team_a_{n-1}``, ``team_b_0`` … (n = ``players_per_team``, 1–5) |
+| action (``head_mode='discrete'``) | MultiDiscrete [walk 5, turn 3, kick 3, head 7]: see ``soccer.actions`` |
+| action (``head_mode='continuous'``) | Dict ``motion`` MultiDiscrete [5, 3, 3], ``head`` Box rad per period |
+| observation | team-frame ground truth, float32 (``envs.soccer_spaces``) |
+| reward | sum of the primary, rule, auxiliary and observation terms; each term in ``infos[agent]['reward_terms']`` |
+| episode | 120 s = 240 motion periods, then every agent is truncated |
+
+Keyword arguments are the settings of ``soccer.config.SoccerConfig`` (nested ones as dicts), plus
+``render_mode='rgb_array'``.
+"""
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+from pettingzoo import ParallelEnv
+
+from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder, action_space
+from dynenv_ros.sim.reward_terms import RewardTerm
+from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.soccer.world import TEAM_A, TEAM_B, SoccerWorld
+
+RESET_OPTIONS = ("kickoff_team",)
+
+
+def agent_names(players_per_team: int) -> list[str]:
+    return [f"team_{team}_{i}" for team in ("a", "b") for i in range(players_per_team)]
+
+
+class RoboCupParallelEnv(ParallelEnv):
+    metadata = {"name": "robocup_v0", "render_modes": ["rgb_array"], "render_fps": 2, "is_parallelizable": True}
+
+    def __init__(self, render_mode: str | None = None, **config: Any) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode = render_mode
+        self.config = SoccerConfig.from_mapping(config)
+        self.world = SoccerWorld(self.config)
+        self.possible_agents = agent_names(self.config.players_per_team)
+        self.agents: list[str] = []
+        self._index = {name: i for i, name in enumerate(self.possible_agents)}
+        self.encoder = GroundTruthEncoder(self.config)
+        self._action_space = action_space(self.config)
+        self._action_spaces = {a: self._action_space for a in self.possible_agents}
+        self._observation_spaces = {a: self.encoder.observation_space for a in self.possible_agents}
+        self.state_space = self.encoder.state_space
+
+    def observation_space(self, agent: str):
+        return self._observation_spaces[self._known(agent)]
+
+    def action_space(self, agent: str):
+        return self._action_spaces[self._known(agent)]
+
+    def _known(self, agent: str) -> str:
+        if agent not in self._index:
+            raise ValueError(f"unknown agent {agent!r}; agents are {', '.join(self.possible_agents)}")
+        return agent
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            warnings.warn(f"robocup_v0.reset ignores unknown option(s) {unknown}; known: {list(RESET_OPTIONS)}",
+                          stacklevel=2)
+        kickoff = options.get("kickoff_team", "a")
+        teams = {"a": TEAM_A, "b": TEAM_B, TEAM_A: TEAM_A, TEAM_B: TEAM_B}
+        if kickoff not in teams:
+            raise ValueError(f"options['kickoff_team'] must be 'a' or 'b', got {kickoff!r}")
+        self.world.reset(seed=seed, kickoff_team=teams[kickoff])
+        self.agents = self.possible_agents[:]
+        observations = self.encoder.observations(self.world)
+        zero_terms = {term.name.lower(): 0.0 for term in RewardTerm}
+        return ({a: observations[i] for i, a in enumerate(self.agents)},
+                {a: {"reward_terms": dict(zero_terms)} for a in self.agents})
+
+    def step(self, actions: dict[str, Any]):
+        if not self.agents:
+            raise RuntimeError("robocup_v0: the episode is over (or reset() was never called); call reset()")
+        if not isinstance(actions, dict):
+            raise ValueError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
+        for agent in actions:
+            if agent not in self._index:
+                raise ValueError(f"unknown agent {agent!r} in actions; agents are {', '.join(self.agents)}")
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise ValueError(f"no action for {', '.join(missing)}")
+        result = self.world.step([actions[a] for a in self.possible_agents], names=self.possible_agents)
+        observations = self.encoder.observations(self.world)
+        totals = result.rewards.sum(axis=0)
+        terms = [{term.name.lower(): float(result.rewards[term, i]) for term in RewardTerm}
+                 for i in range(len(self.possible_agents))]
+        obs, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
+        for i, agent in enumerate(self.agents):
+            obs[agent] = observations[i]
+            rewards[agent] = float(totals[i])
+            terminations[agent] = result.terminated
+            truncations[agent] = result.truncated
+            infos[agent] = {"reward_terms": terms[i]}
+        if result.terminated or result.truncated:
+            self.agents = []
+        return obs, rewards, terminations, truncations, infos
+
+    def state(self) -> np.ndarray:
+        return self.encoder.state(self.world)
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            warnings.warn("robocup_v0.render() needs render_mode='rgb_array'", stacklevel=2)
+            return None
+        from dynenv_ros.render.topdown import as_array, render_snapshot   # Pillow only when rendering
+        return as_array(render_snapshot(self.world.snapshot(), self.config.field,
+                                        ball_radius=self.config.ball.radius))
+
+    def close(self) -> None:
+        pass
+
+
+def parallel_env(**config: Any) -> RoboCupParallelEnv:
+    return RoboCupParallelEnv(**config)
