@@ -19,6 +19,9 @@ from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.world import SoccerWorld
 
 
+AUTO_SUBPROCESS_MIN_ENVS = 8
+
+
 @dataclass
 class BatchStep:
     observations: np.ndarray       # (E, A, D) float32, after any automatic reset
@@ -173,15 +176,18 @@ class SubprocessBatch:
 class SoccerVectorEnv:
     """``num_envs`` soccer worlds as one batch: ``reset(seed) -> (E, A, D)``, ``step(actions (E, A, 4))``."""
 
-    def __init__(self, num_envs: int, backend: str = "inprocess", workers: int | None = None,
+    def __init__(self, num_envs: int, backend: str = "auto", workers: int | None = None,
                  config: SoccerConfig | Mapping[str, Any] | None = None) -> None:
         self.config = config if isinstance(config, SoccerConfig) else SoccerConfig.from_mapping(config)
+        if backend == "auto":   # measured crossover on 2 cores: workers pay off from about 8 worlds (benchmarks.md)
+            backend = "subprocess" if num_envs >= AUTO_SUBPROCESS_MIN_ENVS and (os.cpu_count() or 1) > 1 \
+                else "inprocess"
         if backend == "inprocess":
             self._batch: InProcessBatch | SubprocessBatch = InProcessBatch(num_envs, self.config)
         elif backend == "subprocess":
             self._batch = SubprocessBatch(num_envs, self.config, workers)
         else:
-            raise ValueError(f"backend must be 'inprocess' or 'subprocess', got {backend!r}")
+            raise ValueError(f"backend must be 'auto', 'inprocess' or 'subprocess', got {backend!r}")
         self.backend = backend
         self.num_envs = num_envs
         encoder = GroundTruthEncoder(self.config)

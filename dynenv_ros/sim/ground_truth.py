@@ -37,6 +37,7 @@ class WorldSnapshot:
     scenario: int
     episode_id: int
     tick: int
+    tick_period: float
     game_time: float
     time_remaining: float
     phase: int

@@ -155,6 +155,7 @@ class SoccerWorld:
                                  size_x=ball_d, size_y=ball_d))
         s = self.state
         return WorldSnapshot(scenario=self.scenario, episode_id=self.episode_id, tick=self.tick,
+                             tick_period=self._tick_seconds,
                              game_time=self.game_time, time_remaining=self.time_remaining, phase=int(s.phase),
                              ball_owner_team=s.ball_owner, ball_owner_remaining=s.ball_owner_remaining,
                              last_touch_robot_ids=tuple(s.chain), score_team_a=s.score[TEAM_A],
