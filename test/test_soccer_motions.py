@@ -145,3 +145,27 @@ def test_other_rates_keep_the_distance_per_action():
     assert frames == [0, 1, 2, 3, 4]
     assert world.tick == 100
     assert world.robots[0].x + 2.0 == pytest.approx(world.config.motion.forward_step, abs=0.003)
+
+
+def test_the_ball_rolls_decelerates_and_stops():
+    world = make_world()
+    world.place_ball(-3.0, -1.0, 2.0, 0.0)
+    idle_steps(world, 1)
+    v_half_second = world.ball.velocity.x
+    assert v_half_second == pytest.approx(2.0 - world.config.ball.deceleration * 0.5, abs=0.02)
+    idle_steps(world, 6)
+    assert world.ball.velocity.length == 0.0
+    assert world.ball_xy[0] + 3.0 == pytest.approx(2.0 ** 2 / (2 * world.config.ball.deceleration), abs=0.03)
+
+
+def test_the_ball_bounces_off_a_goalpost_and_off_a_robot():
+    world = make_world()
+    post_x, post_y = world.config.field.goalposts[3]
+    world.place_ball(post_x - 0.5, post_y, 2.0, 0.0)
+    idle_steps(world, 1)
+    assert world.ball.velocity.x < -0.5 and world.ball_xy[0] < post_x - 0.1
+    world.place_robot(0, 0.0, -2.0, 0.0)
+    world.place_ball(0.6, -2.0, -2.0, 0.0)
+    idle_steps(world, 1)
+    assert world.ball.velocity.x > 0.1
+    assert world.robots[0].x == pytest.approx(0.0, abs=0.02)   # the driven robot holds its place
