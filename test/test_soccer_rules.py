@@ -268,3 +268,30 @@ def test_episode_is_truncated_after_its_time():
     assert world.state.phase == Phase.FINISHED
     with pytest.raises(RuntimeError, match="reset"):
         world.step([IDLE, IDLE])
+
+
+@pytest.mark.parametrize("players", [1, 2, 5])
+@pytest.mark.parametrize("kicking_team", [1, -1])
+def test_kickoff_puts_the_keeper_in_goal_the_striker_at_the_ball_and_everyone_in_their_half(players, kicking_team):
+    world = make_world(players_per_team=players)
+    world.reset(seed=4, kickoff_team=kicking_team)
+    f = world.config.field
+    for r in world.robots:
+        assert r.team * r.x < 0 and abs(r.y) < f.half_width
+        assert math.cos(r.yaw) == pytest.approx(r.team)           # facing the opponent goal
+    for team in (1, -1):
+        mates = [r for r in world.robots if r.team == team]
+        striker = mates[0] if players == 1 else mates[1]
+        distance = math.hypot(striker.x, striker.y)
+        assert distance < 0.9 if team == kicking_team else f.center_circle_radius < distance < 2.5
+        if players > 1:
+            assert mates[0].team * mates[0].x < -f.half_length + f.penalty_area_length   # slot 0 keeps goal
+    assert world.state.ball_owner == kicking_team and world.state.phase == Phase.KICKOFF
+
+
+@pytest.mark.parametrize("settings,message", [({"robot_mass": 0.0}, "robot_mass must be positive"),
+                                              ({"ball": {"radius": 0.0}}, "ball.radius must be positive"),
+                                              ({"kick": {"periods": 0}}, "at least 1")])
+def test_settings_that_would_break_the_physics_are_refused(settings, message):
+    with pytest.raises(ValueError, match=message):
+        make_world(**settings)

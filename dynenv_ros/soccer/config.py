@@ -131,6 +131,14 @@ class SoccerConfig:
             raise ValueError(f"episode_seconds ({self.episode_seconds}) is shorter than one motion period ({period})")
         if 2 * self.kick.strike_seconds > period:
             raise ValueError("kick.strike_seconds: the stroke forward and back must fit in one motion period")
+        for name in ("robot_mass", "ball.mass", "ball.radius", "ball.deceleration", "kick.strike_speed",
+                     "kick.strike_seconds", "motion.drive_max_force", "motion.drive_max_torque", "motion.head_step",
+                     "motion.head_limit", "penalties.sideline_spacing"):
+            owner, _, leaf = name.rpartition(".")
+            if not getattr(getattr(self, owner) if owner else self, leaf) > 0:
+                raise ValueError(f"{name} must be positive")
+        if self.kick.periods < 1 or self.motion.head_units < 1 or self.penalties.spots_per_side < 1:
+            raise ValueError("kick.periods, motion.head_units and penalties.spots_per_side must be at least 1")
         for name in ("p_walk", "p_turn", "p_kick", "p_fall_again"):
             if not 0.0 <= getattr(self.falls, name) <= 1.0:
                 raise ValueError(f"falls.{name} must be a probability in [0, 1]")

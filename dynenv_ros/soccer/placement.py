@@ -13,7 +13,7 @@ from dynenv_ros.soccer.field import FieldGeometry
 
 # Kickoff roles (DynEnv §2.2, converted to metres in the team's own frame). Each entry: x0, x spread (uniform
 # in [0, spread), negative = away from the ball), x jitter (uniform ±), y0, y jitter (uniform ±).
-# The first role of each side (the striker) is always filled; the others are drawn at random.
+# Which slot takes which role: see role_order.
 KICKING_ROLES = ((-0.275, -0.5, 0.0, 0.0, 0.125),   # striker just behind the ball
                  (-0.275, -0.5, 0.0, -1.5, 0.25),   # right wing
                  (-0.275, -0.5, 0.0, 1.5, 0.25),    # left wing
@@ -33,12 +33,25 @@ def to_field(team: int, x: float, y: float, yaw: float) -> tuple[float, float, f
     return -x, -y, math.remainder(yaw + math.pi, math.tau)
 
 
+KEEPER_ROLE = 4
+
+
+def role_order(rng: np.random.Generator, players_per_team: int, role_count: int) -> list[int]:
+    """Roles by slot: slot 0 keeps goal (SPL's player 1) once a team has two players, the next slot is the striker
+    (kickoff) or the circle defender, the rest are drawn from the remaining roles."""
+    if players_per_team == 1:
+        return [0]
+    others = [r for r in range(1, role_count) if r != KEEPER_ROLE]
+    drawn = [others[int(i)] for i in rng.permutation(len(others))[:players_per_team - 2]]
+    return [KEEPER_ROLE, 0] + drawn
+
+
 def kickoff_poses(rng: np.random.Generator, players_per_team: int, kicking_team: int
                   ) -> dict[int, list[tuple[float, float, float]]]:
     """Field-frame poses for each team's players (slot order), kicking team drawn first."""
     poses: dict[int, list[tuple[float, float, float]]] = {}
     for team, roles in ((kicking_team, KICKING_ROLES), (-kicking_team, DEFENDING_ROLES)):
-        chosen = [0] + [1 + int(i) for i in rng.permutation(len(roles) - 1)[:players_per_team - 1]]
+        chosen = role_order(rng, players_per_team, len(roles))
         team_poses = []
         for role in chosen:
             x0, spread, x_jitter, y0, y_jitter = roles[role]
