@@ -36,16 +36,10 @@ def _world_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], 
     units, step_rad = config.motion.head_units, config.motion.head_step
     actions = [[SoccerAction(Walk(a[0]), Turn(a[1]), Kick(a[2]), (a[3] - units) * step_rad) for a in row]
                for row in pool]
-    encode = None
-    if args.observation == "ground_truth":
-        from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder
-        encode = GroundTruthEncoder(config).observations
 
     def run(steps: int) -> None:
         for k in range(steps):
             result = world.step(actions[k % ACTION_POOL])
-            if encode is not None:
-                encode(world)
             if result.truncated:
                 world.reset()
     return run
@@ -53,7 +47,12 @@ def _world_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], 
 
 def _pettingzoo_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
     from dynenv_ros.envs.robocup_v0 import parallel_env
-    env = parallel_env(players_per_team=args.players_per_team)
+    if args.noise == "none":
+        perception: Any = "none"
+    else:
+        perception = {"preset": args.preset, "mode": args.noise, "noise_magnitude": args.noise_magnitude}
+    env = parallel_env(players_per_team=args.players_per_team, observation=args.observation, perception=perception,
+                       image_size=_image_size(args.image_size))
     env.reset(seed=args.seed)
     names = env.possible_agents
     actions = [dict(zip(names, row)) for row in pool]
@@ -78,6 +77,14 @@ def _vector_stepper(args: Any, config: Any, pool: np.ndarray) -> tuple[Callable[
     return run, env
 
 
+def _image_size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise SystemExit(f"--image-size must look like 160x120, got {text!r}") from None
+    return width, height
+
+
 def run(args: Any) -> int:
     if not 1 <= args.players_per_team <= 5:
         print("--players-per-team must be in 1..5", file=sys.stderr)
@@ -94,7 +101,7 @@ def run(args: Any) -> int:
     closer = None
     if args.envs > 1:
         stepper, closer = _vector_stepper(args, config, pool)
-    elif args.observation == "pettingzoo":
+    elif args.observation != "none":
         stepper = _pettingzoo_stepper(args, config, pool)
     else:
         stepper = _world_stepper(args, config, pool)
@@ -108,7 +115,9 @@ def run(args: Any) -> int:
         closer.close()
     figures = {
         "scenario": args.scenario, "players_per_team": args.players_per_team, "steps": args.steps,
-        "observation": args.observation, "noise": args.noise, "envs": args.envs,
+        "observation": args.observation, "noise": args.noise if args.observation in ("partial", "image") else "n/a",
+        "preset": args.preset, "noise_magnitude": args.noise_magnitude,
+        "image_size": args.image_size if args.observation == "image" else None, "envs": args.envs,
         "backend": args.backend if args.envs > 1 else "single", "cores": len(cores),
         "env_steps_per_s": round(best, 1), "ms_per_env_step": round(1000.0 / best, 4),
         "physics_ticks_per_s": round(best * config.rates.motion_period_ticks),

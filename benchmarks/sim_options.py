@@ -4,8 +4,8 @@ from __future__ import annotations
 import argparse
 
 SCENARIOS = ("robocup",)
-OBSERVATIONS = ("none", "ground_truth", "pettingzoo")
-NOISE = ("none",)   # perception presets arrive with the perception model
+OBSERVATIONS = ("none", "full", "partial", "image")
+NOISE = ("realistic", "random", "none")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -13,9 +13,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--players-per-team", type=int, default=2)
     parser.add_argument("--steps", type=int, default=5000, help="motion periods (env steps) to time")
     parser.add_argument("--observation", choices=OBSERVATIONS, default="none",
-                        help="none: physics and rules only; ground_truth: plus team-frame observations; "
-                             "pettingzoo: the full Parallel API step")
-    parser.add_argument("--noise", choices=NOISE, default="none")
+                        help="none: the world's physics and rules only; full / partial / image: the whole PettingZoo "
+                             "step with that observation mode")
+    parser.add_argument("--noise", choices=NOISE, default="realistic",
+                        help="perception error mode (partial and image observations)")
+    parser.add_argument("--preset", choices=("realistic", "dynenv"), default="realistic",
+                        help="perception parameter preset for --noise realistic/random")
+    parser.add_argument("--noise-magnitude", type=float, default=1.0, help="0..5")
+    parser.add_argument("--image-size", default="160x120", help="WIDTHxHEIGHT of camera images (--observation image)")
     parser.add_argument("--envs", type=int, default=1, help="worlds stepped as one vectorised batch")
     parser.add_argument("--backend", choices=("inprocess", "subprocess"), default="inprocess",
                         help="vectorised backend when --envs > 1")

@@ -5,12 +5,14 @@
 | agents | ``team_a_0`` … ``team_a_{n-1}``, ``team_b_0`` … (n = ``players_per_team``, 1–5) |
 | action (``head_mode='discrete'``) | MultiDiscrete [walk 5, turn 3, kick 3, head 7]: see ``soccer.actions`` |
 | action (``head_mode='continuous'``) | Dict ``motion`` MultiDiscrete [5, 3, 3], ``head`` Box rad per period |
-| observation | team-frame ground truth, float32 (``envs.soccer_spaces``) |
+| observation (``observation='partial'``) | per vision frame, the robot's detections as float32 rows, and proprioception (``envs.soccer_observations``) |
+| observation (``'full'`` / ``'image'``) | team-frame ground truth / top and bottom camera segmentation per frame |
+| perception | ``perception='realistic'`` (default), ``'dynenv'``, ``'none'``, or ``{"preset": …, "noise_magnitude": …, "mode": …}`` |
 | reward | sum of the primary, rule, auxiliary and observation terms; each term in ``infos[agent]['reward_terms']`` |
 | episode | 120 s = 240 motion periods, then every agent is truncated |
 
 Keyword arguments are the settings of ``soccer.config.SoccerConfig`` (nested ones as dicts), plus
-``render_mode='rgb_array'``.
+``render_mode='rgb_array'``, ``observation``, ``perception`` and ``image_size=(width, height)``.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from typing import Any
 import numpy as np
 from pettingzoo import ParallelEnv
 
+from dynenv_ros.envs.soccer_observations import SoccerObservations
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder, action_space
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.config import SoccerConfig
@@ -35,7 +38,8 @@ def agent_names(players_per_team: int) -> list[str]:
 class RoboCupParallelEnv(ParallelEnv):
     metadata = {"name": "robocup_v0", "render_modes": ["rgb_array"], "render_fps": 2, "is_parallelizable": True}
 
-    def __init__(self, render_mode: str | None = None, **config: Any) -> None:
+    def __init__(self, render_mode: str | None = None, observation: str = "partial",
+                 perception: Any = "realistic", image_size: tuple[int, int] = (640, 480), **config: Any) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
@@ -45,9 +49,10 @@ class RoboCupParallelEnv(ParallelEnv):
         self.agents: list[str] = []
         self._index = {name: i for i, name in enumerate(self.possible_agents)}
         self.encoder = GroundTruthEncoder(self.config)
+        self.observations = SoccerObservations(self.config, observation, perception, image_size)
         self._action_space = action_space(self.config)
         self._action_spaces = {a: self._action_space for a in self.possible_agents}
-        self._observation_spaces = {a: self.encoder.observation_space for a in self.possible_agents}
+        self._observation_spaces = {a: self.observations.space for a in self.possible_agents}
         self.state_space = self.encoder.state_space
 
     def observation_space(self, agent: str):
@@ -72,8 +77,9 @@ class RoboCupParallelEnv(ParallelEnv):
         if kickoff not in teams:
             raise ValueError(f"options['kickoff_team'] must be 'a' or 'b', got {kickoff!r}")
         self.world.reset(seed=seed, kickoff_team=teams[kickoff])
+        self.observations.reset(self.world)
         self.agents = self.possible_agents[:]
-        observations = self.encoder.observations(self.world)
+        observations = self.observations.initial()
         zero_terms = {term.name.lower(): 0.0 for term in RewardTerm}
         return ({a: observations[i] for i, a in enumerate(self.agents)},
                 {a: {"reward_terms": dict(zero_terms)} for a in self.agents})
@@ -89,8 +95,10 @@ class RoboCupParallelEnv(ParallelEnv):
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"no action for {', '.join(missing)}")
-        result = self.world.step([actions[a] for a in self.possible_agents], names=self.possible_agents)
-        observations = self.encoder.observations(self.world)
+        result = self.world.step([actions[a] for a in self.possible_agents], on_frame=self.observations.on_frame,
+                                 names=self.possible_agents)
+        observations, seen_rewards = self.observations.build()
+        result.rewards[RewardTerm.OBSERVATION] += seen_rewards
         totals = result.rewards.sum(axis=0)
         terms = [{term.name.lower(): float(result.rewards[term, i]) for term in RewardTerm}
                  for i in range(len(self.possible_agents))]

@@ -1,0 +1,241 @@
+"""The perception error model's parameters: named, documented, loaded from YAML presets (docs/perception.md).
+
+Probabilities are *per unit of noise magnitude*: the model multiplies them by ``noise_magnitude`` (0–5), so one knob
+scales every failure at once, as in DynEnv. Distances are metres, angles radians.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from dynenv_ros.core.object_classes import ObjectClass
+
+MODES = ("realistic", "random", "none")
+PRESETS = ("realistic", "dynenv", "none")
+CLASS_NAMES = {"ball": ObjectClass.BALL, "robot": ObjectClass.ROBOT, "goalpost": ObjectClass.GOALPOST,
+               "penalty_cross": ObjectClass.PENALTY_CROSS, "line_crossing": ObjectClass.LINE_CROSSING,
+               "field_line": ObjectClass.FIELD_LINE, "center_circle": ObjectClass.CENTER_CIRCLE,
+               "none": ObjectClass.UNKNOWN}
+
+
+@dataclass(frozen=True)
+class ClassParams:
+    """How far one class can be seen, and how reliably."""
+    near_range: float          # beyond this the sighting is DISTANT (and, realistic, less reliable)
+    max_range: float           # beyond this nothing is detected (inf: no cut-off, as in DynEnv)
+    miss_scale: float = 1.0    # multiplies the base miss probability for this class
+    visibility_radius: float = 0.05   # how far the object reaches out of the field of view to be partially seen
+
+
+@dataclass(frozen=True)
+class MissParams:
+    """P(miss) = base · magnitude · miss_scale · multiplier; realistic multiplier = (offset + slope·(d/near)²) ×
+    the factor of the sighting (partial beats distant beats nearby); random mode uses multiplier 1."""
+    base: float = 0.01
+    range_offset: float = 0.25
+    range_slope: float = 3.75
+    nearby_factor: float = 2.0
+    distant_factor: float = 3.0
+    partial_factor: float = 4.0
+    nearby_distance: float = 0.35      # another object this close (centre to centre) makes a sighting NEARBY
+
+
+@dataclass(frozen=True)
+class PositionParams:
+    """Where a detection lands. 'uniform' (DynEnv): each axis ± 0.5·magnitude·uniform_scale·multiplier (random
+    mode: multiplier 4). 'polar' (realistic): radial σ = magnitude·(radial_base + radial_per_m2·d²) — a ground
+    projection's error grows with the square of the distance — and bearing σ = magnitude·bearing_std."""
+    model: str = "polar"
+    uniform_scale: float = 0.0025
+    radial_base: float = 0.01
+    radial_per_m2: float = 0.0175
+    bearing_std: float = 0.0175
+    random_std: float = 0.05           # random mode with the polar model: σ per axis, independent of distance
+    size_std: float = 0.05             # relative size error σ per unit magnitude
+    yaw_std: float = 0.1               # robots' heading σ per unit magnitude, rad
+
+
+@dataclass(frozen=True)
+class Confusion:
+    """A ``source`` detection is reported as ``target`` with P = probability · base · magnitude · multiplier."""
+    source: ObjectClass
+    target: ObjectClass
+    probability: float
+    distant_only: bool = False
+
+
+@dataclass(frozen=True)
+class FalsePositiveParams:
+    trials: int = 10                   # per frame, each firing with P = probability · magnitude
+    probability: float = 0.01
+    classes: tuple[ObjectClass, ...] = (ObjectClass.BALL, ObjectClass.ROBOT, ObjectClass.GOALPOST,
+                                        ObjectClass.PENALTY_CROSS, ObjectClass.LINE_CROSSING, ObjectClass.UNKNOWN)
+    max_distance: float = 8.32         # placed uniformly in distance up to this, uniformly in bearing in the view
+    at_feet_probability: float = 0.1   # realistic: per robot seen closer than at_feet_range, P(ball at its feet)
+    at_feet_range: float = 2.5
+    at_feet_spread: float = 0.175
+    at_feet_robot_dropped: float = 0.08  # nested: P(the robot itself is not reported), per unit magnitude
+
+
+@dataclass(frozen=True)
+class OcclusionParams:
+    """A robot hides what lies behind it within its angular half-width asin(occluder_radius / distance)."""
+    enabled: bool = True
+    occluder_radius: float = 0.15
+
+
+@dataclass(frozen=True)
+class PerceptionParams:
+    mode: str = "realistic"
+    noise_magnitude: float = 1.0
+    field_of_view: float = math.pi / 2
+    confidence: str = "reliability"    # 'reliability': 1 - P(miss) of the sighting (FPs lower); 'none': always 1
+    classes: Mapping[ObjectClass, ClassParams] = field(default_factory=dict)
+    miss: MissParams = field(default_factory=MissParams)
+    position: PositionParams = field(default_factory=PositionParams)
+    confusions: tuple[Confusion, ...] = ()
+    false_positives: FalsePositiveParams = field(default_factory=FalsePositiveParams)
+    occlusion: OcclusionParams = field(default_factory=OcclusionParams)
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"perception mode must be one of {MODES}, got {self.mode!r}")
+        m = self.noise_magnitude
+        if isinstance(m, bool) or not isinstance(m, (int, float)) or not 0.0 <= m <= 5.0:
+            raise ValueError(f"noise_magnitude must be a number in [0, 5], got {m!r}")
+        if not 0.0 < self.field_of_view < math.pi:
+            raise ValueError(f"field_of_view must be in (0, pi) rad, got {self.field_of_view}")
+        if self.confidence not in ("reliability", "none"):
+            raise ValueError(f"confidence must be 'reliability' or 'none', got {self.confidence!r}")
+        if self.position.model not in ("uniform", "polar"):
+            raise ValueError(f"position.model must be 'uniform' or 'polar', got {self.position.model!r}")
+        missing = [name for name, cls in CLASS_NAMES.items() if cls != ObjectClass.UNKNOWN and cls not in self.classes]
+        if missing:
+            raise ValueError(f"classes: no settings for {', '.join(missing)}")
+        for cls, p in self.classes.items():
+            numbers = (p.near_range, p.max_range, p.miss_scale, p.visibility_radius)
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in numbers) or not (
+                    p.near_range > 0 and p.max_range > 0 and p.miss_scale >= 0 and p.visibility_radius >= 0):
+                raise ValueError(f"classes.{ObjectClass(cls).name.lower()}: ranges must be positive, "
+                                 "miss_scale and visibility_radius non-negative")
+        _check_non_negative(self)
+
+    @property
+    def rho(self) -> float:
+        """DynEnv's ``randBase``: the base probability scaled by the noise magnitude."""
+        return self.miss.base * self.noise_magnitude
+
+    def with_noise(self, magnitude: float | None = None, mode: str | None = None) -> "PerceptionParams":
+        return replace(self, noise_magnitude=self.noise_magnitude if magnitude is None else magnitude,
+                       mode=self.mode if mode is None else mode)
+
+
+def _check_non_negative(obj: Any, prefix: str = "") -> None:
+    for f in fields(obj):
+        value = getattr(obj, f.name)
+        if hasattr(value, "__dataclass_fields__"):
+            _check_non_negative(value, f"{prefix}{f.name}.")
+        elif isinstance(value, (str, list, dict)) and f.type in ("float", "int"):
+            raise ValueError(f"{prefix}{f.name} must be a number, got {value!r}")
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            if not math.isfinite(value) and f.name != "max_range" or value < 0:
+                raise ValueError(f"{prefix}{f.name} must be a non-negative finite number, got {value}")
+
+
+def preset_dir() -> Path:
+    """``config/perception`` of the source tree, or of the installed share directory."""
+    here = Path(__file__).resolve().parents[2] / "config" / "perception"
+    if here.is_dir():
+        return here
+    import sys
+    installed = Path(sys.prefix) / "share" / "dynenv_ros" / "config" / "perception"
+    if installed.is_dir():
+        return installed
+    raise FileNotFoundError(f"perception presets not found in {here} or {installed}")
+
+
+def load_preset(name: str, **overrides: Any) -> PerceptionParams:
+    """A named preset from ``config/perception/<name>.yaml``; keyword overrides replace top-level settings."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown perception preset {name!r}; presets: {', '.join(PRESETS)}")
+    return load_yaml(preset_dir() / f"{name}.yaml", **overrides)
+
+
+def load_yaml(path: str | Path, **overrides: Any) -> PerceptionParams:
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"cannot read perception parameters from {path}: {exc}") from None
+    if not isinstance(data, dict) or "perception" not in data:
+        raise ValueError(f"{path}: expected a mapping with a top-level 'perception' key")
+    values = dict(data["perception"])
+    values.update(overrides)
+    try:
+        return from_mapping(values)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def _class(name: Any, where: str) -> ObjectClass:
+    if name not in CLASS_NAMES:
+        raise ValueError(f"{where}: unknown class {name!r}; classes: {', '.join(CLASS_NAMES)}")
+    return CLASS_NAMES[name]
+
+
+def _section(cls: type, values: Any, where: str) -> Any:
+    if not isinstance(values, Mapping):
+        raise ValueError(f"{where} must be a mapping, got {values!r}")
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"{where}: unknown setting(s) {unknown}; known: {sorted(known)}")
+    try:
+        return cls(**values)
+    except TypeError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def from_mapping(values: Mapping[str, Any]) -> PerceptionParams:
+    """Parameters from plain values (a preset's ``perception`` mapping); unknown keys are refused by name."""
+    values = dict(values)
+    known = {f.name for f in fields(PerceptionParams)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"unknown perception setting(s) {unknown}; known: {sorted(known)}")
+    kwargs: dict[str, Any] = {}
+    for key in ("mode", "confidence"):
+        if key in values:
+            kwargs[key] = values[key]
+    for key in ("noise_magnitude", "field_of_view"):
+        if key in values:
+            if isinstance(values[key], bool) or not isinstance(values[key], (int, float)):
+                raise ValueError(f"{key} must be a number, got {values[key]!r}")
+            kwargs[key] = float(values[key])
+    if "classes" in values:
+        if not isinstance(values["classes"], Mapping):
+            raise ValueError("classes must map class names to their settings")
+        kwargs["classes"] = {_class(name, "classes"): _section(ClassParams, v, f"classes.{name}")
+                             for name, v in values["classes"].items()}
+    for key, cls in (("miss", MissParams), ("position", PositionParams), ("occlusion", OcclusionParams)):
+        if key in values:
+            kwargs[key] = _section(cls, values[key], key)
+    if "false_positives" in values:
+        fp = dict(values["false_positives"] or {})
+        if "classes" in fp:
+            fp["classes"] = tuple(_class(c, "false_positives.classes") for c in fp["classes"])
+        kwargs["false_positives"] = _section(FalsePositiveParams, fp, "false_positives")
+    if "confusions" in values:
+        rules = []
+        for i, rule in enumerate(values["confusions"] or ()):
+            where = f"confusions[{i}]"
+            rule = dict(rule)
+            for key in ("source", "target"):
+                rule[key] = _class(rule.get(key), f"{where}.{key}")
+            rules.append(_section(Confusion, rule, where))
+        kwargs["confusions"] = tuple(rules)
+    return PerceptionParams(**kwargs)

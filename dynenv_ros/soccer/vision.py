@@ -1,0 +1,115 @@
+"""The soccer world seen through each robot's vision pipeline: records the world at every vision instant of a
+motion period, then perceives all robots' frames in one vectorised pass and scores what they truly saw."""
+from __future__ import annotations
+
+import numpy as np
+
+from dynenv_ros.core.object_classes import ObjectClass
+from dynenv_ros.perception.model import Perception, Perceiver
+from dynenv_ros.perception.params import PerceptionParams
+from dynenv_ros.perception.scene import SceneFrames, SceneObjects, Views
+from dynenv_ros.soccer.robot import BODY_RADIUS
+from dynenv_ros.soccer.world import SoccerWorld
+
+GOALPOST_ID, PENALTY_MARK_ID, CROSSING_ID, CENTER_CIRCLE_ID = 1000, 1100, 1200, 1300
+
+
+def soccer_scene(world: SoccerWorld) -> SceneObjects:
+    """Robots (ids 0..n-1), the ball (id n), then goalposts, penalty marks and line crossings (ids from 1000)."""
+    f, n = world.config.field, world.n_robots
+    ball_d = 2 * world.config.ball.radius
+    crossings = f.line_crossings
+    classes = ([ObjectClass.ROBOT] * n + [ObjectClass.BALL] + [ObjectClass.GOALPOST] * len(f.goalposts)
+               + [ObjectClass.PENALTY_CROSS] * len(f.penalty_marks) + [ObjectClass.LINE_CROSSING] * len(crossings)
+               + [ObjectClass.CENTER_CIRCLE])
+    ids = (list(range(n + 1)) + [GOALPOST_ID + i for i in range(len(f.goalposts))]
+           + [PENALTY_MARK_ID + i for i in range(len(f.penalty_marks))]
+           + [CROSSING_ID + i for i in range(len(crossings))] + [CENTER_CIRCLE_ID])
+    size = ([2 * BODY_RADIUS] * n + [ball_d] + [2 * f.goalpost_radius] * len(f.goalposts)
+            + [f.penalty_mark_size] * len(f.penalty_marks) + [0.1] * len(crossings) + [2 * f.center_circle_radius])
+    team = [r.team for r in world.robots] + [0] * (len(classes) - n)
+    subtype = [0] * (n + 1 + len(f.goalposts) + len(f.penalty_marks)) + [int(c.shape) for c in crossings] + [0]
+    total = len(classes)
+    return SceneObjects(
+        class_id=np.array(classes, np.uint8), object_id=np.array(ids, np.int32), size_x=np.array(size),
+        size_y=np.array(size), team=np.array(team, np.int8), subtype=np.array(subtype, np.uint8),
+        occluder=np.arange(total) < n, dynamic=np.arange(total) <= n, lines=np.asarray(f.lines, float))
+
+
+class SoccerVision:
+    """Attach to a world: call ``frame`` at each vision instant (``world.step(..., on_frame=vision.frame)``), then
+    ``perceive`` once per period."""
+
+    def __init__(self, world: SoccerWorld, params: PerceptionParams) -> None:
+        self.world = world
+        self.params = params
+        self.reset()
+
+    def reset(self) -> None:
+        """Call after ``world.reset`` (the scene's robots are the world's)."""
+        world = self.world
+        self.objects = soccer_scene(world)
+        self.perceiver = Perceiver(self.objects, self.params)
+        frames = world.config.rates.frames_per_period
+        n, total = world.n_robots, len(self.objects.class_id)
+        f = world.config.field
+        static = np.vstack([f.goalposts, f.penalty_marks, [[c.x, c.y] for c in f.line_crossings], [[0.0, 0.0]]])
+        self._x = np.zeros((frames, total))
+        self._y = np.zeros((frames, total))
+        self._x[:, n + 1:], self._y[:, n + 1:] = static[:, 0], static[:, 1]
+        self._yaw = np.full((frames, total), np.nan)
+        self._fallen = np.zeros((frames, total), bool)
+        self._penalized = np.zeros((frames, total), bool)
+        self._head = np.zeros((frames, n))
+        self._records: list = []
+        self._views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.teams = np.array([r.team for r in world.robots], np.int8)
+
+    def frame(self, index: int) -> None:
+        """Record the world at this vision instant."""
+        if len(self._records) >= len(self._x):
+            raise RuntimeError("more vision frames than a motion period holds; call perceive() every period")
+        # Plain Python now, one numpy conversion per period in perceive().
+        record = [(r.body.position, r.body.angle, r.rules.fallen, r.rules.penalized, r.head_yaw, r.kick is not None)
+                  for r in self.world.robots]
+        self._records.append((record, self.world.ball.position))
+
+    def frames_recorded(self) -> int:
+        return len(self._records)
+
+    def perceive(self) -> Perception:
+        """All robots' detections for the recorded frames (view index = frame · n_robots + robot)."""
+        frames, n = len(self._records), self.world.n_robots
+        table = np.array([[(p.x, p.y, yaw, fallen, penalized, head, kicking)
+                           for p, yaw, fallen, penalized, head, kicking in record]
+                          + [(ball.x, ball.y, np.nan, 0, 0, 0, 0)] for record, ball in self._records])  # (F, n+1, 7)
+        self._records = []
+        # Each robot's own state per frame: head yaw, fallen, penalized, kicking (what it knows of itself).
+        self.proprioception = table[:, :n, (5, 3, 4, 6)].astype(np.float32)
+        self._x[:frames, :n + 1], self._y[:frames, :n + 1] = table[:, :, 0], table[:, :, 1]
+        self._yaw[:frames, :n] = table[:, :n, 2]
+        self._fallen[:frames, :n] = table[:, :n, 3] > 0
+        self._penalized[:frames, :n] = table[:, :n, 4] > 0
+        self._head[:frames] = table[:, :n, 5]
+        if frames not in self._views:
+            self._views[frames] = (np.repeat(np.arange(frames), n), np.tile(np.arange(n), frames),
+                                   np.tile(self.teams, frames))
+        frame_of_view, observer, team = self._views[frames]
+        views = Views(frame=frame_of_view, observer=observer, head_yaw=self._head[:frames].ravel())
+        scene = SceneFrames(self._x[:frames], self._y[:frames], self._yaw[:frames], self._fallen[:frames],
+                            self._penalized[:frames])
+        return self.perceiver.perceive(scene, views, self.world.rng, team)
+
+    def observation_rewards(self, perception: Perception) -> np.ndarray:
+        """(n_robots,) DynEnv's reward for looking around, from what each robot truly saw this period."""
+        n = self.world.n_robots
+        frames = len(perception) // n
+        seen = perception.seen.reshape(frames, n, -1)                       # (F, observer, object)
+        w = self.world.config.rewards
+        robot_frames = np.minimum(w.observation_robot_cap, seen[:, :, :n].sum(axis=0))   # (observer, robot)
+        robot_frames[np.arange(n), np.arange(n)] = 0                       # oneself does not count
+        landmarks = seen[:, :, self.perceiver.is_landmark].sum(axis=2) + perception.lines_seen.reshape(frames, n)
+        landmark_term = np.minimum(float(w.observation_landmark_cap), landmarks.sum(axis=0) / frames)
+        ball_frames = np.minimum(w.observation_ball_cap, seen[:, :, n].sum(axis=0))
+        return (w.observation_robot * robot_frames.sum(axis=1) + w.observation_landmark * landmark_term
+                + w.observation_ball * ball_frames)
