@@ -121,6 +121,8 @@ def run(args: Any) -> int:
         "backend": args.backend if args.envs > 1 else "single", "cores": len(cores),
         "env_steps_per_s": round(best, 1), "ms_per_env_step": round(1000.0 / best, 4),
         "physics_ticks_per_s": round(best * config.rates.motion_period_ticks),
+        "robot_frames_per_s": round(best * config.rates.frames_per_period * config.n_robots)
+        if args.observation in ("partial", "image") else None,
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
         "torch_imported": "torch" in sys.modules, "python": platform.python_version(),
     }
