@@ -52,7 +52,7 @@ def camera_to_field(observer_pose: tuple[float, float, float], x: np.ndarray | f
 def class_colour(class_id: int, team: int = 0, observer_team: int = 1) -> Colour:
     """Marker colour of a reported class; robots by team relation (own = the observer's team colour)."""
     if class_id == ObjectClass.ROBOT:
-        return TEAM_COLOURS.get(int(team) * observer_team, TEAM_COLOURS[0]) if team else TEAM_COLOURS[0]
+        return TEAM_COLOURS.get(int(team) * observer_team, TEAM_COLOURS[0])
     return {ObjectClass.BALL: BALL, ObjectClass.GOALPOST: GOALPOST, ObjectClass.PENALTY_CROSS: MARK,
             ObjectClass.LINE_CROSSING: MARK, ObjectClass.FIELD_LINE: LINE_DETECTION,
             ObjectClass.CENTER_CIRCLE: LINE_DETECTION}.get(int(class_id), OTHER)
@@ -86,7 +86,7 @@ def overlay_detections(image: Image.Image, view: FieldView, observer_pose: tuple
     if lines.any():
         sx, sy = camera_to_field(observer_pose, d["line_start_x"][lines], d["line_start_y"][lines])
         ex, ey = camera_to_field(observer_pose, d["line_end_x"][lines], d["line_end_y"][lines])
-        width = max(2, round(view.length_to_pixels(0.04)))
+        width = max(1, round(view.length_to_pixels(0.025)))   # thin: noisy lines pile up over frames
         for segment in zip(sx, sy, ex, ey):
             draw.line((*view.field_to_pixel(segment[0], segment[1]), *view.field_to_pixel(segment[2], segment[3])),
                       fill=LINE_DETECTION, width=width)

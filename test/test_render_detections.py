@@ -1,0 +1,127 @@
+"""Detection overlay: camera-frame rows land on the right field pixels, errors are marked, the figure script runs."""
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from dynenv_ros.core.object_classes import ObjectClass
+from dynenv_ros.perception.detections import empty
+from dynenv_ros.render.detections import (BALL, ERROR, LINE_DETECTION, MISSED, camera_to_field, field_view,
+                                          missed_positions, overlay_detections)
+from dynenv_ros.render.topdown import CARPET
+from dynenv_ros.soccer.field import FieldGeometry
+
+PPM = 40
+SCRIPT = Path(__file__).resolve().parent.parent / "tools" / "perception_figures.py"
+FIGURES = ("perception_none.png", "perception_realistic.png", "perception_realistic_m3.png", "perception_dynenv.png")
+
+
+@pytest.fixture
+def view():
+    return field_view(FieldGeometry(), PPM)
+
+
+def blank(view) -> Image.Image:
+    return Image.new("RGB", view.size, CARPET)
+
+
+def ball_at(x: float, y: float, **fields) -> np.ndarray:
+    rows = empty(1)
+    rows["class_id"] = rows["true_class"] = ObjectClass.BALL
+    rows["x"], rows["y"] = x, y
+    rows["true_id"] = 4
+    for name, value in fields.items():
+        rows[name] = value
+    return rows
+
+
+def colour_at(image: Image.Image, view, x: float, y: float) -> tuple[int, int, int]:
+    col, row = view.field_to_pixel(x, y)
+    return image.getpixel((int(col), int(row)))
+
+
+def count(image: Image.Image, colour) -> int:
+    return int(np.all(np.asarray(image) == np.array(colour, np.uint8), axis=2).sum())
+
+
+@pytest.mark.parametrize("heading, expected", [(0.0, (2.0, 0.0)), (math.pi / 2, (0.0, 2.0))])
+def test_camera_x_lands_along_the_heading(view, heading, expected):
+    assert np.allclose(camera_to_field((0.0, 0.0, heading), 2.0, 0.0), expected, atol=1e-12)
+    image = overlay_detections(blank(view), view, (0.0, 0.0, heading), ball_at(2.0, 0.0))
+    assert colour_at(image, view, *expected) == BALL
+    other = (0.0, 2.0) if heading == 0.0 else (2.0, 0.0)
+    assert colour_at(image, view, *other) == CARPET
+
+
+def test_camera_y_is_left_of_the_gaze(view):
+    pose = (1.0, -1.0, math.pi / 2)                    # looking along +y: camera-left is field -x
+    assert np.allclose(camera_to_field(pose, 1.0, 0.5), (0.5, 0.0), atol=1e-12)
+
+
+def test_false_positive_draws_red_and_a_true_detection_does_not(view):
+    truthful = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), ball_at(2.0, 0.0))
+    assert count(truthful, ERROR) == 0
+    fp = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), ball_at(2.0, 0.0, true_id=-1, true_class=0))
+    assert count(fp, ERROR) > 10
+
+
+def test_confusion_is_ringed_in_red(view):
+    confused = ball_at(2.0, 0.0, true_id=1102, true_class=ObjectClass.PENALTY_CROSS)
+    image = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), confused)
+    assert count(image, ERROR) > 10
+    assert colour_at(image, view, 2.0, 0.0) == BALL
+
+
+def test_line_detection_draws_cyan_along_its_segment(view):
+    rows = empty(1)
+    rows["class_id"] = rows["true_class"] = ObjectClass.FIELD_LINE
+    rows["true_id"] = -2
+    rows["line_start_x"], rows["line_start_y"], rows["line_end_x"], rows["line_end_y"] = 1.0, -1.0, 3.0, -1.0
+    image = overlay_detections(blank(view), view, (0.5, 0.5, 0.0), rows)
+    for x in (1.6, 2.5, 3.4):                          # field segment (1.5, -0.5) → (3.5, -0.5)
+        assert colour_at(image, view, x, -0.5) == LINE_DETECTION
+    assert colour_at(image, view, 2.5, 0.5) == CARPET
+    assert count(image, LINE_DETECTION) < 2.2 * PPM * 3     # a thin segment, nothing else
+
+
+def test_missed_objects_are_hollow_white_circles(view):
+    image = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), empty(0), truth=[(1.0, 1.0)])
+    assert colour_at(image, view, 1.0, 1.0) == CARPET
+    assert count(image, MISSED) > 10
+
+
+def test_missed_positions_skip_objects_that_have_a_detection():
+    visible = np.array([True, True, False, True])
+    ids = np.array([0, 4, 1000, 1102])
+    rows = ball_at(1.0, 0.0, true_id=1102, class_id=ObjectClass.BALL, true_class=ObjectClass.PENALTY_CROSS)
+    xs, ys = np.array([0.0, 1.0, 2.0, 3.0]), np.zeros(4)
+    assert missed_positions(visible, rows, ids, xs, ys) == [(0.0, 0.0), (1.0, 0.0)]
+
+
+def test_image_of_another_scale_is_refused(view):
+    with pytest.raises(ValueError, match="pixels_per_metre"):
+        overlay_detections(Image.new("RGB", (10, 10)), view, (0.0, 0.0, 0.0), empty(0))
+
+
+def test_figure_script_writes_the_four_pngs(tmp_path):
+    spec = importlib.util.spec_from_file_location("perception_figures_under_test", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module                    # dataclasses look their module up while the file runs
+    try:
+        spec.loader.exec_module(module)
+        assert module.main(["--out", str(tmp_path)]) == 0
+    finally:
+        del sys.modules[spec.name]
+    expected = field_view(FieldGeometry(), module.PIXELS_PER_METRE).size
+    for name in FIGURES:
+        path = tmp_path / name
+        assert path.stat().st_size < 150_000
+        with Image.open(path) as image:
+            assert image.size == expected
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(FIGURES)
