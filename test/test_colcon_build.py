@@ -41,6 +41,8 @@ def test_colcon_builds_both_packages_into_a_ros_layout(tmp_path):
     for node in ("selfcheck_talker", "selfcheck_listener"):
         assert os.access(install / "dynenv_ros" / "lib" / "dynenv_ros" / node, os.X_OK), node
     assert (install / "dynenv_ros" / "share" / "dynenv_ros" / "config" / "main_job.yaml").is_file()
+    for preset in ("realistic", "dynenv", "none"):
+        assert (install / "dynenv_ros" / "share" / "dynenv_ros" / "config" / "perception" / f"{preset}.yaml").is_file()
     assert (install / "dynenv_ros" / "share" / "ament_index" / "resource_index" / "packages" / "dynenv_ros").exists()
     assert (install / "dynenv_msgs" / "share" / "dynenv_msgs" / "msg" / "DetectionArray.msg").is_file()
     # The installed node script runs the installed code: a refused parameter proves it got as far as the node.

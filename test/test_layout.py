@@ -9,12 +9,13 @@ import sys
 import dynenv_ros.bags
 import dynenv_ros.core
 import dynenv_ros.envs
+import dynenv_ros.perception
 import dynenv_ros.render
 import dynenv_ros.sim
 import dynenv_ros.soccer
 
 ROS_FREE_PACKAGES = [dynenv_ros.core, dynenv_ros.bags, dynenv_ros.sim, dynenv_ros.soccer, dynenv_ros.envs,
-                     dynenv_ros.render]
+                     dynenv_ros.render, dynenv_ros.perception]
 
 
 def test_ros_free_packages_import_no_ros():

@@ -67,6 +67,19 @@ def test_play_tool_runs_a_scripted_game_and_records_it(tmp_path):
     assert bad.returncode == 2 and "players_per_team" in bad.stderr
 
 
+def test_play_tool_draws_one_robots_detections(tmp_path):
+    gif = tmp_path / "watch.gif"
+    result = _run("dynenv_ros.envs.play", "--players-per-team", "1", "--seconds", "1", "--watch", "1",
+                  "--perception", "realistic", "--noise-magnitude", "2", "--gif", str(gif),
+                  "--pixels-per-metre", "10", "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["frames"] == 10 and gif.stat().st_size > 0
+    assert sum(summary["reward_per_robot"]["observation"]) > 0          # watching perceives: it earns the term
+    bad = _run("dynenv_ros.envs.play", "--players-per-team", "1", "--watch", "7", "--seconds", "1")
+    assert bad.returncode == 2 and "--watch" in bad.stderr
+
+
 def test_sim_benchmark_prints_one_json_object_with_its_figures():
     result = _run("benchmarks", "sim", "--scenario", "robocup", "--players-per-team", "1", "--steps", "20",
                   "--repeat", "1", "--json")

@@ -1,8 +1,11 @@
 """dynenv-play: a soccer game between scripted teams, in-process, with a summary and optional recordings.
 
     dynenv-play --players-per-team 2 --policy keeper_and_chasers --seconds 60 --gif game.gif --png-dir frames/
+    dynenv-play --watch 0 --perception realistic --noise-magnitude 2 --seconds 20 --gif robot0.gif
 
-Frames are taken at every vision instant (10 Hz), so the GIF plays in real time at --fps 10.
+Frames are taken at every vision instant (10 Hz), so the GIF plays in real time at --fps 10. With --watch, each
+frame also shows that robot's field of view and its detections (red X: false positive, red ring: confusion,
+white circle: in view but missed).
 """
 from __future__ import annotations
 
@@ -34,6 +37,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--png-dir", type=Path, help="write every frame as a PNG into this existing folder")
     parser.add_argument("--fps", type=float, default=10.0, help="GIF playback rate (10 = real time)")
     parser.add_argument("--pixels-per-metre", type=float, default=40.0)
+    parser.add_argument("--watch", type=int, help="robot id whose field of view and detections are drawn")
+    parser.add_argument("--perception", choices=("realistic", "dynenv", "none"), default="realistic")
+    parser.add_argument("--noise-magnitude", type=float, help="0..5 (default: the preset's)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     return parser.parse_args(argv)
 
@@ -48,12 +54,20 @@ def play(args: argparse.Namespace) -> dict:
         from dynenv_ros.render.topdown import EpisodeRecorder
         recorder = EpisodeRecorder(config.field, pixels_per_metre=args.pixels_per_metre,
                                    ball_radius=config.ball.radius)
+    watcher = _Watcher(world, args) if args.watch is not None else None
     totals = np.zeros((len(RewardTerm), config.n_robots))
     events: Counter[str] = Counter()
     while True:
         actions = act_all(policies, world.snapshot())
-        on_frame = (lambda k: recorder.add(world.snapshot())) if recorder is not None else None
+        if watcher is not None:
+            on_frame = watcher.frame
+        elif recorder is not None:
+            on_frame = lambda k: recorder.add(world.snapshot())  # noqa: E731
+        else:
+            on_frame = None
         result = world.step(actions, on_frame=on_frame)
+        if watcher is not None:
+            result.rewards[RewardTerm.OBSERVATION] += watcher.end_period(recorder)
         totals += result.rewards
         events.update(e.kind if e.kind != "penalty" else f"penalty: {e.detail.split(' (')[0]}"
                       for e in result.events if e.kind != "touch")
@@ -72,6 +86,46 @@ def play(args: argparse.Namespace) -> dict:
             "seconds": round(world.game_time, 3), "events": dict(sorted(events.items())),
             "reward_per_robot": {term.name.lower(): [round(v, 3) for v in totals[term]] for term in RewardTerm},
             "frames": len(recorder) if recorder is not None else 0}
+
+
+class _Watcher:
+    """Perceives every period and draws one robot's view and detections onto each frame."""
+
+    def __init__(self, world: SoccerWorld, args: argparse.Namespace) -> None:
+        from dynenv_ros.perception.params import load_preset
+        from dynenv_ros.soccer.vision import SoccerVision
+        if not 0 <= args.watch < world.n_robots:
+            raise ValueError(f"--watch must be a robot id in 0..{world.n_robots - 1}, got {args.watch}")
+        overrides = {} if args.noise_magnitude is None else {"noise_magnitude": args.noise_magnitude}
+        self.params = load_preset(args.perception, **overrides)
+        self.world, self.robot, self.ppm = world, args.watch, args.pixels_per_metre
+        self.vision = SoccerVision(world, self.params)
+        self.snapshots: list = []
+
+    def frame(self, k: int) -> None:
+        self.vision.frame(k)
+        self.snapshots.append(self.world.snapshot())
+
+    def end_period(self, recorder) -> np.ndarray:
+        from dynenv_ros.render.detections import field_view, missed_positions, overlay_detections
+        from dynenv_ros.render.topdown import render_snapshot
+        perception = self.vision.perceive()
+        n, geometry = self.world.n_robots, self.world.config.field
+        view = field_view(geometry, self.ppm)
+        for k, snapshot in enumerate(self.snapshots):
+            me = snapshot.objects[self.robot]
+            v = k * n + self.robot
+            x, y = self.vision.positions(k)
+            image = render_snapshot(snapshot, geometry, pixels_per_metre=self.ppm,
+                                    ball_radius=self.world.config.ball.radius,
+                                    fov=(self.robot, self.params.field_of_view / 2))
+            missed = missed_positions(perception.visible[v], perception.of_view(v), self.vision.objects.object_id, x, y)
+            overlay_detections(image, view, (me.x, me.y, me.yaw + me.head_yaw), perception.of_view(v), truth=missed,
+                               observer_team=me.team)
+            if recorder is not None:
+                recorder.frames.append(image)
+        self.snapshots = []
+        return self.vision.observation_rewards(perception)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -147,15 +147,16 @@ def _check_non_negative(obj: Any, prefix: str = "") -> None:
 
 
 def preset_dir() -> Path:
-    """``config/perception`` of the source tree, or of the installed share directory."""
-    here = Path(__file__).resolve().parents[2] / "config" / "perception"
-    if here.is_dir():
-        return here
+    """``config/perception`` of the source tree, else of an installed share directory (colcon or pip)."""
+    import os
     import sys
-    installed = Path(sys.prefix) / "share" / "dynenv_ros" / "config" / "perception"
-    if installed.is_dir():
-        return installed
-    raise FileNotFoundError(f"perception presets not found in {here} or {installed}")
+    candidates = [Path(__file__).resolve().parents[2] / "config" / "perception"]
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p] + [sys.prefix]
+    candidates += [Path(p) / "share" / "dynenv_ros" / "config" / "perception" for p in prefixes]
+    for candidate in candidates:
+        if candidate.is_dir():
+            return candidate
+    raise FileNotFoundError("perception presets not found in: " + ", ".join(str(c) for c in candidates))
 
 
 def load_preset(name: str, **overrides: Any) -> PerceptionParams:

@@ -74,6 +74,10 @@ class SoccerVision:
                   for r in self.world.robots]
         self._records.append((record, self.world.ball.position))
 
+    def positions(self, frame: int) -> tuple[np.ndarray, np.ndarray]:
+        """Field positions of the scene's objects at a frame of the last perceived period (for drawing)."""
+        return self._x[frame], self._y[frame]
+
     def frames_recorded(self) -> int:
         return len(self._records)
 
