@@ -1,0 +1,191 @@
+"""The soccer world served to asynchronous controllers (ROS nodes, sockets, tests): actions arrive one robot at a
+time, are validated and kept per motion period; a period runs when all controlled robots have acted, or when told
+to. ROS-free: the simulator node (``nodes/sim_node.py``) only converts what comes in and goes out.
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dynenv_ros.perception.params import PerceptionParams
+from dynenv_ros.sim.ground_truth import WorldSnapshot
+from dynenv_ros.sim.reward_terms import RewardTerm
+from dynenv_ros.soccer.actions import IDLE, Kick, SoccerAction, Turn, Walk
+from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.soccer.vision import SoccerVision
+from dynenv_ros.soccer.world import TEAM_A, TEAM_B, SoccerWorld
+from dynenv_ros.envs.robocup_v0 import agent_names
+
+MISSING_ACTION_RULES = ("hold", "none")
+REJECT_REASONS = ("malformed", "out_of_range", "unknown_robot", "wrong_episode", "late", "early", "duplicate")
+
+
+@dataclass
+class RobotFrame:
+    """What one robot perceived at one vision instant, plus its own state."""
+    detections: np.ndarray        # structured DETECTION_DTYPE rows (camera frame)
+    head_yaw: float
+    fallen: bool
+    penalized: bool
+
+
+@dataclass
+class FrameOutput:
+    tick: int
+    frame_index: int
+    snapshot: WorldSnapshot
+    robots: list[RobotFrame]
+
+
+@dataclass
+class RobotFeedback:
+    rewards: dict[str, float]
+    seen_object_ids: list[int]
+    landmarks_seen: float
+
+
+@dataclass
+class PeriodOutput:
+    episode_id: int
+    motion_period: int            # the period that just ran
+    frames: list[FrameOutput]
+    feedback: list[RobotFeedback]
+    terminated: bool
+    truncated: bool
+    events: list = field(default_factory=list)
+
+
+class SoccerSession:
+    """One world, its perception, and a mailbox of actions per motion period."""
+
+    def __init__(self, config: SoccerConfig, perception: PerceptionParams, seed: int | None = None,
+                 missing_action: str = "none", controlled: list[int] | None = None) -> None:
+        if missing_action not in MISSING_ACTION_RULES:
+            raise ValueError(f"missing_action must be one of {MISSING_ACTION_RULES}, got {missing_action!r}")
+        self.config = config
+        self.names = agent_names(config.players_per_team)
+        self.world = SoccerWorld(config, seed=seed)
+        self.perception = perception
+        self.vision = SoccerVision(self.world, perception)
+        self.missing_action = missing_action
+        self.controlled = sorted(set(range(config.n_robots) if controlled is None else controlled))
+        for robot in self.controlled:
+            if not 0 <= robot < config.n_robots:
+                raise ValueError(f"controlled robot {robot} does not exist (robots 0..{config.n_robots - 1})")
+        self.pending: dict[int, SoccerAction] = {}
+        self.last: dict[int, SoccerAction] = {}
+        self.counts: Counter[str] = Counter()
+        self.finished = False
+
+    # -- episode -----------------------------------------------------------------------------------------------
+    def reset(self, seed: int | None = None, kickoff_team: int = TEAM_A) -> int:
+        self.world.reset(seed=seed, kickoff_team=kickoff_team)
+        self.vision.reset()
+        self.pending.clear()
+        self.last.clear()
+        self.finished = False
+        return self.world.episode_id
+
+    @property
+    def episode_id(self) -> int:
+        return self.world.episode_id
+
+    @property
+    def period(self) -> int:
+        """The motion period whose actions are being collected (the next to run)."""
+        return self.world.period
+
+    # -- actions -------------------------------------------------------------------------------------------------
+    def submit(self, robot_id: int, episode_id: int, motion_period: int, walk: int, turn: int, kick: int,
+               head_yaw_delta: float) -> tuple[bool, str]:
+        """Accept one robot's action for the current period, or refuse it with a reason (counted)."""
+        reason = self._check(robot_id, episode_id, motion_period, walk, turn, kick, head_yaw_delta)
+        if reason:
+            self.counts["rejected_" + reason.split(":")[0]] += 1
+            return False, reason
+        self.pending[robot_id] = SoccerAction(Walk(walk), Turn(turn), Kick(kick), float(head_yaw_delta))
+        self.counts["accepted"] += 1
+        return True, "accepted"
+
+    def _check(self, robot_id, episode_id, motion_period, walk, turn, kick, head) -> str:
+        if not 0 <= robot_id < self.config.n_robots:
+            return f"unknown_robot: robot {robot_id} does not exist"
+        if episode_id != self.episode_id:
+            return f"wrong_episode: episode {episode_id}, the current one is {self.episode_id}"
+        if motion_period < self.period:
+            return f"late: period {motion_period} has run already (now collecting {self.period})"
+        if motion_period > self.period:
+            return f"early: period {motion_period} is not the current one ({self.period})"
+        if robot_id in self.pending:
+            return f"duplicate: robot {robot_id} already acted in period {motion_period}"
+        if not isinstance(head, (int, float)) or not math.isfinite(head):
+            return f"malformed: head_yaw_delta is {head}"
+        limits = (("walk", walk, len(Walk)), ("turn", turn, len(Turn)), ("kick", kick, len(Kick)))
+        for name, value, count in limits:
+            if not 0 <= value < count:
+                return f"out_of_range: {name}={value} (0..{count - 1})"
+        bound = self.config.motion.head_max_delta
+        if abs(head) > bound + 1e-6:
+            return f"out_of_range: head_yaw_delta={head:.3f} rad beyond ±{bound:.3f}"
+        return ""
+
+    def ready(self) -> bool:
+        """Every controlled robot has acted for the current period."""
+        return all(robot in self.pending for robot in self.controlled)
+
+    # -- one period ----------------------------------------------------------------------------------------------
+    def step(self) -> PeriodOutput:
+        """Run the current period with the actions received; missing ones follow ``missing_action``."""
+        if self.finished:
+            raise RuntimeError("the episode has finished; reset first")
+        actions = []
+        for robot in range(self.config.n_robots):
+            action = self.pending.get(robot)
+            if action is None:
+                if robot in self.controlled:
+                    self.counts["missing"] += 1
+                action = self.last.get(robot, IDLE) if self.missing_action == "hold" else IDLE
+            actions.append(action)
+        snapshots: list[WorldSnapshot] = []
+        ticks: list[int] = []
+
+        def on_frame(k: int) -> None:
+            self.vision.frame(k)
+            snapshots.append(self.world.snapshot())
+            ticks.append(self.world.tick)
+
+        period = self.world.period
+        result = self.world.step(actions, on_frame=on_frame)
+        perception = self.vision.perceive()
+        seen_rewards = self.vision.observation_rewards(perception)
+        result.rewards[RewardTerm.OBSERVATION] += seen_rewards
+        self.last = dict(enumerate(actions))
+        self.pending.clear()
+        n = self.config.n_robots
+        proprio = self.vision.proprioception
+        frames = [FrameOutput(ticks[k], k, snapshots[k],
+                              [RobotFrame(perception.of_view(k * n + i), float(proprio[k, i, 0]),
+                                          bool(proprio[k, i, 1]), bool(proprio[k, i, 2])) for i in range(n)])
+                  for k in range(len(snapshots))]
+        ids = self.vision.objects.object_id
+        feedback = []
+        for i in range(n):
+            seen = perception.seen[i::n].any(axis=0)
+            landmarks = (perception.seen[i::n][:, self.vision.perceiver.is_landmark].sum(axis=1)
+                         + perception.lines_seen[i::n])
+            feedback.append(RobotFeedback({t.name.lower(): float(result.rewards[t, i]) for t in RewardTerm},
+                                          [int(x) for x in ids[seen]], float(landmarks.mean())))
+        self.finished = result.terminated or result.truncated
+        return PeriodOutput(self.episode_id, period, frames, feedback, result.terminated, result.truncated,
+                            result.events)
+
+
+def kickoff_team(value: Any) -> int:
+    teams = {"a": TEAM_A, "b": TEAM_B, 1: TEAM_A, -1: TEAM_B}
+    if value not in teams:
+        raise ValueError(f"kickoff_team must be 'a' or 'b', got {value!r}")
+    return teams[value]

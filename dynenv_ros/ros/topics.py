@@ -1,0 +1,31 @@
+"""Topic and service names of the simulator graph, in one place (docs/ros_graph.md describes each)."""
+from __future__ import annotations
+
+CLOCK = "/clock"                                  # rosgraph_msgs/Clock, sim time, at vision rate
+WORLD_STATE = "/world_state"                      # dynenv_msgs/WorldState, ground truth, frame "map", vision rate
+DIAGNOSTICS = "/sim/diagnostics"                  # diagnostic_msgs/DiagnosticArray, about 1 Hz
+GROUND_TRUTH_MARKERS = "/sim/markers/ground_truth"  # visualization_msgs/MarkerArray, frame "map"
+DETECTION_MARKERS = "/sim/markers/detections"     # visualization_msgs/MarkerArray of one robot's detections
+RESET_SERVICE = "/sim/reset"                      # dynenv_msgs/srv/ResetSimulation
+STEP_SERVICE = "/sim/step"                        # dynenv_msgs/srv/StepSimulation
+
+
+def detections(robot: str) -> str:
+    """dynenv_msgs/DetectionArray of one robot, frame "<robot>/camera", vision rate."""
+    return f"/{robot}/detections"
+
+
+def action(robot: str) -> str:
+    """dynenv_msgs/Action for one robot, one per motion period (subscribed by the simulator)."""
+    return f"/{robot}/action"
+
+
+def feedback(robot: str) -> str:
+    """dynenv_msgs/StepFeedback of one robot, motion rate."""
+    return f"/{robot}/feedback"
+
+
+SIM_PUBLISHED_TYPES = {
+    "rosgraph_msgs/msg/Clock", "dynenv_msgs/msg/WorldState", "dynenv_msgs/msg/DetectionArray",
+    "dynenv_msgs/msg/StepFeedback", "diagnostic_msgs/msg/DiagnosticArray", "visualization_msgs/msg/MarkerArray",
+}
