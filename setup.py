@@ -10,6 +10,8 @@ PACKAGE = "dynenv_ros"
 NODES = [
     "selfcheck_talker = dynenv_ros.nodes.selfcheck_talker:main",
     "selfcheck_listener = dynenv_ros.nodes.selfcheck_listener:main",
+    "sim_node = dynenv_ros.nodes.sim_node:main",
+    "scripted_policy = policy_node.scripted_policy:main",
 ]
 TOOLS = [
     "dynenv-run = dynenv_ros.main_job:main",

@@ -31,6 +31,7 @@ class RobotFrame:
     head_yaw: float
     fallen: bool
     penalized: bool
+    missed: np.ndarray | None = None   # (m, 2) field positions of objects in view but not detected, if asked for
 
 
 @dataclass
@@ -80,6 +81,7 @@ class SoccerSession:
         self.last: dict[int, SoccerAction] = {}
         self.counts: Counter[str] = Counter()
         self.finished = False
+        self.missed_for: int | None = None      # a robot whose misses each frame reports (visualisation)
 
     # -- episode -----------------------------------------------------------------------------------------------
     def reset(self, seed: int | None = None, kickoff_team: int = TEAM_A) -> int:
@@ -96,8 +98,9 @@ class SoccerSession:
 
     @property
     def period(self) -> int:
-        """The motion period whose actions are being collected (the next to run)."""
-        return self.world.period
+        """The motion period whose actions are being collected. Period 0 is the observation of the reset state;
+        the frames of period p are what the policy sees before acting for period p + 1 (Action.msg)."""
+        return self.world.period + 1
 
     # -- actions -------------------------------------------------------------------------------------------------
     def submit(self, robot_id: int, episode_id: int, motion_period: int, walk: int, turn: int, kick: int,
@@ -138,6 +141,15 @@ class SoccerSession:
         return all(robot in self.pending for robot in self.controlled)
 
     # -- one period ----------------------------------------------------------------------------------------------
+    def initial(self) -> PeriodOutput:
+        """Period 0: every frame shows the reset state (each perceived anew), no rewards yet."""
+        frames = self.config.rates.frames_per_period
+        snapshot = self.world.snapshot()
+        for k in range(frames):
+            self.vision.frame(k)
+        return self._output(0, [snapshot] * frames, [self.world.tick] * frames, self.vision.perceive(),
+                            np.zeros((len(RewardTerm), self.config.n_robots)), False, False, [])
+
     def step(self) -> PeriodOutput:
         """Run the current period with the actions received; missing ones follow ``missing_action``."""
         if self.finished:
@@ -158,18 +170,23 @@ class SoccerSession:
             snapshots.append(self.world.snapshot())
             ticks.append(self.world.tick)
 
-        period = self.world.period
         result = self.world.step(actions, on_frame=on_frame)
         perception = self.vision.perceive()
-        seen_rewards = self.vision.observation_rewards(perception)
-        result.rewards[RewardTerm.OBSERVATION] += seen_rewards
+        result.rewards[RewardTerm.OBSERVATION] += self.vision.observation_rewards(perception)
         self.last = dict(enumerate(actions))
         self.pending.clear()
+        self.finished = result.terminated or result.truncated
+        return self._output(self.world.period, snapshots, ticks, perception, result.rewards, result.terminated,
+                            result.truncated, result.events)
+
+    def _output(self, period, snapshots, ticks, perception, rewards, terminated, truncated, events) -> PeriodOutput:
         n = self.config.n_robots
         proprio = self.vision.proprioception
         frames = [FrameOutput(ticks[k], k, snapshots[k],
                               [RobotFrame(perception.of_view(k * n + i), float(proprio[k, i, 0]),
-                                          bool(proprio[k, i, 1]), bool(proprio[k, i, 2])) for i in range(n)])
+                                          bool(proprio[k, i, 1]), bool(proprio[k, i, 2]),
+                                          self._missed(perception, k, k * n + i) if i == self.missed_for else None)
+                               for i in range(n)])
                   for k in range(len(snapshots))]
         ids = self.vision.objects.object_id
         feedback = []
@@ -177,11 +194,16 @@ class SoccerSession:
             seen = perception.seen[i::n].any(axis=0)
             landmarks = (perception.seen[i::n][:, self.vision.perceiver.is_landmark].sum(axis=1)
                          + perception.lines_seen[i::n])
-            feedback.append(RobotFeedback({t.name.lower(): float(result.rewards[t, i]) for t in RewardTerm},
+            feedback.append(RobotFeedback({t.name.lower(): float(rewards[t, i]) for t in RewardTerm},
                                           [int(x) for x in ids[seen]], float(landmarks.mean())))
-        self.finished = result.terminated or result.truncated
-        return PeriodOutput(self.episode_id, period, frames, feedback, result.terminated, result.truncated,
-                            result.events)
+        return PeriodOutput(self.episode_id, period, frames, feedback, terminated, truncated, events)
+
+
+    def _missed(self, perception, frame: int, view: int) -> np.ndarray:
+        ids = self.vision.objects.object_id
+        missed = perception.visible[view] & ~np.isin(ids, perception.of_view(view)["true_id"])
+        x, y = self.vision.positions(frame)
+        return np.column_stack((x[missed], y[missed]))
 
 
 def kickoff_team(value: Any) -> int:

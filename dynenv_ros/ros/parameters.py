@@ -5,17 +5,42 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 
 
-def declare_int(node: Node, name: str, default: int, low: int, high: int, description: str) -> int:
-    descriptor = ParameterDescriptor(description=description,
+def declare_int(node: Node, name: str, default: int, low: int, high: int, description: str,
+                read_only: bool = False) -> int:
+    descriptor = ParameterDescriptor(description=description, read_only=read_only,
                                      integer_range=[IntegerRange(from_value=low, to_value=high, step=1)])
     return node.declare_parameter(name, default, descriptor).value
 
 
-def declare_float(node: Node, name: str, default: float, low: float, high: float, description: str) -> float:
-    descriptor = ParameterDescriptor(description=description,
+def declare_float(node: Node, name: str, default: float, low: float, high: float, description: str,
+                  read_only: bool = False) -> float:
+    descriptor = ParameterDescriptor(description=description, read_only=read_only,
                                      floating_point_range=[FloatingPointRange(from_value=low, to_value=high)])
     return node.declare_parameter(name, default, descriptor).value
 
 
-def declare_str(node: Node, name: str, default: str, description: str) -> str:
-    return node.declare_parameter(name, default, ParameterDescriptor(description=description)).value
+def declare_str(node: Node, name: str, default: str, description: str, read_only: bool = False,
+                choices: tuple[str, ...] = ()) -> str:
+    """A string parameter; with ``choices`` the allowed values are listed in the descriptor and checked now
+    (later changes are checked by the node's on-set callback, see ``check_choice``)."""
+    constraints = f"one of: {', '.join(choices)}" if choices else ""
+    value = node.declare_parameter(name, default, ParameterDescriptor(
+        description=description, read_only=read_only, additional_constraints=constraints)).value
+    if choices and value not in choices:
+        from rclpy.exceptions import ParameterException
+        raise ParameterException(f"'{value}' is not {constraints}", [name])
+    return value
+
+
+def declare_bool(node: Node, name: str, default: bool, description: str, read_only: bool = False) -> bool:
+    return node.declare_parameter(name, default, ParameterDescriptor(description=description,
+                                                                     read_only=read_only)).value
+
+
+def declare_str_list(node: Node, name: str, default: list[str], description: str, read_only: bool = False
+                     ) -> list[str]:
+    from rcl_interfaces.msg import ParameterType
+    descriptor = ParameterDescriptor(description=description, read_only=read_only,
+                                     type=ParameterType.PARAMETER_STRING_ARRAY)
+    value = node.declare_parameter(name, default or [""], descriptor).value
+    return [v for v in value if v]

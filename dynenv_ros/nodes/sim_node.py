@@ -1,0 +1,376 @@
+"""The simulator node: the soccer world and each robot's vision pipeline on ROS 2 topics.
+
+Publishes per robot its detections at vision rate, the ground truth and ``/clock`` at vision rate, per-robot step
+feedback at motion rate, diagnostics and RViz markers; subscribes to each robot's actions. Stepped mode runs a
+motion period as soon as every controlled robot has acted (or on ``/sim/step``); real-time mode is paced by a wall
+timer. All game logic is in ``envs/soccer_session.py``; this file only converts and publishes (docs/ros_graph.md).
+"""
+from __future__ import annotations
+
+import time
+from collections import Counter, deque
+from collections.abc import Sequence
+from typing import Any
+
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from dynenv_msgs.msg import Action
+from dynenv_msgs.srv import ResetSimulation, StepSimulation
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock as ClockMsg
+from visualization_msgs.msg import MarkerArray
+
+from dynenv_ros.envs.soccer_session import MISSING_ACTION_RULES, PeriodOutput, SoccerSession, kickoff_team
+from dynenv_ros.perception.params import MODES, PRESETS, load_preset
+from dynenv_ros.ros import conversions as cv
+from dynenv_ros.ros import markers, topics
+from dynenv_ros.ros.node_runner import run_node
+from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list)
+from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.soccer.config import SoccerConfig
+
+MODES_OF_RUNNING = ("stepped", "realtime")
+RESET_OPTIONS = ("kickoff_team",)
+
+
+class SimNode(Node):
+    def __init__(self, **node_options: Any) -> None:
+        """``node_options`` go to rclpy's Node (context, parameter_overrides, ...) for in-process tests."""
+        super().__init__("sim_node", **node_options)
+        fixed = dict(read_only=True)   # these shape the world: set them at start (YAML preset, --ros-args -p)
+        players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team.", **fixed)
+        self.mode = declare_str(self, "mode", "stepped", "stepped: a period runs when every controlled robot has "
+                                "acted (or on /sim/step); realtime: paced by the wall clock.", choices=MODES_OF_RUNNING,
+                                **fixed)
+        self.real_time_factor = declare_float(self, "real_time_factor", 1.0, 0.01, 100.0,
+                                              "Realtime mode: sim seconds per wall second.")
+        self.missing_action = declare_str(self, "missing_action", "none", "A robot without an action for a "
+                                          "period: 'hold' repeats its last action, 'none' stands still.",
+                                          choices=MISSING_ACTION_RULES)
+        preset = declare_str(self, "perception_preset", "realistic", "Perception parameter preset.",
+                             choices=PRESETS, **fixed)
+        noise_mode = declare_str(self, "noise_mode", "", "Error mode (realistic|random|none); empty: the preset's.",
+                                 choices=("",) + MODES, **fixed)
+        magnitude = declare_float(self, "noise_magnitude", -1.0, -1.0, 5.0,
+                                  "Noise magnitude 0..5; -1: the preset's.", **fixed)
+        physics_hz = declare_float(self, "physics_hz", 100.0, 10.0, 1000.0, "Physics ticks per second.", **fixed)
+        vision_ticks = declare_int(self, "vision_period_ticks", 10, 1, 1000, "Ticks per vision frame.", **fixed)
+        motion_ticks = declare_int(self, "motion_period_ticks", 50, 1, 10000, "Ticks per motion period.", **fixed)
+        episode_s = declare_float(self, "episode_seconds", 120.0, 0.5, 86400.0, "Episode length (s).", **fixed)
+        falls = declare_bool(self, "falls_enabled", True, "Random and contact falls.", **fixed)
+        seed = declare_int(self, "seed", -1, -1, 2**62, "World seed; -1 draws one.", **fixed)
+        controlled = declare_str_list(self, "controlled_robots", [], "Robots whose actions a period waits for "
+                                      "(names like team_a_0); empty: all.", **fixed)
+        self.auto_reset = declare_bool(self, "auto_reset", True, "Start a new episode when one ends.")
+        self.publish_markers = declare_bool(self, "publish_markers", True, "RViz/Foxglove markers.")
+        self.marker_robot = declare_str(self, "marker_robot", "team_a_0", "Robot whose detections are drawn.")
+        diag_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.", **fixed)
+        self.wait_for_subscribers = declare_int(
+            self, "wait_for_subscribers", 1, 0, 100, "Stepped mode: hold the first observation until every robot's "
+            "detections and /world_state have this many subscribers (policies, recorder).", **fixed)
+        self.exit_when_finished = declare_bool(self, "exit_when_finished", False, "Exit (status 0) when an episode "
+                                               "ends and auto_reset is off, after every subscriber has it.", **fixed)
+        self.report_path = declare_str(self, "report_path", "", "Write a JSON summary here on exit.", **fixed)
+        try:
+            config = SoccerConfig.from_mapping({
+                "players_per_team": players, "episode_seconds": episode_s, "falls": {"enabled": falls},
+                "rates": {"physics_hz": physics_hz, "vision_period_ticks": vision_ticks,
+                          "motion_period_ticks": motion_ticks}})
+            overrides: dict[str, Any] = {}
+            if noise_mode:
+                overrides["mode"] = noise_mode
+            if magnitude >= 0:
+                overrides["noise_magnitude"] = magnitude
+            params = load_preset(preset, **overrides)
+        except ValueError as error:
+            raise ParameterException(str(error), ["players_per_team"]) from None
+        self.config = config
+        names = [f"team_{t}_{i}" for t in "ab" for i in range(players)]
+        unknown = [c for c in controlled if c not in names]
+        if unknown:
+            raise ParameterException(f"unknown robots {unknown}; robots are {names}", ["controlled_robots"])
+        if self.marker_robot and self.marker_robot not in names:
+            raise ParameterException(f"'{self.marker_robot}' is not one of {names}", ["marker_robot"])
+        self.session = SoccerSession(config, params, seed=None if seed < 0 else seed,
+                                     missing_action=self.missing_action,
+                                     controlled=[names.index(c) for c in controlled] if controlled else None)
+        self.names = names
+        self._seed = None if seed < 0 else seed
+        self.session.missed_for = names.index(self.marker_robot) if self.marker_robot else None
+        qos = sim_stream()
+        self.clock_pub = self.create_publisher(ClockMsg, topics.CLOCK, qos)
+        self.world_pub = self.create_publisher(cv.WorldState, topics.WORLD_STATE, qos)
+        self.detection_pubs = [self.create_publisher(cv.DetectionArray, topics.detections(n), qos) for n in names]
+        self.feedback_pubs = [self.create_publisher(cv.StepFeedback, topics.feedback(n), qos) for n in names]
+        self.action_subs = [self.create_subscription(Action, topics.action(n), self._action_callback(i), qos)
+                            for i, n in enumerate(names)]
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QoSProfile(depth=10))
+        self.truth_marker_pub = self.create_publisher(MarkerArray, topics.GROUND_TRUTH_MARKERS, QoSProfile(depth=5))
+        self.detection_marker_pub = self.create_publisher(MarkerArray, topics.DETECTION_MARKERS,
+                                                          QoSProfile(depth=5))
+        self.reset_srv = self.create_service(ResetSimulation, topics.RESET_SERVICE, self._on_reset)
+        self.step_srv = self.create_service(StepSimulation, topics.STEP_SERVICE, self._on_step)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self.frames_published = 0
+        self.periods_run = 0
+        self.episodes_started = 0
+        self.episode_scores: list[tuple[int, int]] = []
+        self._window = deque(maxlen=2)   # (wall time, sim time, frames) samples for achieved rates
+        self._buffer: deque = deque()    # realtime: frames of the current period waiting for their instant
+        self._tick_s = config.rates.tick_seconds
+        self.diagnostics_timer = self.create_timer(diag_s, self._publish_diagnostics, clock=self.wall)
+        self.vision_timer = None
+        if self.mode == "realtime":
+            period = config.rates.vision_period_ticks * self._tick_s / self.real_time_factor
+            self.vision_timer = self.create_timer(period, self._realtime_tick, clock=self.wall)
+        self.started = False
+        self._started_wall = time.monotonic()
+        if self.mode == "stepped" and self.wait_for_subscribers > 0:
+            self.start_timer = self.create_timer(0.05, self._start_when_subscribed, clock=self.wall)
+        else:
+            self._start()
+        self.get_logger().info(
+            f"{players}v{players} {self.mode} ({config.rates.vision_hz:g} Hz vision, {config.rates.motion_hz:g} Hz "
+            f"motion), perception '{preset}' mode {params.mode} magnitude {params.noise_magnitude:g}; robots "
+            f"{', '.join(names)}")
+
+    # -- episodes --------------------------------------------------------------------------------------------------
+    def _start(self) -> None:
+        self.started = True
+        self._started_wall = time.monotonic()
+        self._reset(self._seed, 1)
+
+    def _start_when_subscribed(self) -> None:
+        wanted = self.wait_for_subscribers
+        if all(p.get_subscription_count() >= wanted for p in self.detection_pubs + [self.world_pub]):
+            self.start_timer.cancel()
+            self._start()
+
+    def _reset(self, seed: int | None, kickoff: int) -> None:
+        self.session.reset(seed=seed, kickoff_team=kickoff)
+        self.episodes_started += 1
+        self._buffer.clear()
+        self._emit(self.session.initial())
+
+    def _on_reset(self, request: ResetSimulation.Request, response: ResetSimulation.Response):
+        try:
+            options = yaml.safe_load(request.options_yaml) if request.options_yaml.strip() else {}
+            if not isinstance(options, dict):
+                raise ValueError("options_yaml must be a mapping")
+            unknown = sorted(set(options) - set(RESET_OPTIONS))
+            if unknown:
+                raise ValueError(f"unknown reset option(s) {unknown}; known: {list(RESET_OPTIONS)}")
+            kickoff = kickoff_team(options.get("kickoff_team", "a"))
+        except (ValueError, yaml.YAMLError) as error:
+            response.success, response.message = False, f"reset refused: {error}"
+            response.episode_id = self.session.episode_id
+            return response
+        self._reset(int(request.seed) if request.use_seed else None, kickoff)
+        response.success, response.episode_id = True, self.session.episode_id
+        response.message = f"episode {self.session.episode_id} started"
+        return response
+
+    def _on_step(self, request: StepSimulation.Request, response: StepSimulation.Response):
+        period_ticks = self.config.rates.motion_period_ticks
+        if self.mode != "stepped":
+            response.success, response.message = False, "/sim/step works in stepped mode only"
+        elif request.ticks == 0 or request.ticks % period_ticks:
+            response.success = False
+            response.message = f"ticks must be a positive multiple of the motion period ({period_ticks})"
+        else:
+            for _ in range(request.ticks // period_ticks):
+                if self.session.finished and not self.auto_reset:
+                    break
+                self._run_period()
+            response.success = not (self.session.finished and not self.auto_reset)
+            response.message = "stepped" if response.success else "the episode has finished; call /sim/reset"
+        response.tick = self.session.world.tick
+        response.stamp = cv.sim_time(self.session.world.tick, self._tick_s)
+        return response
+
+    # -- actions ---------------------------------------------------------------------------------------------------
+    def _action_callback(self, robot: int):
+        def receive(msg: Action) -> None:
+            if msg.robot_id != robot:
+                accepted, reason = False, (f"unknown_robot: robot_id {msg.robot_id} on {topics.action(self.names[robot])}"
+                                           f" (expected {robot})")
+                self.session.counts["rejected_unknown_robot"] += 1
+            else:
+                accepted, reason = self.session.submit(msg.robot_id, msg.episode_id, msg.motion_period, msg.walk,
+                                                       msg.turn, msg.kick, float(msg.head_yaw_delta))
+            if not accepted:
+                self.get_logger().warning(f"action of {self.names[robot]} rejected: {reason}",
+                                          throttle_duration_sec=1.0)
+                return
+            if self.mode == "stepped" and self.session.ready():
+                self._run_period()
+        return receive
+
+    # -- running ---------------------------------------------------------------------------------------------------
+    def _run_period(self) -> None:
+        if not self.started:
+            return
+        if self.session.finished:
+            if not self.auto_reset:
+                return
+            self._reset(None, 1)
+            return
+        output = self.session.step()
+        self.periods_run += 1
+        if self.mode == "stepped":
+            self._emit(output)
+        else:
+            self._buffer.extend((output, k) for k in range(len(output.frames)))
+        for event in output.events:
+            if event.kind in ("goal", "penalty"):
+                who = self.names[event.robot] if event.robot is not None else f"team {'A' if event.team > 0 else 'B'}"
+                self.get_logger().info(f"{event.kind}: {who} {event.detail}")
+
+    def _realtime_tick(self) -> None:
+        if not self._buffer:
+            self._run_period()
+        if self._buffer:
+            output, k = self._buffer.popleft()
+            self._publish_frame(output, k)
+            if k == len(output.frames) - 1:
+                self._publish_feedback(output)
+
+    def _emit(self, output: PeriodOutput) -> None:
+        """Stepped mode (and resets): every frame of the period now, then the feedback."""
+        if self.mode == "realtime":
+            self._buffer.extend((output, k) for k in range(len(output.frames)))
+            return
+        for k in range(len(output.frames)):
+            self._publish_frame(output, k)
+        self._publish_feedback(output)
+
+    def _publish_frame(self, output: PeriodOutput, k: int) -> None:
+        frame = output.frames[k]
+        stamp = cv.sim_time(frame.tick, self._tick_s)
+        self.clock_pub.publish(ClockMsg(clock=stamp))
+        self.world_pub.publish(cv.world_state(frame.snapshot, stamp))
+        frames_per_period = len(output.frames)
+        for i, robot in enumerate(frame.robots):
+            self.detection_pubs[i].publish(cv.detection_array(
+                robot.detections, robot_id=i, robot_name=self.names[i], episode_id=output.episode_id,
+                motion_period=output.motion_period, frame_index=k, frames_per_period=frames_per_period,
+                head_yaw=robot.head_yaw, fallen=robot.fallen, penalized=robot.penalized, stamp=stamp))
+        self.frames_published += 1
+        if self.publish_markers and k == len(output.frames) - 1:
+            self._publish_markers(frame, stamp)
+
+    def _publish_feedback(self, output: PeriodOutput) -> None:
+        stamp = cv.sim_time(output.frames[-1].tick, self._tick_s)
+        for i, fb in enumerate(output.feedback):
+            self.feedback_pubs[i].publish(cv.step_feedback(
+                robot_id=i, episode_id=output.episode_id, motion_period=output.motion_period, rewards=fb.rewards,
+                terminated=output.terminated, truncated=output.truncated, seen_object_ids=fb.seen_object_ids,
+                landmarks_seen=fb.landmarks_seen, stamp=stamp))
+        if output.terminated or output.truncated:
+            self.episode_scores.append((self.session.world.state.score[1], self.session.world.state.score[-1]))
+            if self.auto_reset and self.mode == "stepped":
+                self._reset(None, 1)
+            elif not self.auto_reset and self.exit_when_finished:
+                self._finish()
+
+    def _finish(self) -> None:
+        """Let every subscriber receive everything, write the report, and stop spinning with status 0."""
+        from rclpy.duration import Duration
+
+        from dynenv_ros.ros.node_runner import NodeExit
+        publishers = [self.clock_pub, self.world_pub] + self.detection_pubs + self.feedback_pubs
+        for publisher in publishers:
+            publisher.wait_for_all_acked(Duration(seconds=5.0))
+        self.write_report()
+        raise NodeExit(0)
+
+    def write_report(self) -> None:
+        if not self.report_path:
+            return
+        import json
+        report = {"diagnostics": self.diagnostics(), "episode_scores": self.episode_scores,
+                  "published": {"world_state": self.frames_published,
+                                "detections_per_robot": self.frames_published,
+                                "feedback_per_robot": self.periods_run + self.episodes_started},
+                  "robots": self.names}
+        with open(self.report_path, "w") as handle:
+            json.dump(report, handle, indent=2)
+
+    def _publish_markers(self, frame, stamp) -> None:
+        self.truth_marker_pub.publish(markers.ground_truth_markers(frame.snapshot, self.config.field, stamp,
+                                                                   include_field=True))
+        if self.marker_robot:
+            i = self.names.index(self.marker_robot)
+            me, robot = frame.snapshot.objects[i], frame.robots[i]
+            missed = [] if robot.missed is None else [tuple(p) for p in robot.missed.tolist()]
+            self.detection_marker_pub.publish(markers.detection_markers(
+                robot.detections, (me.x, me.y, me.yaw + me.head_yaw), stamp, missed=missed,
+                robot_name=self.marker_robot))
+
+    # -- parameters and diagnostics ----------------------------------------------------------------------------------
+    def _on_set_parameters(self, parameters: list) -> SetParametersResult:
+        for p in parameters:
+            if p.name == "missing_action" and p.value not in MISSING_ACTION_RULES:
+                return SetParametersResult(successful=False,
+                                           reason=f"missing_action must be one of {MISSING_ACTION_RULES}")
+            if p.name == "marker_robot" and p.value and p.value not in self.names:
+                return SetParametersResult(successful=False, reason=f"marker_robot must be one of {self.names}")
+        for p in parameters:
+            if p.name == "missing_action":
+                self.missing_action = self.session.missing_action = p.value
+            elif p.name == "marker_robot":
+                self.marker_robot = p.value
+                self.session.missed_for = self.names.index(p.value) if p.value else None
+            elif p.name == "publish_markers":
+                self.publish_markers = bool(p.value)
+            elif p.name == "auto_reset":
+                self.auto_reset = bool(p.value)
+            elif p.name == "real_time_factor" and self.vision_timer is not None:
+                self.real_time_factor = float(p.value)
+                self.vision_timer.cancel()
+                period = self.config.rates.vision_period_ticks * self._tick_s / self.real_time_factor
+                self.vision_timer = self.create_timer(period, self._realtime_tick, clock=self.wall)
+        return SetParametersResult(successful=True)
+
+    def diagnostics(self) -> dict[str, str]:
+        """Achieved rates over the last diagnostics window and action counts, as strings (DiagnosticStatus)."""
+        now = time.monotonic()
+        sim_now = self.session.world.tick * self._tick_s
+        self._window.append((now, sim_now, self.frames_published))
+        (t0, s0, f0), (t1, s1, f1) = self._window[0], self._window[-1]
+        wall = max(t1 - t0, 1e-9)
+        overall = sim_now / max(now - self._started_wall, 1e-9) if self.episodes_started <= 1 else float("nan")
+        values = {"mode": self.mode, "episode": str(self.session.episode_id), "period": str(self.session.period),
+                  "real_time_factor_since_start": f"{overall:.2f}",
+                  "sim_time_s": f"{sim_now:.2f}", "real_time_factor": f"{(s1 - s0) / wall:.2f}",
+                  "vision_frames_per_s": f"{(f1 - f0) / wall:.1f}", "periods_run": str(self.periods_run)}
+        counts: Counter[str] = self.session.counts
+        for key in ("accepted", "missing") + tuple(f"rejected_{r}" for r in
+                                                   ("malformed", "out_of_range", "unknown_robot", "wrong_episode",
+                                                    "late", "early", "duplicate")):
+            values[key] = str(counts.get(key, 0))
+        return values
+
+    def _publish_diagnostics(self) -> None:
+        values = self.diagnostics()
+        problems = sum(int(v) for k, v in values.items() if k.startswith("rejected_"))
+        status = DiagnosticStatus(level=DiagnosticStatus.WARN if problems else DiagnosticStatus.OK, name="dynenv_sim",
+                                  message=f"{problems} actions rejected" if problems else "ok",
+                                  hardware_id="simulation", values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(msg)
+        self.get_logger().debug(" ".join(f"{k}={v}" for k, v in values.items()))
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(SimNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
