@@ -344,7 +344,7 @@ class SimNode(Node):
         self._window.append((now, sim_now, self.frames_published))
         (t0, s0, f0), (t1, s1, f1) = self._window[0], self._window[-1]
         wall = max(t1 - t0, 1e-9)
-        overall = sim_now / max(now - self._started_wall, 1e-9) if self.episodes_started <= 1 else float("nan")
+        overall = self.periods_run * self.config.period_seconds / max(now - self._started_wall, 1e-9)
         values = {"mode": self.mode, "episode": str(self.session.episode_id), "period": str(self.session.period),
                   "real_time_factor_since_start": f"{overall:.2f}",
                   "sim_time_s": f"{sim_now:.2f}", "real_time_factor": f"{(s1 - s0) / wall:.2f}",

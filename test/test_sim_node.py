@@ -1,0 +1,196 @@
+"""The simulator node in one process with a test node: rates, actions, determinism, services, parameters and
+every kind of bad action. No launch files: the harness spins both nodes on one executor."""
+from __future__ import annotations
+
+import math
+
+import pytest
+from dynenv_msgs.msg import Action, DetectionArray, StepFeedback, WorldState
+from dynenv_msgs.srv import ResetSimulation, StepSimulation
+from rclpy.exceptions import ParameterException
+from rclpy.parameter import Parameter
+
+from dynenv_ros.nodes.sim_node import SimNode
+from dynenv_ros.ros import topics
+from dynenv_ros.ros.qos import sim_stream
+from ros_harness import spin_until
+
+ROBOTS = ["team_a_0", "team_b_0"]
+
+
+def _sim(make_node, **params):
+    defaults = {"players_per_team": 1, "seed": 7, "falls_enabled": False, "perception_preset": "realistic"}
+    defaults.update(params)
+    return make_node(SimNode, parameter_overrides=[Parameter(k, value=v) for k, v in defaults.items()])
+
+
+class Probe:
+    """Listens to everything the simulator publishes for a 1v1 game and can send actions."""
+
+    def __init__(self, make_node, executor):
+        self.node = make_node("probe")
+        self.detections = {r: [] for r in ROBOTS}
+        self.feedback = {r: [] for r in ROBOTS}
+        self.truth: list[WorldState] = []
+        qos = sim_stream()
+        for r in ROBOTS:
+            self.node.create_subscription(DetectionArray, topics.detections(r), self.detections[r].append, qos)
+            self.node.create_subscription(StepFeedback, topics.feedback(r), self.feedback[r].append, qos)
+        self.node.create_subscription(WorldState, topics.WORLD_STATE, self.truth.append, qos)
+        self.actions = {r: self.node.create_publisher(Action, topics.action(r), qos) for r in ROBOTS}
+        self.executor = executor
+        executor.add_node(self.node)
+
+    def act(self, robot: int, period: int, episode: int = 1, walk: int = 0, turn: int = 0, kick: int = 0,
+            head: float = 0.0, robot_id: int | None = None) -> None:
+        msg = Action(robot_id=robot if robot_id is None else robot_id, episode_id=episode, motion_period=period,
+                     walk=walk, turn=turn, kick=kick, head_yaw_delta=head)
+        self.actions[ROBOTS[robot]].publish(msg)
+
+    def spin(self, condition, timeout=10.0) -> bool:
+        return spin_until(self.executor, condition, timeout)
+
+    def periods_received(self, periods: int) -> bool:
+        """Everything of periods 0..periods-1 has arrived (topics are delivered independently)."""
+        return (len(self.truth) == 5 * periods and all(len(f) == periods for f in self.feedback.values())
+                and all(len(d) == 5 * periods for d in self.detections.values()))
+
+
+def _start(make_node, executor, **params):
+    sim = _sim(make_node, **params)
+    executor.add_node(sim)
+    probe = Probe(make_node, executor)
+    assert probe.spin(lambda: len(probe.detections["team_a_0"]) == 5), "no first observation"
+    assert probe.spin(lambda: all(sim.count_publishers(topics.action(r)) >= 1 for r in ROBOTS))
+    return sim, probe
+
+
+def test_first_observation_is_period_zero_with_every_frame(make_node, executor):
+    sim, probe = _start(make_node, executor)
+    frames = probe.detections["team_a_0"]
+    assert [(m.motion_period, m.frame_index, m.frames_per_period) for m in frames] == [(0, k, 5) for k in range(5)]
+    assert frames[0].header.frame_id == "team_a_0/camera" and frames[0].episode_id == 1
+    assert any(d.class_id == d.CLASS_BALL for m in frames for d in m.detections)   # the ball lies ahead at kickoff
+
+
+def test_actions_move_robots_one_period_at_a_time(make_node, executor):
+    sim, probe = _start(make_node, executor)
+    start = next(o for o in probe.truth[-1].objects if o.id == 0)
+    for period in (1, 2):
+        probe.act(0, period, walk=Action.WALK_BACKWARD)
+        probe.act(1, period)
+        assert probe.spin(lambda: probe.periods_received(period + 1))
+    end = next(o for o in probe.truth[-1].objects if o.id == 0)
+    moved = math.hypot(end.x - start.x, end.y - start.y)
+    assert moved == pytest.approx(2 * sim.config.motion.backward_step, abs=0.01)
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in probe.detections["team_a_0"][5:]]
+    assert stamps == pytest.approx([0.1 * k for k in range(1, 11)])     # vision rate in sim time
+    assert [m.motion_period for m in probe.feedback["team_b_0"]] == [0, 1, 2]
+
+
+def _ground_truth_run(make_node, executor, seed):
+    sim, probe = _start(make_node, executor, seed=seed, falls_enabled=True)
+    for period in range(1, 7):
+        probe.act(0, period, walk=Action.WALK_FORWARD, turn=Action.TURN_LEFT)
+        probe.act(1, period, walk=Action.WALK_FORWARD)
+        assert probe.spin(lambda: probe.periods_received(period + 1))
+    trace = [(m.tick, tuple((o.id, round(o.x, 9), round(o.y, 9), round(o.yaw, 9)) for o in m.objects))
+             for m in probe.truth]
+    detections = [len(m.detections) for m in probe.detections["team_a_0"]]
+    executor.remove_node(sim)
+    executor.remove_node(probe.node)
+    return trace, detections
+
+
+def test_stepped_mode_is_deterministic(make_node, executor):
+    first = _ground_truth_run(make_node, executor, 11)
+    second = _ground_truth_run(make_node, executor, 11)
+    assert first == second and len(first[0]) == 35
+
+
+def test_reset_and_step_services(make_node, executor):
+    sim, probe = _start(make_node, executor)
+    client = probe.node.create_client(ResetSimulation, topics.RESET_SERVICE)
+    stepper = probe.node.create_client(StepSimulation, topics.STEP_SERVICE)
+    assert client.wait_for_service(timeout_sec=5.0) and stepper.wait_for_service(timeout_sec=5.0)
+
+    def call(cli, request):
+        future = cli.call_async(request)
+        assert probe.spin(future.done)
+        return future.result()
+
+    bad = call(client, ResetSimulation.Request(options_yaml="kickoff_team: c"))
+    assert not bad.success and "kickoff_team" in bad.message
+    bad = call(client, ResetSimulation.Request(options_yaml="colour: red"))
+    assert not bad.success and "unknown reset option" in bad.message
+    reply = call(client, ResetSimulation.Request(use_seed=True, seed=3, options_yaml="kickoff_team: b"))
+    assert reply.success and reply.episode_id == 2
+    assert probe.spin(lambda: probe.truth[-1].episode_id == 2)
+    assert probe.truth[-1].ball_owner_team == -1
+    reply = call(stepper, StepSimulation.Request(ticks=7))
+    assert not reply.success and "multiple of the motion period (50)" in reply.message
+    reply = call(stepper, StepSimulation.Request(ticks=100))
+    assert reply.success and reply.tick == 100 and reply.stamp.sec == 1
+    assert sim.session.counts["missing"] == 4                              # nobody acted: the missing rule applied
+
+
+def test_parameters_are_validated_on_set(make_node, executor):
+    sim, probe = _start(make_node, executor)
+    refused = sim.set_parameters([Parameter("missing_action", value="guess")])[0]
+    assert not refused.successful and "missing_action must be one of" in refused.reason
+    refused = sim.set_parameters([Parameter("marker_robot", value="team_c_0")])[0]
+    assert not refused.successful and "marker_robot" in refused.reason
+    refused = sim.set_parameters([Parameter("players_per_team", value=3)])[0]
+    assert not refused.successful and "read-only" in refused.reason
+    refused = sim.set_parameters([Parameter("real_time_factor", value=500.0)])[0]
+    assert not refused.successful
+    assert sim.set_parameters([Parameter("missing_action", value="hold")])[0].successful
+    assert sim.session.missing_action == "hold"
+
+
+@pytest.mark.parametrize("params,message", [({"players_per_team": 9}, "players_per_team"),
+                                            ({"mode": "turbo"}, "turbo"), ({"perception_preset": "exact"}, "exact"),
+                                            ({"controlled_robots": ["team_c_9"]}, "team_c_9"),
+                                            ({"vision_period_ticks": 7}, "vision periods")])
+def test_bad_start_parameters_are_refused_with_the_reason(make_node, params, message):
+    with pytest.raises(ParameterException, match=message):
+        _sim(make_node, **params)
+
+
+def test_every_kind_of_bad_action_is_counted_and_leaves_the_world_alone(make_node, executor):
+    sim, probe = _start(make_node, executor)
+    tick = sim.session.world.tick
+    probe.act(0, 1, head=float("nan"))                 # malformed
+    probe.act(0, 1, walk=9)                            # out of range
+    probe.act(0, 1, head=2.0)                          # out of range (head)
+    probe.act(0, 1, episode=5)                         # wrong episode
+    probe.act(0, 0)                                    # late
+    probe.act(0, 4)                                    # early
+    probe.act(0, 1, robot_id=1)                        # unknown robot for this topic
+    probe.act(0, 1)                                    # valid
+    probe.act(0, 1, walk=1)                            # duplicate
+    counts = sim.session.counts
+    expected = {"rejected_malformed": 1, "rejected_out_of_range": 2, "rejected_wrong_episode": 1,
+                "rejected_late": 1, "rejected_early": 1, "rejected_unknown_robot": 1, "rejected_duplicate": 1,
+                "accepted": 1}
+    assert probe.spin(lambda: all(counts[k] == v for k, v in expected.items())), dict(counts)
+    assert sim.session.world.tick == tick                                  # nothing ran: robot 1 has not acted
+    diagnostics = sim.diagnostics()
+    assert diagnostics["rejected_out_of_range"] == "2" and diagnostics["accepted"] == "1"
+    probe.act(1, 1)
+    assert probe.spin(lambda: sim.session.world.tick == tick + 50)         # and the node keeps working
+
+
+def test_realtime_mode_publishes_at_vision_rate_in_sim_time(make_node, executor):
+    import time
+    sim = _sim(make_node, mode="realtime", real_time_factor=10.0)
+    executor.add_node(sim)
+    probe = Probe(make_node, executor)
+    started = time.monotonic()
+    assert probe.spin(lambda: len(probe.detections["team_a_0"]) >= 60, 20.0)
+    wall = time.monotonic() - started
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in probe.detections["team_a_0"]]
+    steps = [round(b - a, 6) for a, b in zip(stamps[5:], stamps[6:])]
+    assert set(steps) == {0.1}                                             # one frame per 0.1 s of sim time
+    assert stamps[-1] / wall > 3.0                                         # faster than real time, as asked
+    assert sim.session.counts["missing"] > 0                               # nobody acted: the missing rule ran
