@@ -1,7 +1,9 @@
 """The main job (`make run`): runs the project's node graph end to end and prints a summary.
 
-Today the graph is the interface self-check (a talker publishes and serves every dynenv_msgs interface, a listener
-verifies each field). Later graphs (simulator, policies, recorder, trainer) are further entries of GRAPHS.
+Graphs: ``soccer`` (default) — the simulator node in stepped mode, a scripted policy node for every robot and the
+recorder, for ``duration_s`` of sim time; it prints achieved rates, message counts and the score, and leaves the
+bag and a GIF in the run directory. ``selfcheck`` — every dynenv_msgs interface across processes. The learned
+policy and the trainer join the soccer graph with the agent issue.
 """
 from __future__ import annotations
 
@@ -33,12 +35,21 @@ class ConfigError(ValueError):
     """A configuration value is missing, unknown or out of range."""
 
 
+POLICIES = ("keeper_and_chasers", "chaser", "random")
+PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
+
+
 @dataclass(frozen=True)
 class MainJobConfig:
-    graph: str = "selfcheck"
+    graph: str = "soccer"
     seed: int = 0
-    samples_per_type: int = 5
-    timeout_s: float = 60.0
+    samples_per_type: int = 5        # selfcheck graph
+    duration_s: float = 60.0         # soccer graph: sim seconds
+    players_per_team: int = 2
+    perception: str = "realistic"
+    policy: str = "keeper_and_chasers"
+    gif: bool = True
+    timeout_s: float = 180.0
     domain_id: int = -1  # -1: pick one from the process id, so parallel runs do not meet
 
     @classmethod
@@ -70,6 +81,14 @@ class MainJobConfig:
             raise ConfigError(f"domain_id must be -1 (auto) or in [0, 101], got {self.domain_id}")
         if not 0 <= self.seed < 2**31:
             raise ConfigError(f"seed must be in [0, 2^31), got {self.seed}")
+        if not 0.5 <= self.duration_s <= 3600:
+            raise ConfigError(f"duration_s must be in [0.5, 3600], got {self.duration_s}")
+        if not 1 <= self.players_per_team <= 5:
+            raise ConfigError(f"players_per_team must be in [1, 5], got {self.players_per_team}")
+        if self.perception not in PERCEPTION_PRESETS:
+            raise ConfigError(f"perception must be one of {PERCEPTION_PRESETS}, got {self.perception!r}")
+        if self.policy not in POLICIES:
+            raise ConfigError(f"policy must be one of {POLICIES}, got {self.policy!r}")
 
 
 def load_config(path: Path, overrides: dict[str, Any]) -> MainJobConfig:
@@ -99,7 +118,7 @@ def selfcheck_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
     ]
 
 
-def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path) -> bool:
+def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
     report_path = run_dir / "selfcheck.json"
     if not report_path.exists():
         print(f"no self-check report was written; see the logs in {run_dir}")
@@ -109,13 +128,74 @@ def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path) -> bool:
     return bool(report["ok"])
 
 
+def robot_names(players_per_team: int) -> list[str]:
+    return [f"team_{t}_{i}" for t in "ab" for i in range(players_per_team)]
+
+
+def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
+    names = robot_names(config.players_per_team)
+    sim = NodeLaunch("sim_node", "dynenv_ros.nodes.sim_node", {
+        "players_per_team": config.players_per_team, "seed": config.seed, "perception_preset": config.perception,
+        "mode": "stepped", "episode_seconds": config.duration_s, "auto_reset": False, "exit_when_finished": True,
+        "report_path": str(run_dir / "sim_report.json"), "wait_for_subscribers": 2,
+        "wait_for_recorder": True}, ends_run=True)
+    policies = []
+    for i, name in enumerate(names):
+        slot = i % config.players_per_team
+        kind = {"chaser": "chaser", "random": "random"}.get(
+            config.policy, "keeper" if slot == 0 and config.players_per_team > 1 else "chaser")
+        policies.append(NodeLaunch(f"policy_{name}", "policy_node.scripted_policy",
+                                   {"robot": name, "policy": kind, "seed": config.seed + i}))
+    recorder = NodeLaunch("recorder", "dynenv_ros.nodes.recorder", {"output": str(run_dir / "bag")})
+    return [recorder, *policies, sim]
+
+
+def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
+    from dynenv_ros.bags.inspect import bag_info, render
+    report_path = run_dir / "sim_report.json"
+    if not report_path.exists():
+        print(f"the simulator wrote no report; see the logs in {run_dir}")
+        return False
+    report = json.loads(report_path.read_text())
+    diag = report["diagnostics"]
+    rejected = sum(int(v) for k, v in diag.items() if k.startswith("rejected_"))
+    scores = report["episode_scores"]
+    print(f"  game: {diag['sim_time_s']} s of sim time in {diag['periods_run']} periods, "
+          f"score A {scores[-1][0]} : {scores[-1][1]} B" if scores else "  game: unfinished")
+    print(f"  stepped-mode real-time factor {diag['real_time_factor_since_start']}x; actions accepted "
+          f"{diag['accepted']}, missing {diag['missing']}, rejected {rejected}")
+    ok = rejected == 0 and bool(scores)
+    bag = run_dir / "bag"
+    if not bag.exists():
+        print(f"  no bag was recorded in {bag}")
+        return False
+    info = bag_info(bag)
+    published = report["published"]
+    expected = {"/world_state": published["world_state"], "/clock": published["world_state"]}
+    for name in report["robots"]:
+        expected[f"/{name}/detections"] = published["detections_per_robot"]
+        expected[f"/{name}/feedback"] = published["feedback_per_robot"]
+    counts = {t["name"]: t["count"] for t in info["topics"]}
+    lost = {t: (n, counts.get(t, 0)) for t, n in expected.items() if counts.get(t, 0) != n}
+    total = sum(counts.values())
+    print(f"  bag {bag}: {total} messages on {len(counts)} topics, {info['duration_s']:.1f} s; "
+          + ("every published message recorded" if not lost else f"LOST (published, recorded): {lost}"))
+    ok = ok and not lost
+    if config.gif:
+        target = run_dir / "game.gif"
+        frames = render(bag, target, robot="team_a_0", fps=10.0, pixels_per_metre=30.0)
+        print(f"  replay: {target} ({frames} frames, robot team_a_0's detections overlaid)")
+    return ok
+
+
 @dataclass(frozen=True)
 class Graph:
     build: Callable[[MainJobConfig, Path], list[NodeLaunch]]
-    summarise: Callable[[GraphOutcome, Path], bool]
+    summarise: Callable[[GraphOutcome, Path, MainJobConfig], bool]
 
 
-GRAPHS: dict[str, Graph] = {"selfcheck": Graph(selfcheck_graph, summarise_selfcheck)}
+GRAPHS: dict[str, Graph] = {"soccer": Graph(soccer_graph, summarise_soccer),
+                            "selfcheck": Graph(selfcheck_graph, summarise_selfcheck)}
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -153,7 +233,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for node in outcome.nodes:
         state = "stopped" if node.stopped_by_graph else f"exit {node.exit_code}"
         print(f"  node {node.name:<24} {state:<10} log {node.log_path}")
-    ok = graph.summarise(outcome, run_dir) and outcome.ok
+    ok = graph.summarise(outcome, run_dir, config) and outcome.ok
     print(f"dynenv-run: {'OK' if ok else 'FAILED'} in {outcome.wall_time_s:.1f} s")
     return 0 if ok else 1
 

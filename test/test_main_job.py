@@ -1,4 +1,5 @@
-"""The main job runs the self-check graph end to end, refuses bad settings, and reports failures honestly."""
+"""The main job runs the soccer graph and the self-check graph end to end, refuses bad settings, and reports
+failures honestly."""
 from __future__ import annotations
 
 import json
@@ -13,8 +14,8 @@ from dynenv_ros.main_job import ConfigError, MainJobConfig, load_config, main
 
 
 def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
-    status = main(["--output-dir", str(tmp_path), "--set", "samples_per_type=3", "--set",
-                   f"domain_id={os.environ['ROS_DOMAIN_ID']}"])
+    status = main(["--output-dir", str(tmp_path), "--set", "graph=selfcheck", "--set", "samples_per_type=3",
+                   "--set", f"domain_id={os.environ['ROS_DOMAIN_ID']}"])
     output = capsys.readouterr().out
     assert status == 0, output
     report = json.loads((tmp_path / "selfcheck.json").read_text())
@@ -22,6 +23,18 @@ def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
     assert len(report["interfaces"]) == 9
     assert all(entry["received"] == 3 for entry in report["interfaces"].values())
     assert "interfaces verified: 9/9" in output and "dynenv-run: OK" in output
+
+
+def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
+    """The README's run command: simulator, a scripted policy node per robot, recorder; lossless bag and a GIF."""
+    status = main(["--output-dir", str(tmp_path), "--set", "duration_s=5", "--set", "players_per_team=1",
+                   "--set", f"domain_id={os.environ['ROS_DOMAIN_ID']}"])
+    output = capsys.readouterr().out
+    assert status == 0, output
+    report = json.loads((tmp_path / "sim_report.json").read_text())
+    assert report["diagnostics"]["periods_run"] == "10" and report["diagnostics"]["missing"] == "0"
+    assert "every published message recorded" in output and "dynenv-run: OK" in output
+    assert (tmp_path / "game.gif").stat().st_size > 0 and (tmp_path / "bag").is_dir()
 
 
 def test_graph_reports_a_listener_that_does_not_get_what_it_expects(tmp_path):
@@ -56,6 +69,10 @@ def test_graph_times_out_and_stops_every_process(tmp_path):
     ({"timeout_s": "long"}, "timeout_s must be float"),
     ({"domain_id": 500}, "domain_id must be"),
     ({"sample_per_type": 3}, "unknown key"),
+    ({"duration_s": 0.0}, "duration_s must be in"),
+    ({"players_per_team": 6}, "players_per_team must be in"),
+    ({"perception": "perfect"}, "perception must be one of"),
+    ({"policy": "genius"}, "policy must be one of"),
 ])
 def test_bad_settings_are_refused_with_a_reason(settings, message):
     with pytest.raises(ConfigError, match=message):

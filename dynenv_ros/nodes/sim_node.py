@@ -72,6 +72,9 @@ class SimNode(Node):
         self.wait_for_subscribers = declare_int(
             self, "wait_for_subscribers", 1, 0, 100, "Stepped mode: hold the first observation until every robot's "
             "detections and /world_state have this many subscribers (policies, recorder).", **fixed)
+        self.wait_for_recorder = declare_bool(
+            self, "wait_for_recorder", False, "Stepped mode: also hold the first observation until /clock and every "
+            "feedback topic have a subscriber, so a recorder misses nothing.", **fixed)
         self.exit_when_finished = declare_bool(self, "exit_when_finished", False, "Exit (status 0) when an episode "
                                                "ends and auto_reset is off, after every subscriber has it.", **fixed)
         self.report_path = declare_str(self, "report_path", "", "Write a JSON summary here on exit.", **fixed)
@@ -130,7 +133,7 @@ class SimNode(Node):
             self.vision_timer = self.create_timer(period, self._realtime_tick, clock=self.wall)
         self.started = False
         self._started_wall = time.monotonic()
-        if self.mode == "stepped" and self.wait_for_subscribers > 0:
+        if self.mode == "stepped" and (self.wait_for_subscribers > 0 or self.wait_for_recorder):
             self.start_timer = self.create_timer(0.05, self._start_when_subscribed, clock=self.wall)
         else:
             self._start()
@@ -147,7 +150,10 @@ class SimNode(Node):
 
     def _start_when_subscribed(self) -> None:
         wanted = self.wait_for_subscribers
-        if all(p.get_subscription_count() >= wanted for p in self.detection_pubs + [self.world_pub]):
+        ready = all(p.get_subscription_count() >= wanted for p in self.detection_pubs + [self.world_pub])
+        if self.wait_for_recorder:
+            ready = ready and all(p.get_subscription_count() >= 1 for p in self.feedback_pubs + [self.clock_pub])
+        if ready:
             self.start_timer.cancel()
             self._start()
 
