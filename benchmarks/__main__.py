@@ -10,7 +10,7 @@ import sys
 from collections.abc import Sequence
 
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
-SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim"}
+SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "ros": "ros_graph"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -25,6 +25,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "sim":   # its options are cheap to declare without importing the simulator
             from benchmarks.sim_options import add_arguments
             add_arguments(sub)
+        if name == "ros":
+            sub.add_argument("--sim-seconds", type=float, default=60.0, help="sim seconds per stepped game")
+            sub.add_argument("--wall-seconds", type=float, default=10.0, help="realtime CPU sampling window")
+            sub.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     if args.repeat < 1:
         parser.error("--repeat must be at least 1")

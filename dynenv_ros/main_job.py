@@ -162,7 +162,8 @@ def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig
     scores = report["episode_scores"]
     print(f"  game: {diag['sim_time_s']} s of sim time in {diag['periods_run']} periods, "
           f"score A {scores[-1][0]} : {scores[-1][1]} B" if scores else "  game: unfinished")
-    print(f"  stepped-mode real-time factor {diag['real_time_factor_since_start']}x; actions accepted "
+    print(f"  stepped-mode real-time factor {diag['real_time_factor_running']}x "
+          f"({diag['real_time_factor_since_start']}x with start-up); actions accepted "
           f"{diag['accepted']}, missing {diag['missing']}, rejected {rejected}")
     ok = rejected == 0 and bool(scores)
     bag = run_dir / "bag"

@@ -123,6 +123,11 @@ def _utc(ns: int) -> str:
     return datetime.fromtimestamp(ns / 1e9, tz=timezone.utc).isoformat(timespec="milliseconds")
 
 
+def _seconds(ns: int) -> str:
+    """Exact seconds.nanoseconds (a float would round epoch times to about 100 ns)."""
+    return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
+
+
 def bag_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Summary of a bag; reads every message (without decoding) so that counts and times are what is really
     there, and a damaged file is found now rather than half way through a replay."""
@@ -154,8 +159,8 @@ def format_info(info: dict[str, Any]) -> str:
     lines = [f"Bag:       {info['path']}", f"Storage:   {info['storage']}",
              f"Duration:  {info['duration_s']:.3f} s"]
     if info["start_ns"] is not None:
-        lines += [f"Start:     {_utc(info['start_ns'])} ({info['start_ns'] / 1e9:.9f})",
-                  f"End:       {_utc(info['end_ns'])} ({info['end_ns'] / 1e9:.9f})"]
+        lines += [f"Start:     {_utc(info['start_ns'])} ({_seconds(info['start_ns'])})",
+                  f"End:       {_utc(info['end_ns'])} ({_seconds(info['end_ns'])})"]
     lines += [f"Messages:  {info['message_count']}", f"Topics:    {len(info['topics'])}"]
     width = max((len(t["name"]) for t in info["topics"]), default=0)
     type_width = max((len(t["type"]) for t in info["topics"]), default=0)
@@ -307,7 +312,8 @@ TABLES: dict[str, tuple[str, list[Column], Callable[[Any], Sequence[Any]]]] = {
         Column("class_id", "u1", lambda t, b, m, i: i.class_id),
         Column("team", "i1", lambda t, b, m, i: i.team),
     ] + [Column(f, "f8", (lambda f: lambda t, b, m, i: getattr(i, f))(f))
-         for f in ("x", "y", "yaw", "vx", "vy", "yaw_rate", "head_yaw", "size_x", "size_y")]
+         for f in ("x", "y", "yaw", "vx", "vy", "yaw_rate", "head_yaw")]
+      + [Column(f, "f4", (lambda f: lambda t, b, m, i: getattr(i, f))(f)) for f in ("size_x", "size_y")]
       + [Column("status", "u1", lambda t, b, m, i: i.status),
          Column("penalty_remaining", "f4", lambda t, b, m, i: i.penalty_remaining),
          Column("goal_x", "f8", lambda t, b, m, i: i.goal_x),
@@ -386,7 +392,10 @@ def export(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], fmt: s
             with open(tmp, "w", newline="") as stream:
                 writer = csv.writer(stream)
                 writer.writerow([c.name for c in columns])
-                writer.writerows(zip(*(table[c.name] for c in columns)))
+                # float32 fields in their shortest form (0.2, not 0.20000000298023224)
+                cells = [[str(np.float32(v)) for v in table[c.name]] if c.dtype == "f4" else table[c.name]
+                         for c in columns]
+                writer.writerows(zip(*cells))
         else:
             arrays = {c.name: np.asarray(table[c.name], dtype=c.dtype if c.dtype != "U" else str)
                       for c in columns}

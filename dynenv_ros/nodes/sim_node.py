@@ -122,6 +122,7 @@ class SimNode(Node):
         self.frames_published = 0
         self.periods_run = 0
         self.episodes_started = 0
+        self._first_period_wall = self._last_period_wall = 0.0
         self.episode_scores: list[tuple[int, int]] = []
         self._window = deque(maxlen=2)   # (wall time, sim time, frames) samples for achieved rates
         self._buffer: deque = deque()    # realtime: frames of the current period waiting for their instant
@@ -151,6 +152,9 @@ class SimNode(Node):
     def _start_when_subscribed(self) -> None:
         wanted = self.wait_for_subscribers
         ready = all(p.get_subscription_count() >= wanted for p in self.detection_pubs + [self.world_pub])
+        # ... and every controlled robot has someone to act for it, so no first action is sent into the void.
+        ready = ready and all(self.count_publishers(topics.action(self.names[i])) >= 1
+                              for i in self.session.controlled)
         if self.wait_for_recorder:
             ready = ready and all(p.get_subscription_count() >= 1 for p in self.feedback_pubs + [self.clock_pub])
         if ready:
@@ -228,6 +232,9 @@ class SimNode(Node):
             return
         output = self.session.step()
         self.periods_run += 1
+        now = time.monotonic()
+        self._first_period_wall = self._first_period_wall or now
+        self._last_period_wall = now
         if self.mode == "stepped":
             self._emit(output)
         else:
@@ -351,8 +358,12 @@ class SimNode(Node):
         (t0, s0, f0), (t1, s1, f1) = self._window[0], self._window[-1]
         wall = max(t1 - t0, 1e-9)
         overall = self.periods_run * self.config.period_seconds / max(now - self._started_wall, 1e-9)
+        # From the first period to the last: the loop itself, without start-up and discovery.
+        running = (self.periods_run - 1) * self.config.period_seconds / max(
+            self._last_period_wall - self._first_period_wall, 1e-9) if self.periods_run > 1 else 0.0
         values = {"mode": self.mode, "episode": str(self.session.episode_id), "period": str(self.session.period),
                   "real_time_factor_since_start": f"{overall:.2f}",
+                  "real_time_factor_running": f"{running:.2f}",
                   "sim_time_s": f"{sim_now:.2f}", "real_time_factor": f"{(s1 - s0) / wall:.2f}",
                   "vision_frames_per_s": f"{(f1 - f0) / wall:.1f}", "periods_run": str(self.periods_run)}
         counts: Counter[str] = self.session.counts

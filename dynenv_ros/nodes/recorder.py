@@ -1,0 +1,271 @@
+"""Recorder: subscribes (raw CDR, no deserialisation) to the simulator's topics and writes them to a rosbag2 MCAP
+bag, because there is no ``ros2 bag`` on PyPI.
+
+Parameters:
+  output    bag directory to create (default ``bags/recording_<UTC time>``); an existing path is refused.
+  topics    topics to record; empty = every topic whose type the simulator publishes (``SIM_PUBLISHED_TYPES``)
+            plus policies' ``dynenv_msgs/msg/Action``. Either way topics are found by polling the ROS graph every
+            0.5 s, so a topic that appears later is recorded from then on.
+  duration  seconds of wall time to record, 0 = until SIGINT/SIGTERM.
+
+Bag time of a message is its receive time on the system (wall) clock in ns, like ``ros2 bag record``; the sim time
+stays in each message's header.stamp. Subscriptions use the simulator's reliable KEEP_ALL QoS, so a recorder that
+falls behind holds the publisher back instead of silently losing messages (once the writer's history is full, the
+publisher's publish() fails after Fast DDS's blocking time rather than dropping). The bag is finished (MCAP footer,
+metadata.yaml) on every exit path and a summary (messages per topic) is logged. SIGINT/SIGTERM first drain what is already on its
+way (until no message arrived for DRAIN_QUIET_S, at most DRAIN_MAX_S), then finish the bag and exit 0; a second
+signal finishes at once.
+
+``dynenv-record --output DIR --topics T ... --duration S`` (``cli_main``) is the same node with argparse options.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from datetime import datetime, timezone
+from typing import Any
+
+from rclpy.exceptions import ParameterException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from dynenv_ros.bags.typestore import dynenv_typestore
+from dynenv_ros.bags.writer import BagWriter
+from dynenv_ros.ros.node_runner import NodeExit, run_node
+from dynenv_ros.ros.parameters import declare_float, declare_str, declare_str_list
+from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.ros.topics import SIM_PUBLISHED_TYPES
+
+RCLError = _rclpy.RCLError
+
+RECORDED_TYPES = frozenset(SIM_PUBLISHED_TYPES | {"dynenv_msgs/msg/Action"})
+DISCOVERY_PERIOD_S = 0.5
+DRAIN_QUIET_S = 0.25      # after a stop request, finish once no message arrived for this long ...
+DRAIN_MAX_S = 2.0         # ... or after this long at most (a publisher that keeps publishing)
+
+
+def message_class(type_name: str) -> type:
+    """The generated Python class of "pkg/msg/Name" (what rosidl_runtime_py.utilities.get_message does; that
+    package is not among our PyPI wheels)."""
+    try:
+        package, kind, name = type_name.split("/")
+    except ValueError:
+        raise ValueError(f"not a ROS message type name: {type_name!r} (expected pkg/msg/Name)") from None
+    try:
+        return getattr(importlib.import_module(f"{package}.{kind}"), name)
+    except (ImportError, AttributeError) as error:
+        raise ImportError(f"message type {type_name} is not installed: {error}") from error
+
+
+def default_output() -> str:
+    return f"bags/recording_{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%SZ')}"
+
+
+class Recorder(Node):
+    def __init__(self, *, exit_when_done: bool = True, **node_options: Any) -> None:
+        """``exit_when_done``: raise NodeExit when ``duration`` elapses (False in in-process tests, which watch
+        ``finished``). ``node_options`` go to rclpy's Node (context, parameter_overrides, ...)."""
+        super().__init__("recorder", **node_options)
+        self.output = declare_str(self, "output", default_output(), "Bag directory to create (must not exist).")
+        requested = declare_str_list(self, "topics", [], "Topics to record; empty = every simulator topic.")
+        self.duration = declare_float(self, "duration", 0.0, 0.0, 1e9, "Wall seconds to record, 0 = until stopped.")
+        self.requested = {self.resolve_topic_name(t) for t in requested}
+        self.exit_when_done = exit_when_done
+        try:
+            self.bag = BagWriter(self.output, dynenv_typestore())
+        except FileExistsError as error:
+            raise ParameterException(str(error), ["output"]) from None
+        self.subscribed: dict[str, str] = {}          # topic → type
+        self._ignored: set[tuple[str, tuple[str, ...]]] = set()   # warned about once
+        self._subscriptions: list[Any] = []
+        self._started = time.monotonic()
+        self._last_message = self._started
+        self._stop_requested: float | None = None
+        self.finished = False
+        self._discover()
+        self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        self._stop_timer = self.create_timer(0.05, self._check_stop)
+        what = ", ".join(sorted(self.requested)) if self.requested else "all simulator topics"
+        self.get_logger().info(f"recording {what} to {self.output}"
+                               + (f" for {self.duration:g} s" if self.duration > 0 else " until stopped"))
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages written per topic so far."""
+        return dict(self.bag.counts)
+
+    def _wanted(self, topic: str, types: list[str]) -> bool:
+        if self.requested:
+            return topic in self.requested
+        return any(t in RECORDED_TYPES for t in types)
+
+    def _discover(self) -> None:
+        if self.finished:
+            return
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self.subscribed or not self._wanted(topic, types):
+                continue
+            key = (topic, tuple(types))
+            if key in self._ignored:
+                continue
+            reason = self._subscribe(topic, types)
+            if reason:
+                self._ignored.add(key)
+                self.get_logger().warning(f"not recording {topic}: {reason}")
+
+    def _subscribe(self, topic: str, types: list[str]) -> str:
+        """Start recording ``topic``; returns why not, or "" on success."""
+        if len(types) != 1:
+            return f"it has several types {types}"
+        msgtype = types[0]
+        try:
+            cls = message_class(msgtype)
+            self.bag.add_topic(topic, msgtype)
+        except (ImportError, ValueError, KeyError) as error:
+            return str(error)
+        self._subscriptions.append(self.create_subscription(
+            cls, topic, lambda data, name=topic: self._on_message(name, data), sim_stream(), raw=True))
+        self.subscribed[topic] = msgtype
+        self.get_logger().info(f"recording {topic} [{msgtype}]")
+        return ""
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        if not self.bag.closed:
+            self.bag.write(topic, time.time_ns(), data)
+            self._last_message = time.monotonic()
+
+    def request_stop(self, drain: bool = True) -> None:
+        """Stop soon (what SIGINT/SIGTERM do): with ``drain``, first keep taking the messages that are already on
+        their way (a publisher that just finished has handed them to DDS, but they still sit in this node's queue);
+        without, at the next timer tick."""
+        now = time.monotonic()
+        if self._stop_requested is None or not drain:
+            self._stop_requested = now if drain else now - DRAIN_MAX_S
+
+    def _check_stop(self) -> None:
+        if self.finished:
+            return
+        now = time.monotonic()
+        if self._stop_requested is not None:
+            quiet = now - max(self._last_message, self._stop_requested) >= DRAIN_QUIET_S
+            if not (quiet or now - self._stop_requested >= DRAIN_MAX_S):
+                return
+        elif not (self.duration > 0 and now - self._started >= self.duration):
+            return
+        self.finish()
+        if self.exit_when_done:
+            raise NodeExit(0)
+
+    def finish(self) -> None:
+        """Stop recording, finish the bag so it is readable, and log what was recorded. Idempotent."""
+        if self.finished:
+            return
+        self.finished = True
+        for subscription in self._subscriptions:
+            self.destroy_subscription(subscription)
+        self._subscriptions.clear()
+        self.bag.close()
+        counts = self.counts
+        lines = [f"  {topic}: {count}" for topic, count in sorted(counts.items())]
+        summary = (f"bag {self.output} finished: {sum(counts.values())} messages on {len(counts)} topics"
+                   + ("\n" + "\n".join(lines) if lines else ""))
+        if self.context.ok():
+            self.get_logger().info(summary)
+        else:   # after SIGINT/SIGTERM the logger's /rosout publisher is gone and would complain
+            print(f"[recorder] {summary}", file=sys.stderr, flush=True)
+
+    def destroy_node(self) -> None:
+        if hasattr(self, "bag"):   # the constructor may have failed before the bag existed
+            self.finish()
+        super().destroy_node()
+
+
+def run_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None = None) -> int:
+    """``run_node`` for nodes that must exit 0 on SIGINT/SIGTERM even while a callback is running.
+
+    rclpy's handler (installed by ``rclpy.init``) shuts the context down and then calls the Python handler that was
+    there before. Two things go wrong with the defaults: Python's SIGINT handler raises KeyboardInterrupt wherever
+    the interpreter is, and a signal that arrives during a callback makes the executor's next wait raise RCLError
+    ("context is not valid") instead of ExternalShutdownException, i.e. a traceback and exit status 1. Here the
+    Python handlers only record the signal, and an RCLError after a recorded signal is a normal shutdown (exit 0).
+    ``run_node``'s ``finally`` has destroyed the node either way.
+    """
+    received: list[int] = []
+    stop_signals = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, lambda signum, frame: received.append(signum)) for s in stop_signals}
+    try:
+        return run_node(make_node, args)
+    except RCLError:
+        if received:
+            return 0
+        raise
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def run_recorder(make_node: Callable[[], Recorder], args: Sequence[str] | None = None) -> int:
+    """Run a recorder that drains on SIGINT/SIGTERM instead of letting rclpy shut the context down at once.
+
+    A recorder is stopped right after the publishers finish (the main job's graph sends SIGINT when the simulator
+    exits); messages they already sent may still wait in this node's queue, and rclpy's own handler would drop
+    them. So rclpy's handlers are uninstalled and ours ask the node to stop after draining (``request_stop``); a
+    second signal stops without draining, a third raises KeyboardInterrupt (run_node still finishes the bag).
+    """
+    from rclpy.signals import uninstall_signal_handlers
+
+    received: list[int] = []
+    nodes: list[Recorder] = []
+
+    def on_signal(signum: int, frame: Any) -> None:
+        received.append(signum)
+        if not nodes or len(received) >= 3:
+            raise KeyboardInterrupt
+        nodes[0].request_stop(drain=len(received) == 1)
+
+    def make() -> Recorder:
+        uninstall_signal_handlers()   # restores on_signal, which was installed before rclpy.init
+        nodes.append(make_node())
+        return nodes[0]
+
+    stop_signals = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, on_signal) for s in stop_signals}
+    try:
+        return run_node(make, args)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_recorder(Recorder, args)
+
+
+def cli_main(argv: Sequence[str] | None = None) -> int:
+    """``dynenv-record``: options instead of ROS parameters; arguments after ``--ros-args`` go to rclpy."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ros_args = argv[argv.index("--ros-args"):] if "--ros-args" in argv else []
+    own = argv[:len(argv) - len(ros_args)]
+    parser = argparse.ArgumentParser(prog="dynenv-record", description="Record simulator topics to a rosbag2 "
+                                     "MCAP bag (Ctrl-C finishes the bag).")
+    parser.add_argument("--output", default=None, help="bag directory to create (default bags/recording_<UTC>)")
+    parser.add_argument("--topics", nargs="*", default=None, help="topics to record (default: all simulator topics)")
+    parser.add_argument("--duration", type=float, default=None, help="seconds of wall time (default: until Ctrl-C)")
+    options = parser.parse_args(own)
+    overrides = []
+    if options.output is not None:
+        overrides.append(Parameter("output", Parameter.Type.STRING, options.output))
+    if options.topics:
+        overrides.append(Parameter("topics", Parameter.Type.STRING_ARRAY, list(options.topics)))
+    if options.duration is not None:
+        overrides.append(Parameter("duration", Parameter.Type.DOUBLE, float(options.duration)))
+    return run_recorder(lambda: Recorder(parameter_overrides=overrides), [sys.argv[0], *ros_args])
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
