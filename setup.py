@@ -12,11 +12,15 @@ NODES = [
     "selfcheck_listener = dynenv_ros.nodes.selfcheck_listener:main",
     "sim_node = dynenv_ros.nodes.sim_node:main",
     "scripted_policy = policy_node.scripted_policy:main",
+    "recorder = dynenv_ros.nodes.recorder:main",
+    "bag_player = dynenv_ros.nodes.bag_player:main",
 ]
 TOOLS = [
     "dynenv-run = dynenv_ros.main_job:main",
     "dynenv-bench = benchmarks.__main__:main",
     "dynenv-play = dynenv_ros.envs.play:main",
+    "dynenv-bag = dynenv_ros.bags.inspect:main",
+    "dynenv-record = dynenv_ros.nodes.recorder:cli_main",
 ]
 
 setup(

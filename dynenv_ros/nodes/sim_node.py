@@ -28,6 +28,7 @@ from dynenv_ros.envs.soccer_session import MISSING_ACTION_RULES, PeriodOutput, S
 from dynenv_ros.perception.params import MODES, PRESETS, load_preset
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import markers, topics
+from dynenv_ros.ros.cdr import detection_array_cdr
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list)
 from dynenv_ros.ros.qos import sim_stream
@@ -262,17 +263,33 @@ class SimNode(Node):
             self._publish_frame(output, k)
         self._publish_feedback(output)
 
+    def _publish(self, publisher, message) -> None:
+        """Publish on a KEEP_ALL topic: if a slow reader filled the queue, Fast DDS refuses after its blocking
+        time; try again for up to a second (the reader drains meanwhile) rather than lose the message."""
+        for attempt in range(100):
+            try:
+                publisher.publish(message)
+                return
+            except Exception as error:          # rclpy's RCLError: "cannot publish data"
+                if type(error).__name__ != "RCLError":
+                    raise
+                time.sleep(0.01)
+        self.session.counts["publish_failed"] += 1
+        self.get_logger().error(f"could not publish on {publisher.topic_name}: its readers are stuck",
+                                throttle_duration_sec=1.0)
+
     def _publish_frame(self, output: PeriodOutput, k: int) -> None:
         frame = output.frames[k]
         stamp = cv.sim_time(frame.tick, self._tick_s)
-        self.clock_pub.publish(ClockMsg(clock=stamp))
-        self.world_pub.publish(cv.world_state(frame.snapshot, stamp))
+        self._publish(self.clock_pub, ClockMsg(clock=stamp))
+        self._publish(self.world_pub, cv.world_state(frame.snapshot, stamp))
         frames_per_period = len(output.frames)
-        for i, robot in enumerate(frame.robots):
-            self.detection_pubs[i].publish(cv.detection_array(
-                robot.detections, robot_id=i, robot_name=self.names[i], episode_id=output.episode_id,
+        for i, robot in enumerate(frame.robots):   # serialised from the numpy records directly (ros/cdr.py)
+            self._publish(self.detection_pubs[i], detection_array_cdr(
+                robot.detections, stamp_sec=stamp.sec, stamp_nanosec=stamp.nanosec,
+                frame_id=cv.camera_frame(self.names[i]), robot_id=i, episode_id=output.episode_id,
                 motion_period=output.motion_period, frame_index=k, frames_per_period=frames_per_period,
-                head_yaw=robot.head_yaw, fallen=robot.fallen, penalized=robot.penalized, stamp=stamp))
+                head_yaw=robot.head_yaw, fallen=robot.fallen, penalized=robot.penalized))
         self.frames_published += 1
         if self.publish_markers and k == len(output.frames) - 1:
             self._publish_markers(frame, stamp)
@@ -280,7 +297,7 @@ class SimNode(Node):
     def _publish_feedback(self, output: PeriodOutput) -> None:
         stamp = cv.sim_time(output.frames[-1].tick, self._tick_s)
         for i, fb in enumerate(output.feedback):
-            self.feedback_pubs[i].publish(cv.step_feedback(
+            self._publish(self.feedback_pubs[i], cv.step_feedback(
                 robot_id=i, episode_id=output.episode_id, motion_period=output.motion_period, rewards=fb.rewards,
                 terminated=output.terminated, truncated=output.truncated, seen_object_ids=fb.seen_object_ids,
                 landmarks_seen=fb.landmarks_seen, stamp=stamp))
@@ -296,17 +313,18 @@ class SimNode(Node):
         from rclpy.duration import Duration
 
         from dynenv_ros.ros.node_runner import NodeExit
+        final = self.diagnostics()     # before waiting: acknowledgements take a heartbeat period (≈ 3 s)
         publishers = [self.clock_pub, self.world_pub] + self.detection_pubs + self.feedback_pubs
         for publisher in publishers:
             publisher.wait_for_all_acked(Duration(seconds=5.0))
-        self.write_report()
+        self.write_report(final)
         raise NodeExit(0)
 
-    def write_report(self) -> None:
+    def write_report(self, diagnostics: dict[str, str] | None = None) -> None:
         if not self.report_path:
             return
         import json
-        report = {"diagnostics": self.diagnostics(), "episode_scores": self.episode_scores,
+        report = {"diagnostics": diagnostics or self.diagnostics(), "episode_scores": self.episode_scores,
                   "published": {"world_state": self.frames_published,
                                 "detections_per_robot": self.frames_published,
                                 "feedback_per_robot": self.periods_run + self.episodes_started},
@@ -367,7 +385,7 @@ class SimNode(Node):
                   "sim_time_s": f"{sim_now:.2f}", "real_time_factor": f"{(s1 - s0) / wall:.2f}",
                   "vision_frames_per_s": f"{(f1 - f0) / wall:.1f}", "periods_run": str(self.periods_run)}
         counts: Counter[str] = self.session.counts
-        for key in ("accepted", "missing") + tuple(f"rejected_{r}" for r in
+        for key in ("accepted", "missing", "publish_failed") + tuple(f"rejected_{r}" for r in
                                                    ("malformed", "out_of_range", "unknown_robot", "wrong_episode",
                                                     "late", "early", "duplicate")):
             values[key] = str(counts.get(key, 0))

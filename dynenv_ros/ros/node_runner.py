@@ -36,6 +36,9 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
         status = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception as error:  # a signal during a callback: the next wait finds the context already shut down
+        if type(error).__name__ != "RCLError" or (node is not None and node.context.ok()):
+            raise
     finally:
         if node is not None:
             node.destroy_node()
