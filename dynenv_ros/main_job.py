@@ -146,7 +146,9 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
             config.policy, "keeper" if slot == 0 and config.players_per_team > 1 else "chaser")
         policies.append(NodeLaunch(f"policy_{name}", "policy_node.scripted_policy",
                                    {"robot": name, "policy": kind, "seed": config.seed + i}))
-    recorder = NodeLaunch("recorder", "dynenv_ros.nodes.recorder", {"output": str(run_dir / "bag")})
+    # Stamped with sim time (as `ros2 bag record --use-sim-time`): the bag replays at game speed.
+    recorder = NodeLaunch("recorder", "dynenv_ros.nodes.recorder", {"output": str(run_dir / "bag"),
+                                                                     "use_sim_time": True})
     return [recorder, *policies, sim]
 
 

@@ -23,6 +23,7 @@ from typing import Any
 
 from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from dynenv_ros.bags.inspect import BagError, BagReader, open_bag
@@ -41,6 +42,8 @@ class BagPlayer(Node):
         """``exit_when_done``: raise NodeExit(0) after the last message (False in in-process tests, which watch
         ``finished``). ``node_options`` go to rclpy's Node (context, parameter_overrides, ...)."""
         super().__init__("bag_player", **node_options)
+        # Timers run on the steady clock: with use_sim_time the node clock stands still until /clock arrives.
+        self._wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.bag_path = declare_str(self, "bag", "", "Bag directory to play.")
         self.rate = declare_float(self, "rate", 1.0, 0.0, 1000.0, "Playback speed factor, 0 = as fast as possible.")
         self.loop = declare_bool(self, "loop", False, "Start over at the end of the bag.")
@@ -61,7 +64,7 @@ class BagPlayer(Node):
         self._next: tuple[Any, int, bytes] | None = None
         self._origin: tuple[float, int] | None = None   # (monotonic start, first bag timestamp) of this pass
         self._waiting_since = time.monotonic()
-        self._timer = self.create_timer(TICK_S, self._play)
+        self._timer = self.create_timer(TICK_S, self._play, clock=self._wall)
         self.get_logger().info(f"playing {self.bag_path}: {len(self.publishers_by_topic)} topics at "
                                + (f"rate {self.rate:g}" if self.rate > 0 else "full speed")
                                + (", looping" if self.loop else ""))

@@ -8,7 +8,8 @@ Parameters:
             0.5 s, so a topic that appears later is recorded from then on.
   duration  seconds of wall time to record, 0 = until SIGINT/SIGTERM.
 
-Bag time of a message is its receive time on the system (wall) clock in ns, like ``ros2 bag record``; the sim time
+Bag time of a message is its receive time in ns, like ``ros2 bag record``: wall time, or with ``use_sim_time:=true``
+(``--use-sim-time``) the latest /clock value recorded; the sim time
 stays in each message's header.stamp. Subscriptions use the simulator's reliable KEEP_ALL QoS, so a recorder that
 falls behind holds the publisher back instead of silently losing messages (once the writer's history is full, the
 publisher's publish() fails after Fast DDS's blocking time rather than dropping). The bag is finished (MCAP footer,
@@ -23,6 +24,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import signal
+import struct
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -31,6 +33,7 @@ from typing import Any
 
 from rclpy.exceptions import ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -71,6 +74,8 @@ class Recorder(Node):
         """``exit_when_done``: raise NodeExit when ``duration`` elapses (False in in-process tests, which watch
         ``finished``). ``node_options`` go to rclpy's Node (context, parameter_overrides, ...)."""
         super().__init__("recorder", **node_options)
+        # Timers run on the steady clock: with use_sim_time the node clock stands still until /clock arrives.
+        self._wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.output = declare_str(self, "output", default_output(), "Bag directory to create (must not exist).")
         requested = declare_str_list(self, "topics", [], "Topics to record; empty = every simulator topic.")
         self.duration = declare_float(self, "duration", 0.0, 0.0, 1e9, "Wall seconds to record, 0 = until stopped.")
@@ -80,6 +85,10 @@ class Recorder(Node):
             self.bag = BagWriter(self.output, dynenv_typestore())
         except FileExistsError as error:
             raise ParameterException(str(error), ["output"]) from None
+        # With use_sim_time the bag time is the latest /clock value this node recorded (read from the raw bytes,
+        # so it never depends on callback order between the clock and the data).
+        self._use_sim_time = bool(self.get_parameter("use_sim_time").value)
+        self._sim_ns = 0
         self.subscribed: dict[str, str] = {}          # topic → type
         self._ignored: set[tuple[str, tuple[str, ...]]] = set()   # warned about once
         self._subscriptions: list[Any] = []
@@ -88,8 +97,8 @@ class Recorder(Node):
         self._stop_requested: float | None = None
         self.finished = False
         self._discover()
-        self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
-        self._stop_timer = self.create_timer(0.05, self._check_stop)
+        self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover, clock=self._wall)
+        self._stop_timer = self.create_timer(0.05, self._check_stop, clock=self._wall)
         what = ", ".join(sorted(self.requested)) if self.requested else "all simulator topics"
         self.get_logger().info(f"recording {what} to {self.output}"
                                + (f" for {self.duration:g} s" if self.duration > 0 else " until stopped"))
@@ -135,8 +144,12 @@ class Recorder(Node):
         return ""
 
     def _on_message(self, topic: str, data: bytes) -> None:
+        if topic == "/clock" and len(data) >= 12:   # CDR: 4-byte header, int32 sec, uint32 nanosec
+            sec, nanosec = struct.unpack_from("<iI", data, 4)
+            self._sim_ns = sec * 1_000_000_000 + nanosec
         if not self.bag.closed:
-            self.bag.write(topic, time.time_ns(), data)
+            stamp = self._sim_ns if self._use_sim_time else time.time_ns()
+            self.bag.write(topic, stamp, data)
             self._last_message = time.monotonic()
 
     def request_stop(self, drain: bool = True) -> None:
