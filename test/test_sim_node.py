@@ -3,6 +3,7 @@ every kind of bad action. No launch files: the harness spins both nodes on one e
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 from dynenv_msgs.msg import Action, DetectionArray, StepFeedback, WorldState
@@ -16,6 +17,7 @@ from dynenv_ros.ros.qos import sim_stream
 from ros_harness import spin_until
 
 ROBOTS = ["team_a_0", "team_b_0"]
+REPO = Path(__file__).resolve().parents[1]
 
 
 def _sim(make_node, **params):
@@ -194,3 +196,11 @@ def test_realtime_mode_publishes_at_vision_rate_in_sim_time(make_node, executor)
     assert set(steps) == {0.1}                                             # one frame per 0.1 s of sim time
     assert stamps[-1] / wall > 3.0                                         # faster than real time, as asked
     assert sim.session.counts["missing"] > 0                               # nobody acted: the missing rule ran
+
+
+@pytest.mark.parametrize("preset", sorted(p.name for p in (REPO / "config").glob("sim_*.yaml")))
+def test_every_parameter_preset_starts_the_simulator(make_node, preset):
+    import yaml
+    values = yaml.safe_load((REPO / "config" / preset).read_text())["/**"]["ros__parameters"]
+    sim = make_node(SimNode, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+    assert sim.config.players_per_team == values["players_per_team"] and sim.mode == values["mode"]
