@@ -122,15 +122,12 @@ def recorder_loss(players: int, sim_seconds: float, domain: int, work: Path) -> 
     sim.wait(timeout=30)
     recorder.send_signal(signal.SIGINT)
     recorder.wait(timeout=30)
-    published = json.loads(report.read_text())["published"]
-    counts = {t["name"]: t["count"] for t in bag_info(bag)["topics"]}
-    names = [f"team_{t}_{i}" for t in "ab" for i in range(players)]
-    expected = {"/world_state": published["world_state"], "/clock": published["world_state"]}
-    for n in names:
-        expected[f"/{n}/detections"] = published["detections_per_robot"]
-        expected[f"/{n}/feedback"] = published["feedback_per_robot"]
-    lost = sum(max(0, n - counts.get(t, 0)) for t, n in expected.items())
-    return {"players_per_team": players, "published": sum(expected.values()), "lost": lost}
+    from dynenv_ros.main_job import missing_from_bag
+    sim_report = json.loads(report.read_text())
+    info = bag_info(bag)
+    lost = sum(max(0, published - recorded) for published, recorded in missing_from_bag(sim_report, info).values())
+    published = sum(t["count"] for t in info["topics"] if t["name"] != "/sim/diagnostics") + lost
+    return {"players_per_team": players, "published": published, "lost": lost}
 
 
 def run(args: Any) -> int:

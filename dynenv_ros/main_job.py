@@ -118,12 +118,17 @@ def selfcheck_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
     ]
 
 
+def read_report(path: Path, writer: str) -> dict[str, Any] | None:
+    if not path.exists():
+        print(f"the {writer} wrote no report; see the logs in {path.parent}")
+        return None
+    return json.loads(path.read_text())
+
+
 def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
-    report_path = run_dir / "selfcheck.json"
-    if not report_path.exists():
-        print(f"no self-check report was written; see the logs in {run_dir}")
+    report = read_report(run_dir / "selfcheck.json", "self-check listener")
+    if report is None:
         return False
-    report = json.loads(report_path.read_text())
     print(format_report(report))
     return bool(report["ok"])
 
@@ -152,13 +157,22 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
     return [recorder, *policies, sim]
 
 
+def missing_from_bag(report: dict[str, Any], info: dict[str, Any]) -> dict[str, tuple[int, int]]:
+    """Topics whose recorded count differs from what the simulator says it published: topic → (published, recorded)."""
+    published = report["published"]
+    expected = {"/world_state": published["world_state"], "/clock": published["world_state"]}
+    for name in report["robots"]:
+        expected[f"/{name}/detections"] = published["detections_per_robot"]
+        expected[f"/{name}/feedback"] = published["feedback_per_robot"]
+    counts = {t["name"]: t["count"] for t in info["topics"]}
+    return {t: (n, counts.get(t, 0)) for t, n in expected.items() if counts.get(t, 0) != n}
+
+
 def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
     from dynenv_ros.bags.inspect import bag_info, render
-    report_path = run_dir / "sim_report.json"
-    if not report_path.exists():
-        print(f"the simulator wrote no report; see the logs in {run_dir}")
+    report = read_report(run_dir / "sim_report.json", "simulator")
+    if report is None:
         return False
-    report = json.loads(report_path.read_text())
     diag = report["diagnostics"]
     rejected = sum(int(v) for k, v in diag.items() if k.startswith("rejected_"))
     scores = report["episode_scores"]
@@ -173,13 +187,8 @@ def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig
         print(f"  no bag was recorded in {bag}")
         return False
     info = bag_info(bag)
-    published = report["published"]
-    expected = {"/world_state": published["world_state"], "/clock": published["world_state"]}
-    for name in report["robots"]:
-        expected[f"/{name}/detections"] = published["detections_per_robot"]
-        expected[f"/{name}/feedback"] = published["feedback_per_robot"]
+    lost = missing_from_bag(report, info)
     counts = {t["name"]: t["count"] for t in info["topics"]}
-    lost = {t: (n, counts.get(t, 0)) for t, n in expected.items() if counts.get(t, 0) != n}
     total = sum(counts.values())
     print(f"  bag {bag}: {total} messages on {len(counts)} topics, {info['duration_s']:.1f} s; "
           + ("every published message recorded" if not lost else f"LOST (published, recorded): {lost}"))
