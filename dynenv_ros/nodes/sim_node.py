@@ -123,6 +123,7 @@ class SimNode(Node):
         self.frames_published = 0
         self.periods_run = 0
         self.episodes_started = 0
+        self._diagnostics_sent = 0
         self._first_period_wall = self._last_period_wall = 0.0
         self.episode_scores: list[tuple[int, int]] = []
         self._window = deque(maxlen=2)   # (wall time, sim time, frames) samples for achieved rates
@@ -400,7 +401,10 @@ class SimNode(Node):
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diagnostics_pub.publish(msg)
-        self.get_logger().debug(" ".join(f"{k}={v}" for k, v in values.items()))
+        self._diagnostics_sent += 1
+        line = " ".join(f"{k}={v}" for k, v in values.items() if v not in ("0", "0.00"))
+        if problems or self._diagnostics_sent % 10 == 1:     # the log gets one line in ten, or any trouble
+            self.get_logger().info(line)
 
 
 def main(args: Sequence[str] | None = None) -> int:
