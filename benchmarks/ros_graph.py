@@ -58,8 +58,6 @@ def _drive(players: int, domain: int, until: callable, timeout_s: float) -> int:
 
     for i, n in enumerate(names):
         node.create_subscription(DetectionArray, topics.detections(n), on_frame(i), sim_stream())
-    from dynenv_msgs.msg import WorldState           # the simulator starts once the ground truth has a reader too
-    node.create_subscription(WorldState, topics.WORLD_STATE, lambda msg: None, sim_stream())
     from rclpy.executors import SingleThreadedExecutor
     executor = SingleThreadedExecutor()             # one executor: rclpy.spin_once would rebuild one per call
     executor.add_node(node)

@@ -143,7 +143,7 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         "players_per_team": config.players_per_team, "seed": config.seed, "perception_preset": config.perception,
         "mode": "stepped", "episode_seconds": config.duration_s, "auto_reset": False, "exit_when_finished": True,
         "report_path": str(run_dir / "sim_report.json"), "wait_for_subscribers": 2,
-        "wait_for_recorder": True}, ends_run=True)
+        "wait_for_ground_truth_subscribers": len(names) + 1, "wait_for_recorder": True}, ends_run=True)
     policies = []
     for i, name in enumerate(names):
         slot = i % config.players_per_team

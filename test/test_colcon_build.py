@@ -38,7 +38,8 @@ def test_colcon_builds_both_packages_into_a_ros_layout(tmp_path):
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     install = tmp_path / "install"
-    for node in ("selfcheck_talker", "selfcheck_listener", "sim_node", "scripted_policy", "recorder", "bag_player"):
+    for node in ("selfcheck_talker", "selfcheck_listener", "sim_node", "scripted_policy", "policy_node", "recorder",
+                 "bag_player"):
         assert os.access(install / "dynenv_ros" / "lib" / "dynenv_ros" / node, os.X_OK), node
     assert (install / "dynenv_ros" / "share" / "dynenv_ros" / "config" / "main_job.yaml").is_file()
     for preset in ("realistic", "dynenv", "none"):

@@ -72,7 +72,10 @@ class SimNode(Node):
         diag_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.", **fixed)
         self.wait_for_subscribers = declare_int(
             self, "wait_for_subscribers", 1, 0, 100, "Stepped mode: hold the first observation until every robot's "
-            "detections and /world_state have this many subscribers (policies, recorder).", **fixed)
+            "detections topic has this many subscribers (policies, recorder).", **fixed)
+        self.wait_for_truth_readers = declare_int(
+            self, "wait_for_ground_truth_subscribers", 0, 0, 100, "Stepped mode: also hold the first observation "
+            "until /world_state has this many subscribers (scripted policies read it).", **fixed)
         self.wait_for_recorder = declare_bool(
             self, "wait_for_recorder", False, "Stepped mode: also hold the first observation until /clock and every "
             "feedback topic have a subscriber, so a recorder misses nothing.", **fixed)
@@ -136,7 +139,8 @@ class SimNode(Node):
             self.vision_timer = self.create_timer(period, self._realtime_tick, clock=self.wall)
         self.started = False
         self._started_wall = time.monotonic()
-        if self.mode == "stepped" and (self.wait_for_subscribers > 0 or self.wait_for_recorder):
+        if self.mode == "stepped" and (self.wait_for_subscribers > 0 or self.wait_for_recorder
+                                       or self.wait_for_truth_readers > 0):
             self.start_timer = self.create_timer(0.05, self._start_when_subscribed, clock=self.wall)
         else:
             self._start()
@@ -153,7 +157,8 @@ class SimNode(Node):
 
     def _start_when_subscribed(self) -> None:
         wanted = self.wait_for_subscribers
-        ready = all(p.get_subscription_count() >= wanted for p in self.detection_pubs + [self.world_pub])
+        ready = all(p.get_subscription_count() >= wanted for p in self.detection_pubs)
+        ready = ready and self.world_pub.get_subscription_count() >= self.wait_for_truth_readers
         # ... and every controlled robot has someone to act for it, so no first action is sent into the void.
         ready = ready and all(self.count_publishers(topics.action(self.names[i])) >= 1
                               for i in self.session.controlled)

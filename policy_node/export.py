@@ -1,0 +1,247 @@
+"""The agent as an ONNX file, and two interchangeable runtimes (torch, onnxruntime) so a policy node can switch by a
+parameter.
+
+Why ONNX: a robot's decision must fit in a few milliseconds on one core; onnxruntime runs the small recurrent
+network with far less per-call overhead than eager torch, and the file carries no Python code.
+
+The exported graph takes explicit tensors (a ``StreamBatch`` is not an ONNX type) with a dynamic batch axis (the
+robots) and fixed frame and detection axes (``collate`` with the same ``max_landmarks`` / ``max_objects`` gives
+exactly those shapes). Inputs, in order:
+
+==================  ==================  ========  ==========================================
+name                shape               dtype     meaning
+==================  ==================  ========  ==========================================
+landmark_features   (B, F, N_l, 19)     float32   ``StreamBatch.features`` of the landmarks
+landmark_kind       (B, F, N_l)         int64     class embedding index (0 = padding)
+landmark_mask       (B, F, N_l)         bool      True = padded slot
+object_features     (B, F, N_o, 19)     float32   same for ball and robots
+object_kind         (B, F, N_o)         int64
+object_mask         (B, F, N_o)         bool
+previous_action     (B, 12)             float32   ``encode_previous_action``
+proprioception      (B, 4)              float32
+h_loc, c_loc        (B, D)              float32   localization LSTM state
+h_obj, c_obj        (B, D)              float32   object LSTM state
+==================  ==================  ========  ==========================================
+
+Outputs: walk_logits (B, 5), turn_logits (B, 3), kick_logits (B, 3), head (B, 2·units+1 logits, or B, 2
+[mean, log_std]), value (B,), pose (B, 6), then the next state h_loc', c_loc', h_obj', c_obj' (B, D) each.
+Masks are ONNX ``bool`` tensors (numpy ``bool_``), the same type ``collate`` produces, so nothing is converted.
+
+The model's configuration and the fixed shapes are stored in the file's metadata (``dynenv.*`` keys), so the
+onnxruntime side needs no checkpoint to know its head mode or the shapes it accepts.
+"""
+from __future__ import annotations
+
+import io
+import json
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from policy_node.model.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
+from policy_node.model.network import DynEnvAgent, State
+
+INPUT_NAMES = ("landmark_features", "landmark_kind", "landmark_mask", "object_features", "object_kind",
+               "object_mask", "previous_action", "proprioception", "h_loc", "c_loc", "h_obj", "c_obj")
+OUTPUT_NAMES = ("walk_logits", "turn_logits", "kick_logits", "head", "value", "pose",
+                "h_loc_out", "c_loc_out", "h_obj_out", "c_obj_out")
+METADATA_KEY = "dynenv.policy"
+FORMAT = "dynenv_policy_onnx/1"
+
+
+@dataclass
+class PolicyStep:
+    """What a policy node needs from one decision; the field names are those of ``AgentStep`` so the code that
+    reads a step (``DynEnvAgent.act``/``distributions`` included) does not care which runtime produced it."""
+    walk: torch.Tensor     # (B, 5) logits
+    turn: torch.Tensor     # (B, 3)
+    kick: torch.Tensor     # (B, 3)
+    head: torch.Tensor     # (B, 2·units+1) logits, or (B, 2) [mean, log_std]
+    value: torch.Tensor    # (B,)
+    pose: torch.Tensor     # (B, 6)
+    state: State
+
+
+class _ExportWrapper(nn.Module):
+    """Explicit tensors in, a flat tuple out: the exporter cannot take dataclasses or nested tuples. Only repacks;
+    the network's computation is untouched."""
+
+    def __init__(self, model: DynEnvAgent) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, landmark_features: torch.Tensor, landmark_kind: torch.Tensor, landmark_mask: torch.Tensor,
+                object_features: torch.Tensor, object_kind: torch.Tensor, object_mask: torch.Tensor,
+                previous_action: torch.Tensor, proprioception: torch.Tensor, h_loc: torch.Tensor,
+                c_loc: torch.Tensor, h_obj: torch.Tensor, c_obj: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        step = self.model(StreamBatch(landmark_features, landmark_kind, landmark_mask),
+                          StreamBatch(object_features, object_kind, object_mask),
+                          previous_action, proprioception, (h_loc, c_loc, h_obj, c_obj))
+        return (step.walk, step.turn, step.kick, step.head, step.value, step.pose, *step.state)
+
+
+def _example_inputs(model: DynEnvAgent, batch: int, frames: int, max_landmarks: int, max_objects: int
+                    ) -> tuple[torch.Tensor, ...]:
+    """Inputs with a batch of 2 and a mixed mask. Not 1: ``nn.MultiheadAttention`` tests ``attn_mask.size(0) == 1``
+    in Python, and a trace at batch 1 would bake in a broadcast that is wrong for larger batches."""
+    generator = torch.Generator().manual_seed(0)
+
+    def stream(n: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        features = torch.randn(batch, frames, n, FEATURES, generator=generator)
+        kind = torch.randint(1, NUM_CLASSES, (batch, frames, n), generator=generator)
+        mask = torch.rand(batch, frames, n, generator=generator) < 0.5
+        return features, kind, mask
+
+    D = model.feature_size
+    return (*stream(max_landmarks), *stream(max_objects), torch.zeros(batch, ACTION_ENCODING),
+            torch.zeros(batch, PROPRIOCEPTION), *(torch.zeros(batch, D) for _ in range(4)))
+
+
+def _config(model: DynEnvAgent, frames: int, max_landmarks: int, max_objects: int) -> dict[str, Any]:
+    return {"format": FORMAT, "feature_size": model.feature_size, "head_mode": model.head_mode,
+            "head_units": (model.head_head.out_features - 1) // 2 if model.head_mode == "discrete" else None,
+            "head_max": float(model.head_max), "frames": frames, "max_landmarks": max_landmarks,
+            "max_objects": max_objects}
+
+
+def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int = 5, max_landmarks: int = 48,
+                max_objects: int = 12, opset: int = 17) -> None:
+    """Write ``model`` to ``path`` as ONNX (via ``path.tmp`` and a rename, so a failed export never leaves a
+    half-written file where a node would load it). Uses the TorchScript exporter (``dynamo=False``): it needs only
+    ``onnx``, and it traces ``nn.MultiheadAttention`` with ``add_bias_kv`` as ordinary ops."""
+    import onnx
+
+    if frames < 1 or max_landmarks < 1 or max_objects < 1:
+        raise ValueError("frames, max_landmarks and max_objects must be at least 1")
+    target = Path(path)
+    if not target.parent.is_dir():
+        raise ValueError(f"cannot write {target}: folder {target.parent} does not exist")
+    was_training = model.training
+    model.eval()
+    try:
+        wrapper = _ExportWrapper(model).eval()
+        example = _example_inputs(model, 2, frames, max_landmarks, max_objects)
+        buffer = io.BytesIO()
+        with torch.no_grad(), warnings.catch_warnings():
+            # Known and harmless: the legacy exporter's deprecation notice, Slice folding it skips, and the shape
+            # tests inside nn.MultiheadAttention, which the batch of 2 resolves to the branch valid for any batch.
+            warnings.filterwarnings("ignore", message="You are using the legacy TorchScript",
+                                    category=DeprecationWarning)
+            warnings.filterwarnings("ignore", message="The feature will be removed", category=DeprecationWarning,
+                                    module=r"torch\.onnx")
+            warnings.filterwarnings("ignore", message="Constant folding - Only steps=1", category=UserWarning)
+            warnings.filterwarnings("ignore", category=torch.jit.TracerWarning, module=r"torch\.nn\.functional")
+            torch.onnx.export(wrapper, example, buffer, dynamo=False, opset_version=opset,
+                              input_names=list(INPUT_NAMES), output_names=list(OUTPUT_NAMES),
+                              dynamic_axes={name: {0: "robots"} for name in INPUT_NAMES + OUTPUT_NAMES},
+                              do_constant_folding=True)
+    finally:
+        model.train(was_training)
+    proto = onnx.load_from_string(buffer.getvalue())
+    entry = proto.metadata_props.add()
+    entry.key, entry.value = METADATA_KEY, json.dumps(_config(model, frames, max_landmarks, max_objects))
+    onnx.checker.check_model(proto)
+    tmp = target.with_name(target.name + ".tmp")
+    try:
+        with open(tmp, "wb") as handle:
+            handle.write(proto.SerializeToString())
+        os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _numpy(tensor: torch.Tensor | np.ndarray, dtype: type) -> np.ndarray:
+    """Zero-copy where the tensor already has the right dtype and layout (``collate``'s output does)."""
+    array = tensor.detach().numpy() if isinstance(tensor, torch.Tensor) else tensor
+    return np.ascontiguousarray(array, dtype=dtype)
+
+
+class OnnxPolicy:
+    """onnxruntime on the CPU, ``threads`` intra-op threads (1: one robot process per core, no thread pool
+    contention). Called like ``DynEnvAgent``; returns a ``PolicyStep`` of torch tensors (sharing numpy memory)."""
+
+    def __init__(self, path: str | os.PathLike[str], threads: int = 1) -> None:
+        import onnxruntime as ort
+
+        source = Path(path)
+        if not source.is_file():
+            raise ValueError(f"ONNX policy {source} does not exist")
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = threads
+        options.inter_op_num_threads = 1
+        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        try:
+            self.session = ort.InferenceSession(str(source), sess_options=options,
+                                                providers=["CPUExecutionProvider"])
+        except Exception as error:    # onnxruntime raises its own Fail/InvalidProtobuf/... types
+            raise ValueError(f"ONNX policy {source} cannot be loaded: {type(error).__name__}: "
+                             f"{str(error).splitlines()[0] if str(error) else ''}") from None
+        raw = self.session.get_modelmeta().custom_metadata_map.get(METADATA_KEY)
+        config = json.loads(raw) if raw else {}
+        if config.get("format") != FORMAT:
+            raise ValueError(f"ONNX policy {source} is not a {FORMAT} file (no dynenv metadata)")
+        if [i.name for i in self.session.get_inputs()] != list(INPUT_NAMES):
+            raise ValueError(f"ONNX policy {source} has unexpected inputs")
+        self.config: dict[str, Any] = config
+        self.feature_size: int = config["feature_size"]
+        self.head_mode: str = config["head_mode"]
+        self.head_max: float = config["head_max"]
+        self.frames: int = config["frames"]
+        self.max_landmarks: int = config["max_landmarks"]
+        self.max_objects: int = config["max_objects"]
+
+    def initial_state(self, batch: int) -> State:
+        zeros = torch.zeros(batch, self.feature_size)
+        return (zeros, zeros.clone(), zeros.clone(), zeros.clone())
+
+    def _check(self, name: str, batch: StreamBatch, n: int) -> None:
+        expected = (self.frames, n, FEATURES)
+        if tuple(batch.features.shape[1:]) != expected:
+            raise ValueError(f"{name}: features of shape {tuple(batch.features.shape)}, the exported policy takes "
+                             f"(B, {', '.join(map(str, expected))}); collate with max_landmarks="
+                             f"{self.max_landmarks}, max_objects={self.max_objects} and {self.frames} frames")
+
+    def __call__(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
+                 proprioception: torch.Tensor, state: State) -> PolicyStep:
+        self._check("landmarks", landmarks, self.max_landmarks)
+        self._check("objects", objects, self.max_objects)
+        feeds = {
+            "landmark_features": _numpy(landmarks.features, np.float32),
+            "landmark_kind": _numpy(landmarks.kind, np.int64),
+            "landmark_mask": _numpy(landmarks.mask, np.bool_),
+            "object_features": _numpy(objects.features, np.float32),
+            "object_kind": _numpy(objects.kind, np.int64),
+            "object_mask": _numpy(objects.mask, np.bool_),
+            "previous_action": _numpy(previous_action, np.float32),
+            "proprioception": _numpy(proprioception, np.float32),
+        }
+        for name, tensor in zip(INPUT_NAMES[8:], state):
+            feeds[name] = _numpy(tensor, np.float32)
+        out = [torch.from_numpy(array) for array in self.session.run(None, feeds)]
+        return PolicyStep(out[0], out[1], out[2], out[3], out[4], out[5], (out[6], out[7], out[8], out[9]))
+
+
+class TorchPolicy:
+    """The torch model behind the same call as ``OnnxPolicy`` (no autograd graph is built: a node never trains).
+    Puts the model in eval mode."""
+
+    def __init__(self, model: DynEnvAgent) -> None:
+        self.model = model.eval()
+        self.feature_size, self.head_mode, self.head_max = model.feature_size, model.head_mode, model.head_max
+
+    def initial_state(self, batch: int) -> State:
+        return self.model.initial_state(batch)
+
+    def __call__(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
+                 proprioception: torch.Tensor, state: State) -> PolicyStep:
+        with torch.no_grad():
+            step = self.model(landmarks, objects, previous_action, proprioception, state)
+        return PolicyStep(step.walk, step.turn, step.kick, step.head, step.value, step.pose, step.state)

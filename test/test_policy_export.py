@@ -1,0 +1,163 @@
+"""The ONNX export of the agent: onnxruntime gives what torch gives (to 1e-5) on real detections across periods with
+the recurrent state fed back, for any number of robots from one file, in both head modes and with empty frames;
+a damaged file is refused clearly."""
+import math
+
+import numpy as np
+import pytest
+import torch
+
+pytest.importorskip("onnx")
+pytest.importorskip("onnxruntime")
+
+from dynenv_ros.envs.robocup_v0 import parallel_env  # noqa: E402
+from policy_node.export import OnnxPolicy, TorchPolicy, export_onnx  # noqa: E402
+from policy_node.model.inputs import FEATURES, PROPRIOCEPTION, collate, encode_previous_action  # noqa: E402
+from policy_node.model.network import DynEnvAgent  # noqa: E402
+
+FRAMES, MAX_LANDMARKS, MAX_OBJECTS = 5, 48, 12
+PERIODS = 3
+HEAD_STEP, HEAD_UNITS = math.radians(12.5), 3
+FIELDS = ("walk", "turn", "kick", "head", "value", "pose")
+
+
+@pytest.fixture(scope="module")
+def periods():
+    """PERIODS consecutive env steps of a 2v2 game with sampled actions: per period, the 4 robots' (detections,
+    encoded previous action — the one that led to these observations —, last frame's proprioception)."""
+    env = parallel_env(players_per_team=2, perception={"preset": "realistic", "noise_magnitude": 2.0})
+    obs, _ = env.reset(seed=0)
+    for agent in env.possible_agents:
+        env.action_space(agent).seed(0)
+    out = []
+    for _ in range(PERIODS):
+        actions = {a: env.action_space(a).sample() for a in env.agents}
+        obs, *_ = env.step(actions)
+        a = torch.tensor(np.stack([actions[agent] for agent in env.possible_agents]))
+        previous = encode_previous_action(a[:, 0], a[:, 1], a[:, 2], (a[:, 3] - HEAD_UNITS) * HEAD_STEP,
+                                          HEAD_STEP * HEAD_UNITS)
+        proprio = torch.tensor(np.stack([obs[agent]["proprioception"][-1] for agent in env.possible_agents]),
+                               dtype=torch.float32)
+        out.append(([obs[agent]["detections"] for agent in env.possible_agents], previous, proprio))
+    return out
+
+
+def _model(head_mode="discrete"):
+    torch.manual_seed(0)
+    return DynEnvAgent(feature_size=32, head_mode=head_mode).eval()
+
+
+def _batch(periods, size):
+    """Each period's inputs for ``size`` robots, cycling the 4 real ones (different order per slot so the batch
+    entries are not aligned copies)."""
+    out = []
+    for detections, previous, proprio in periods:
+        index = [(i * 3 + i // 4) % 4 for i in range(size)]
+        out.append(([detections[i] for i in index], previous[index], proprio[index]))
+    return out
+
+
+def _assert_same_over_periods(torch_policy, onnx_policy, inputs):
+    B = len(inputs[0][0])
+    state_t, state_o = torch_policy.initial_state(B), onnx_policy.initial_state(B)
+    for detections, previous, proprio in inputs:
+        landmarks, objects = collate(detections, max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS)
+        assert landmarks.features.shape[1:3] == (FRAMES, MAX_LANDMARKS)
+        a = torch_policy(landmarks, objects, previous, proprio, state_t)
+        b = onnx_policy(landmarks, objects, previous, proprio, state_o)
+        for field in FIELDS:
+            x, y = getattr(a, field), getattr(b, field)
+            assert x.shape == y.shape, field
+            assert torch.allclose(x, y, atol=1e-5, rtol=0), (field, (x - y).abs().max().item())
+        for x, y in zip(a.state, b.state):
+            assert torch.allclose(x, y, atol=1e-5, rtol=0), (x - y).abs().max().item()
+        state_t, state_o = a.state, b.state      # each runtime carries its own state, as a node would
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    path = tmp_path_factory.mktemp("onnx") / "policy.onnx"
+    model = _model()
+    export_onnx(model, path, frames=FRAMES, max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS)
+    return model, path
+
+
+@pytest.mark.parametrize("robots", [1, 10])
+def test_onnxruntime_matches_torch_across_periods(exported, periods, robots):
+    model, path = exported
+    policy = OnnxPolicy(path)
+    assert (policy.frames, policy.max_landmarks, policy.max_objects) == (FRAMES, MAX_LANDMARKS, MAX_OBJECTS)
+    assert policy.head_mode == "discrete" and policy.feature_size == 32
+    _assert_same_over_periods(TorchPolicy(model), policy, _batch(periods, robots))
+
+
+def test_one_file_serves_changing_batch_sizes(exported, periods):
+    model, path = exported
+    policy = OnnxPolicy(path)
+    for robots in (4, 1, 10, 4):
+        _assert_same_over_periods(TorchPolicy(model), policy, _batch(periods[:1], robots))
+
+
+def test_continuous_head(tmp_path, periods):
+    model = _model("continuous")
+    export_onnx(model, tmp_path / "continuous.onnx", frames=FRAMES, max_landmarks=MAX_LANDMARKS,
+                max_objects=MAX_OBJECTS)
+    policy = OnnxPolicy(tmp_path / "continuous.onnx")
+    assert policy.head_mode == "continuous"
+    _assert_same_over_periods(TorchPolicy(model), policy, _batch(periods, 4))
+    landmarks, objects = collate(periods[0][0], max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS)
+    step = policy(landmarks, objects, periods[0][1], periods[0][2], policy.initial_state(4))
+    assert step.head.shape == (4, 2)
+    assert model.act(step, greedy=True).shape == (4, 4)      # a PolicyStep goes wherever an AgentStep went
+
+
+def test_empty_frames(exported, periods):
+    model, path = exported
+    empty = [np.zeros((0, FEATURES), np.float32)] * FRAMES
+    only_ball = [np.zeros((0, FEATURES), np.float32)] * (FRAMES - 1) + [periods[0][0][0][-1][:1]]
+    detections = [empty, periods[0][0][1], only_ball, empty]
+    inputs = [(detections, previous, proprio) for _, previous, proprio in periods]
+    _assert_same_over_periods(TorchPolicy(model), OnnxPolicy(path), inputs)
+    _assert_same_over_periods(TorchPolicy(model), OnnxPolicy(path),
+                              [([empty], previous[:1], torch.zeros(1, PROPRIOCEPTION)) for _, previous, _ in periods])
+
+
+def test_export_leaves_no_temporary_file_and_keeps_the_model_mode(tmp_path):
+    model = _model().train()
+    export_onnx(model, tmp_path / "p.onnx", max_landmarks=8, max_objects=4)
+    assert model.training
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.onnx"]
+
+
+def test_wrong_shapes_are_refused_clearly(exported, periods):
+    _, path = exported
+    landmarks, objects = collate(periods[0][0], max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS + 1)
+    policy = OnnxPolicy(path)
+    with pytest.raises(ValueError, match="max_objects=12"):
+        policy(landmarks, objects, periods[0][1], periods[0][2], policy.initial_state(4))
+
+
+def test_a_corrupt_or_missing_file_is_refused_clearly(exported, tmp_path):
+    _, path = exported
+    truncated = tmp_path / "truncated.onnx"
+    truncated.write_bytes(path.read_bytes()[:1000])
+    garbage = tmp_path / "garbage.onnx"
+    garbage.write_bytes(b"this is not a protobuf \x00\xff" * 50)
+    for bad in (truncated, garbage):
+        with pytest.raises(ValueError, match="cannot be loaded"):
+            OnnxPolicy(bad)
+    with pytest.raises(ValueError, match="does not exist"):
+        OnnxPolicy(tmp_path / "missing.onnx")
+
+
+def test_a_foreign_onnx_file_is_refused(tmp_path):
+    import onnx
+    from onnx import TensorProto, helper
+
+    graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "foreign",
+                              [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8)
+    onnx.save(model, tmp_path / "foreign.onnx")
+    with pytest.raises(ValueError, match="not a dynenv_policy_onnx"):
+        OnnxPolicy(tmp_path / "foreign.onnx")
