@@ -14,10 +14,14 @@ from policy_node.model.network import DynEnvAgent, parameter_count
 def _observations(seed=0, robots=2):
     env = parallel_env(players_per_team=1, perception={"preset": "realistic", "noise_magnitude": 2.0})
     obs, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(seed)
+    for i, agent in enumerate(env.possible_agents):
+        env.action_space(agent).seed(seed + i)              # the same frames every run
     for _ in range(3):
         obs, *_ = env.step({a: env.action_space(a).sample() for a in env.agents})
-    return [obs[a]["detections"] for a in env.possible_agents][:robots]
+    frames = [obs[a]["detections"] for a in env.possible_agents][:robots]
+    classes = {int(c) for rows in frames[0] for c in rows[:, 0]}
+    assert {1, 2} & classes and {3, 4, 5, 6} & classes, "the test scene must show objects and landmarks"
+    return frames
 
 
 def _run(model, observations, max_objects=None, state=None):
@@ -86,7 +90,9 @@ def test_every_parameter_gets_gradient_from_the_actor_critic_and_localization_lo
     out = _run(model, observations, state=first.state)      # a second period: the recurrent weights act too
     actions = model.act(out, generator=torch.Generator().manual_seed(0))
     log_prob = sum(d.log_prob(actions[:, i]) for i, d in enumerate(model.distributions(out)))
-    loss = -log_prob.mean() + out.value.pow(2).mean() + out.pose.pow(2).mean() + out.object_features.pow(2).mean()
+    loss = -log_prob.mean() + out.value.pow(2).mean() + out.pose.pow(2).mean()
+    loss = loss + out.ball.pow(2).mean() + out.ball_confidence.mean() + out.robots.pow(2).mean() \
+        + out.robot_confidence.mean()
     loss.backward()
     unused = [name for name, p in model.named_parameters() if p.grad is None or not p.grad.abs().sum() > 0]
     # class blocks of classes absent from these frames cannot get gradient; everything else must
@@ -148,3 +154,16 @@ def test_a_tiny_localization_task_is_learned():
         loss.backward()
         optimiser.step()
     assert loss.item() < 0.2 * first
+
+
+def test_reconstruction_loss_trains_the_head_and_the_object_stream():
+    from policy_node.model.losses import ANCHORS, reconstruction_loss
+    torch.manual_seed(0)
+    model = DynEnvAgent(feature_size=16)
+    out = _run(model, _observations())
+    targets = torch.tensor([[[1.0, 0.5, 1, 0, 1, 0], [-2.0, 1.0, 0, 1, -1, 0], [0, 0, 0, 0, 0, 0]]] * 2)
+    seen = torch.tensor([[True, True, False]] * 2)
+    losses = reconstruction_loss(out.robots, out.robot_confidence, targets, seen, anchors=ANCHORS)
+    sum(losses.values()).backward()
+    assert model.reconstruction.net[0].weight.grad.abs().sum() > 0
+    assert model.objects.lstm.weight_ih.grad.abs().sum() > 0

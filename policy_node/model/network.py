@@ -100,6 +100,23 @@ class Stream(nn.Module):
         return self.norm(h), (h, c), confidence
 
 
+class ReconstructionHead(nn.Module):
+    """Where the objects are (team frame), from the object stream: one ball slot [x, y, owner] and ``robot_slots``
+    robot slots [x, y, cos, sin, teammate, fallen], each with a confidence logit. Slots are matched to objects
+    through field-fixed anchors (``losses.assign_slots``); predictions are absolute positions, not offsets."""
+
+    def __init__(self, size: int, robot_slots: int = 4) -> None:
+        super().__init__()
+        self.robot_slots = robot_slots
+        self.net = nn.Sequential(nn.Linear(size, 2 * size), nn.LeakyReLU(0.1), nn.LayerNorm(2 * size),
+                                 nn.Linear(2 * size, 4 + robot_slots * 7))
+
+    def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        out = self.net(features)
+        ball, robots = out[:, :4], out[:, 4:].reshape(-1, self.robot_slots, 7)
+        return ball[:, :3], ball[:, 3], robots[..., :6], robots[..., 6]
+
+
 @dataclass
 class AgentStep:
     walk: torch.Tensor                 # (B, 5) logits
@@ -113,6 +130,10 @@ class AgentStep:
     state: State
     landmark_confidence: torch.Tensor  # (B, N_landmarks)
     object_confidence: torch.Tensor    # (B, N_objects)
+    ball: torch.Tensor | None = None               # (B, 3) reconstruction [x, y, owner]
+    ball_confidence: torch.Tensor | None = None    # (B,) logit
+    robots: torch.Tensor | None = None             # (B, S, 6) reconstruction
+    robot_confidence: torch.Tensor | None = None   # (B, S) logits
 
 
 class DynEnvAgent(nn.Module):
@@ -135,6 +156,7 @@ class DynEnvAgent(nn.Module):
             self.head_head = nn.Linear(2 * D, 1)
             self.head_log_std = nn.Parameter(torch.full((1,), math.log(0.3 * head_max)))
         self.critic = nn.Sequential(nn.Linear(2 * D, D), nn.LeakyReLU(0.1), nn.LayerNorm(D), nn.Linear(D, 1))
+        self.reconstruction = ReconstructionHead(D)
 
     def initial_state(self, batch: int) -> State:
         zeros = torch.zeros(batch, self.feature_size)
@@ -153,9 +175,10 @@ class DynEnvAgent(nn.Module):
         else:
             mean = self.head_max * torch.tanh(self.head_head(phi))
             head = torch.cat([mean, self.head_log_std.expand_as(mean)], dim=-1)
+        ball, ball_conf, robots, robot_conf = self.reconstruction(obj)
         return AgentStep(self.walk_head(phi), self.turn_head(phi), self.kick_head(phi), head,
                          self.critic(phi).squeeze(-1), pose, phi, obj, loc_state + obj_state,
-                         landmark_confidence, object_confidence)
+                         landmark_confidence, object_confidence, ball, ball_conf, robots, robot_conf)
 
     def distributions(self, step: AgentStep) -> list[torch.distributions.Distribution]:
         """One distribution per action dimension: categorical walk, turn, kick; head categorical or Gaussian."""
