@@ -10,7 +10,7 @@ import sys
 from collections.abc import Sequence
 
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
-SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "ros": "ros_graph"}
+SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "ros": "ros_graph", "policy": "policy"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -25,6 +25,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "sim":   # its options are cheap to declare without importing the simulator
             from benchmarks.sim_options import add_arguments
             add_arguments(sub)
+        if name == "policy":   # declaring its options imports no torch
+            from benchmarks.policy import add_arguments as add_policy_arguments
+            add_policy_arguments(sub)
         if name == "ros":
             sub.add_argument("--sim-seconds", type=float, default=60.0, help="sim seconds per stepped game")
             sub.add_argument("--wall-seconds", type=float, default=10.0, help="realtime CPU sampling window")

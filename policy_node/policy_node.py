@@ -154,7 +154,9 @@ class PolicyNode(Node):
         started = time.perf_counter()
         memories = [self.memory[n] for n in ready]
         observations = [[rows_from_msg(m.frames[k]) for k in sorted(m.frames)] for m in memories]
-        landmarks, objects = collate(observations)
+        # A fixed-shape runtime (ONNX) declares its maxima; give both runtimes the same (truncated) input then.
+        landmarks, objects = collate(observations, max_landmarks=getattr(self.policy, "max_landmarks", None),
+                                     max_objects=getattr(self.policy, "max_objects", None))
         prev = torch.tensor([m.previous for m in memories], dtype=torch.float32)
         previous = encode_previous_action(prev[:, 0], prev[:, 1], prev[:, 2], prev[:, 3], HEAD_STEP * HEAD_UNITS)
         last = [m.frames[max(m.frames)] for m in memories]

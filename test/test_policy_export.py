@@ -129,12 +129,27 @@ def test_export_leaves_no_temporary_file_and_keeps_the_model_mode(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.onnx"]
 
 
-def test_wrong_shapes_are_refused_clearly(exported, periods):
-    _, path = exported
-    landmarks, objects = collate(periods[0][0], max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS + 1)
+def test_other_slot_counts_are_fitted_and_other_frame_counts_refused(exported, periods):
+    """Collated without maxima (fewer slots) or with larger ones, the ONNX policy gives what torch gives on the
+    batch collated with the file's maxima; a different number of frames is refused clearly."""
+    model, path = exported
+    detections, previous, proprio = periods[0]
+    # more than MAX_OBJECTS balls and robots in some frames, landmarks as seen
+    crowded = [np.concatenate([rows] + [rows[rows[:, 0] <= 2]] * 6) for rows in detections[1]]
+    batch = [detections[0], crowded, detections[2], detections[3]]
+    reference = TorchPolicy(model)(*collate(batch, max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS),
+                                   previous, proprio, model.initial_state(4))
     policy = OnnxPolicy(path)
-    with pytest.raises(ValueError, match="max_objects=12"):
-        policy(landmarks, objects, periods[0][1], periods[0][2], policy.initial_state(4))
+    for maxima in ({}, {"max_landmarks": 96, "max_objects": 40}):
+        landmarks, objects = collate(batch, **maxima)
+        assert objects.features.shape[2] > MAX_OBJECTS and landmarks.features.shape[2] != MAX_LANDMARKS
+        step = policy(landmarks, objects, previous, proprio, policy.initial_state(4))
+        for field in FIELDS:
+            assert torch.allclose(getattr(reference, field), getattr(step, field), atol=1e-5, rtol=0), field
+    landmarks, objects = collate([frames[:3] for frames in batch], max_landmarks=MAX_LANDMARKS,
+                                 max_objects=MAX_OBJECTS)
+    with pytest.raises(ValueError, match="5 vision frames per period"):
+        policy(landmarks, objects, previous, proprio, policy.initial_state(4))
 
 
 def test_a_corrupt_or_missing_file_is_refused_clearly(exported, tmp_path):
@@ -161,3 +176,25 @@ def test_a_foreign_onnx_file_is_refused(tmp_path):
     onnx.save(model, tmp_path / "foreign.onnx")
     with pytest.raises(ValueError, match="not a dynenv_policy_onnx"):
         OnnxPolicy(tmp_path / "foreign.onnx")
+
+
+def test_full_frames_and_scattered_padding(exported, periods):
+    """Slots filled to the maximum in one robot, few in another, and padding in the middle of a frame (the graph
+    cuts only slots padded everywhere, wherever the real ones sit)."""
+    model, path = exported
+    detections = periods[0][0]
+    crowded = [np.concatenate([rows] * 8)[: 3 * MAX_LANDMARKS] for rows in detections[1]]
+    batch = [crowded, detections[0], detections[2], detections[3]]
+    landmarks, objects = collate(batch, max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS)
+    assert not landmarks.mask[0, :, -1].any()
+    order = torch.randperm(MAX_LANDMARKS, generator=torch.Generator().manual_seed(3))
+    scattered = type(landmarks)(landmarks.features[:, :, order], landmarks.kind[:, :, order],
+                                landmarks.mask[:, :, order])
+    for lm in (landmarks, scattered):
+        state = model.initial_state(4)
+        a = TorchPolicy(model)(lm, objects, periods[0][1], periods[0][2], state)
+        b = OnnxPolicy(path)(lm, objects, periods[0][1], periods[0][2], state)
+        for field in FIELDS:
+            assert torch.allclose(getattr(a, field), getattr(b, field), atol=1e-5, rtol=0), field
+    small = [detections[0]] + [[rows[:2] for rows in frames] for frames in detections[1:]]
+    _assert_same_over_periods(TorchPolicy(model), OnnxPolicy(path), [(small, periods[0][1], periods[0][2])])

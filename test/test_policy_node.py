@@ -69,3 +69,13 @@ def test_checkpoints_load_and_bad_ones_are_refused(make_node, executor, tmp_path
     assert reply.success and reply.checkpoint_sha256 == digest
     before = sim.periods_run
     assert spin_until(executor, lambda: sim.periods_run >= before + 2, 30.0)    # still playing after the swap
+
+
+def test_an_exported_onnx_policy_plays_and_can_be_swapped_in(make_node, executor, tmp_path):
+    from policy_node.export import export_onnx
+    torch.manual_seed(6)
+    onnx_file = tmp_path / "agent.onnx"
+    export_onnx(DynEnvAgent(), onnx_file)
+    sim, policy = _graph(make_node, executor, checkpoint=str(onnx_file), runtime="onnxruntime")
+    assert spin_until(executor, lambda: sim.periods_run >= 3, 30.0), sim.session.counts
+    assert policy.actions_sent >= 6 and not any(v for k, v in sim.session.counts.items() if k.startswith("rejected"))
