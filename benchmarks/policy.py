@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from benchmarks.timing import print_table
+from benchmarks.timing import pin_cores, print_table
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,14 +38,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="CPU cores this process may use (pinned with sched_setaffinity); 0 = no pinning")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
-
-
-def _pin(cores: int) -> list[int]:
-    allowed = sorted(os.sched_getaffinity(0))
-    if cores > 0:
-        allowed = allowed[:cores]
-        os.sched_setaffinity(0, allowed)
-    return allowed
 
 
 def _record(robots: int, periods: int, seed: int) -> list[tuple[list, Any, Any]]:
@@ -119,7 +111,7 @@ def run(args: Any) -> int:
     if args.decisions < 200 or args.warmup < 0 or args.periods < 1 or args.threads < 1:
         print("--decisions must be at least 200, --periods and --threads at least 1", file=sys.stderr)
         return 2
-    cores = _pin(args.cores)
+    cores = pin_cores(args.cores)
     import torch
 
     torch.set_num_threads(args.threads)

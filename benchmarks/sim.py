@@ -15,18 +15,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from benchmarks.timing import print_table
+from benchmarks.timing import pin_cores, print_table
 
 WARMUP_STEPS = 50
 ACTION_POOL = 256
-
-
-def _pin(cores: int) -> list[int]:
-    allowed = sorted(os.sched_getaffinity(0))
-    if cores > 0:
-        allowed = allowed[:cores]
-        os.sched_setaffinity(0, allowed)
-    return allowed
 
 
 def _world_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
@@ -92,7 +84,7 @@ def run(args: Any) -> int:
     if args.steps < 1 or args.envs < 1:
         print("--steps and --envs must be at least 1", file=sys.stderr)
         return 2
-    cores = _pin(args.cores)
+    cores = pin_cores(args.cores)
     from dynenv_ros.soccer.config import SoccerConfig
     config = SoccerConfig(players_per_team=args.players_per_team)
     rng = np.random.default_rng(args.seed)

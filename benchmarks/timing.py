@@ -1,6 +1,7 @@
 """Small timing helpers shared by the suites."""
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 
@@ -20,3 +21,12 @@ def print_table(title: str, rows: list[tuple[str, str]]) -> None:
     print(title)
     for name, value in rows:
         print(f"  {name:<{width}}  {value}")
+
+
+def pin_cores(cores: int) -> list[int]:
+    """Restrict this process to its first ``cores`` allowed CPUs (0: leave as is); return the CPUs it may use."""
+    allowed = sorted(os.sched_getaffinity(0))
+    if cores > 0:
+        allowed = allowed[:cores]
+        os.sched_setaffinity(0, allowed)
+    return allowed
