@@ -6,7 +6,6 @@ from a pre-drawn pool, so the policy costs nothing; the first 50 steps warm up a
 from __future__ import annotations
 
 import json
-import os
 import platform
 import resource
 import sys
