@@ -348,3 +348,26 @@ def test_helpers():
                              torch.tensor(-math.pi / 2))
     assert features.tolist() == pytest.approx([1.0, -2.0, 1.0, 0.0, 0.0, -1.0], abs=1e-7)
     assert localization_loss(features, features).item() == 0.0
+
+
+def test_the_long_term_prediction_loss_is_actually_optimised():
+    """DynEnv computed LTP but never optimised it (facts §12.12): here an optimiser on it learns the dynamics."""
+    from policy_node.model.losses import LongTermPredictor, RCMAttention, ltp_loss
+    g = torch.Generator().manual_seed(0)
+    T, N, D, A = 6, 8, 8, 4
+    actions = torch.nn.functional.one_hot(torch.randint(0, A, (T, N), generator=g), A).float()
+    drift = torch.randn(A, D, generator=g) * 0.3
+    phi = [torch.randn(N, D, generator=g)]
+    for t in range(T):                                   # a simple action-driven dynamics to predict
+        phi.append(0.9 * phi[-1] + actions[t] @ drift)
+    phi = torch.stack(phi)
+    predictor, attention = LongTermPredictor(D, A, horizon=T), RCMAttention(D)
+    optimiser = torch.optim.Adam(list(predictor.parameters()) + list(attention.parameters()), lr=1e-2)
+    mask = torch.ones(T, N, dtype=torch.bool)
+    first = ltp_loss(phi, actions, predictor, attention, mask).loss.item()
+    for _ in range(300):
+        optimiser.zero_grad()
+        loss = ltp_loss(phi, actions, predictor, attention, mask).loss
+        loss.backward()
+        optimiser.step()
+    assert loss.item() < 0.1 * first
