@@ -133,7 +133,9 @@ def test_reset_and_step_services(make_node, executor):
     assert not reply.success and "multiple of the motion period (50)" in reply.message
     reply = call(stepper, StepSimulation.Request(ticks=100))
     assert reply.success and reply.tick == 100 and reply.stamp.sec == 1
-    assert sim.session.counts["missing"] == 4                              # nobody acted: the missing rule applied
+    reply = call(stepper, StepSimulation.Request(ticks=0))                  # 0 = one motion period
+    assert reply.success and reply.tick == 150
+    assert sim.session.counts["missing"] == 6                              # nobody acted: the missing rule applied
 
 
 def test_parameters_are_validated_on_set(make_node, executor):

@@ -196,11 +196,11 @@ class SimNode(Node):
         period_ticks = self.config.rates.motion_period_ticks
         if self.mode != "stepped":
             response.success, response.message = False, "/sim/step works in stepped mode only"
-        elif request.ticks == 0 or request.ticks % period_ticks:
+        elif request.ticks % period_ticks:
             response.success = False
-            response.message = f"ticks must be a positive multiple of the motion period ({period_ticks})"
+            response.message = f"ticks must be a multiple of the motion period ({period_ticks}), or 0 for one period"
         else:
-            for _ in range(request.ticks // period_ticks):
+            for _ in range(max(1, request.ticks // period_ticks)):
                 if self.session.finished and not self.auto_reset:
                     break
                 self._run_period()
