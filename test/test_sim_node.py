@@ -206,3 +206,9 @@ def test_every_parameter_preset_starts_the_simulator(make_node, preset):
     values = yaml.safe_load((REPO / "config" / preset).read_text())["/**"]["ros__parameters"]
     sim = make_node(SimNode, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
     assert sim.config.players_per_team == values["players_per_team"] and sim.mode == values["mode"]
+
+
+def test_whole_numbers_are_accepted_for_real_valued_parameters(make_node):
+    """`-p episode_seconds:=30` arrives as an integer; it means 30.0, not an error."""
+    sim = _sim(make_node, episode_seconds=30, real_time_factor=2)
+    assert sim.config.episode_seconds == 30.0 and sim.real_time_factor == 2.0

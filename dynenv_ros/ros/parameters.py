@@ -14,6 +14,7 @@ def declare_int(node: Node, name: str, default: int, low: int, high: int, descri
 
 def declare_float(node: Node, name: str, default: float, low: float, high: float, description: str,
                   read_only: bool = False) -> float:
+    _integer_override_to_double(node, name)
     descriptor = ParameterDescriptor(description=description, read_only=read_only,
                                      floating_point_range=[FloatingPointRange(from_value=low, to_value=high)])
     return node.declare_parameter(name, default, descriptor).value
@@ -44,3 +45,14 @@ def declare_str_list(node: Node, name: str, default: list[str], description: str
                                      type=ParameterType.PARAMETER_STRING_ARRAY)
     value = node.declare_parameter(name, default or [""], descriptor).value
     return [v for v in value if v]
+
+
+def _integer_override_to_double(node: Node, name: str) -> None:
+    """``-p rate:=2`` arrives as an integer and rclpy refuses it for a double parameter; take it as 2.0."""
+    from rclpy.parameter import Parameter
+    overrides = getattr(node, "_parameter_overrides", None)
+    if not isinstance(overrides, dict) or name not in overrides:
+        return
+    override = overrides[name]
+    if override.type_ == Parameter.Type.INTEGER:
+        overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(override.value))
