@@ -53,6 +53,7 @@ class TorchRuntime:
         self.model = model.eval()
         self.head_mode = model.head_mode
         self.feature_size = model.feature_size
+        self.head_max = model.head_max
 
     def __call__(self, landmarks, objects, previous_action, proprioception, state):
         with torch.no_grad():
@@ -124,7 +125,11 @@ class PolicyNode(Node):
         except ValueError as error:
             response.success, response.message = False, f"kept the current policy: {error}"
             return response
-        # Callbacks run one at a time: the swap happens between two decisions, the recurrent states carry over.
+        # Callbacks run one at a time: the swap happens between two decisions. The recurrent states carry over
+        # when they fit the new network; a network of another size starts from fresh states.
+        if policy.feature_size != self.policy.feature_size:
+            for memory in self.memory.values():
+                memory.state = None
         self.policy, self.runtime_name, self.checkpoint_sha256 = policy, runtime, digest
         response.success, response.message, response.checkpoint_sha256 = True, f"loaded ({runtime})", digest
         self.get_logger().info(f"loaded {request.checkpoint_path} ({runtime}, sha256 {digest[:12]})")
@@ -158,17 +163,22 @@ class PolicyNode(Node):
         landmarks, objects = collate(observations, max_landmarks=getattr(self.policy, "max_landmarks", None),
                                      max_objects=getattr(self.policy, "max_objects", None))
         prev = torch.tensor([m.previous for m in memories], dtype=torch.float32)
-        previous = encode_previous_action(prev[:, 0], prev[:, 1], prev[:, 2], prev[:, 3], HEAD_STEP * HEAD_UNITS)
+        previous = encode_previous_action(prev[:, 0], prev[:, 1], prev[:, 2], prev[:, 3],
+                                          float(getattr(self.policy, "head_max", HEAD_STEP * HEAD_UNITS)))
         last = [m.frames[max(m.frames)] for m in memories]
         proprio = torch.tensor([[f.head_yaw, f.self_fallen, f.self_penalized, 0.0] for f in last])
         size = self.policy.feature_size
         states = [m.state or tuple(torch.zeros(1, size) for _ in range(4)) for m in memories]
         state = tuple(torch.cat([s[i] for s in states]) for i in range(4))
         step = self.policy(landmarks, objects, previous, proprio, state)
-        actions = _sample(step, self.policy.head_mode, self.generator, self.greedy)
+        head_max = float(getattr(self.policy, "head_max", HEAD_STEP * HEAD_UNITS))
+        actions = _sample(step, self.policy.head_mode, self.generator, self.greedy, head_max)
+        units = (torch.as_tensor(step.head).shape[-1] - 1) // 2 if self.policy.head_mode == "discrete" else 0
         for b, (name, memory, frame) in enumerate(zip(ready, memories, last)):
             walk, turn, kick, head = actions[b]
-            head_delta = (int(head) - HEAD_UNITS) * HEAD_STEP if self.policy.head_mode == "discrete" else float(head)
+            # The checkpoint's own head discretisation: index 0..2u ↦ (index − u)·head_max/u rad.
+            head_delta = ((int(head) - units) * head_max / units if self.policy.head_mode == "discrete"
+                          else float(head))
             self.action_pubs[name].publish(Action(
                 robot_id=self.ids[name], episode_id=frame.episode_id, motion_period=frame.motion_period + 1,
                 walk=int(walk), turn=int(turn), kick=int(kick), head_yaw_delta=head_delta))
@@ -183,7 +193,7 @@ class PolicyNode(Node):
                                    f"{statistics.median(recent):.2f} ms, max {max(recent):.2f} ms")
 
 
-def _sample(step, head_mode: str, generator: torch.Generator, greedy: bool) -> np.ndarray:
+def _sample(step, head_mode: str, generator: torch.Generator, greedy: bool, head_max: float) -> np.ndarray:
     """(B, 4) [walk, turn, kick, head] from the network's outputs (either runtime)."""
     columns = []
     for logits in (step.walk, step.turn, step.kick) + ((step.head,) if head_mode == "discrete" else ()):
@@ -194,7 +204,7 @@ def _sample(step, head_mode: str, generator: torch.Generator, greedy: bool) -> n
         head = torch.as_tensor(step.head)
         mean, std = head[:, 0], head[:, 1].exp()
         value = mean if greedy else mean + std * torch.randn(mean.shape, generator=generator)
-        columns.append(value.clamp(-HEAD_STEP * HEAD_UNITS, HEAD_STEP * HEAD_UNITS))
+        columns.append(value.clamp(-head_max, head_max))
     return torch.stack([c.float() for c in columns], dim=-1).numpy()
 
 

@@ -48,12 +48,14 @@ class ScriptedPolicyNode(Node):
         self.create_subscription(DetectionArray, topics.detections(self.robot), self._on_detections, qos)
 
     @staticmethod
-    def _key(stamp) -> tuple[int, int]:
-        return (stamp.sec, stamp.nanosec)
+    def _key(episode: int, stamp) -> tuple[int, int, int]:
+        """Episodes restart the clock at 0, so an instant is (episode, sec, nanosec)."""
+        return (episode, stamp.sec, stamp.nanosec)
 
     def _on_truth(self, msg: WorldState) -> None:
-        key = self._key(msg.header.stamp)
+        key = self._key(msg.episode_id, msg.header.stamp)
         self._truth[key] = msg
+        self._truth.move_to_end(key)
         while len(self._truth) > 50:
             self._truth.popitem(last=False)
         if key in self._waiting:
@@ -62,10 +64,12 @@ class ScriptedPolicyNode(Node):
     def _on_detections(self, msg: DetectionArray) -> None:
         if msg.frame_index != msg.frames_per_period - 1:
             return
-        key = self._key(msg.header.stamp)
+        key = self._key(msg.episode_id, msg.header.stamp)
         truth = self._truth.get(key)
         if truth is None:
             self._waiting[key] = msg
+            while len(self._waiting) > 50:      # a ground truth that never came: forget the oldest wait
+                self._waiting.pop(next(iter(self._waiting)))
         else:
             self._act(msg, truth)
 

@@ -79,3 +79,17 @@ def test_an_exported_onnx_policy_plays_and_can_be_swapped_in(make_node, executor
     sim, policy = _graph(make_node, executor, checkpoint=str(onnx_file), runtime="onnxruntime")
     assert spin_until(executor, lambda: sim.periods_run >= 3, 30.0), sim.session.counts
     assert policy.actions_sent >= 6 and not any(v for k, v in sim.session.counts.items() if k.startswith("rejected"))
+
+
+def test_swapping_in_a_network_of_another_size_keeps_playing(make_node, executor, tmp_path):
+    torch.manual_seed(7)
+    smaller = tmp_path / "small.pt"
+    save_checkpoint(DynEnvAgent(feature_size=16), smaller)
+    sim, policy = _graph(make_node, executor)
+    assert spin_until(executor, lambda: sim.periods_run >= 2, 30.0)
+    client = policy.create_client(LoadPolicy, "/policy_node/load_policy")
+    assert client.wait_for_service(timeout_sec=5.0)
+    future = client.call_async(LoadPolicy.Request(checkpoint_path=str(smaller), runtime="torch"))
+    assert spin_until(executor, future.done, 10.0) and future.result().success
+    before = sim.periods_run
+    assert spin_until(executor, lambda: sim.periods_run >= before + 2, 30.0)

@@ -212,3 +212,21 @@ def test_whole_numbers_are_accepted_for_real_valued_parameters(make_node):
     """`-p episode_seconds:=30` arrives as an integer; it means 30.0, not an error."""
     sim = _sim(make_node, episode_seconds=30, real_time_factor=2)
     assert sim.config.episode_seconds == 30.0 and sim.real_time_factor == 2.0
+
+
+def test_answers_to_the_last_frames_of_an_episode_are_ignored_not_rejected():
+    from dynenv_ros.envs.soccer_session import SoccerSession
+    from dynenv_ros.perception.params import load_preset
+    from dynenv_ros.soccer.config import SoccerConfig
+    session = SoccerSession(SoccerConfig.from_mapping({"players_per_team": 1, "episode_seconds": 1.0}),
+                            load_preset("none"), seed=0)
+    session.reset(seed=0)
+    for _ in range(2):
+        session.step()
+    assert session.finished
+    session.reset()
+    accepted, reason = session.submit(0, 1, 3, 0, 0, 0, 0.0)       # the old episode's next period
+    assert not accepted and reason.startswith("ignored")
+    accepted, reason = session.submit(0, 1, 7, 0, 0, 0, 0.0)       # anything else from it is still wrong
+    assert not accepted and reason.startswith("wrong_episode")
+    assert session.counts["ignored_after_episode_end"] == 1 and session.counts["rejected_wrong_episode"] == 1

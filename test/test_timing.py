@@ -42,3 +42,8 @@ def test_sim_time_does_not_drift():
     assert Rates().time_of_tick(12_000) == (120, 0)
     with pytest.raises(ValueError):
         Rates().time_of_tick(-1)
+
+
+def test_more_frames_per_period_than_a_detection_array_can_number_are_refused():
+    with pytest.raises(ValueError, match="at most 255 vision frames"):
+        Rates(physics_hz=100.0, vision_period_ticks=1, motion_period_ticks=300)

@@ -81,10 +81,13 @@ class SoccerSession:
         self.last: dict[int, SoccerAction] = {}
         self.counts: Counter[str] = Counter()
         self.finished = False
+        self._previous_episode, self._previous_final_period = -1, -1
         self.missed_for: int | None = None      # a robot whose misses each frame reports (visualisation)
 
     # -- episode -----------------------------------------------------------------------------------------------
     def reset(self, seed: int | None = None, kickoff_team: int = TEAM_A) -> int:
+        # Policies answer an episode's last frames before they see the next episode: expect those answers.
+        self._previous_episode, self._previous_final_period = self.world.episode_id, self.world.period
         self.world.reset(seed=seed, kickoff_team=kickoff_team)
         self.vision.reset()
         self.pending.clear()
@@ -107,6 +110,9 @@ class SoccerSession:
                head_yaw_delta: float) -> tuple[bool, str]:
         """Accept one robot's action for the current period, or refuse it with a reason (counted)."""
         reason = self._check(robot_id, episode_id, motion_period, walk, turn, kick, head_yaw_delta)
+        if reason.startswith("ignored"):
+            self.counts["ignored_after_episode_end"] += 1
+            return False, reason
         if reason:
             self.counts["rejected_" + reason.split(":")[0]] += 1
             return False, reason
@@ -118,6 +124,8 @@ class SoccerSession:
         if not 0 <= robot_id < self.config.n_robots:
             return f"unknown_robot: robot {robot_id} does not exist"
         if episode_id != self.episode_id:
+            if episode_id == self._previous_episode and motion_period == self._previous_final_period + 1:
+                return "ignored: an answer to the previous episode's last frames"
             return f"wrong_episode: episode {episode_id}, the current one is {self.episode_id}"
         if motion_period < self.period:
             return f"late: period {motion_period} has run already (now collecting {self.period})"

@@ -187,6 +187,10 @@ class SimNode(Node):
             response.success, response.message = False, f"reset refused: {error}"
             response.episode_id = self.session.episode_id
             return response
+        if not self.started:                    # a reset starts a node still waiting for its readers
+            self.start_timer.cancel()
+            self.started = True
+            self._started_wall = time.monotonic()
         self._reset(int(request.seed) if request.use_seed else None, kickoff)
         response.success, response.episode_id = True, self.session.episode_id
         response.message = f"episode {self.session.episode_id} started"
@@ -194,7 +198,10 @@ class SimNode(Node):
 
     def _on_step(self, request: StepSimulation.Request, response: StepSimulation.Response):
         period_ticks = self.config.rates.motion_period_ticks
-        if self.mode != "stepped":
+        if not self.started:
+            response.success = False
+            response.message = "not started yet: waiting for subscribers (wait_for_subscribers & co.)"
+        elif self.mode != "stepped":
             response.success, response.message = False, "/sim/step works in stepped mode only"
         elif request.ticks % period_ticks:
             response.success = False
@@ -221,8 +228,9 @@ class SimNode(Node):
                 accepted, reason = self.session.submit(msg.robot_id, msg.episode_id, msg.motion_period, msg.walk,
                                                        msg.turn, msg.kick, float(msg.head_yaw_delta))
             if not accepted:
-                self.get_logger().warning(f"action of {self.names[robot]} rejected: {reason}",
-                                          throttle_duration_sec=1.0)
+                if not reason.startswith("ignored"):
+                    self.get_logger().warning(f"action of {self.names[robot]} rejected: {reason}",
+                                              throttle_duration_sec=1.0)
                 return
             if self.mode == "stepped" and self.session.ready():
                 self._run_period()
@@ -369,7 +377,7 @@ class SimNode(Node):
                 self.auto_reset = bool(p.value)
             elif p.name == "real_time_factor" and self.vision_timer is not None:
                 self.real_time_factor = float(p.value)
-                self.vision_timer.cancel()
+                self.destroy_timer(self.vision_timer)
                 period = self.config.rates.vision_period_ticks * self._tick_s / self.real_time_factor
                 self.vision_timer = self.create_timer(period, self._realtime_tick, clock=self.wall)
         return SetParametersResult(successful=True)
@@ -391,7 +399,7 @@ class SimNode(Node):
                   "sim_time_s": f"{sim_now:.2f}", "real_time_factor": f"{(s1 - s0) / wall:.2f}",
                   "vision_frames_per_s": f"{(f1 - f0) / wall:.1f}", "periods_run": str(self.periods_run)}
         counts: Counter[str] = self.session.counts
-        for key in ("accepted", "missing", "publish_failed") + tuple(f"rejected_{r}" for r in
+        for key in ("accepted", "missing", "ignored_after_episode_end", "publish_failed") + tuple(f"rejected_{r}" for r in
                                                    ("malformed", "out_of_range", "unknown_robot", "wrong_episode",
                                                     "late", "early", "duplicate")):
             values[key] = str(counts.get(key, 0))

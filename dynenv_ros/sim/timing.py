@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 NANOSECONDS_PER_SECOND = 1_000_000_000
+MAX_FRAMES_PER_PERIOD = 255
 
 
 @dataclass(frozen=True)
@@ -29,6 +30,9 @@ class Rates:
         if self.motion_period_ticks % self.vision_period_ticks:
             raise ValueError(f"a motion period ({self.motion_period_ticks} ticks) must hold a whole number of "
                              f"vision periods ({self.vision_period_ticks} ticks)")
+        if self.motion_period_ticks // self.vision_period_ticks > MAX_FRAMES_PER_PERIOD:
+            raise ValueError(f"at most {MAX_FRAMES_PER_PERIOD} vision frames per motion period (DetectionArray."
+                             f"frame_index is a uint8), got {self.motion_period_ticks // self.vision_period_ticks}")
 
     @classmethod
     def from_hz(cls, physics_hz: float, vision_hz: float, motion_hz: float) -> "Rates":

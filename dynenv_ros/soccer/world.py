@@ -349,7 +349,8 @@ class SoccerWorld:
         self.physics.space.add_post_step_callback(self._resolve_pending, "rules")
 
     def _resolve_pending(self, space: pymunk.Space, key: Any) -> None:
-        pending, self._pending = self._pending, []
+        # Within one tick, touches and falls happened before the ball was judged out: resolve them first.
+        pending, self._pending = sorted(self._pending, key=lambda event: event[0] == "out"), []
         for kind, *args in pending:
             getattr(self, "_resolve_" + kind)(*args)
 
