@@ -125,14 +125,17 @@ def test_reset_and_step_services(make_node, executor):
     assert not bad.success and "kickoff_team" in bad.message
     bad = call(client, ResetSimulation.Request(options_yaml="colour: red"))
     assert not bad.success and "unknown reset option" in bad.message
+    last_stamp = probe.truth[-1].header.stamp
     reply = call(client, ResetSimulation.Request(use_seed=True, seed=3, options_yaml="kickoff_team: b"))
     assert reply.success and reply.episode_id == 2
     assert probe.spin(lambda: probe.truth[-1].episode_id == 2)
-    assert probe.truth[-1].ball_owner_team == -1
+    assert probe.truth[-1].ball_owner_team == -1 and probe.truth[-1].tick == 0       # the game clock restarts
+    new_stamp = probe.truth[-1].header.stamp
+    assert (new_stamp.sec, new_stamp.nanosec) > (last_stamp.sec, last_stamp.nanosec)  # sim time never goes back
     reply = call(stepper, StepSimulation.Request(ticks=7))
     assert not reply.success and "multiple of the motion period (50)" in reply.message
     reply = call(stepper, StepSimulation.Request(ticks=100))
-    assert reply.success and reply.tick == 100 and reply.stamp.sec == 1
+    assert reply.success and reply.tick == 100 and reply.stamp.sec == 1 and reply.stamp.nanosec == 100_000_000
     reply = call(stepper, StepSimulation.Request(ticks=0))                  # 0 = one motion period
     assert reply.success and reply.tick == 150
     assert sim.session.counts["missing"] == 6                              # nobody acted: the missing rule applied

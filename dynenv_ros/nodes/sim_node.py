@@ -127,6 +127,7 @@ class SimNode(Node):
         self.periods_run = 0
         self.episodes_started = 0
         self._diagnostics_sent = 0
+        self._tick_offset = 0
         self._first_period_wall = self._last_period_wall = 0.0
         self.episode_scores: list[tuple[int, int]] = []
         self._window = deque(maxlen=2)   # (wall time, sim time, frames) samples for achieved rates
@@ -169,6 +170,10 @@ class SimNode(Node):
             self._start()
 
     def _reset(self, seed: int | None, kickoff: int) -> None:
+        # Sim time (/clock and every stamp) runs on across episodes, so use_sim_time nodes never see it jump
+        # back; WorldState.tick and game_time restart with each episode. One vision period separates episodes.
+        if self.episodes_started:
+            self._tick_offset += self.session.world.tick + self.config.rates.vision_period_ticks
         self.session.reset(seed=seed, kickoff_team=kickoff)
         self.episodes_started += 1
         self._buffer.clear()
@@ -214,7 +219,7 @@ class SimNode(Node):
             response.success = not (self.session.finished and not self.auto_reset)
             response.message = "stepped" if response.success else "the episode has finished; call /sim/reset"
         response.tick = self.session.world.tick
-        response.stamp = cv.sim_time(self.session.world.tick, self._tick_s)
+        response.stamp = cv.sim_time(self._tick_offset + self.session.world.tick, self._tick_s)
         return response
 
     # -- actions ---------------------------------------------------------------------------------------------------
@@ -294,7 +299,7 @@ class SimNode(Node):
 
     def _publish_frame(self, output: PeriodOutput, k: int) -> None:
         frame = output.frames[k]
-        stamp = cv.sim_time(frame.tick, self._tick_s)
+        stamp = cv.sim_time(self._tick_offset + frame.tick, self._tick_s)
         self._publish(self.clock_pub, ClockMsg(clock=stamp))
         self._publish(self.world_pub, cv.world_state(frame.snapshot, stamp))
         frames_per_period = len(output.frames)
@@ -309,7 +314,7 @@ class SimNode(Node):
             self._publish_markers(frame, stamp)
 
     def _publish_feedback(self, output: PeriodOutput) -> None:
-        stamp = cv.sim_time(output.frames[-1].tick, self._tick_s)
+        stamp = cv.sim_time(self._tick_offset + output.frames[-1].tick, self._tick_s)
         for i, fb in enumerate(output.feedback):
             self._publish(self.feedback_pubs[i], cv.step_feedback(
                 robot_id=i, episode_id=output.episode_id, motion_period=output.motion_period, rewards=fb.rewards,
