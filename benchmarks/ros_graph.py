@@ -45,7 +45,8 @@ def _drive(players: int, domain: int, until: callable, timeout_s: float) -> int:
     from dynenv_ros.ros.qos import sim_stream
     rclpy.init()
     node = Node("bench_driver")
-    names = [f"team_{t}_{i}" for t in "ab" for i in range(players)]
+    from dynenv_ros.soccer.config import robot_names
+    names = robot_names(players)
     pubs = [node.create_publisher(Action, topics.action(n), sim_stream()) for n in names]
     sent = [0]
 

@@ -21,6 +21,7 @@ import yaml
 
 from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch, run_graph
 from dynenv_ros.ros.selfcheck import format_report
+from dynenv_ros.soccer.config import robot_names
 
 REPO_CONFIG = Path(__file__).resolve().parent.parent / "config" / "main_job.yaml"
 INSTALLED_CONFIG = Path(sys.prefix) / "share" / "dynenv_ros" / "config" / "main_job.yaml"
@@ -131,10 +132,6 @@ def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path, config: MainJobCon
         return False
     print(format_report(report))
     return bool(report["ok"])
-
-
-def robot_names(players_per_team: int) -> list[str]:
-    return [f"team_{t}_{i}" for t in "ab" for i in range(players_per_team)]
 
 
 def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:

@@ -9,7 +9,6 @@ or through the LoadPolicy service, swapped between two decisions so no period is
 """
 from __future__ import annotations
 
-import math
 import statistics
 import time
 from collections.abc import Sequence
@@ -22,42 +21,18 @@ from dynenv_msgs.srv import LoadPolicy
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
-from dynenv_ros.perception.detections import FEATURE_COLUMNS
+from dynenv_ros.perception.detections import as_features, rows_from_messages
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_int, declare_str
 from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.soccer.config import robot_names
 from policy_node.checkpoint import load_checkpoint, sha256
+from policy_node.export import TorchPolicy
 from policy_node.model.inputs import collate, encode_previous_action
 from policy_node.model.network import DynEnvAgent
 
 RUNTIMES = ("torch", "onnxruntime")
-HEAD_STEP = math.radians(12.5)
-HEAD_UNITS = 3
-
-
-def rows_from_msg(msg: DetectionArray) -> np.ndarray:
-    """Detection messages → the learner's feature rows (``FEATURE_COLUMNS``), the same as in-process training."""
-    out = np.zeros((len(msg.detections), len(FEATURE_COLUMNS)), np.float32)
-    for i, d in enumerate(msg.detections):
-        defined = math.isfinite(d.yaw)
-        out[i] = (d.class_id, d.position.x, d.position.y, math.cos(d.yaw) if defined else 0.0,
-                  math.sin(d.yaw) if defined else 0.0, d.size_x, d.size_y, d.confidence, d.team, d.subtype,
-                  d.fallen, d.penalized, d.line_start.x, d.line_start.y, d.line_end.x, d.line_end.y,
-                  d.sighting & 1 > 0, d.sighting & 2 > 0, d.sighting & 4 > 0)
-    return out
-
-
-class TorchRuntime:
-    def __init__(self, model: DynEnvAgent) -> None:
-        self.model = model.eval()
-        self.head_mode = model.head_mode
-        self.feature_size = model.feature_size
-        self.head_max = model.head_max
-
-    def __call__(self, landmarks, objects, previous_action, proprioception, state):
-        with torch.no_grad():
-            return self.model(landmarks, objects, previous_action, proprioception, state)
 
 
 class RobotMemory:
@@ -84,15 +59,16 @@ class PolicyNode(Node):
         seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed of action sampling (and untrained weights).",
                            read_only=True)
         self.greedy = declare_bool(self, "greedy", False, "Take the most likely action instead of sampling.")
-        self.names = [f"team_{t}_{i}" for t in "ab" for i in range(players) if team in ("", t)]
-        self.ids = {name: ("ab".index(name[5])) * players + int(name.rsplit("_", 1)[1]) for name in self.names}
+        everyone = robot_names(players)
+        self.names = [name for name in everyone if team in ("", name[5])]
+        self.ids = {name: everyone.index(name) for name in self.names}
         self.generator = torch.Generator().manual_seed(seed)
         try:
             if checkpoint:
                 self.policy, self.checkpoint_sha256 = self._load(checkpoint, self.runtime_name)
             else:
                 torch.manual_seed(seed)
-                self.policy, self.checkpoint_sha256 = TorchRuntime(DynEnvAgent()), ""
+                self.policy, self.checkpoint_sha256 = TorchPolicy(DynEnvAgent()), ""
                 self.get_logger().warning("no checkpoint: acting with untrained weights")
         except ValueError as error:
             raise ParameterException(str(error), ["checkpoint"]) from None
@@ -111,7 +87,7 @@ class PolicyNode(Node):
         if runtime not in RUNTIMES:
             raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
         if runtime == "torch":
-            return TorchRuntime(load_checkpoint(path)), sha256(path)
+            return TorchPolicy(load_checkpoint(path)), sha256(path)
         from policy_node.export import OnnxPolicy
         try:
             return OnnxPolicy(path), sha256(path)
@@ -158,20 +134,19 @@ class PolicyNode(Node):
             return
         started = time.perf_counter()
         memories = [self.memory[n] for n in ready]
-        observations = [[rows_from_msg(m.frames[k]) for k in sorted(m.frames)] for m in memories]
+        observations = [[as_features(rows_from_messages(m.frames[k].detections)) for k in sorted(m.frames)]
+                        for m in memories]
         # A fixed-shape runtime (ONNX) declares its maxima; give both runtimes the same (truncated) input then.
         landmarks, objects = collate(observations, max_landmarks=getattr(self.policy, "max_landmarks", None),
                                      max_objects=getattr(self.policy, "max_objects", None))
         prev = torch.tensor([m.previous for m in memories], dtype=torch.float32)
-        previous = encode_previous_action(prev[:, 0], prev[:, 1], prev[:, 2], prev[:, 3],
-                                          float(getattr(self.policy, "head_max", HEAD_STEP * HEAD_UNITS)))
+        previous = encode_previous_action(prev[:, 0], prev[:, 1], prev[:, 2], prev[:, 3], float(self.policy.head_max))
         last = [m.frames[max(m.frames)] for m in memories]
         proprio = torch.tensor([[f.head_yaw, f.self_fallen, f.self_penalized, 0.0] for f in last])
-        size = self.policy.feature_size
-        states = [m.state or tuple(torch.zeros(1, size) for _ in range(4)) for m in memories]
+        states = [m.state or self.policy.initial_state(1) for m in memories]
         state = tuple(torch.cat([s[i] for s in states]) for i in range(4))
         step = self.policy(landmarks, objects, previous, proprio, state)
-        head_max = float(getattr(self.policy, "head_max", HEAD_STEP * HEAD_UNITS))
+        head_max = float(self.policy.head_max)
         actions = _sample(step, self.policy.head_mode, self.generator, self.greedy, head_max)
         units = (torch.as_tensor(step.head).shape[-1] - 1) // 2 if self.policy.head_mode == "discrete" else 0
         for b, (name, memory, frame) in enumerate(zip(ready, memories, last)):

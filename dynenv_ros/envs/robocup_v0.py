@@ -31,10 +31,6 @@ from dynenv_ros.soccer.world import TEAM_A, TEAM_B, SoccerWorld
 RESET_OPTIONS = ("kickoff_team",)
 
 
-def agent_names(players_per_team: int) -> list[str]:
-    return [f"team_{team}_{i}" for team in ("a", "b") for i in range(players_per_team)]
-
-
 class RoboCupParallelEnv(ParallelEnv):
     metadata = {"name": "robocup_v0", "render_modes": ["rgb_array"], "render_fps": 2, "is_parallelizable": True}
 
@@ -45,7 +41,7 @@ class RoboCupParallelEnv(ParallelEnv):
         self.render_mode = render_mode
         self.config = SoccerConfig.from_mapping(config)
         self.world = SoccerWorld(self.config)
-        self.possible_agents = agent_names(self.config.players_per_team)
+        self.possible_agents = self.config.robot_names
         self.agents: list[str] = []
         self._index = {name: i for i, name in enumerate(self.possible_agents)}
         self.encoder = GroundTruthEncoder(self.config)

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from dynenv_ros.perception.model import missed_objects
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.sim.ground_truth import WorldSnapshot
 from dynenv_ros.sim.reward_terms import RewardTerm
@@ -18,7 +19,6 @@ from dynenv_ros.soccer.actions import IDLE, Kick, SoccerAction, Turn, Walk
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.vision import SoccerVision
 from dynenv_ros.soccer.world import TEAM_A, TEAM_B, SoccerWorld
-from dynenv_ros.envs.robocup_v0 import agent_names
 
 MISSING_ACTION_RULES = ("hold", "none")
 REJECT_REASONS = ("malformed", "out_of_range", "unknown_robot", "wrong_episode", "late", "early", "duplicate")
@@ -68,7 +68,7 @@ class SoccerSession:
         if missing_action not in MISSING_ACTION_RULES:
             raise ValueError(f"missing_action must be one of {MISSING_ACTION_RULES}, got {missing_action!r}")
         self.config = config
-        self.names = agent_names(config.players_per_team)
+        self.names = config.robot_names
         self.world = SoccerWorld(config, seed=seed)
         self.perception = perception
         self.vision = SoccerVision(self.world, perception)
@@ -197,19 +197,17 @@ class SoccerSession:
                                for i in range(n)])
                   for k in range(len(snapshots))]
         ids = self.vision.objects.object_id
+        landmarks = self.vision.landmarks_seen(perception).mean(axis=0)           # (n,)
         feedback = []
         for i in range(n):
             seen = perception.seen[i::n].any(axis=0)
-            landmarks = (perception.seen[i::n][:, self.vision.perceiver.is_landmark].sum(axis=1)
-                         + perception.lines_seen[i::n])
             feedback.append(RobotFeedback({t.name.lower(): float(rewards[t, i]) for t in RewardTerm},
-                                          [int(x) for x in ids[seen]], float(landmarks.mean())))
+                                          [int(x) for x in ids[seen]], float(landmarks[i])))
         return PeriodOutput(self.episode_id, period, frames, feedback, terminated, truncated, events)
 
 
     def _missed(self, perception, frame: int, view: int) -> np.ndarray:
-        ids = self.vision.objects.object_id
-        missed = perception.visible[view] & ~np.isin(ids, perception.of_view(view)["true_id"])
+        missed = missed_objects(perception.visible[view], perception.of_view(view), self.vision.objects.object_id)
         x, y = self.vision.positions(frame)
         return np.column_stack((x[missed], y[missed]))
 

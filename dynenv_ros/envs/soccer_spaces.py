@@ -72,6 +72,13 @@ class GroundTruthEncoder:
             opponents = [j for j in range(per_team - team_start, 2 * per_team - team_start)]
             self._others.append(np.array(mates + opponents, dtype=np.intp))
 
+    def _clock_fractions(self, world: SoccerWorld) -> tuple[float, float]:
+        """Episode time left and ball-ownership time left, each as a fraction of its longest value."""
+        c = self.config
+        longest_ownership = max(c.ball.free_kick_ownership_seconds, c.ball.kickoff_ownership_seconds)
+        return (world.time_remaining / (c.episode_periods * c.period_seconds),
+                world.state.ball_owner_remaining / longest_ownership)
+
     def _robot_table(self, world: SoccerWorld) -> np.ndarray:
         rows = []
         for r in world.robots:
@@ -89,9 +96,7 @@ class GroundTruthEncoder:
         bx, by = world.ball_xy
         bv = world.ball.velocity
         s = world.state
-        episode = self.config.episode_periods * self.config.period_seconds
-        owner_frac = s.ball_owner_remaining / max(self.config.ball.free_kick_ownership_seconds,
-                                                  self.config.ball.kickoff_ownership_seconds)
+        time_frac, owner_frac = self._clock_fractions(world)
         out = np.empty((len(world.robots), self.observation_space.shape[0]), np.float64)
         team = table[:, 8]
         for i, others in enumerate(self._others):
@@ -102,7 +107,7 @@ class GroundTruthEncoder:
             o = table[others]
             block = np.column_stack((t * o[:, 0:6], o[:, 9:12]))
             goal_diff = s.score[int(t)] - s.score[-int(t)]
-            out[i] = np.concatenate((row, block.ravel(), (world.time_remaining / episode, owner_frac, goal_diff)))
+            out[i] = np.concatenate((row, block.ravel(), (time_frac, owner_frac, goal_diff)))
         return np.clip(out, self._low, self._high).astype(np.float32)
 
     def state(self, world: SoccerWorld) -> np.ndarray:
@@ -111,10 +116,8 @@ class GroundTruthEncoder:
         s = world.state
         bx, by = world.ball_xy
         bv = world.ball.velocity
-        episode = self.config.episode_periods * self.config.period_seconds
-        owner_frac = s.ball_owner_remaining / max(self.config.ball.free_kick_ownership_seconds,
-                                                  self.config.ball.kickoff_ownership_seconds)
-        tail = (bx, by, bv.x, bv.y, world.time_remaining / episode, s.ball_owner, owner_frac,
+        time_frac, owner_frac = self._clock_fractions(world)
+        tail = (bx, by, bv.x, bv.y, time_frac, s.ball_owner, owner_frac,
                 s.score[1], s.score[-1], int(s.phase))
         flat = np.concatenate((table.ravel(), tail))
         return np.clip(flat, self.state_space.low, self.state_space.high).astype(np.float32)

@@ -32,7 +32,7 @@ from dynenv_ros.ros.cdr import detection_array_cdr
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list)
 from dynenv_ros.ros.qos import sim_stream
-from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.soccer.config import SoccerConfig, robot_names
 
 MODES_OF_RUNNING = ("stepped", "realtime")
 RESET_OPTIONS = ("kickoff_team",)
@@ -96,7 +96,7 @@ class SimNode(Node):
         except ValueError as error:
             raise ParameterException(str(error), ["players_per_team"]) from None
         self.config = config
-        names = [f"team_{t}_{i}" for t in "ab" for i in range(players)]
+        names = robot_names(players)
         unknown = [c for c in controlled if c not in names]
         if unknown:
             raise ParameterException(f"unknown robots {unknown}; robots are {names}", ["controlled_robots"])
@@ -134,10 +134,7 @@ class SimNode(Node):
         self._buffer: deque = deque()    # realtime: frames of the current period waiting for their instant
         self._tick_s = config.rates.tick_seconds
         self.diagnostics_timer = self.create_timer(diag_s, self._publish_diagnostics, clock=self.wall)
-        self.vision_timer = None
-        if self.mode == "realtime":
-            period = config.rates.vision_period_ticks * self._tick_s / self.real_time_factor
-            self.vision_timer = self.create_timer(period, self._realtime_tick, clock=self.wall)
+        self.vision_timer = self._vision_timer() if self.mode == "realtime" else None
         self.started = False
         self._started_wall = time.monotonic()
         if self.mode == "stepped" and (self.wait_for_subscribers > 0 or self.wait_for_recorder
@@ -380,12 +377,17 @@ class SimNode(Node):
                 self.publish_markers = bool(p.value)
             elif p.name == "auto_reset":
                 self.auto_reset = bool(p.value)
-            elif p.name == "real_time_factor" and self.vision_timer is not None:
+            elif p.name == "real_time_factor":
                 self.real_time_factor = float(p.value)
-                self.destroy_timer(self.vision_timer)
-                period = self.config.rates.vision_period_ticks * self._tick_s / self.real_time_factor
-                self.vision_timer = self.create_timer(period, self._realtime_tick, clock=self.wall)
+                if self.vision_timer is not None:
+                    self.destroy_timer(self.vision_timer)
+                    self.vision_timer = self._vision_timer()
         return SetParametersResult(successful=True)
+
+    def _vision_timer(self):
+        """Realtime mode: one frame per vision period of sim time, on the wall clock scaled by the factor."""
+        period = self.config.rates.vision_period_ticks * self._tick_s / self.real_time_factor
+        return self.create_timer(period, self._realtime_tick, clock=self.wall)
 
     def diagnostics(self) -> dict[str, str]:
         """Achieved rates over the last diagnostics window and action counts, as strings (DiagnosticStatus)."""

@@ -38,6 +38,17 @@ def empty(count: int = 0) -> np.ndarray:
     return out
 
 
+def rows_from_messages(detections, true_id: int = -2) -> np.ndarray:
+    """Detection messages (rclpy or rosbags: attributes only) → rows. A message carries only what the robot
+    reported, so ``true_id`` is a placeholder (-2 by default: neither a false positive nor a known object)."""
+    rows = empty(len(detections))
+    for i, d in enumerate(detections):
+        rows[i] = (d.class_id, d.position.x, d.position.y, d.yaw, d.size_x, d.size_y, d.confidence, d.team,
+                   d.subtype, d.fallen, d.penalized, d.line_start.x, d.line_start.y, d.line_end.x, d.line_end.y,
+                   d.sighting, true_id, 0)
+    return rows
+
+
 def as_features(detections: np.ndarray) -> np.ndarray:
     """(k, len(FEATURE_COLUMNS)) float32 rows: yaw as cos/sin (0, 0 where undefined), sighting bits split out."""
     d = detections

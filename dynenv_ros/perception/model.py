@@ -46,6 +46,12 @@ class Perception:
         return len(self.offsets) - 1
 
 
+def missed_objects(visible: np.ndarray, detections: np.ndarray, object_ids: np.ndarray) -> np.ndarray:
+    """(N,) bool: objects geometrically visible in a view that no detection row comes from. A confused object
+    has a row (with the wrong class), so it counts as detected here, not as missed."""
+    return np.asarray(visible, bool) & ~np.isin(object_ids, np.asarray(detections)["true_id"])
+
+
 class Perceiver:
     """Per-class tables for one scene and one parameter set, so ``perceive`` only does per-frame work."""
 

@@ -16,6 +16,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from dynenv_ros.core.object_classes import ObjectClass
+from dynenv_ros.perception.model import missed_objects
 from dynenv_ros.render.topdown import BALL, TEAM_COLOURS, Colour, FieldView
 from dynenv_ros.soccer.field import FieldGeometry
 
@@ -122,8 +123,7 @@ def missed_positions(perception_visible: np.ndarray, detections: np.ndarray, obj
     A confused object is not "seen" by the model's bookkeeping but does have a detection (with its red ring), so
     it is not counted as missed here; that keeps one error from being drawn twice.
     """
-    detected = np.isin(object_ids, np.asarray(detections)["true_id"])
-    missed = np.flatnonzero(np.asarray(perception_visible, bool) & ~detected)
+    missed = np.flatnonzero(missed_objects(perception_visible, detections, object_ids))
     return [(float(x[j]), float(y[j])) for j in missed]
 
 

@@ -1,7 +1,6 @@
 """Core records ↔ dynenv_msgs messages. Field-for-field copies: the core already speaks SI units and REP 103."""
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 import numpy as np
@@ -9,9 +8,8 @@ from builtin_interfaces.msg import Time
 from dynenv_msgs.msg import Action, Detection, DetectionArray, ObjectState, StepFeedback, WorldState
 from geometry_msgs.msg import Point
 
-from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
-from dynenv_ros.sim.ground_truth import BodyState, WorldSnapshot
-from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk
+from dynenv_ros.sim.ground_truth import WorldSnapshot, snapshot_from_msg  # noqa: F401  (re-exported)
+from dynenv_ros.soccer.actions import SoccerAction
 
 WORLD_FRAME = "map"
 
@@ -66,20 +64,6 @@ def world_state(snapshot: WorldSnapshot, stamp: Time) -> WorldState:
     return msg
 
 
-def snapshot_from_msg(msg: WorldState) -> WorldSnapshot:
-    """The inverse of ``world_state`` (scripted policies and tools work on snapshots)."""
-    objects = tuple(BodyState(id=o.id, class_id=ObjectClass(o.class_id), team=o.team, x=o.x, y=o.y, yaw=o.yaw,
-                              vx=o.vx, vy=o.vy, yaw_rate=o.yaw_rate, head_yaw=o.head_yaw, size_x=o.size_x,
-                              size_y=o.size_y, status=ObjectStatus(o.status), penalty_remaining=o.penalty_remaining,
-                              goal_x=o.goal_x, goal_y=o.goal_y) for o in msg.objects)
-    return WorldSnapshot(scenario=msg.scenario, episode_id=msg.episode_id, tick=msg.tick,
-                         tick_period=msg.tick_period, game_time=msg.game_time, time_remaining=msg.time_remaining,
-                         phase=msg.phase, ball_owner_team=msg.ball_owner_team,
-                         ball_owner_remaining=msg.ball_owner_remaining,
-                         last_touch_robot_ids=tuple(msg.last_touch_robot_ids), score_team_a=msg.score_team_a,
-                         score_team_b=msg.score_team_b, objects=objects)
-
-
 def step_feedback(*, robot_id: int, episode_id: int, motion_period: int, rewards: dict[str, float],
                   terminated: bool, truncated: bool, seen_object_ids: Sequence[int], landmarks_seen: float,
                   stamp: Time) -> StepFeedback:
@@ -98,12 +82,3 @@ def action_msg(action: SoccerAction, *, robot_id: int, episode_id: int, motion_p
                  throttle=0.0, brake=0.0, steering=0.0)
     msg.header.stamp = stamp
     return msg
-
-
-def action_from_msg(msg: Action) -> SoccerAction:
-    """Trusting conversion (the session validates the numbers first)."""
-    return SoccerAction(Walk(msg.walk), Turn(msg.turn), Kick(msg.kick), float(msg.head_yaw_delta))
-
-
-def finite_or_nan(value: float) -> float:
-    return value if math.isfinite(value) else float("nan")

@@ -6,6 +6,7 @@ neither needs to know a scenario's internals.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
 
@@ -50,3 +51,31 @@ class WorldSnapshot:
 
     def of_class(self, class_id: ObjectClass) -> tuple[BodyState, ...]:
         return tuple(o for o in self.objects if o.class_id == class_id)
+
+
+def _object_class(value: int) -> ObjectClass | int:
+    try:
+        return ObjectClass(int(value))
+    except ValueError:   # a class this code base does not know yet: keep the number rather than fail a replay
+        return int(value)
+
+
+def body_from_msg(o: Any) -> BodyState:
+    """ObjectState (rclpy or rosbags: attributes only, no ROS import) → BodyState, field for field."""
+    return BodyState(id=int(o.id), class_id=_object_class(o.class_id), team=int(o.team), x=float(o.x),
+                     y=float(o.y), yaw=float(o.yaw), vx=float(o.vx), vy=float(o.vy), yaw_rate=float(o.yaw_rate),
+                     head_yaw=float(o.head_yaw), size_x=float(o.size_x), size_y=float(o.size_y),
+                     status=ObjectStatus(int(o.status)), penalty_remaining=float(o.penalty_remaining),
+                     goal_x=float(o.goal_x), goal_y=float(o.goal_y))
+
+
+def snapshot_from_msg(msg: Any) -> WorldSnapshot:
+    """WorldState (rclpy or rosbags) → WorldSnapshot, the inverse of ``ros.conversions.world_state``."""
+    return WorldSnapshot(scenario=int(msg.scenario), episode_id=int(msg.episode_id), tick=int(msg.tick),
+                         tick_period=float(msg.tick_period), game_time=float(msg.game_time),
+                         time_remaining=float(msg.time_remaining), phase=int(msg.phase),
+                         ball_owner_team=int(msg.ball_owner_team),
+                         ball_owner_remaining=float(msg.ball_owner_remaining),
+                         last_touch_robot_ids=tuple(int(i) for i in msg.last_touch_robot_ids),
+                         score_team_a=int(msg.score_team_a), score_team_b=int(msg.score_team_b),
+                         objects=tuple(body_from_msg(o) for o in msg.objects))

@@ -16,6 +16,11 @@ from dynenv_ros.soccer.field import FieldGeometry
 MAX_PLAYERS_PER_TEAM = 5
 
 
+def robot_names(players_per_team: int) -> list[str]:
+    """Robot names, also PettingZoo agent names and ROS namespaces: team A's slots, then team B's (index = id)."""
+    return [f"team_{team}_{slot}" for team in "ab" for slot in range(players_per_team)]
+
+
 @dataclass(frozen=True)
 class MotionConfig:
     """What one motion period of each high-level action achieves for a free robot."""
@@ -147,6 +152,10 @@ class SoccerConfig:
                 raise ValueError(f"falls.{name} must be in (0, 1]")
 
     @property
+    def robot_names(self) -> list[str]:
+        return robot_names(self.players_per_team)
+
+    @property
     def n_robots(self) -> int:
         return 2 * self.players_per_team
 
@@ -216,5 +225,5 @@ def _coerce(name: str, value: Any, default: Any) -> Any:
     return value
 
 
-__all__ = ["SoccerConfig", "MotionConfig", "KickConfig", "FallConfig", "PenaltyConfig", "BallConfig",
+__all__ = ["robot_names", "SoccerConfig", "MotionConfig", "KickConfig", "FallConfig", "PenaltyConfig", "BallConfig",
            "RewardConfig", "MAX_PLAYERS_PER_TEAM", "replace"]

@@ -104,6 +104,13 @@ class SoccerVision:
                             self._penalized[:frames])
         return self.perceiver.perceive(scene, views, self.world.rng, team)
 
+    def landmarks_seen(self, perception: Perception) -> np.ndarray:
+        """(frames, n_robots): landmarks (posts, marks, crossings, lines) each robot truly saw in each frame."""
+        n = self.world.n_robots
+        frames = len(perception) // n
+        seen = perception.seen.reshape(frames, n, -1)
+        return seen[:, :, self.perceiver.is_landmark].sum(axis=2) + perception.lines_seen.reshape(frames, n)
+
     def observation_rewards(self, perception: Perception) -> np.ndarray:
         """(n_robots,) DynEnv's reward for looking around, from what each robot truly saw this period."""
         n = self.world.n_robots
@@ -112,8 +119,8 @@ class SoccerVision:
         w = self.world.config.rewards
         robot_frames = np.minimum(w.observation_robot_cap, seen[:, :, :n].sum(axis=0))   # (observer, robot)
         robot_frames[np.arange(n), np.arange(n)] = 0                       # oneself does not count
-        landmarks = seen[:, :, self.perceiver.is_landmark].sum(axis=2) + perception.lines_seen.reshape(frames, n)
-        landmark_term = np.minimum(float(w.observation_landmark_cap), landmarks.sum(axis=0) / frames)
+        landmarks = self.landmarks_seen(perception)
+        landmark_term = np.minimum(float(w.observation_landmark_cap), landmarks.sum(axis=0) / len(landmarks))
         ball_frames = np.minimum(w.observation_ball_cap, seen[:, :, n].sum(axis=0))
         return (w.observation_robot * robot_frames.sum(axis=1) + w.observation_landmark * landmark_term
                 + w.observation_ball * ball_frames)
