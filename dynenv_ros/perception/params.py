@@ -13,6 +13,7 @@ from typing import Any, Mapping
 import yaml
 
 from dynenv_ros.core.object_classes import ObjectClass
+from dynenv_ros.core.settings import check_numbers
 
 MODES = ("realistic", "random", "none")
 PRESETS = ("realistic", "dynenv", "none")
@@ -122,7 +123,7 @@ class PerceptionParams:
                     p.near_range > 0 and p.max_range > 0 and p.miss_scale >= 0 and p.visibility_radius >= 0):
                 raise ValueError(f"classes.{ObjectClass(cls).name.lower()}: ranges must be positive, "
                                  "miss_scale and visibility_radius non-negative")
-        _check_non_negative(self)
+        check_numbers(self, infinite_ok=("max_range",))
 
     @property
     def rho(self) -> float:
@@ -132,18 +133,6 @@ class PerceptionParams:
     def with_noise(self, magnitude: float | None = None, mode: str | None = None) -> "PerceptionParams":
         return replace(self, noise_magnitude=self.noise_magnitude if magnitude is None else magnitude,
                        mode=self.mode if mode is None else mode)
-
-
-def _check_non_negative(obj: Any, prefix: str = "") -> None:
-    for f in fields(obj):
-        value = getattr(obj, f.name)
-        if hasattr(value, "__dataclass_fields__"):
-            _check_non_negative(value, f"{prefix}{f.name}.")
-        elif isinstance(value, (str, list, dict)) and f.type in ("float", "int"):
-            raise ValueError(f"{prefix}{f.name} must be a number, got {value!r}")
-        elif isinstance(value, (int, float)) and not isinstance(value, bool):
-            if not math.isfinite(value) and f.name != "max_range" or value < 0:
-                raise ValueError(f"{prefix}{f.name} must be a non-negative finite number, got {value}")
 
 
 def preset_dir() -> Path:

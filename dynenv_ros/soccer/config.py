@@ -10,6 +10,7 @@ from dataclasses import dataclass, fields, is_dataclass, replace
 from dataclasses import field as _default
 from typing import Any, Mapping
 
+from dynenv_ros.core.settings import check_numbers
 from dynenv_ros.sim.timing import Rates
 from dynenv_ros.soccer.field import FieldGeometry
 
@@ -130,7 +131,7 @@ class SoccerConfig:
             raise ValueError(f"players_per_team must be an integer in 1..{MAX_PLAYERS_PER_TEAM}, got {n!r}")
         if self.head_mode not in ("discrete", "continuous"):
             raise ValueError(f"head_mode must be 'discrete' or 'continuous', got {self.head_mode!r}")
-        _check_numbers(self)
+        check_numbers(self, negative_ok=("fall", "penalty_per_second"))
         period = self.rates.motion_period_ticks * self.rates.tick_seconds
         if self.episode_seconds < period:
             raise ValueError(f"episode_seconds ({self.episode_seconds}) is shorter than one motion period ({period})")
@@ -171,18 +172,6 @@ class SoccerConfig:
     def from_mapping(cls, values: Mapping[str, Any] | None = None) -> "SoccerConfig":
         """Build from nested plain values (YAML, keyword arguments); unknown keys are refused by name."""
         return _build(cls, dict(values or {}), prefix="")
-
-
-def _check_numbers(config: Any, prefix: str = "") -> None:
-    for f in fields(config):
-        value = getattr(config, f.name)
-        if is_dataclass(value):
-            _check_numbers(value, f"{prefix}{f.name}.")
-        elif isinstance(value, float) and not math.isfinite(value):
-            raise ValueError(f"{prefix}{f.name} must be finite, got {value}")
-        elif isinstance(value, (int, float)) and not isinstance(value, bool) and value < 0 \
-                and f.name not in ("fall", "penalty_per_second"):
-            raise ValueError(f"{prefix}{f.name} must not be negative, got {value}")
 
 
 def _build(cls: type, values: dict[str, Any], prefix: str) -> Any:
