@@ -13,11 +13,19 @@ from dynenv_ros.graph.process_graph import NodeLaunch, run_graph
 from dynenv_ros.main_job import ConfigError, MainJobConfig, load_config, main
 
 
-def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
-    status = main(["--output-dir", str(tmp_path), "--set", "graph=selfcheck", "--set", "samples_per_type=3",
-                   "--set", f"domain_id={os.environ['ROS_DOMAIN_ID']}"])
+def _run_main(tmp_path, capsys, *settings: str) -> str:
+    """Run the main job into tmp_path on this test worker's domain; return its output (it must succeed)."""
+    arguments = ["--output-dir", str(tmp_path), "--set", f"domain_id={os.environ['ROS_DOMAIN_ID']}"]
+    for setting in settings:
+        arguments += ["--set", setting]
+    status = main(arguments)
     output = capsys.readouterr().out
     assert status == 0, output
+    return output
+
+
+def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
+    output = _run_main(tmp_path, capsys, "graph=selfcheck", "samples_per_type=3")
     report = json.loads((tmp_path / "selfcheck.json").read_text())
     assert report["ok"] and not report["hash_problems"]
     assert len(report["interfaces"]) == 9
@@ -27,10 +35,7 @@ def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
 
 def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
     """The README's run command: simulator, a scripted policy node per robot, recorder; lossless bag and a GIF."""
-    status = main(["--output-dir", str(tmp_path), "--set", "duration_s=5", "--set", "players_per_team=1",
-                   "--set", f"domain_id={os.environ['ROS_DOMAIN_ID']}"])
-    output = capsys.readouterr().out
-    assert status == 0, output
+    output = _run_main(tmp_path, capsys, "duration_s=5", "players_per_team=1")
     report = json.loads((tmp_path / "sim_report.json").read_text())
     assert report["diagnostics"]["periods_run"] == "10" and report["diagnostics"]["missing"] == "0"
     assert "every published message recorded" in output and "dynenv-run: OK" in output
