@@ -58,7 +58,9 @@ def simulated_messages(periods: int = 2) -> list[tuple[str, str, object, int]]:
                                       episode_id=period.episode_id, motion_period=period.motion_period,
                                       frame_index=frame.frame_index, frames_per_period=len(period.frames),
                                       head_yaw=seen.head_yaw, fallen=seen.fallen, penalized=seen.penalized,
-                                      stamp=stamp)
+                                      kicking=seen.kicking, ball_owner=seen.ball_owner,
+                                      ball_owner_seconds=seen.ball_owner_seconds,
+                                      game_seconds_remaining=seen.game_seconds_remaining, stamp=stamp)
                 out.append((topics.detections(name), DETECTIONS, msg, at + 1 + robot_id))
         end = sim_time(period.frames[-1].tick, 0.01)
         at = BAG_EPOCH_NS + period.frames[-1].tick * 10_000_000 + 100
@@ -320,12 +322,19 @@ def test_export_csv_and_npz(capsys, tmp_path, game_bag, game):
     assert int(first["tick"]) == worlds[0].tick and int(first["id"]) == worlds[0].objects[0].id
     assert float(first["x"]) == pytest.approx(worlds[0].objects[0].x)
     assert {row["robot"] for row in tables["detections"]} == {"team_a_0", "team_a_1", "team_b_0", "team_b_1"}
+    # the robot's own kick and the GameController's values, repeated on each of a message's rows
+    expected = [(str(a.self_kicking), str(a.ball_owner), str(np.float32(a.ball_owner_seconds)),
+                 str(np.float32(a.game_seconds_remaining))) for a in arrays for _ in a.detections]
+    got = [(r["self_kicking"], r["ball_owner"], r["ball_owner_seconds"], r["game_seconds_remaining"])
+           for r in tables["detections"]]
+    assert sorted(got) == sorted(expected) and {g[1] for g in got} == {"1", "-1"}
     status, _, err = run_cli(capsys, "export", game_bag, "--out", tmp_path / "npz", "--format", "npz")
     assert status == 0, err
     with np.load(tmp_path / "npz" / "detections.npz") as detections, \
             np.load(tmp_path / "npz" / "world_state.npz") as world:
         assert len(detections["class_id"]) == len(tables["detections"])
         assert detections["robot"][0] == tables["detections"][0]["robot"]
+        assert detections["ball_owner"].dtype == np.int8 and detections["game_seconds_remaining"].dtype == np.float32
         assert world["x"][0] == pytest.approx(worlds[0].objects[0].x)
         assert world["stamp_ns"][0] == worlds[0].header.stamp.sec * 10**9 + worlds[0].header.stamp.nanosec
 
@@ -373,6 +382,40 @@ def test_player_republishes_every_message(make_node, executor, game_bag, game):
         assert [field_differences(w, deserialize_message(r, cls)) for w, r in zip(wire, received[topic])] \
             == [[]] * len(wire)
     assert player.published == {topic: len(messages) for topic, messages in expected.items()}
+
+
+def test_player_rebuilds_messages_recorded_with_an_older_definition(make_node, executor):
+    """The sample bag's DetectionArrays predate self_kicking and the GameController fields: played raw, their bytes
+    would be misread; the player rebuilds them as the installed type (old fields equal, new ones at defaults)."""
+    from dynenv_msgs.msg import DetectionArray, WorldState
+    from dynenv_ros.bags.inspect import echo
+    from dynenv_ros.nodes.bag_player import BagPlayer
+
+    sample = REPO / "bags" / "sample_2v2_realistic_30s"
+    played = {"/team_b_0/detections": DetectionArray, topics.WORLD_STATE: WorldState}
+    received: dict[str, list] = {topic: [] for topic in played}
+    listener = make_node("old_listener")
+    for topic, cls in played.items():
+        listener.create_subscription(cls, topic, received[topic].append, sim_stream())
+    player = make_node(BagPlayer, exit_when_done=False, parameter_overrides=[
+        Parameter("bag", Parameter.Type.STRING, str(sample)), Parameter("rate", Parameter.Type.DOUBLE, 0.0),
+        Parameter("topics", Parameter.Type.STRING_ARRAY, list(played)),
+        Parameter("wait_for_subscribers", Parameter.Type.INTEGER, 1)])
+    assert set(player.converted) == {"/team_b_0/detections"}      # WorldState is unchanged: played raw
+    for node in (listener, player):
+        executor.add_node(node)
+    assert spin_until(executor, lambda: player.finished and len(received["/team_b_0/detections"]) == 305
+                      and len(received[topics.WORLD_STATE]) == 305, 30.0), {t: len(v) for t, v in received.items()}
+    recorded = [r["message"] for r in echo(sample, "/team_b_0/detections")]
+    for old, new in zip(recorded, received["/team_b_0/detections"]):
+        assert (new.robot_id, new.episode_id, new.motion_period, new.frame_index, new.header.frame_id) == (
+            old["robot_id"], old["episode_id"], old["motion_period"], old["frame_index"], old["header"]["frame_id"])
+        assert (new.self_fallen, new.self_penalized) == (old["self_fallen"], old["self_penalized"])
+        assert new.head_yaw == pytest.approx(old["head_yaw"])
+        assert [d.class_id for d in new.detections] == [d["class_id"] for d in old["detections"]]
+        assert [d.position.x for d in new.detections] == pytest.approx([d["position"]["x"] for d in old["detections"]])
+        assert (new.self_kicking, new.ball_owner, new.ball_owner_seconds, new.game_seconds_remaining) == (
+            False, 0, 0.0, 0.0)
 
 
 def test_player_keeps_the_bag_timing(make_node, executor, tmp_path, game):

@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from dynenv_ros.bags.inspect import bag_info, echo, render
+from dynenv_ros.bags.inspect import bag_info, echo, export, render
 
 BAG = Path(__file__).resolve().parents[1] / "bags" / "sample_2v2_realistic_30s"
 
@@ -24,3 +24,15 @@ def test_sample_bag_decodes_and_replays(tmp_path):
     assert [f["message"]["motion_period"] for f in feedback] == [0, 1]
     frames = render(BAG, tmp_path / "replay.gif", robot="team_a_0", stride=50, pixels_per_metre=10)
     assert frames == 7 and (tmp_path / "replay.gif").stat().st_size > 0
+
+
+def test_sample_bag_recorded_before_detection_arrays_carried_the_game_controller_still_reads(tmp_path):
+    """The bag embeds the DetectionArray definition it was recorded with (no self_kicking, ball_owner,
+    ball_owner_seconds, game_seconds_remaining): it decodes with that one, and export leaves those columns out."""
+    first = next(iter(echo(BAG, "/team_b_0/detections", limit=1)))["message"]
+    assert first["header"]["frame_id"] == "team_b_0/camera" and "self_penalized" in first
+    assert not {"self_kicking", "ball_owner", "ball_owner_seconds", "game_seconds_remaining"} & set(first)
+    written = export(BAG, tmp_path, fmt="csv")
+    assert written["detections.csv"] > 0
+    header = (tmp_path / "detections.csv").read_text().splitlines()[0].split(",")
+    assert "self_penalized" in header and "ball_owner" not in header and "self_kicking" not in header

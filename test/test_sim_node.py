@@ -6,7 +6,7 @@ import math
 from pathlib import Path
 
 import pytest
-from dynenv_msgs.msg import Action, DetectionArray, StepFeedback, WorldState
+from dynenv_msgs.msg import Action, DetectionArray, ObjectState, StepFeedback, WorldState
 from dynenv_msgs.srv import ResetSimulation, StepSimulation
 from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
@@ -88,6 +88,37 @@ def test_actions_move_robots_one_period_at_a_time(make_node, executor):
     stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in probe.detections["team_a_0"][5:]]
     assert stamps == pytest.approx([0.1 * k for k in range(1, 11)])     # vision rate in sim time
     assert [m.motion_period for m in probe.feedback["team_b_0"]] == [0, 1, 2]
+
+
+def test_detections_carry_the_robots_own_kick_and_what_the_game_controller_broadcasts(make_node, executor):
+    """Per frame, each robot's DetectionArray holds the ball ownership relative to its team (team A kicks off: +1
+    for team_a_0, -1 for team_b_0, for the 10 s of kick-off ownership), its seconds left and the game seconds
+    left — the world state of the same instant (/world_state) — and whether the robot itself is kicking."""
+    sim, probe = _start(make_node, executor)
+    for robot, relation in (("team_a_0", 1), ("team_b_0", -1)):
+        for m in probe.detections[robot]:                                  # period 0: the reset state
+            assert (m.ball_owner, m.ball_owner_seconds, m.game_seconds_remaining) == (relation, 10.0, 120.0)
+            assert not m.self_kicking
+    for period in (1, 2, 3):
+        probe.act(0, period)
+        probe.act(1, period, kick=Action.KICK_LEFT_FOOT if period == 1 else Action.KICK_NONE)
+        assert probe.spin(lambda: probe.periods_received(period + 1))
+    truth = {(w.header.stamp.sec, w.header.stamp.nanosec): w for w in probe.truth}
+    kick_periods = sim.config.kick.periods
+    for robot, team in (("team_a_0", 1), ("team_b_0", -1)):
+        frames = probe.detections[robot]
+        assert len(frames) == 20
+        for m in frames:
+            w = truth[(m.header.stamp.sec, m.header.stamp.nanosec)]        # the world at this frame
+            assert m.ball_owner == w.ball_owner_team * team
+            assert m.ball_owner_seconds == pytest.approx(w.ball_owner_remaining, abs=1e-5)
+            assert m.game_seconds_remaining == pytest.approx(w.time_remaining, abs=1e-4)
+            assert m.game_seconds_remaining == pytest.approx(120.0 - w.game_time, abs=1e-4)
+            kicking = robot == "team_b_0" and 1 <= m.motion_period <= kick_periods
+            assert m.self_kicking == kicking, (robot, m.motion_period)
+            me = next(o for o in w.objects if o.id == m.robot_id)
+            assert m.self_kicking == bool(me.status & ObjectState.STATUS_KICKING)
+    assert probe.detections["team_a_0"][-1].ball_owner_seconds == pytest.approx(10.0 - 1.5, abs=1e-4)
 
 
 def _ground_truth_run(make_node, executor, seed):

@@ -280,6 +280,12 @@ class Column:
     name: str
     dtype: str                     # numpy dtype of the .npz column
     get: Callable[..., Any]
+    optional: bool = False         # a field bags recorded with an older definition lack: the getter gives None there
+
+
+def _field(name: str) -> Callable[..., Any]:
+    """Getter of a message field that older definitions lack (None there)."""
+    return lambda t, b, m, i: getattr(m, name, None)
 
 
 def _robot_of(topic: str) -> str:
@@ -324,6 +330,10 @@ TABLES: dict[str, tuple[str, list[Column], Callable[[Any], Sequence[Any]]]] = {
         Column("head_yaw", "f4", lambda t, b, m, i: m.head_yaw),
         Column("self_fallen", "?", lambda t, b, m, i: m.self_fallen),
         Column("self_penalized", "?", lambda t, b, m, i: m.self_penalized),
+        Column("self_kicking", "?", _field("self_kicking"), optional=True),
+        Column("ball_owner", "i1", _field("ball_owner"), optional=True),
+        Column("ball_owner_seconds", "f4", _field("ball_owner_seconds"), optional=True),
+        Column("game_seconds_remaining", "f4", _field("game_seconds_remaining"), optional=True),
         Column("class_id", "u1", lambda t, b, m, i: i.class_id),
         Column("x", "f8", lambda t, b, m, i: i.position.x),
         Column("y", "f8", lambda t, b, m, i: i.position.y),
@@ -362,6 +372,7 @@ def export(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], fmt: s
     column) and return {file name: rows}. Other types (clock, diagnostics, markers) are not exported.
 
     A DetectionArray with no detections gives no row; feedback's ``seen_object_ids`` is a space-separated string.
+    Columns of fields that a bag's (older) message definitions lack are left out of that table, never invented.
     """
     if fmt not in ("csv", "npz"):
         raise BagError(f"--format must be csv or npz, got {fmt!r}")
@@ -384,7 +395,7 @@ def export(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], fmt: s
     target.mkdir(parents=True, exist_ok=True)
     written: dict[str, int] = {}
     for kind, table in rows.items():
-        columns = TABLES[kind][1]
+        columns = [c for c in TABLES[kind][1] if not (c.optional and any(v is None for v in table[c.name]))]
         count = len(table[columns[0].name])
         name = f"{kind}.{fmt}"
         tmp = target / (name + ".tmp")

@@ -26,11 +26,15 @@ REJECT_REASONS = ("malformed", "out_of_range", "unknown_robot", "wrong_episode",
 
 @dataclass
 class RobotFrame:
-    """What one robot perceived at one vision instant, plus its own state."""
+    """What one robot perceived at one vision instant, plus its own state and what the GameController told it."""
     detections: np.ndarray        # structured DETECTION_DTYPE rows (camera frame)
     head_yaw: float
     fallen: bool
     penalized: bool
+    kicking: bool                 # executing a kick
+    ball_owner: int               # set-play / kick-off ownership relative to its team: +1 own, -1 opponents, 0 free
+    ball_owner_seconds: float     # seconds left of that ownership (0 when free)
+    game_seconds_remaining: float
     missed: np.ndarray | None = None   # (m, 2) field positions of objects in view but not detected, if asked for
 
 
@@ -189,10 +193,12 @@ class SoccerSession:
 
     def _output(self, period, snapshots, ticks, perception, rewards, terminated, truncated, events) -> PeriodOutput:
         n = self.config.n_robots
-        proprio = self.vision.proprioception
+        proprio = self.vision.proprioception.tolist()        # (F, n, 4): head yaw, fallen, penalized, kicking
+        controller = self.vision.game_controller.tolist()    # (F, n, 3): owner relation, its seconds, game seconds
         frames = [FrameOutput(ticks[k], k, snapshots[k],
-                              [RobotFrame(perception.of_view(k * n + i), float(proprio[k, i, 0]),
-                                          bool(proprio[k, i, 1]), bool(proprio[k, i, 2]),
+                              [RobotFrame(perception.of_view(k * n + i), proprio[k][i][0], bool(proprio[k][i][1]),
+                                          bool(proprio[k][i][2]), bool(proprio[k][i][3]), int(controller[k][i][0]),
+                                          controller[k][i][1], controller[k][i][2],
                                           self._missed(perception, k, k * n + i) if i == self.missed_for else None)
                                for i in range(n)])
                   for k in range(len(snapshots))]

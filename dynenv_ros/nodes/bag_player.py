@@ -13,6 +13,11 @@ Parameters:
 
 Publishers use the simulator's reliable KEEP_ALL QoS. When not looping the node waits for every message to be
 acknowledged by the subscribers (at most ACK_TIMEOUT_S) and exits 0.
+
+A topic recorded with an older definition of its type than the installed one (the RIHS01 hash the bag embeds
+differs, e.g. a DetectionArray from before ``self_kicking`` and the GameController fields) cannot be republished
+raw: its bytes would be misread. Its messages are decoded with the bag's definition and rebuilt as the installed
+type, field by field; fields the old definition lacks keep their defaults (logged once per topic).
 """
 from __future__ import annotations
 
@@ -25,8 +30,11 @@ from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.serialization import serialize_message
+from rosidl_parser.definition import AbstractNestedType, NamespacedType
 
 from dynenv_ros.bags.inspect import BagError, BagReader, open_bag
+from dynenv_ros.bags.typestore import dynenv_typestore
 from dynenv_ros.nodes.recorder import RCLError, message_class, run_until_signal
 from dynenv_ros.ros.node_runner import NodeExit
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
@@ -84,6 +92,8 @@ class BagPlayer(Node):
             raise ParameterException(f"nothing to play: topics {sorted(wanted)} not in the bag (it has {in_bag})",
                                      ["topics"])
         self.publishers_by_topic: dict[str, Any] = {}
+        self.converted: dict[str, type] = {}            # topics recorded with an older definition: rebuilt
+        store = dynenv_typestore()
         for connection in self.connections:
             if connection.topic not in self.publishers_by_topic:
                 try:
@@ -92,6 +102,14 @@ class BagPlayer(Node):
                     raise ParameterException(f"cannot play {connection.topic}: {error}", ["bag"]) from None
                 self.publishers_by_topic[connection.topic] = self.create_publisher(cls, connection.topic,
                                                                                    sim_stream())
+            digest = getattr(connection, "digest", "")
+            if (connection.msgtype in store.fielddefs and digest.startswith("RIHS01_")
+                    and digest != store.hash_rihs01(connection.msgtype)):
+                self.converted[connection.topic] = message_class(connection.msgtype)
+        for topic, cls in self.converted.items():
+            self.get_logger().warning(f"{topic} was recorded with an older definition of {cls.__name__}: its "
+                                      "messages are rebuilt as the installed type; fields the bag lacks keep "
+                                      "their defaults")
 
     def _subscribers_ready(self) -> bool:
         if self.wait_for_subscribers == 0:
@@ -142,6 +160,15 @@ class BagPlayer(Node):
                 due = self._origin[0] + (timestamp - self._origin[1]) / 1e9 / self.rate
                 if due > now:
                     return
+            target = self.converted.get(connection.topic)
+            if target is not None:
+                try:
+                    message = self.reader.deserialize(raw, connection.msgtype)
+                except BagError as error:
+                    self.get_logger().error(str(error))
+                    self._finish(status=2)
+                    return
+                raw = serialize_message(to_installed(message, target))
             try:
                 self.publishers_by_topic[connection.topic].publish(bytes(raw))
             except RCLError as error:
@@ -171,6 +198,26 @@ class BagPlayer(Node):
         if hasattr(self, "_stack"):
             self._stack.close()
         super().destroy_node()
+
+
+def to_installed(value: Any, cls: type) -> Any:
+    """A message decoded by rosbags with a bag's own (older) definition → an instance of the installed class
+    ``cls``: fields of the same name copied, nested messages and sequences of them recursively; fields the old
+    definition lacks keep their defaults."""
+    msg = cls()
+    for name, kind in zip(cls.get_fields_and_field_types(), cls.SLOT_TYPES):
+        if not hasattr(value, name):
+            continue
+        old = getattr(value, name)
+        if isinstance(kind, NamespacedType):
+            old = to_installed(old, message_class("/".join((*kind.namespaces, kind.name))))
+        elif isinstance(kind, AbstractNestedType) and isinstance(kind.value_type, NamespacedType):
+            item = message_class("/".join((*kind.value_type.namespaces, kind.value_type.name)))
+            old = [to_installed(v, item) for v in old]
+        elif hasattr(old, "tolist"):      # numpy arrays and scalars → Python values the generated setters accept
+            old = old.tolist()
+        setattr(msg, name, old)
+    return msg
 
 
 def main(args: Sequence[str] | None = None) -> int:

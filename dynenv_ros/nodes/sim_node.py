@@ -305,7 +305,9 @@ class SimNode(Node):
                 robot.detections, stamp_sec=stamp.sec, stamp_nanosec=stamp.nanosec,
                 frame_id=cv.camera_frame(self.names[i]), robot_id=i, episode_id=output.episode_id,
                 motion_period=output.motion_period, frame_index=k, frames_per_period=frames_per_period,
-                head_yaw=robot.head_yaw, fallen=robot.fallen, penalized=robot.penalized))
+                head_yaw=robot.head_yaw, fallen=robot.fallen, penalized=robot.penalized, kicking=robot.kicking,
+                ball_owner=robot.ball_owner, ball_owner_seconds=robot.ball_owner_seconds,
+                game_seconds_remaining=robot.game_seconds_remaining))
         self.frames_published += 1
         if self.publish_markers and k == len(output.frames) - 1:
             self._publish_markers(frame, stamp)

@@ -31,7 +31,8 @@ def _align(offset: int, size: int) -> int:
 
 def detection_array_cdr(rows: np.ndarray, *, stamp_sec: int, stamp_nanosec: int, frame_id: str, robot_id: int,
                         episode_id: int, motion_period: int, frame_index: int, frames_per_period: int,
-                        head_yaw: float, fallen: bool, penalized: bool) -> bytes:
+                        head_yaw: float, fallen: bool, penalized: bool, kicking: bool, ball_owner: int,
+                        ball_owner_seconds: float, game_seconds_remaining: float) -> bytes:
     """CDR bytes of a dynenv_msgs/DetectionArray holding ``rows`` (DETECTION_DTYPE records)."""
     name = frame_id.encode() + b"\x00"
     head = bytearray(struct.pack("<iiI", stamp_sec, stamp_nanosec, len(name)) + name)
@@ -41,7 +42,10 @@ def detection_array_cdr(rows: np.ndarray, *, stamp_sec: int, stamp_nanosec: int,
     head += b"\x00" * (o - len(head)) + struct.pack("<IIBB", episode_id, motion_period, frame_index,
                                                     frames_per_period)
     o = _align(len(head), 4)
-    head += b"\x00" * (o - len(head)) + struct.pack("<f??", head_yaw, bool(fallen), bool(penalized))
+    # head_yaw .. ball_owner fill 8 bytes from a 4-aligned offset: the two float32 after them need no padding.
+    head += b"\x00" * (o - len(head)) + struct.pack("<f???bff", head_yaw, bool(fallen), bool(penalized),
+                                                    bool(kicking), ball_owner, ball_owner_seconds,
+                                                    game_seconds_remaining)
     o = _align(len(head), 4)
     n = len(rows)
     head += b"\x00" * (o - len(head)) + struct.pack("<I", n)

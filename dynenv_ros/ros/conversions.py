@@ -38,10 +38,14 @@ def detections_to_msgs(rows: np.ndarray) -> list[Detection]:
 
 def detection_array(rows: np.ndarray, *, robot_id: int, robot_name: str, episode_id: int, motion_period: int,
                     frame_index: int, frames_per_period: int, head_yaw: float, fallen: bool, penalized: bool,
+                    kicking: bool, ball_owner: int, ball_owner_seconds: float, game_seconds_remaining: float,
                     stamp: Time) -> DetectionArray:
+    """``ball_owner`` is relative to the observer's team (+1 own, -1 opponents, 0 free), as the message says."""
     msg = DetectionArray(robot_id=robot_id, episode_id=episode_id, motion_period=motion_period,
                          frame_index=frame_index, frames_per_period=frames_per_period, head_yaw=head_yaw,
-                         self_fallen=fallen, self_penalized=penalized, detections=detections_to_msgs(rows))
+                         self_fallen=fallen, self_penalized=penalized, self_kicking=kicking, ball_owner=ball_owner,
+                         ball_owner_seconds=ball_owner_seconds, game_seconds_remaining=game_seconds_remaining,
+                         detections=detections_to_msgs(rows))
     msg.header.stamp = stamp
     msg.header.frame_id = camera_frame(robot_name)
     return msg

@@ -70,9 +70,14 @@ class SoccerVision:
         if len(self._records) >= len(self._x):
             raise RuntimeError("more vision frames than a motion period holds; call perceive() every period")
         # Plain Python now, one numpy conversion per period in perceive().
+        world = self.world
         record = [(r.body.position, r.body.angle, r.rules.fallen, r.rules.penalized, r.head_yaw, r.kick is not None)
-                  for r in self.world.robots]
-        self._records.append((record, self.world.ball.position))
+                  for r in world.robots]
+        state = world.state
+        # What the GameController broadcasts: ball owner (absolute team), seconds of it left, game seconds left.
+        game = (state.ball_owner, max(0.0, state.ball_owner_remaining) if state.ball_owner else 0.0,
+                world.time_remaining)
+        self._records.append((record, world.ball.position, game))
 
     def positions(self, frame: int) -> tuple[np.ndarray, np.ndarray]:
         """Field positions of the scene's objects at a frame of the last perceived period (for drawing)."""
@@ -86,10 +91,18 @@ class SoccerVision:
         frames, n = len(self._records), self.world.n_robots
         table = np.array([[(p.x, p.y, yaw, fallen, penalized, head, kicking)
                            for p, yaw, fallen, penalized, head, kicking in record]
-                          + [(ball.x, ball.y, np.nan, 0, 0, 0, 0)] for record, ball in self._records])  # (F, n+1, 7)
+                          + [(ball.x, ball.y, np.nan, 0, 0, 0, 0)] for record, ball, _ in self._records])  # (F, n+1, 7)
+        game = np.array([g for _, _, g in self._records], np.float64).reshape(frames, 3)
         self._records = []
         # Each robot's own state per frame: head yaw, fallen, penalized, kicking (what it knows of itself).
         self.proprioception = table[:, :n, (5, 3, 4, 6)].astype(np.float32)
+        # What the GameController tells each robot per frame, (F, n, 3): ball ownership relative to the robot's team
+        # (+1 own, -1 opponents, 0 free), seconds left of that ownership (0 when free), game seconds left.
+        controller = np.empty((frames, n, 3), np.float32)
+        controller[:, :, 0] = game[:, :1] * self.teams
+        controller[:, :, 1] = game[:, 1:2]
+        controller[:, :, 2] = game[:, 2:3]
+        self.game_controller = controller
         self._x[:frames, :n + 1], self._y[:frames, :n + 1] = table[:, :, 0], table[:, :, 1]
         self._yaw[:frames, :n] = table[:, :n, 2]
         self._fallen[:frames, :n] = table[:, :n, 3] > 0
