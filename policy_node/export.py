@@ -83,7 +83,9 @@ class _SparseClassEmbedding(nn.Module):
     Why: the network's version runs every class's block on every slot, padding included, and keeps one — with the
     fixed deployment maxima (48 landmark slots for ~11 real landmarks a frame) that is ~30× the needed work and most
     of the decision's time. The result is the same for every real row; a padded slot's embedding never reaches an
-    output (it is a masked key, and its query output is zeroed), so zero is as good as anything there."""
+    output (it is a masked key, and its query output is zeroed — a slot empty in this frame but filled in an earlier
+    one enters the temporal attention with a zero query whatever its embedding), so zero is as good as anything
+    there."""
 
     def __init__(self, embedding: nn.Module) -> None:
         super().__init__()
@@ -152,8 +154,11 @@ def _trimmed(features: torch.Tensor, kind: torch.Tensor, mask: torch.Tensor) -> 
     padded slots that remain (for ``_SparseClassEmbedding``).
 
     Why: the fixed maxima are sized for the worst frame, a typical batch fills a third of them, and attention cost
-    grows with the square of the slots. Padded slots never change an output (the network's padding invariance), so
-    dropping them is exact; at least one slot is kept so no axis becomes empty."""
+    grows with the square of the slots. A slot padded in every frame is never filled so far, so the RTA's carried
+    mask (valid once filled in any frame) zeroes it, excludes it as a key and leaves it out of the pooling at every
+    step: it never changes an output (the network's padding invariance), and dropping it is exact. Slots padded only
+    in some frames are kept — they can hold a summary from an earlier frame. At least one slot is kept so no axis
+    becomes empty."""
     slots = features.shape[2]
     position = torch.arange(1, slots + 1, dtype=torch.int64)
     used = torch.clamp((position * (~mask).to(torch.int64)).amax(), min=1)
@@ -166,8 +171,8 @@ class _ExportWrapper(nn.Module):
     """Explicit tensors in, a flat tuple out: the exporter cannot take dataclasses or nested tuples. Runs an eval
     copy of the model (the caller's is left as it is) with all-padded trailing slots cut (``_trimmed``), class
     embeddings that skip padded slots (``_SparseClassEmbedding``) and lean attention (``_LeanAttention``, where the
-    attention is the kind it handles); the network's own forward code does the rest, so its outputs are the
-    model's."""
+    attention is the kind it handles); the network's own forward code does the rest — the RTA's recurrence and its
+    carried mask included, traced as they are — so its outputs are the model's."""
 
     def __init__(self, model: DynEnvAgent) -> None:
         super().__init__()
