@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from dynenv_ros.envs.robocup_v0 import parallel_env
-from policy_node.model.inputs import ACTION_ENCODING, FEATURES, PROPRIOCEPTION, collate, encode_previous_action
+from policy_node.model.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, collate,
+                                   encode_previous_action)
 from policy_node.model.network import DynEnvAgent, parameter_count
 
 
@@ -119,8 +120,48 @@ def test_previous_action_encoding_keeps_every_dimension():
     assert enc[:, -1].tolist() == pytest.approx([0.5, -1.0])
 
 
-def test_parameter_count_is_small():
-    assert 50_000 < parameter_count(DynEnvAgent()) < 400_000
+def _linear(n_in, n_out, bias=True):
+    return n_in * n_out + (n_out if bias else 0)
+
+
+def _layer_norm(d):
+    return 2 * d                                             # weight and bias
+
+
+def _lstm_cell(n_in, h):
+    return 4 * (n_in * h + h * h + 2 * h)                    # weight_ih, weight_hh, bias_ih, bias_hh of 4 gates
+
+
+def _attention_with_bias_kv(d):
+    # nn.MultiheadAttention(d, 1, add_bias_kv=True): in_proj weight (3d·d) and bias (3d), out_proj Linear(d, d),
+    # bias_k (d) and bias_v (d)
+    return 3 * d * d + 3 * d + _linear(d, d) + d + d
+
+
+def _expected_parameters(d, head_mode="discrete", head_units=3, robot_slots=4, pose=6, embed_hidden=32):
+    """The architecture as network.py documents it, counted by hand (no call into the model code)."""
+    embed_block = (_linear(FEATURES, embed_hidden, bias=False) + _layer_norm(embed_hidden)
+                   + _linear(embed_hidden, d, bias=False) + _layer_norm(d))          # EmbedBlock: 2 × (Linear, LN)
+    rta = 2 * _attention_with_bias_kv(d) + _layer_norm(d) + _linear(d, 1)            # object + temporal attention
+
+    def stream(side):                                       # embed → RTA → transform → LSTMCell → LayerNorm
+        return (NUM_CLASSES * embed_block + rta + _linear(d + side, d) + _layer_norm(d) + _lstm_cell(d, d)
+                + _layer_norm(d))
+
+    total = stream(ACTION_ENCODING + PROPRIOCEPTION)         # localization: previous action + proprioception
+    total += _linear(d, pose)                                # pose head
+    total += stream(pose + PROPRIOCEPTION)                   # objects: pose estimate + proprioception
+    total += _linear(2 * d, 5) + _linear(2 * d, 3) + _linear(2 * d, 3)                   # walk, turn, kick
+    total += _linear(2 * d, 2 * head_units + 1) if head_mode == "discrete" else _linear(2 * d, 1) + 1  # + log std
+    total += _linear(2 * d, d) + _layer_norm(d) + _linear(d, 1)                          # critic
+    total += _linear(d, 2 * d) + _layer_norm(2 * d) + _linear(2 * d, 4 + robot_slots * 7)  # reconstruction
+    return total
+
+
+@pytest.mark.parametrize("feature_size,head_mode", [(64, "discrete"), (16, "continuous"), (32, "discrete")])
+def test_parameter_count_is_exactly_the_documented_architecture(feature_size, head_mode):
+    expected = _expected_parameters(feature_size, head_mode)
+    assert parameter_count(DynEnvAgent(feature_size=feature_size, head_mode=head_mode)) == expected
 
 
 def test_a_tiny_localization_task_is_learned():
@@ -167,3 +208,90 @@ def test_reconstruction_loss_trains_the_head_and_the_object_stream():
     sum(losses.values()).backward()
     assert model.reconstruction.net[0].weight.grad.abs().sum() > 0
     assert model.objects.lstm.weight_ih.grad.abs().sum() > 0
+
+
+# ---- Recurrent Temporal Attention: a slot stays valid once any frame of the period has filled it
+
+def _rta(size=16):
+    from policy_node.model.network import RecurrentTemporalAttention
+    torch.manual_seed(0)
+    return RecurrentTemporalAttention(size).eval()
+
+
+def test_rta_remembers_earlier_frames_when_the_last_frame_is_empty():
+    rta, frames, slots = _rta(), 5, 4
+    x = torch.randn(2, frames, slots, 16, generator=torch.Generator().manual_seed(1))
+    mask = torch.zeros(2, frames, slots, dtype=torch.bool)
+    mask[:, :, 3] = True                                     # a slot no frame fills
+    mask[:, -1] = True                                       # the last frame saw nothing
+    with torch.no_grad():
+        pooled, confidence = rta(x, mask)
+        assert (pooled.norm(dim=-1) > 0.1).all()
+        assert (confidence[:, :3] > 0).all() and (confidence[:, 3] == 0).all()
+        changed = x.clone()
+        changed[:, :-1] += torch.randn(2, frames - 1, slots, 16, generator=torch.Generator().manual_seed(2))
+        assert ((rta(changed, mask)[0] - pooled).abs().amax(-1) > 1e-3).all()
+        # what the empty last frame and the never-filled slot hold changes nothing
+        ignored = x.clone()
+        ignored[:, -1] = 7.0
+        ignored[:, :, 3] = -7.0
+        assert torch.allclose(rta(ignored, mask)[0], pooled, atol=1e-6)
+
+
+def test_rta_slot_filled_only_in_the_first_frame_still_counts_at_the_end():
+    rta, frames = _rta(), 5
+    x = torch.randn(1, frames, 2, 16, generator=torch.Generator().manual_seed(3))
+    mask = torch.ones(1, frames, 2, dtype=torch.bool)
+    mask[:, :, 0] = False                                    # slot 0: every frame
+    mask[:, 0, 1] = False                                    # slot 1: frame 0 only
+    with torch.no_grad():
+        pooled, confidence = rta(x, mask)
+        assert confidence[0, 1] > 0                          # still pooled after four frames without it
+        other = x.clone()
+        other[:, 0, 1] = torch.randn(16, generator=torch.Generator().manual_seed(4))
+        assert (rta(other, mask)[0] - pooled).abs().max() > 1e-3
+        never = mask.clone()
+        never[:, 0, 1] = True                                # the same period without that detection
+        assert (rta(x, never)[0] - pooled).abs().max() > 1e-3
+        assert rta(x, never)[1][0, 1] == 0
+        # only frame 0 has anything: its detections carry through to the end
+        first_only = torch.ones_like(mask)
+        first_only[:, 0] = False
+        alone, confidence = rta(x, first_only)
+        assert (confidence > 0).all() and alone.norm() > 0.1
+        assert (rta(other, first_only)[0] - alone).abs().max() > 1e-3
+
+
+def _empty_last_frame(frames):
+    return list(frames[:-1]) + [np.zeros((0, FEATURES), np.float32)]
+
+
+def _shift(frames, classes, dx):
+    """Frames 0..F-2 with the x of the given classes' detections moved by dx (metres); the last frame as is."""
+    out = []
+    for rows in frames[:-1]:
+        rows = rows.copy()
+        rows[np.isin(rows[:, 0].astype(int), classes), 1] += dx
+        out.append(rows)
+    return out + [frames[-1]]
+
+
+def test_agent_features_keep_the_period_when_its_last_frame_is_empty(model):
+    """Both streams: with nothing in the last frame, the pooled RTA output is not zero and the agent's features
+    still follow what the earlier frames saw."""
+    robot = _empty_last_frame(_observations()[0])
+    earlier = np.concatenate(robot[:-1])
+    assert np.isin(earlier[:, 0], [1, 2]).any() and np.isin(earlier[:, 0], [3, 4, 5, 6, 7]).any()
+    landmarks, objects = collate([robot])
+    assert landmarks.mask[:, -1].all() and objects.mask[:, -1].all()
+    with torch.no_grad():
+        for stream, batch in ((model.localization, landmarks), (model.objects, objects)):
+            pooled, _ = stream.rta(stream.embed(batch.features, batch.kind), batch.mask)
+            assert pooled.norm() > 0.1
+        base = _run(model, [robot])
+        moved_objects = _run(model, [_shift(robot, [1, 2], 0.5)])
+        moved_landmarks = _run(model, [_shift(robot, [3, 4, 5, 6, 7], 0.5)])
+    # the same landmarks give the same pose; the objects seen earlier in the period still reach the object stream
+    assert torch.allclose(moved_objects.pose, base.pose)
+    assert (moved_objects.object_features - base.object_features).abs().max() > 1e-3
+    assert (moved_landmarks.pose - base.pose).abs().max() > 1e-4

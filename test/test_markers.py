@@ -110,9 +110,7 @@ def test_ground_truth_counts_positions_and_colours(snapshot):
         assert rgb(body.color) == TEAM_COLOURS[robot.team] and body.color.a == 1.0
         heading, head = by_id[ground_truth_marker_id(robot.id, 1)], by_id[ground_truth_marker_id(robot.id, 2)]
         assert heading.type == head.type == Marker.ARROW and head.scale.y < heading.scale.y
-        q = heading.pose.orientation
-        assert 2 * math.atan2(q.z, q.w) == pytest.approx(robot.yaw) or \
-            math.isclose(abs(2 * math.atan2(q.z, q.w)), math.pi)   # yaw pi and -pi are one heading
+        assert arrow_direction(heading) == pytest.approx((math.cos(robot.yaw), math.sin(robot.yaw), 0.0), abs=1e-9)
     assert {rgb(by_id[ground_truth_marker_id(r.id)].color) for r in robots if r.team == 1} == {(40, 80, 230)}
     assert {rgb(by_id[ground_truth_marker_id(r.id)].color) for r in robots if r.team == -1} == {(220, 40, 40)}
     ball = snapshot.of_class(ObjectClass.BALL)[0]
@@ -121,6 +119,30 @@ def test_ground_truth_counts_positions_and_colours(snapshot):
     assert rgb(sphere.color) == (255, 140, 0)
     text = next(m for m in array.markers if m.type == Marker.TEXT_VIEW_FACING)
     assert "A 0 : 0 B" in text.text and "KICKOFF" in text.text
+
+
+def arrow_direction(marker: Marker) -> tuple[float, float, float]:
+    """Where an ARROW marker points: its pose's orientation applied to the marker's x axis (unit quaternion)."""
+    q = marker.pose.orientation
+    return (1 - 2 * (q.y ** 2 + q.z ** 2), 2 * (q.x * q.y + q.w * q.z), 2 * (q.x * q.z - q.w * q.y))
+
+
+@pytest.mark.parametrize("yaws,head_yaws", [((0.0, math.pi, -math.pi / 2, 2.5), (0.0, 0.0, 0.0, 0.0)),
+                                             ((0.3, -2.8, math.pi, -math.pi), (1.2, -0.7, 2.0, -2.0))])
+def test_heading_and_head_arrows_point_along_the_body_and_the_gaze(snapshot, yaws, head_yaws):
+    poses = dict(enumerate(zip(yaws, head_yaws)))
+    posed = dataclasses.replace(snapshot, objects=tuple(
+        dataclasses.replace(o, yaw=poses[o.id][0], head_yaw=poses[o.id][1]) if o.id in poses else o
+        for o in snapshot.objects))
+    by_id = {m.id: m for m in ground_truth_markers(posed, GEOMETRY, STAMP).markers}
+    for robot_id, (yaw, head_yaw) in poses.items():
+        heading = by_id[ground_truth_marker_id(robot_id, 1)]
+        head = by_id[ground_truth_marker_id(robot_id, 2)]
+        assert arrow_direction(heading) == pytest.approx((math.cos(yaw), math.sin(yaw), 0.0), abs=1e-9)
+        gaze = yaw + head_yaw
+        assert arrow_direction(head) == pytest.approx((math.cos(gaze), math.sin(gaze), 0.0), abs=1e-9)
+        body = by_id[ground_truth_marker_id(robot_id)]   # a standing body is only turned about z, never tilted
+        assert arrow_direction(body) == pytest.approx((math.cos(yaw), math.sin(yaw), 0.0), abs=1e-9)
 
 
 def test_ground_truth_ids_are_stable(world, snapshot):

@@ -12,9 +12,10 @@ from PIL import Image
 
 from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.perception.detections import empty
+from dynenv_ros.perception.params import load_preset
 from dynenv_ros.render.detections import (BALL, ERROR, LINE_DETECTION, MISSED, camera_to_field, field_view,
                                           missed_positions, overlay_detections)
-from dynenv_ros.render.topdown import CARPET
+from dynenv_ros.render.topdown import CARPET, as_array, save_png
 from dynenv_ros.soccer.field import FieldGeometry
 
 PPM = 40
@@ -109,19 +110,50 @@ def test_image_of_another_scale_is_refused(view):
         overlay_detections(Image.new("RGB", (10, 10)), view, (0.0, 0.0, 0.0), empty(0))
 
 
-def test_figure_script_writes_the_four_pngs(tmp_path):
+@pytest.fixture(scope="module")
+def figure_script():
     spec = importlib.util.spec_from_file_location("perception_figures_under_test", SCRIPT)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module                    # dataclasses look their module up while the file runs
     try:
         spec.loader.exec_module(module)
-        assert module.main(["--out", str(tmp_path)]) == 0
+        yield module
     finally:
         del sys.modules[spec.name]
-    expected = field_view(FieldGeometry(), module.PIXELS_PER_METRE).size
+
+
+def test_figure_script_writes_the_four_pngs_byte_identical_on_every_run(figure_script, tmp_path):
+    """docs/perception.md: the pictures come from fixed seeds, byte-identical output."""
+    first, second = tmp_path / "first", tmp_path / "second"
+    assert figure_script.main(["--out", str(first)]) == 0
+    assert figure_script.main(["--out", str(second)]) == 0
+    expected = field_view(FieldGeometry(), figure_script.PIXELS_PER_METRE).size
     for name in FIGURES:
-        path = tmp_path / name
-        assert path.stat().st_size < 150_000
-        with Image.open(path) as image:
-            assert image.size == expected
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(FIGURES)
+        data = (first / name).read_bytes()
+        assert data == (second / name).read_bytes(), f"{name} differs between two runs"
+        assert len(data) < 150_000
+        with Image.open(first / name) as image:
+            assert image.format == "PNG" and image.size == expected
+    assert sorted(p.name for p in first.iterdir()) == sorted(FIGURES)
+    assert len({(first / name).read_bytes() for name in FIGURES}) == len(FIGURES)   # four different pictures
+
+
+def _figure_png(module, figure, seed, path):
+    """One figure drawn from the period of world seed ``seed``: (PNG bytes, pixels below the caption strip)."""
+    overrides = {} if figure.noise_magnitude is None else {"noise_magnitude": figure.noise_magnitude}
+    period = module.run_period(load_preset(figure.preset, **overrides), seed)
+    save_png(module.draw_figure(figure, period), path)
+    with Image.open(path) as image:
+        field = as_array(image)[field_view(FieldGeometry(), module.PIXELS_PER_METRE).strip_height:]
+    return path.read_bytes(), field
+
+
+@pytest.mark.parametrize("index", [1, 3], ids=["realistic", "dynenv"])
+def test_figure_bytes_repeat_for_a_seed_and_change_with_it(figure_script, tmp_path, index):
+    figure = figure_script.FIGURES[index]
+    a_bytes, a_field = _figure_png(figure_script, figure, 5, tmp_path / "a.png")
+    b_bytes, b_field = _figure_png(figure_script, figure, 5, tmp_path / "b.png")
+    c_bytes, c_field = _figure_png(figure_script, figure, 6, tmp_path / "c.png")
+    assert a_bytes == b_bytes                           # same seed: the same file, byte for byte
+    assert c_bytes != a_bytes                           # another seed: another file ...
+    assert not np.array_equal(c_field, a_field)         # ... and not only its caption: the drawn detections differ

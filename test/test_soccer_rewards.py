@@ -31,6 +31,32 @@ def test_ball_progress_is_shared_along_the_touch_chain_and_with_the_team():
     assert aux[2] + aux[3] == pytest.approx(-2 * w.team_share * c - w.bystander_share * c)
 
 
+def test_goal_reward_magnitudes_along_the_chain_and_for_bystanders():
+    """docs/soccer.md primary term (fact sheet §6.1, same weights): ±25 per goal; every robot 0.1 × its team's
+    value; the i-th robot of the touch chain (newest first, either team) 25 × 0.5^i times its team's sign; robots
+    of the losing side outside the chain that are their team's closest to the ball or within 1.5 m of it, half
+    the loss."""
+    world = make_world(players_per_team=3)          # team A: robots 0, 1, 2; team B: 3, 4, 5
+    world.place_robot(0, 1.0, 1.0, 0.0)
+    world.place_robot(1, 2.0, -1.0, 0.0)
+    world.place_robot(2, -2.0, 0.0, 0.0)
+    world.place_robot(3, 4.0, -0.5, math.pi)        # team B's closest to the ball, but in the chain
+    world.place_robot(4, 3.8, 0.9, math.pi)         # ≈1.1 m from where the ball crosses the line (4.55, 0.1)
+    world.place_robot(5, 0.0, -2.0, math.pi)        # far from the ball
+    world.state.chain[:] = [3, 1, 0]                # B's robot 3 touched last (own goal), then A's 1, then A's 0
+    world.place_ball(4.3, 0.1, 1.5, 0.0)
+    result = world.step([IDLE] * 6)
+    assert [g.team for g in result.events if g.kind == "goal"] == [1]
+    primary = result.rewards[RewardTerm.PRIMARY].tolist()
+    assert primary == pytest.approx([0.1 * 25 + 25 * 0.25,          # robot 0: third in the chain
+                                     0.1 * 25 + 25 * 0.5,           # robot 1: second in the chain
+                                     0.1 * 25,                      # robot 2: team share only
+                                     -0.1 * 25 - 25 * 1.0,          # robot 3: first in the chain, on the losing side
+                                     -0.1 * 25 - 0.5 * 25,          # robot 4: bystander within 1.5 m
+                                     -0.1 * 25])                    # robot 5: team share only
+    assert primary == pytest.approx([8.75, 15.0, 2.5, -27.5, -15.0, -2.5])
+
+
 def test_a_ball_teleport_after_an_out_is_not_progress():
     world = make_world(rewards=NO_APPROACH)
     world.state.chain[:] = [0]

@@ -65,29 +65,74 @@ def test_three_falls_without_getting_up_give_a_penalty():
     assert ledger == pytest.approx(-10.0)        # first penalty: 20 s at -0.5 per s; random falls cost nothing
 
 
-def _pushing_world(same_team=False, pusher_walks=True):
-    world = make_world(players_per_team=2,
-                       falls={"enabled": True, "p_walk": 0.0, "contact_base": 0.5, "contact_base_pusher": 1.0})
-    victim = 1 if same_team else 2
+CONTACT_FALL = "fell in a robot contact"
+
+
+def _contact_world(falls, victim=2, actions=None, periods=4):
+    """Robot 0 at (-1, 0) facing +x and ``victim`` 0.205 m ahead facing it (bodies 0.20 m across: a 5 mm gap), then
+    ``periods`` periods of ``actions`` (robot index → action, the rest idle). Returns the events and each robot's
+    summed rule reward."""
+    world = make_world(players_per_team=2, falls={"enabled": True, "p_walk": 0.0, **falls})
     world.place_robot(0, -1.0, 0.0, 0.0)
     world.place_robot(victim, -1.0 + 0.205, 0.0, math.pi)
-    action = FORWARD if pusher_walks else IDLE
-    events = idle_steps(world, 4, {0: action})
-    return world, victim, events
+    events, rule = [], [0.0] * world.n_robots
+    for _ in range(periods):
+        result = world.step([(actions or {}).get(i, IDLE) for i in range(world.n_robots)])
+        events += result.events
+        rule = [total + float(r) for total, r in zip(rule, result.rewards[RewardTerm.RULE])]
+    return events, rule
+
+
+def _contact_falls(events):
+    """Robots that fell in a robot contact (the proof that the bodies touched), in order."""
+    return [e.robot for e in kinds(events, "fall") if e.detail == CONTACT_FALL]
+
+
+# contact_base 0.5 (non-pusher falls within a few contact ticks), contact_base_pusher 1.0 (a pusher never falls)
+VICTIM_FALLS = {"contact_base": 0.5, "contact_base_pusher": 1.0}
+# the reverse: a pusher falls within a few contact ticks, a robot that is not pushing never falls
+PUSHER_FALLS = {"contact_base": 1.0, "contact_base_pusher": 0.5}
 
 
 def test_walking_into_an_opponent_who_falls_is_pushing():
-    world, victim, events = _pushing_world()
-    assert victim in [e.robot for e in kinds(events, "fall")]
-    assert 0 not in [e.robot for e in kinds(events, "fall")]          # the pusher's fall chance is 0 here
-    assert [(e.robot, e.detail.split(" (")[0]) for e in kinds(events, "penalty")] == [(0, f"pushing robot {victim}")]
+    events, rule = _contact_world(VICTIM_FALLS, actions={0: FORWARD})
+    assert _contact_falls(events) == [2]                               # the victim fell in the contact
+    assert [e.robot for e in kinds(events, "fall")] == [2]             # the pusher's fall chance is 0 here
+    assert [(e.robot, e.detail) for e in kinds(events, "penalty")] == [(0, "pushing robot 2 (20 s)")]
+    # docs/soccer.md: the victim's fall is unpunished (it was not the pusher); the pusher's first penalty is
+    # 20 s at -0.5 per second
+    assert rule == [-10.0, 0.0, 0.0, 0.0]
 
 
-def test_no_pushing_penalty_between_teammates_or_without_walking():
-    world, victim, events = _pushing_world(same_team=True)
+def test_no_pushing_penalty_between_teammates():
+    events, rule = _contact_world(VICTIM_FALLS, victim=1, actions={0: FORWARD})
+    assert _contact_falls(events) == [1]                               # the contact happened, the teammate fell
     assert kinds(events, "penalty") == []
-    world, victim, events = _pushing_world(pusher_walks=False)
+    assert rule == [0.0, 0.0, 0.0, 0.0]
+
+
+def test_a_robot_that_stands_still_is_not_pushing_when_an_opponent_walks_into_it_and_falls():
+    # Robot 0 does not walk; robot 2 walks into it and is the one that falls.
+    events, rule = _contact_world(PUSHER_FALLS, actions={2: FORWARD})
+    assert _contact_falls(events) == [2]                               # the contact happened, the walker fell
+    assert kinds(events, "penalty") == []                              # robot 0 was not walking: no pushing
+    assert rule == [0.0, 0.0, -2.0, 0.0]                               # fall as pusher: -2 (docs/soccer.md)
+
+
+def test_a_standing_robot_that_falls_in_contact_gets_its_pusher_penalized():
+    # The same contact, the other robot falls: robot 0 stood still (not walking into robot 2) and fell.
+    events, rule = _contact_world(VICTIM_FALLS, actions={2: FORWARD})
+    assert _contact_falls(events) == [0]
+    assert [(e.robot, e.detail) for e in kinds(events, "penalty")] == [(2, "pushing robot 0 (20 s)")]
+    assert rule == [0.0, 0.0, -10.0, 0.0]
+
+
+def test_no_pushing_penalty_when_both_walk_into_each_other():
+    # Both are pushers (base 0.5), so both fall; neither victim was "not walking into" the other: no penalty.
+    events, rule = _contact_world(PUSHER_FALLS, actions={0: FORWARD, 2: FORWARD})
+    assert sorted(_contact_falls(events)) == [0, 2]
     assert kinds(events, "penalty") == []
+    assert rule == [-2.0, 0.0, -2.0, 0.0]
 
 
 def test_pressing_against_a_goalpost_makes_a_robot_fall_with_a_fall_reward():
@@ -243,8 +288,16 @@ def test_goal_scores_pays_and_restarts_with_a_kickoff_for_the_other_team():
     assert [(g.team, g.detail) for g in goals] == [(1, "score 1:0")]
     snap = world.snapshot()
     assert (snap.score_team_a, snap.score_team_b) == (1, 0)
+    # docs/soccer.md, primary term (fact sheet §6.1, the same weights): the goal is worth ±25; every robot gets
+    # 0.1 of its team's value, the touch chain [1, 0] gets 25·0.5^i, and of the losing side the robot closest to
+    # the ball outside the chain (robot 3 at (1.6, -2.5); robot 2 at (1.0, -2.5); nobody within 1.5 m) gets half
+    # the loss.
     primary = result.rewards[RewardTerm.PRIMARY]
-    assert primary[1] > primary[0] > 0 > primary[2] and primary[3] < 0
+    assert primary.tolist() == pytest.approx([0.1 * 25 + 25 * 0.5,      # robot 0: second in the chain
+                                              0.1 * 25 + 25 * 1.0,      # robot 1: the scorer
+                                              -0.1 * 25,                # robot 2: team share only
+                                              -0.1 * 25 - 0.5 * 25])    # robot 3: closest loser, half the loss
+    assert primary.tolist() == pytest.approx([15.0, 27.5, -2.5, -15.0])
     assert world.state.phase == Phase.KICKOFF and world.state.ball_owner == -1
     assert world.ball_xy == pytest.approx((0.0, 0.0), abs=0.05)
     assert world.state.chain == []
@@ -256,9 +309,11 @@ def test_goal_for_team_b_at_the_negative_end():
     world = make_world()
     world.state.chain[:] = [1]
     world.place_ball(-4.3, -0.3, -1.5, 0.0)
-    events = idle_steps(world, 1)
-    assert [g.team for g in kinds(events, "goal")] == [-1]
+    result = world.step([IDLE, IDLE])
+    assert [g.team for g in kinds(result.events, "goal")] == [-1]
     assert world.state.ball_owner == 1 and world.state.score == {1: 0, -1: 1}
+    # robot 1 (team B) scored alone: team share + whole chain share; robot 0 is team A's only (closest) robot
+    assert result.rewards[RewardTerm.PRIMARY].tolist() == pytest.approx([-0.1 * 25 - 0.5 * 25, 0.1 * 25 + 25])
 
 
 def test_episode_is_truncated_after_its_time():
