@@ -16,6 +16,8 @@ from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.core.settings import check_numbers
 
 MODES = ("realistic", "random", "none")
+CONFIDENCE_MODELS = ("calibrated", "none")
+OCCLUSION_MODELS = ("cone", "band")
 PRESETS = ("realistic", "dynenv", "none")
 CLASS_NAMES = {"ball": ObjectClass.BALL, "robot": ObjectClass.ROBOT, "goalpost": ObjectClass.GOALPOST,
                "penalty_cross": ObjectClass.PENALTY_CROSS, "line_crossing": ObjectClass.LINE_CROSSING,
@@ -30,6 +32,7 @@ class ClassParams:
     max_range: float           # beyond this nothing is detected (inf: no cut-off, as in DynEnv)
     miss_scale: float = 1.0    # multiplies the base miss probability for this class
     visibility_radius: float = 0.05   # how far the object reaches out of the field of view to be partially seen
+    correct_prior: float = 0.9        # calibrated confidence: the share of this class's reports that are correct
 
 
 @dataclass(frozen=True)
@@ -84,9 +87,13 @@ class FalsePositiveParams:
 
 @dataclass(frozen=True)
 class OcclusionParams:
-    """A robot hides what lies behind it within its angular half-width asin(occluder_radius / distance)."""
+    """What a robot hides. ``cone`` (realistic): whatever lies behind it within its angular half-width
+    asin(occluder_radius / its distance), the shadow of a body of that radius. ``band`` (DynEnv, facts §2.7):
+    whatever lies behind it within ``occluder_radius`` of the line of sight through it, and only robots in the field
+    of view occlude."""
     enabled: bool = True
     occluder_radius: float = 0.15
+    model: str = "cone"
 
 
 @dataclass(frozen=True)
@@ -94,7 +101,10 @@ class PerceptionParams:
     mode: str = "realistic"
     noise_magnitude: float = 1.0
     field_of_view: float = math.pi / 2
-    confidence: str = "reliability"    # 'reliability': 1 - P(miss) of the sighting (FPs lower); 'none': always 1
+    # 'calibrated': a detector score, P(correct | score) under each class's correct_prior (docs/perception.md);
+    # 'none': always 1 (DynEnv reports no confidence)
+    confidence: str = "calibrated"
+    confidence_separation: float = 1.5   # d': correct reports' evidence ~ N(d', 1), false ones' ~ N(0, 1)
     classes: Mapping[ObjectClass, ClassParams] = field(default_factory=dict)
     miss: MissParams = field(default_factory=MissParams)
     position: PositionParams = field(default_factory=PositionParams)
@@ -110,19 +120,22 @@ class PerceptionParams:
             raise ValueError(f"noise_magnitude must be a number in [0, 5], got {m!r}")
         if not 0.0 < self.field_of_view < math.pi:
             raise ValueError(f"field_of_view must be in (0, pi) rad, got {self.field_of_view}")
-        if self.confidence not in ("reliability", "none"):
-            raise ValueError(f"confidence must be 'reliability' or 'none', got {self.confidence!r}")
+        if self.confidence not in CONFIDENCE_MODELS:
+            raise ValueError(f"confidence must be one of {CONFIDENCE_MODELS}, got {self.confidence!r}")
+        if self.occlusion.model not in OCCLUSION_MODELS:
+            raise ValueError(f"occlusion.model must be one of {OCCLUSION_MODELS}, got {self.occlusion.model!r}")
         if self.position.model not in ("uniform", "polar"):
             raise ValueError(f"position.model must be 'uniform' or 'polar', got {self.position.model!r}")
         missing = [name for name, cls in CLASS_NAMES.items() if cls != ObjectClass.UNKNOWN and cls not in self.classes]
         if missing:
             raise ValueError(f"classes: no settings for {', '.join(missing)}")
         for cls, p in self.classes.items():
-            numbers = (p.near_range, p.max_range, p.miss_scale, p.visibility_radius)
+            numbers = (p.near_range, p.max_range, p.miss_scale, p.visibility_radius, p.correct_prior)
             if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in numbers) or not (
-                    p.near_range > 0 and p.max_range > 0 and p.miss_scale >= 0 and p.visibility_radius >= 0):
+                    p.near_range > 0 and p.max_range > 0 and p.miss_scale >= 0 and p.visibility_radius >= 0
+                    and 0 < p.correct_prior < 1):
                 raise ValueError(f"classes.{ObjectClass(cls).name.lower()}: ranges must be positive, "
-                                 "miss_scale and visibility_radius non-negative")
+                                 "miss_scale and visibility_radius non-negative, correct_prior in (0, 1)")
         check_numbers(self, infinite_ok=("max_range",))
 
     @property
@@ -201,7 +214,7 @@ def from_mapping(values: Mapping[str, Any]) -> PerceptionParams:
     for key in ("mode", "confidence"):
         if key in values:
             kwargs[key] = values[key]
-    for key in ("noise_magnitude", "field_of_view"):
+    for key in ("noise_magnitude", "field_of_view", "confidence_separation"):
         if key in values:
             if isinstance(values[key], bool) or not isinstance(values[key], (int, float)):
                 raise ValueError(f"{key} must be a number, got {values[key]!r}")
