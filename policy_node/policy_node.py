@@ -21,6 +21,8 @@ from dynenv_msgs.srv import LoadPolicy
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
+from dynenv_ros.envs.padded_layout import (LANDMARK_CLASSES, OBJECT_CLASSES, PaddedLayout, clamp_features,
+                                           pack_frames)
 from dynenv_ros.perception.detections import as_features, rows_from_messages
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.node_runner import run_node
@@ -29,7 +31,7 @@ from dynenv_ros.ros.qos import sim_stream
 from dynenv_ros.soccer.config import robot_names
 from policy_node.checkpoint import load_checkpoint, sha256
 from policy_node.export import TorchPolicy
-from policy_node.model.inputs import collate, encode_previous_action
+from policy_node.model.inputs import side_inputs, streams_from_padded
 from policy_node.model.network import DynEnvAgent
 
 RUNTIMES = ("torch", "onnxruntime")
@@ -75,6 +77,7 @@ class PolicyNode(Node):
         self.memory = {name: RobotMemory() for name in self.names}
         self.latencies_ms: list[float] = []
         self.actions_sent = 0
+        self.dropped_detections = 0          # rows beyond a fixed-shape runtime's maxima, farthest first
         qos = sim_stream()
         self.action_pubs = {n: self.create_publisher(Action, topics.action(n), qos) for n in self.names}
         self.detection_subs = [self.create_subscription(DetectionArray, topics.detections(n), self._receiver(n), qos)
@@ -134,21 +137,16 @@ class PolicyNode(Node):
             return
         started = time.perf_counter()
         memories = [self.memory[n] for n in ready]
-        observations = [[as_features(rows_from_messages(m.frames[k].detections)) for k in sorted(m.frames)]
-                        for m in memories]
-        # A fixed-shape runtime (ONNX) declares its maxima; give both runtimes the same (truncated) input then.
-        landmarks, objects = collate(observations, max_landmarks=getattr(self.policy, "max_landmarks", None),
-                                     max_objects=getattr(self.policy, "max_objects", None))
-        prev = torch.tensor([m.previous for m in memories], dtype=torch.float32)
-        previous = encode_previous_action(prev[:, 0], prev[:, 1], prev[:, 2], prev[:, 3], float(self.policy.head_max))
-        last = [m.frames[max(m.frames)] for m in memories]
-        proprio = torch.tensor([[f.head_yaw, f.self_fallen, f.self_penalized, 0.0] for f in last])
+        observation = self._padded(memories)
+        landmarks, objects = streams_from_padded(observation)
+        previous, proprio = side_inputs(observation, float(self.policy.head_max))
         states = [m.state or self.policy.initial_state(1) for m in memories]
         state = tuple(torch.cat([s[i] for s in states]) for i in range(4))
         step = self.policy(landmarks, objects, previous, proprio, state)
         head_max = float(self.policy.head_max)
         actions = _sample(step, self.policy.head_mode, self.generator, self.greedy, head_max)
         units = (torch.as_tensor(step.head).shape[-1] - 1) // 2 if self.policy.head_mode == "discrete" else 0
+        last = [m.frames[max(m.frames)] for m in memories]
         for b, (name, memory, frame) in enumerate(zip(ready, memories, last)):
             walk, turn, kick, head = actions[b]
             # The checkpoint's own head discretisation: index 0..2u ↦ (index − u)·head_max/u rad.
@@ -166,6 +164,42 @@ class PolicyNode(Node):
             recent = self.latencies_ms[-100:]
             self.get_logger().info(f"decision latency for {len(ready)} robots: median "
                                    f"{statistics.median(recent):.2f} ms, max {max(recent):.2f} ms")
+
+
+    def _padded(self, memories: list[RobotMemory]) -> dict[str, np.ndarray]:
+        observation, dropped = pack_messages([[m.frames[k] for k in sorted(m.frames)] for m in memories],
+                                             [m.previous for m in memories],
+                                             getattr(self.policy, "max_landmarks", None),
+                                             getattr(self.policy, "max_objects", None))
+        self.dropped_detections += dropped
+        return observation
+
+
+def pack_messages(periods: list[list[DetectionArray]], previous: list[tuple], max_landmarks: int | None = None,
+                  max_objects: int | None = None) -> tuple[dict[str, np.ndarray], int]:
+    """Each robot's DetectionArray messages of one period (frame order) and previous action → the one observation
+    layout (``envs.padded_layout``): the same arrays the in-process env gives for the same detections. A
+    fixed-shape runtime (ONNX) sets the maxima, else the batch's own longest frame does. Returns the arrays and
+    the number of rows dropped (farthest first) beyond the maxima."""
+    frames = [[clamp_features(as_features(rows_from_messages(msg.detections))) for msg in period]
+              for period in periods]
+    lengths = [max([0] + [int(np.isin(rows[:, 0], classes).sum()) for entry in frames for rows in entry])
+               for classes in (_LANDMARK_IDS, _OBJECT_IDS)]
+    layout = PaddedLayout(max(len(entry) for entry in frames), max_landmarks or max(1, lengths[0]),
+                          max_objects or max(1, lengths[1]))
+    observation, dropped = pack_frames(layout, frames)
+    for b, period in enumerate(periods):
+        for k, msg in enumerate(period):
+            observation["proprioception"][b, k] = (msg.head_yaw, msg.self_fallen, msg.self_penalized,
+                                                   msg.self_kicking)
+        last = period[-1]
+        observation["game"][b] = (last.ball_owner, last.ball_owner_seconds, last.game_seconds_remaining)
+        observation["previous_action"][b] = previous[b]
+    return observation, int(dropped.sum())
+
+
+_LANDMARK_IDS = [int(c) for c in LANDMARK_CLASSES]
+_OBJECT_IDS = [int(c) for c in OBJECT_CLASSES]
 
 
 def _sample(step, head_mode: str, generator: torch.Generator, greedy: bool, head_max: float) -> np.ndarray:

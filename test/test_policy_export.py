@@ -12,7 +12,8 @@ pytest.importorskip("onnxruntime")
 
 from dynenv_ros.envs.robocup_v0 import parallel_env  # noqa: E402
 from policy_node.export import OnnxPolicy, TorchPolicy, export_onnx  # noqa: E402
-from policy_node.model.inputs import FEATURES, PROPRIOCEPTION, collate, encode_previous_action  # noqa: E402
+from policy_node.model.inputs import (FEATURES, PROPRIOCEPTION, collate, encode_previous_action,  # noqa: E402
+                                      self_state)
 from policy_node.model.network import DynEnvAgent  # noqa: E402
 
 FRAMES, MAX_LANDMARKS, MAX_OBJECTS = 5, 48, 12
@@ -36,8 +37,8 @@ def periods():
         a = torch.tensor(np.stack([actions[agent] for agent in env.possible_agents]))
         previous = encode_previous_action(a[:, 0], a[:, 1], a[:, 2], (a[:, 3] - HEAD_UNITS) * HEAD_STEP,
                                           HEAD_STEP * HEAD_UNITS)
-        proprio = torch.tensor(np.stack([obs[agent]["proprioception"][-1] for agent in env.possible_agents]),
-                               dtype=torch.float32)
+        proprio = self_state(np.stack([obs[agent]["proprioception"][-1] for agent in env.possible_agents]),
+                             np.stack([obs[agent]["game"] for agent in env.possible_agents]))
         out.append(([obs[agent]["detections"] for agent in env.possible_agents], previous, proprio))
     return out
 
@@ -198,3 +199,28 @@ def test_full_frames_and_scattered_padding(exported, periods):
             assert torch.allclose(getattr(a, field), getattr(b, field), atol=1e-5, rtol=0), field
     small = [detections[0]] + [[rows[:2] for rows in frames] for frames in detections[1:]]
     _assert_same_over_periods(TorchPolicy(model), OnnxPolicy(path), [(small, periods[0][1], periods[0][2])])
+
+
+def test_carried_mask_matches_torch(exported, periods):
+    """The RTA's mask rule (a slot stays valid once any frame of the period filled it) in the exported graph:
+    periods whose last frame is empty, and slots filled only in the first frame, give what torch gives — and the
+    empty last frame does not blank out what the earlier frames saw."""
+    model, path = exported
+    empty = np.zeros((0, FEATURES), np.float32)
+    detections = periods[0][0]
+    last_empty = list(detections[0][:-1]) + [empty]
+    first_only = [detections[1][0]] + [empty] * (FRAMES - 1)
+    shrinking = [detections[2][0]] + [rows[:1] for rows in detections[2][1:]]    # slots 1.. filled in frame 0 only
+    batch = [last_empty, first_only, shrinking, detections[3]]
+    inputs = [(batch, previous, proprio) for _, previous, proprio in periods]
+    _assert_same_over_periods(TorchPolicy(model), OnnxPolicy(path), inputs)
+    _, previous, proprio = periods[0]
+    moved = [rows.copy() for rows in last_empty]
+    for rows in moved[:-1]:
+        rows[:, 1] += 0.5                                    # every earlier detection 0.5 m further ahead
+    policy = OnnxPolicy(path)
+    a = policy(*collate([last_empty], max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS), previous[:1],
+               proprio[:1], policy.initial_state(1))
+    b = policy(*collate([moved], max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS), previous[:1],
+               proprio[:1], policy.initial_state(1))
+    assert (a.pose - b.pose).abs().max() > 1e-4 and (a.state[2] - b.state[2]).abs().max() > 1e-4

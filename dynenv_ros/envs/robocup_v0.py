@@ -5,14 +5,22 @@
 | agents | ``team_a_0`` … ``team_a_{n-1}``, ``team_b_0`` … (n = ``players_per_team``, 1–5) |
 | action (``head_mode='discrete'``) | MultiDiscrete [walk 5, turn 3, kick 3, head 7]: see ``soccer.actions`` |
 | action (``head_mode='continuous'``) | Dict ``motion`` MultiDiscrete [5, 3, 3], ``head`` Box rad per period |
-| observation (``observation='partial'``) | per vision frame, the robot's detections as float32 rows, and proprioception (``envs.soccer_observations``) |
-| observation (``'full'`` / ``'image'``) | team-frame ground truth / top and bottom camera segmentation per frame |
+| observation (``observation='partial'``) | per vision frame, the robot's detections as float32 rows (variable length), proprioception and the GameController's ``game`` state (``envs.soccer_observations``) |
+| observation (``'padded'``) | the same as fixed-shape Box arrays with masks and the previous action (``envs.padded_layout``): what Stable-Baselines3, SuperSuit, RLlib batch |
+| observation (``'full'`` / ``'image'``) | team-frame ground truth / top and bottom camera segmentation per frame (uint8 0/255 image, channels first) |
 | perception | ``perception='realistic'`` (default), ``'dynenv'``, ``'none'``, or ``{"preset": …, "noise_magnitude": …, "mode": …}`` |
 | reward | sum of the primary, rule, auxiliary and observation terms; each term in ``infos[agent]['reward_terms']`` |
 | episode | 120 s = 240 motion periods, then every agent is truncated |
 
 Keyword arguments are the settings of ``soccer.config.SoccerConfig`` (nested ones as dicts), plus
-``render_mode='rgb_array'``, ``observation``, ``perception`` and ``image_size=(width, height)``.
+``render_mode='rgb_array'``, ``observation``, ``perception``, ``image_size=(width, height)`` and, for the padded
+layout, ``max_landmarks`` / ``max_objects`` (rows per frame; the farthest beyond them are dropped and counted in
+``infos[agent]['dropped_detections']``).
+
+Head modes for learners: ``head_mode='discrete'`` (default) makes the whole action one ``MultiDiscrete``, which every
+PPO implementation accepts (Stable-Baselines3, CleanRL, RLlib). ``head_mode='continuous'`` gives a ``Dict`` of a
+``MultiDiscrete`` and a ``Box`` (a hybrid action), which this project's agent handles with a Gaussian head but which
+Stable-Baselines3's PPO does not accept; use the discrete head with such libraries.
 """
 from __future__ import annotations
 
@@ -35,7 +43,8 @@ class RoboCupParallelEnv(ParallelEnv):
     metadata = {"name": "robocup_v0", "render_modes": ["rgb_array"], "render_fps": 2, "is_parallelizable": True}
 
     def __init__(self, render_mode: str | None = None, observation: str = "partial",
-                 perception: Any = "realistic", image_size: tuple[int, int] = (640, 480), **config: Any) -> None:
+                 perception: Any = "realistic", image_size: tuple[int, int] = (640, 480),
+                 max_landmarks: int | None = None, max_objects: int | None = None, **config: Any) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
@@ -45,7 +54,8 @@ class RoboCupParallelEnv(ParallelEnv):
         self.agents: list[str] = []
         self._index = {name: i for i, name in enumerate(self.possible_agents)}
         self.encoder = GroundTruthEncoder(self.config)
-        self.observations = SoccerObservations(self.config, observation, perception, image_size)
+        self.observations = SoccerObservations(self.config, observation, perception, image_size, max_landmarks,
+                                               max_objects)
         self._action_space = action_space(self.config)
         self._action_spaces = {a: self._action_space for a in self.possible_agents}
         self._observation_spaces = {a: self.observations.space for a in self.possible_agents}
@@ -104,7 +114,11 @@ class RoboCupParallelEnv(ParallelEnv):
             rewards[agent] = float(totals[i])
             terminations[agent] = result.terminated
             truncations[agent] = result.truncated
-            infos[agent] = {"reward_terms": terms[i]}
+            # Gymnasium's key for "ended by the time limit, bootstrap from the final observation", which
+            # SuperSuit's vector env passes on and Stable-Baselines3 reads.
+            infos[agent] = {"reward_terms": terms[i], "TimeLimit.truncated": result.truncated and not result.terminated}
+            if self.observations.mode == "padded":
+                infos[agent]["dropped_detections"] = int(self.observations.dropped_rows[i])
         if result.terminated or result.truncated:
             self.agents = []
         return obs, rewards, terminations, truncations, infos

@@ -1,12 +1,19 @@
-"""What a soccer agent observes each motion period, in one of three modes:
+"""What a soccer agent observes each motion period, in one of four modes:
 
 - ``partial`` (default): each vision frame's detections from the perception model (``perception/``), as float32
-  rows (``perception.detections.FEATURE_COLUMNS``), plus proprioception per frame;
+  rows (``perception.detections.FEATURE_COLUMNS``, nearest first), plus proprioception per frame and the
+  GameController's broadcast (``game``); variable length (gymnasium ``Sequence`` spaces);
+- ``padded``: the same detections in the fixed-shape layout of ``envs.padded_layout`` (Box spaces every RL
+  library can batch), with the previous action;
 - ``full``: the noise-free ground truth in the robot's team frame (``soccer_spaces.GroundTruthEncoder``);
 - ``image``: per frame, semantic segmentation of the NAO's top and bottom cameras (``perception/camera.py``),
-  rendered from the frame's (noisy) detections, plus proprioception.
+  rendered from the frame's (noisy) detections, plus proprioception and ``game``. Declared as an image
+  (uint8 0/255, channels first) so image-aware tools (e.g. Stable-Baselines3's CNN policies) treat it as one:
+  channel ``8·frame + 4·camera + class`` with camera 0 top, 1 bottom and class 0 ball, 1 robot, 2 goalpost,
+  3 lines (field lines, penalty marks, crossings, centre circle).
 
-Partial and image modes also give the observation reward (what was truly seen); full mode gives none, as in DynEnv.
+Partial, padded and image modes also give the observation reward (what was truly seen); full mode gives none, as
+in DynEnv.
 """
 from __future__ import annotations
 
@@ -15,17 +22,24 @@ from typing import Any, Mapping
 import numpy as np
 from gymnasium import spaces
 
-from dynenv_ros.core.arrays import clamp
+from dynenv_ros.envs.padded_layout import (ACTION_COLUMNS, FEATURE_BOUND, GAME_COLUMNS, PROPRIOCEPTION_COLUMNS,
+                                           PaddedLayout, clamp_features)
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder
 from dynenv_ros.perception.detections import FEATURE_COLUMNS, as_features
 from dynenv_ros.perception.params import PerceptionParams, load_preset
+from dynenv_ros.soccer.actions import SoccerAction
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.vision import SoccerVision
 from dynenv_ros.soccer.world import SoccerWorld
 
-OBSERVATION_MODES = ("partial", "full", "image")
-PROPRIOCEPTION_COLUMNS = ("head_yaw", "fallen", "penalized", "kicking")
-FEATURE_BOUND = 50.0
+OBSERVATION_MODES = ("partial", "padded", "full", "image")
+__all__ = ["OBSERVATION_MODES", "PROPRIOCEPTION_COLUMNS", "GAME_COLUMNS", "ACTION_COLUMNS", "FEATURE_BOUND",
+           "SoccerObservations", "perception_params", "previous_actions"]
+
+
+def previous_actions(actions: list[SoccerAction]) -> np.ndarray:
+    """(robots, 4) float32 [walk, turn, kick, head_yaw_delta rad] of the last period's commands."""
+    return np.array([(int(a.walk), int(a.turn), int(a.kick), a.head_yaw_delta) for a in actions], np.float32)
 
 
 def perception_params(setting: str | Mapping[str, Any] | PerceptionParams) -> PerceptionParams:
@@ -45,7 +59,8 @@ class SoccerObservations:
 
     def __init__(self, config: SoccerConfig, mode: str = "partial",
                  perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
-                 image_size: tuple[int, int] = (640, 480)) -> None:
+                 image_size: tuple[int, int] = (640, 480), max_landmarks: int | None = None,
+                 max_objects: int | None = None) -> None:
         if mode not in OBSERVATION_MODES:
             raise ValueError(f"observation must be one of {OBSERVATION_MODES}, got {mode!r}")
         self.config = config
@@ -55,19 +70,24 @@ class SoccerObservations:
         self.ground_truth = GroundTruthEncoder(config)
         self.vision: SoccerVision | None = None
         self._frame = 0
-        proprio_space = spaces.Box(-np.pi, np.pi, (self.frames, len(PROPRIOCEPTION_COLUMNS)), np.float32)
+        self.layout = PaddedLayout.for_players(config.players_per_team, self.frames, max_landmarks, max_objects)
+        padded = self.layout.space(head_max=config.motion.head_max_delta)
+        proprio_space, game_space = padded["proprioception"], padded["game"]
         if mode == "full":
             self.space: spaces.Space = self.ground_truth.observation_space
         elif mode == "partial":
             row = spaces.Box(-FEATURE_BOUND, FEATURE_BOUND, (len(FEATURE_COLUMNS),), np.float32)
             self.space = spaces.Dict({"detections": spaces.Tuple([spaces.Sequence(row, stack=True)] * self.frames),
-                                      "proprioception": proprio_space})
+                                      "proprioception": proprio_space, "game": game_space})
+        elif mode == "padded":
+            self.space = padded
         else:
             from dynenv_ros.perception.camera import CHANNELS_PER_CAMERA, ImageConfig
             self.image_config = ImageConfig(*image_size)
-            shape = (self.frames, 2 * CHANNELS_PER_CAMERA, self.image_config.height, self.image_config.width)
-            self.space = spaces.Dict({"images": spaces.Box(0, 1, shape, np.uint8),
-                                      "proprioception": proprio_space})
+            shape = (self.frames * 2 * CHANNELS_PER_CAMERA, self.image_config.height, self.image_config.width)
+            self.space = spaces.Dict({"images": spaces.Box(0, 255, shape, np.uint8),
+                                      "proprioception": proprio_space, "game": game_space})
+        self.dropped_rows = np.zeros(config.n_robots, np.int64)   # padded: rows beyond the maxima, last period
 
     def reset(self, world: SoccerWorld) -> None:
         self.world = world
@@ -91,6 +111,35 @@ class SoccerObservations:
                 self.on_frame(k)
         return self.build()[0]
 
+    def build_padded(self, out: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """Padded mode without per-robot dicts: fill ``out`` (``layout.empty(n_robots)``, or new arrays kept in
+        ``self.arrays``) and return the observation reward per robot. For vectorised batches."""
+        if self.mode != "padded":
+            raise RuntimeError("build_padded() needs observation='padded'")
+        perception = self.vision.perceive()
+        rewards = self.vision.observation_rewards(perception)
+        self.arrays = self._pack(perception, self.vision.proprioception, self.vision.game_controller[-1], out)
+        return rewards
+
+    def initial_padded(self, out: dict[str, np.ndarray] | None = None) -> None:
+        for k in range(self.frames):
+            self.on_frame(k)
+        self.build_padded(out)
+
+    def _pack(self, perception, proprio: np.ndarray, game: np.ndarray,
+              out: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+        n = self.config.n_robots
+        frames = len(perception) // n
+        arrays = self.layout.empty(n) if out is None else out
+        views = np.arange(frames * n)
+        self.dropped_rows = self.layout.pack_rows(
+            clamp_features(as_features(perception.detections)), perception.offsets, views % n, views // n,
+            arrays).reshape(frames, n).sum(axis=0)
+        arrays["proprioception"][:, :frames] = proprio.transpose(1, 0, 2)
+        arrays["game"][:] = game
+        arrays["previous_action"][:] = previous_actions(self.world.last_actions)
+        return arrays
+
     def build(self) -> tuple[list[Any], np.ndarray]:
         """(one observation per robot, observation reward per robot) for the frames recorded this period."""
         n = self.config.n_robots
@@ -100,17 +149,21 @@ class SoccerObservations:
         perception = self.vision.perceive()
         rewards = self.vision.observation_rewards(perception)
         proprio = self.vision.proprioception                                # (F, n, 4)
+        game = self.vision.game_controller[-1]                              # (n, 3) at the last frame
         frames = len(perception) // n
         if self.mode == "partial":
-            features = clamp(as_features(perception.detections), -FEATURE_BOUND, FEATURE_BOUND)
+            features = clamp_features(as_features(perception.detections))
             off = perception.offsets
             out = [{"detections": tuple(features[off[k * n + i]:off[k * n + i + 1]] for k in range(frames)),
-                    "proprioception": proprio[:, i]} for i in range(n)]
+                    "proprioception": proprio[:, i], "game": game[i]} for i in range(n)]
             return out, rewards
+        if self.mode == "padded":
+            arrays = self._pack(perception, proprio, game)
+            return [{key: value[i] for key, value in arrays.items()} for i in range(n)], rewards
         from dynenv_ros.perception.camera import render_segmentation
         out = []
         for i in range(n):
-            images = np.stack([render_segmentation(perception.of_view(k * n + i), self.image_config)
-                               for k in range(frames)])
-            out.append({"images": images, "proprioception": proprio[:, i]})
+            images = np.concatenate([render_segmentation(perception.of_view(k * n + i), self.image_config)
+                                     for k in range(frames)]) * np.uint8(255)
+            out.append({"images": images, "proprioception": proprio[:, i], "game": game[i]})
         return out, rewards

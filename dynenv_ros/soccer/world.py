@@ -17,7 +17,7 @@ from dynenv_ros.sim.ground_truth import BodyState, WorldSnapshot
 from dynenv_ros.sim.physics import PhysicsWorld
 from dynenv_ros.sim.reward_terms import RewardLedger, RewardTerm
 from dynenv_ros.sim.scenario import FrameCallback, GameEvent, PeriodResult
-from dynenv_ros.soccer.actions import Kick, SoccerAction, parse_action
+from dynenv_ros.soccer.actions import IDLE, Kick, SoccerAction, parse_action
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.placement import free_spot, kickoff_poses, sideline_spots
 from dynenv_ros.soccer.referee import GameState, Phase, decide_out
@@ -68,6 +68,8 @@ class SoccerWorld:
         self._progress_anchor: float | None = None
         self.robots = [Robot(i, TEAM_A if i < c.players_per_team else TEAM_B, i % c.players_per_team, c)
                        for i in range(c.n_robots)]
+        # What each robot was told to do last period (a robot knows its own command; observations carry it).
+        self.last_actions: list[SoccerAction] = [IDLE] * c.n_robots
         self._robot_of_shape: dict[pymunk.Shape, Robot] = {r.shape: r for r in self.robots}
         for robot in self.robots:
             robot.add_to(space)
@@ -203,6 +205,7 @@ class SoccerWorld:
         parsed = self.parse_actions(actions, names)
         if self.state.phase == Phase.FINISHED:
             raise RuntimeError("the episode has finished; call reset() first")
+        self.last_actions = parsed
         self.ledger.clear()
         self.events = []
         rates = self.config.rates

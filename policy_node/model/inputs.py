@@ -1,27 +1,33 @@
-"""Detection lists → padded tensors and masks, batched over (environment × robot, vision frame, detection).
+"""Observations → the network's inputs: padded tensors and masks per stream, batched over robots.
 
-The perception's feature rows (``dynenv_ros.perception.detections.FEATURE_COLUMNS``) are split into the two streams
-of the paper's encoder: landmarks (for localization) and dynamic objects (ball, robots). Padding is explicit
-(``mask`` True = padded slot), so no detection, no frame and no batch entry ever needs special-casing downstream.
+The one observation layout is ``dynenv_ros.envs.padded_layout`` (what ``robocup_v0(observation="padded")`` and the
+vectorised batch return, and what the policy node builds from DetectionArray messages): ``streams_from_padded``
+turns it into the two streams of the paper's encoder — landmarks (for localization) and dynamic objects (ball,
+robots) — with tensor operations only, and ``side_inputs`` into the self-state and previous-action vectors.
+``collate`` packs variable-length detection rows into that layout first. Padding is explicit (``mask`` True =
+padded slot), so no detection, frame or batch entry ever needs special-casing downstream.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import torch
 
-from dynenv_ros.core.object_classes import ObjectClass
-from dynenv_ros.perception.detections import FEATURE_COLUMNS
+from dynenv_ros.envs.padded_layout import (FEATURES, GAME_COLUMNS, LANDMARK_CLASSES, OBJECT_CLASSES,
+                                           PROPRIOCEPTION_COLUMNS, PaddedLayout, pack_frames)
 
-FEATURES = len(FEATURE_COLUMNS)
-LANDMARK_CLASSES = (ObjectClass.GOALPOST, ObjectClass.PENALTY_CROSS, ObjectClass.LINE_CROSSING,
-                    ObjectClass.FIELD_LINE, ObjectClass.CENTER_CIRCLE)
-DYNAMIC_CLASSES = (ObjectClass.BALL, ObjectClass.ROBOT)
+DYNAMIC_CLASSES = OBJECT_CLASSES
 # Embedding index of each class (one MLP per class); 0 is reserved for padding and unknown classes.
 CLASS_INDEX = {int(c): i + 1 for i, c in enumerate(DYNAMIC_CLASSES + LANDMARK_CLASSES)}
 NUM_CLASSES = len(CLASS_INDEX) + 1
+_KIND = torch.zeros(256, dtype=torch.int64)
+for _cls, _index in CLASS_INDEX.items():
+    _KIND[_cls] = _index
+# The GameController's values reach the network scaled to about unit size: ownership relation as is, its seconds
+# over a free kick's length, the game's seconds over a 10-minute half.
+GAME_SCALE = torch.tensor([1.0, 1 / 10.0, 1 / 600.0])
 
 
 @dataclass
@@ -33,39 +39,51 @@ class StreamBatch:
     mask: torch.Tensor
 
 
-def _stream(frames_per_entry: Sequence[Sequence[np.ndarray]], classes: tuple, max_objects: int | None
-            ) -> StreamBatch:
-    B = len(frames_per_entry)
-    F = max((len(frames) for frames in frames_per_entry), default=1)
-    wanted = np.array([int(c) for c in classes])
-    selected = [[rows[np.isin(rows[:, 0].astype(int), wanted)] if len(rows) else rows.reshape(0, FEATURES)
-                 for rows in frames] for frames in frames_per_entry]
-    longest = max((len(rows) for frames in selected for rows in frames), default=0)
-    N = max(1, longest if max_objects is None else max_objects)
-    features = np.zeros((B, F, N, FEATURES), np.float32)
-    kind = np.zeros((B, F, N), np.int64)
-    mask = np.ones((B, F, N), bool)
-    lookup = np.zeros(256, np.int64)
-    for cls, index in CLASS_INDEX.items():
-        lookup[cls] = index
-    for b, frames in enumerate(selected):
-        for f, rows in enumerate(frames):
-            rows = rows[:N]                  # beyond a fixed maximum (deployment), the first rows are kept
-            k = len(rows)
-            features[b, f, :k] = rows
-            kind[b, f, :k] = lookup[rows[:, 0].astype(np.int64)]
-            mask[b, f, :k] = False
-    return StreamBatch(torch.from_numpy(features), torch.from_numpy(kind), torch.from_numpy(mask))
+def _as_tensor(value) -> torch.Tensor:
+    return value if isinstance(value, torch.Tensor) else torch.from_numpy(np.asarray(value, np.float32))
+
+
+def stream(features, valid) -> StreamBatch:
+    """One stream from padded rows (B, F, N, FEATURES) and a validity mask (B, F, N), 1 = a detection."""
+    features, valid = _as_tensor(features), _as_tensor(valid)
+    kind = _KIND[features[..., 0].long().clamp(0, 255)]
+    padded = valid < 0.5
+    return StreamBatch(features, kind.masked_fill(padded, 0), padded)
+
+
+def streams_from_padded(observation: Mapping[str, object]) -> tuple[StreamBatch, StreamBatch]:
+    """(landmarks, dynamic objects) of a batch of padded observations (keys of ``PaddedLayout``, robots leading)."""
+    return (stream(observation["landmarks"], observation["landmark_mask"]),
+            stream(observation["objects"], observation["object_mask"]))
+
+
+def side_inputs(observation: Mapping[str, object], head_max: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """(previous action encoding (B, ACTION_ENCODING), self state (B, SELF_STATE)) of padded observations: the
+    period's last proprioception row and the GameController's values, scaled."""
+    action = _as_tensor(observation["previous_action"])
+    previous = encode_previous_action(action[:, 0], action[:, 1], action[:, 2], action[:, 3], head_max)
+    return previous, self_state(_as_tensor(observation["proprioception"])[:, -1], observation["game"])
+
+
+def self_state(proprioception, game) -> torch.Tensor:
+    """(B, SELF_STATE): the last frame's proprioception (B, 4) and the GameController's values (B, 3), scaled."""
+    return torch.cat([_as_tensor(proprioception), _as_tensor(game) * GAME_SCALE], dim=-1)
 
 
 def collate(observations: Sequence[Sequence[np.ndarray]], max_landmarks: int | None = None,
             max_objects: int | None = None) -> tuple[StreamBatch, StreamBatch]:
     """(landmarks, dynamic objects) for a batch of robots; each observation is a sequence of frames, each frame a
-    (k, FEATURES) float array of detection rows (what ``robocup_v0`` gives under ``obs["detections"]``)."""
-    observations = [[np.asarray(rows, np.float32).reshape(-1, FEATURES) for rows in frames]
-                    for frames in observations]
-    return (_stream(observations, LANDMARK_CLASSES, max_landmarks),
-            _stream(observations, DYNAMIC_CLASSES, max_objects))
+    (k, FEATURES) float array of detection rows nearest first (``robocup_v0``'s ``obs["detections"]``). Packed
+    into the padded layout — with the batch's own maxima where none are given; beyond a fixed maximum the
+    farthest rows are dropped, as everywhere."""
+    frames = [[np.asarray(rows, np.float32).reshape(-1, FEATURES) for rows in entry] for entry in observations]
+    counts = [(int(np.isin(rows[:, 0], [int(c) for c in LANDMARK_CLASSES]).sum()),
+               int(np.isin(rows[:, 0], [int(c) for c in OBJECT_CLASSES]).sum())) for entry in frames for rows in entry]
+    layout = PaddedLayout(max((len(entry) for entry in frames), default=1) or 1,
+                          max_landmarks or max([c[0] for c in counts] + [1]),
+                          max_objects or max([c[1] for c in counts] + [1]))
+    arrays, _ = pack_frames(layout, frames)
+    return streams_from_padded(arrays)
 
 
 def encode_previous_action(walk: torch.Tensor, turn: torch.Tensor, kick: torch.Tensor, head: torch.Tensor,
@@ -79,4 +97,4 @@ def encode_previous_action(walk: torch.Tensor, turn: torch.Tensor, kick: torch.T
 
 
 ACTION_ENCODING = 12
-PROPRIOCEPTION = 4
+PROPRIOCEPTION = len(PROPRIOCEPTION_COLUMNS) + len(GAME_COLUMNS)      # the network's self-state input
