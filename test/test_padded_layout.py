@@ -111,7 +111,7 @@ def test_the_layout_declares_float32_boxes_with_the_documented_shapes():
     space = layout.space()
     assert set(space.spaces) == set(KEYS)
     assert {k: s.shape for k, s in space.spaces.items()} == {
-        "landmarks": (5, 32, 19), "landmark_mask": (5, 32), "objects": (5, 10, 19), "object_mask": (5, 10),
+        "landmarks": (5, 40, 19), "landmark_mask": (5, 40), "objects": (5, 10, 19), "object_mask": (5, 10),
         "proprioception": (5, 4), "game": (3,), "previous_action": (4,)}
     assert all(s.dtype == np.float32 for s in space.spaces.values())
     with pytest.raises(ValueError, match="max_objects"):

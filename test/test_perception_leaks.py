@@ -3,10 +3,10 @@
 A learner must not be able to tell a false detection from a real one by a flag, a size or an order: every feature
 of a false or confused report is drawn as a real report of that class at that place would be. The tests collect tens
 of thousands of reports from random play, label each one false (no object behind it, or the wrong class) or correct,
-and fit logistic regressions: one on the geometry alone (where the report is, and how close it is to the other ball
-and robot reports of its frame — the information rule 4 of the paper puts there on purpose), one on the geometry plus
-every other feature but the confidence. The second must do no better than the first within the sampling error
-(docs/perception.md gives the measured chance level). The confidence is informative by design, exactly as far as the
+and fit logistic regressions (``perception.audit.leak_check``): one on the geometry alone (where the report is, and
+how close it is to the other ball and robot reports of its frame — the information rule 4 of the paper puts there on
+purpose), one on the geometry plus every other feature but the confidence. The second must do no better than the
+first within the sampling error (docs/perception.md gives the measured chance level). The confidence is informative by design, exactly as far as the
 documented separation d' allows.
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from dynenv_ros.envs.soccer_observations import perception_params
-from dynenv_ros.perception.detections import FEATURE_COLUMNS, as_features
+from dynenv_ros.perception.audit import auc, false_reports, leak_check, nearest_dynamic
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.vision import SoccerVision
 from dynenv_ros.soccer.world import SoccerWorld
@@ -62,98 +62,21 @@ def _collect(preset: str, periods: int, seed: int) -> tuple[np.ndarray, np.ndarr
 
 @pytest.fixture(scope="module")
 def realistic():
-    return _collect("realistic", 2500, seed=11)
+    return _collect("realistic", 2000, seed=11)
 
 
 @pytest.fixture(scope="module")
 def dynenv():
-    return _collect("dynenv", 1500, seed=12)
-
-
-def _false(rows: np.ndarray) -> np.ndarray:
-    return (rows["true_id"] == -1) | (rows["true_class"] != rows["class_id"])
-
-
-def _nearest_dynamic(rows: np.ndarray, views: np.ndarray) -> np.ndarray:
-    """Distance from each report to the nearest other ball or robot report of its frame (inf if none)."""
-    out = np.full(len(rows), np.inf)
-    dyn = np.flatnonzero(np.isin(rows["class_id"], (BALL, ROBOT)))
-    starts = np.searchsorted(views, views)              # views are sorted: rows of one view are contiguous
-    ends = np.searchsorted(views, views, side="right")
-    dyn_start, dyn_end = np.searchsorted(dyn, starts), np.searchsorted(dyn, ends)
-    width = int((dyn_end - dyn_start).max())
-    for k in range(width):
-        at = dyn_start + k
-        has = at < dyn_end
-        other = dyn[np.minimum(at, len(dyn) - 1)]
-        gap = np.hypot(rows["x"] - rows["x"][other], rows["y"] - rows["y"][other])
-        valid = has & (other != np.arange(len(rows)))
-        out = np.where(valid, np.minimum(out, gap), out)
-    return out
-
-
-def _design(rows: np.ndarray, near: np.ndarray, extra: tuple[str, ...]) -> np.ndarray:
-    features = as_features(rows)
-    d = np.hypot(rows["x"], rows["y"]).astype(float)
-    b = np.abs(np.arctan2(rows["y"], rows["x"])).astype(float)
-    n = np.minimum(near, 10.0)
-    columns = []
-    for cls in POINT_CLASSES:
-        indicator = (rows["class_id"] == cls).astype(float)
-        geometry = [np.ones(len(rows)), d, d ** 2, d ** 3, b, b ** 2, b ** 3, d * b, n, n ** 2, n < NEARBY_DISTANCE]
-        columns += [indicator * g for g in geometry]
-        columns += [indicator * features[:, FEATURE_COLUMNS.index(name)] for name in extra]
-    x = np.column_stack(columns)
-    x = x[:, x.std(axis=0) > 0]
-    return (x - x.mean(axis=0)) / x.std(axis=0)
-
-
-def _logistic_fit(x: np.ndarray, y: np.ndarray, ridge: float = 1e-3) -> np.ndarray:
-    x = np.column_stack((np.ones(len(x)), x))
-    w = np.zeros(x.shape[1])
-    for _ in range(25):                                  # Newton's method
-        p = 1.0 / (1.0 + np.exp(-x @ w))
-        hessian = (x * (p * (1 - p))[:, None]).T @ x + ridge * np.eye(len(w))
-        w -= np.linalg.solve(hessian, x.T @ (p - y) + ridge * w)
-    return w
-
-
-def _score(x: np.ndarray, w: np.ndarray) -> np.ndarray:
-    return np.column_stack((np.ones(len(x)), x)) @ w
-
-
-def _auc(score: np.ndarray, label: np.ndarray) -> float:
-    ranks = np.empty(len(score))
-    ranks[np.argsort(score, kind="stable")] = np.arange(1, len(score) + 1)
-    positives = label.sum()
-    return float((ranks[label].sum() - positives * (positives + 1) / 2) / (positives * (len(label) - positives)))
-
-
-def _held_out_aucs(rows: np.ndarray, views: np.ndarray, extra: tuple[str, ...]) -> tuple[float, float, float]:
-    """(geometry AUC, geometry + extra AUC, bootstrap SE of their difference) on the held-out half."""
-    label = _false(rows)
-    near = _nearest_dynamic(rows, views)
-    train = views % 2 == 0                                # whole frames to each half
-    scores = []
-    for columns in ((), extra):
-        x = _design(rows, near, columns)
-        w = _logistic_fit(x[train], label[train].astype(float))
-        scores.append(_score(x[~train], w))
-    test_label = label[~train]
-    rng = np.random.default_rng(0)
-    diffs = []
-    for _ in range(60):
-        pick = rng.integers(0, len(test_label), len(test_label))
-        diffs.append(_auc(scores[1][pick], test_label[pick]) - _auc(scores[0][pick], test_label[pick]))
-    return _auc(scores[0], test_label), _auc(scores[1], test_label), float(np.std(diffs))
+    return _collect("dynenv", 1200, seed=12)
 
 
 @pytest.mark.parametrize("preset", ["realistic", "dynenv"])
 def test_no_feature_but_the_confidence_adds_to_what_the_geometry_says(preset, request):
     rows, views = request.getfixturevalue(preset)
-    label = _false(rows)
+    label = false_reports(rows)
     assert label.sum() > 2000                             # enough false reports for the comparison to mean much
-    geometry, everything, se = _held_out_aucs(rows, views, OTHER_FEATURES)
+    check = leak_check(rows, views, OTHER_FEATURES)
+    geometry, everything, se = check.geometry_auc, check.extended_auc, check.difference_se
     # The chance level the geometry gives (docs/perception.md: 0.87-0.89 realistic) is far from perfect...
     assert 0.6 < geometry < 0.95
     # ... and flags, sizes, headings, teams, states and shapes add nothing to it.
@@ -162,22 +85,22 @@ def test_no_feature_but_the_confidence_adds_to_what_the_geometry_says(preset, re
 
 def test_the_confidence_separates_correct_and_false_reports_as_far_as_d_prime_allows(realistic):
     rows, _ = realistic
-    label = _false(rows)
+    label = false_reports(rows)
     expected = 0.5 * (1 + math.erf(SEPARATION / math.sqrt(2) / math.sqrt(2)))     # Φ(d'/√2) = 0.856
     for cls in (BALL, ROBOT, GOALPOST):
         of = rows["class_id"] == cls
-        auc = _auc(-rows["confidence"][of].astype(float), label[of])
+        measured = auc(-rows["confidence"][of].astype(float), label[of])
         n_false, n_true = label[of].sum(), (~label[of]).sum()
         # Hanley & McNeil's standard error of an AUC
         q1, q2 = expected / (2 - expected), 2 * expected ** 2 / (1 + expected)
         se = math.sqrt((expected * (1 - expected) + (n_false - 1) * (q1 - expected ** 2)
                         + (n_true - 1) * (q2 - expected ** 2)) / (n_false * n_true))
-        assert abs(auc - expected) < 4 * se, (cls, auc, expected, se)
+        assert abs(measured - expected) < 4 * se, (cls, measured, expected, se)
 
 
 def test_the_confidence_is_calibrated_per_class_in_random_play(realistic):
     rows, _ = realistic
-    correct = ~_false(rows)
+    correct = ~false_reports(rows)
     for cls, prior in REALISTIC_PRIOR.items():
         of = rows["class_id"] == cls
         confidence, share = rows["confidence"][of].astype(float), correct[of].mean()
@@ -197,22 +120,22 @@ def test_sighting_bits_follow_the_report_by_one_rule_for_real_and_false(preset, 
     d = np.hypot(rows["x"], rows["y"]).astype(float)
     cls = rows["class_id"]
     near = np.array([near_range[c] for c in cls])
-    reach = np.arcsin(np.minimum(1.0, np.array([reach_radius[c] for c in cls]) / d))
+    reach = np.arcsin(np.minimum(1.0, np.array([reach_radius[c] for c in cls]) / np.maximum(d, 1e-9)))
     expected = ((d > near) * DISTANT
                 | (np.abs(np.arctan2(rows["y"], rows["x"])) > HALF_FOV - reach) * PARTIAL
-                | (_nearest_dynamic(rows, views) < NEARBY_DISTANCE) * NEARBY)
-    label = _false(rows)
+                | (nearest_dynamic(rows, views) < NEARBY_DISTANCE) * NEARBY)
+    label = false_reports(rows)
     mismatch = rows["sighting"] != expected
     assert mismatch.mean() < 1e-3, (mismatch[label].mean(), mismatch[~label].mean())
     # the issue's examples: false reports beyond their near range are DISTANT; balls at robots' feet are NEARBY
     assert (rows["sighting"][label & (d > near + 0.01)] & DISTANT).all()
-    feet = label & (cls == BALL) & (_nearest_dynamic(rows, views) < 0.3)
+    feet = label & (cls == BALL) & (nearest_dynamic(rows, views) < 0.3)
     assert feet.sum() > 20 and (rows["sighting"][feet] & NEARBY).all()
 
 
 def test_false_balls_have_the_size_distribution_of_real_balls(realistic):
     rows, _ = realistic
-    label = _false(rows)
+    label = false_reports(rows)
     balls = rows["class_id"] == BALL
     false_size, real_size = rows["size_x"][balls & label], rows["size_x"][balls & ~label]
     assert len(np.unique(false_size)) > len(false_size) // 2           # not one nominal value

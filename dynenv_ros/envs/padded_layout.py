@@ -12,8 +12,9 @@ Per robot, for the F vision frames of a motion period:
 | ``game`` | (3,) | ``GAME_COLUMNS``: what the GameController broadcasts, at the period's last frame |
 | ``previous_action`` | (4,) | ``ACTION_COLUMNS``: the action the robot took last period (zeros after a reset) |
 
-All float32 Boxes. Rows beyond a stream's maximum are dropped farthest first (counted); the default maxima hold
-every detection of more than 99.9 % of frames (docs/perception.md). This module is the single definition: the
+All float32 Boxes. Rows beyond a stream's maximum are dropped farthest first (counted); the default maxima (40
+landmarks; the ball, every other robot and 4 more objects) held every detection of every frame in 1,000 periods
+of random play under each preset (docs/perception.md). This module is the single definition: the
 PettingZoo env (``observation="padded"``), the vectorised batch, the agent's input adapter and the policy node all
 pack with ``pack_rows``, so the same detections give the same arrays everywhere.
 """
@@ -38,7 +39,7 @@ GAME_COLUMNS = ("ball_owner", "ball_owner_seconds", "game_seconds_remaining")
 # head_yaw_delta in rad per period, whatever the head mode (a discrete index is converted).
 ACTION_COLUMNS = ("walk", "turn", "kick", "head_yaw_delta")
 KEYS = ("landmarks", "landmark_mask", "objects", "object_mask", "proprioception", "game", "previous_action")
-DEFAULT_MAX_LANDMARKS = 32
+DEFAULT_MAX_LANDMARKS = 40
 EXTRA_OBJECT_SLOTS = 4       # room for false positives beyond the ball and the other robots
 GAME_BOUND = 1000.0          # s; longer than any configurable episode
 
@@ -63,7 +64,7 @@ class PaddedLayout:
     @classmethod
     def for_players(cls, players_per_team: int, frames: int, max_landmarks: int | None = None,
                     max_objects: int | None = None) -> "PaddedLayout":
-        """Default maxima: 32 landmarks, and the ball + every other robot + 4 false positives."""
+        """Default maxima: 40 landmarks, and the ball + every other robot + 4 false positives."""
         return cls(frames, DEFAULT_MAX_LANDMARKS if max_landmarks is None else max_landmarks,
                    2 * players_per_team + EXTRA_OBJECT_SLOTS if max_objects is None else max_objects)
 

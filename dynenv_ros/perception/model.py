@@ -92,7 +92,15 @@ class Perceiver:
             self.class_reach_radius[c] = cp.visibility_radius
             self.class_prior_logit[c] = math.log(cp.correct_prior / (1.0 - cp.correct_prior))
         self.robot_index = np.flatnonzero(self.is_robot)
-        self._members = {int(c): np.flatnonzero(cls == c) for c in np.unique(cls)}
+        # A made-up report's subtype: the one its class always has, or (crossings: L, T, X) a random real one's.
+        self._class_subtype = np.zeros(256, np.uint8)
+        self._varied_subtypes: dict[int, np.ndarray] = {}
+        for c in np.unique(cls):
+            subtypes = objects.subtype[cls == c]
+            if c != ObjectClass.ROBOT and (subtypes != subtypes[0]).any():
+                self._varied_subtypes[int(c)] = subtypes.copy()
+            else:
+                self._class_subtype[c] = subtypes[0]
         # Confusion rules as arrays: source class, target class, probability, distant only.
         self.confusions = [(int(c.source), int(c.target), c.probability, c.distant_only) for c in params.confusions]
 
@@ -174,13 +182,18 @@ class Perceiver:
         truly = keep & ~confused
         seen[v[truly], j[truly]] = True
         context = _ViewContext(f, o, heading, frames, observer_team)
-        rows = [self._point_rows(v[keep], j[keep], reported[keep], confused[keep], xk[keep], yk[keep], context,
-                                 size_factor[keep], yaw_noise[keep], rng)]
+        point_rows = self._point_rows(v[keep], j[keep], reported[keep], xk[keep], yk[keep], context,
+                                      size_factor[keep], yaw_noise[keep])
         line_rows, lines_seen = self._line_rows(ox[:, 0], oy[:, 0], ch[:, 0], sh[:, 0], rng)
-        rows.append(line_rows)
-        rows.extend(self._made_up_rows(part, context, rng) for part in extra)
+        rows = [line_rows]
         if p.mode != "none" and p.noise_magnitude > 0.0:
-            rows.append(self._made_up_rows(self._false_positives(V, rng), context, rng))
+            # Reports no object of their class stands behind: confusions, balls at feet, uniform false positives.
+            confused_kept = confused[keep]
+            made_up = [(point_rows[0][confused_kept], point_rows[1][confused_kept])] + extra
+            made_up.append(self._false_positives(V, rng))
+            point_rows = (point_rows[0][~confused_kept], point_rows[1][~confused_kept])
+            rows.append(self._made_up_rows(_concatenate(made_up), context, rng))
+        rows.append(point_rows)
         return self._assemble(rows, V, seen, lines_seen, visible, rng)
 
     # ------------------------------------------------------------------------------------------------------------
@@ -231,9 +244,8 @@ class Perceiver:
             return x + u[0] * scale, y + u[1] * scale
         return self._polar_point_noise(x, y, rng, d)
 
-    def _point_rows(self, v, j, cls, confused, x, y, context: "_ViewContext", size_factor, yaw_noise, rng):
-        """Rows of the detected point objects. A confused detection is reported with the attributes a real object
-        of the reported class would have (``_made_up_rows``), never with its source's."""
+    def _point_rows(self, v, j, cls, x, y, context: "_ViewContext", size_factor, yaw_noise):
+        """Rows of the detected point objects with their own attributes (confused ones are re-dressed later)."""
         obj = self.objects
         rows = np.zeros(len(v), DETECTION_DTYPE)
         rows["class_id"] = cls
@@ -250,10 +262,6 @@ class Perceiver:
         rows["subtype"] = obj.subtype[j]
         rows["true_id"] = obj.object_id[j]
         rows["true_class"] = obj.class_id[j]
-        if confused.any():
-            made_up = self._made_up_rows((rows[confused], v[confused]), context, rng)[0]
-            for name in ("size_x", "size_y", "yaw", "team", "fallen", "penalized", "subtype"):
-                rows[name][confused] = made_up[name]
         return rows, v
 
     def _made_up_rows(self, part, context: "_ViewContext", rng: np.random.Generator):
@@ -268,39 +276,36 @@ class Perceiver:
         p = self.params
         cls = rows["class_id"].astype(np.intp)
         g = rng.standard_normal((2, n))
-        m = p.noise_magnitude if p.mode != "none" else 0.0
+        m = p.noise_magnitude
         factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
         rows["size_x"] = rows["size_y"] = self.class_size[cls] * factor
         rows["yaw"] = np.nan
         rows["team"] = 0
         rows["fallen"] = rows["penalized"] = False
-        rows["subtype"] = 0
+        rows["subtype"] = self._class_subtype[cls]
         robot = np.flatnonzero(cls == ObjectClass.ROBOT)
         if len(robot):
             observer = context.observer[v[robot]]
             others = self.robot_index
-            position = np.searchsorted(others, observer)
             observer_is_robot = np.isin(observer, others)
             choices = len(others) - observer_is_robot.astype(int)
             if len(others) and (choices > 0).all():
                 pick = (rng.random(len(robot)) * choices).astype(np.intp)
-                pick += observer_is_robot & (pick >= position)
+                pick += observer_is_robot & (pick >= np.searchsorted(others, observer))
                 r = others[pick]
                 f = context.frame[v[robot]]
-                yaw = _wrap(context.frames.yaw[f, r] - context.heading[v[robot]] + m * p.position.yaw_std * g[1, robot])
-                rows["yaw"][robot] = yaw
+                heading = context.heading[v[robot]]
+                rows["yaw"][robot] = _wrap(context.frames.yaw[f, r] - heading + m * p.position.yaw_std * g[1, robot])
                 rows["team"][robot] = self.objects.team[r] * context.observer_team[v[robot]]
                 rows["fallen"][robot] = context.frames.fallen[f, r]
                 rows["penalized"][robot] = context.frames.penalized[f, r]
             else:                                        # no other robot to resemble: a plausible stranger
                 rows["yaw"][robot] = (rng.random(len(robot)) * 2 - 1) * math.pi
                 rows["team"][robot] = np.where(rng.random(len(robot)) < 0.5, -1, 1)
-        for c in np.unique(cls):
-            members = self._members.get(int(c))
-            if members is None or c == ObjectClass.ROBOT:
-                continue
+        for c, subtypes in self._varied_subtypes.items():
             at = np.flatnonzero(cls == c)
-            rows["subtype"][at] = self.objects.subtype[members[(rng.random(len(at)) * len(members)).astype(np.intp)]]
+            if len(at):
+                rows["subtype"][at] = subtypes[(rng.random(len(at)) * len(subtypes)).astype(np.intp)]
         return rows, v
 
     def _feet_balls(self, v: np.ndarray, rx: np.ndarray, ry: np.ndarray, rng: np.random.Generator):
@@ -343,9 +348,7 @@ class Perceiver:
     def _assemble(self, parts, V: int, seen, lines_seen, visible, rng: np.random.Generator) -> Perception:
         """All rows of all views, each view's rows nearest first, with the sighting bits and confidences every
         report gets by the same rule whether it is real, confused or false."""
-        # Concatenate as raw records: numpy's structured concatenate re-promotes every field (slow for small parts).
-        rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
-        view = np.concatenate([v for _, v in parts])
+        rows, view = _concatenate(parts)
         distance = np.hypot(rows["x"], rows["y"])
         order = np.lexsort((distance, view))
         rows, view, distance = rows[order], view[order], distance[order]
@@ -520,6 +523,13 @@ def _clip_disc(ax, ay, bx, by, radius, lo, hi):
 
 
 _RAW = np.dtype((np.void, DETECTION_DTYPE.itemsize))
+
+
+def _concatenate(parts):
+    """(rows, views) parts → one (rows, views). As raw records: numpy's structured concatenate re-promotes every
+    field (slow for small parts)."""
+    rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
+    return rows, np.concatenate([v for _, v in parts])
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:
