@@ -97,24 +97,25 @@ class PaddedLayout:
         return {key: np.zeros(batch + shape, np.float32) for key, shape in self.shapes().items()}
 
     def pack_rows(self, features: np.ndarray, offsets: np.ndarray, robot_of_view: np.ndarray,
-                  frame_of_view: np.ndarray, out: dict[str, np.ndarray]) -> np.ndarray:
+                  frame_of_view: np.ndarray, out: dict[str, np.ndarray], clear: bool = True) -> np.ndarray:
         """Scatter detection rows into ``out`` (arrays with a leading robot axis, as from ``empty(robots)``).
 
         ``features`` (R, 19) holds the rows of V views one view after another (``offsets`` (V+1,)), each view's
         rows nearest first; view v is robot ``robot_of_view[v]`` at frame ``frame_of_view[v]``. Detection arrays
-        and masks of the touched (robot, frame) pairs are overwritten. Returns (V,) rows dropped per view."""
+        and masks of the touched (robot, frame) pairs are overwritten (``clear=False``: ``out`` is known to be
+        zeroed already). Returns (V,) rows dropped per view."""
         V = len(offsets) - 1
         counts = np.diff(offsets)
         view = np.repeat(np.arange(V), counts)
         robot, frame = np.asarray(robot_of_view)[view], np.asarray(frame_of_view)[view]
         touched_robot, touched_frame = np.asarray(robot_of_view), np.asarray(frame_of_view)
-        stream = STREAM_OF_CLASS[np.asarray(features[:, 0], np.float64).astype(np.int64) & 255] if len(view) \
-            else np.zeros(0, np.int8)
+        stream = STREAM_OF_CLASS[features[:, 0].astype(np.int64) & 255]
         dropped = np.zeros(V, np.int64)
         for s, (rows_key, mask_key, limit) in enumerate((("landmarks", "landmark_mask", self.max_landmarks),
                                                          ("objects", "object_mask", self.max_objects))):
-            out[rows_key][touched_robot, touched_frame] = 0.0
-            out[mask_key][touched_robot, touched_frame] = 0.0
+            if clear:
+                out[rows_key][touched_robot, touched_frame] = 0.0
+                out[mask_key][touched_robot, touched_frame] = 0.0
             chosen = np.flatnonzero(stream == s)
             v = view[chosen]
             per_view = np.bincount(v, minlength=V)

@@ -134,7 +134,7 @@ class SoccerObservations:
         views = np.arange(frames * n)
         self.dropped_rows = self.layout.pack_rows(
             clamp_features(as_features(perception.detections)), perception.offsets, views % n, views // n,
-            arrays).reshape(frames, n).sum(axis=0)
+            arrays, clear=out is not None).reshape(frames, n).sum(axis=0)
         arrays["proprioception"][:, :frames] = proprio.transpose(1, 0, 2)
         arrays["game"][:] = game
         arrays["previous_action"][:] = previous_actions(self.world.last_actions)

@@ -354,11 +354,11 @@ class Perceiver:
         rows, view, distance = rows[order], view[order], distance[order]
         offsets = np.zeros(V + 1, np.int64)
         np.cumsum(np.bincount(view, minlength=V), out=offsets[1:])
-        self._sighting_bits(rows, view, distance, V)
+        self._sighting_bits(rows, view, distance)
         self._confidences(rows, rng)
         return Perception(rows, offsets, seen, lines_seen, visible)
 
-    def _sighting_bits(self, rows: np.ndarray, view: np.ndarray, distance: np.ndarray, V: int) -> None:
+    def _sighting_bits(self, rows: np.ndarray, view: np.ndarray, distance: np.ndarray) -> None:
         """DISTANT, PARTIAL and NEARBY of point reports, from the reports themselves — what a real pipeline can
         compute — so no bit tells a false report from a real one: DISTANT beyond the reported class's near range,
         PARTIAL within the class's reach of the view's edge, NEARBY within ``nearby_distance`` of another reported
@@ -372,21 +372,15 @@ class Perceiver:
         reach = np.arcsin(clamp(self.class_reach_radius[c] / np.maximum(d, _EPS), 0.0, 1.0))
         partial = np.abs(np.arctan2(y, x)) > self.params.field_of_view / 2 - reach
         distant = d > self.class_near[c]
-        dyn = (c == ObjectClass.BALL) | (c == ObjectClass.ROBOT)
-        nearby = np.zeros(len(idx), bool)
-        if dyn.any():                  # each report against its own view's ball and robot reports
-            dv = view[idx[dyn]]
-            per_view = np.bincount(dv, minlength=V)
-            slot = np.arange(len(dv)) - (np.cumsum(per_view) - per_view)[dv]
-            width = int(per_view.max())
-            px, py = np.full((V, width), np.nan), np.full((V, width), np.nan)
-            who = np.full((V, width), -1)
-            px[dv, slot], py[dv, slot], who[dv, slot] = x[dyn], y[dyn], idx[dyn]
-            pv = view[idx]
-            with np.errstate(invalid="ignore"):
-                gap2 = (px[pv] - x[:, None]) ** 2 + (py[pv] - y[:, None]) ** 2       # (P, width), NaN = empty
-                close = (gap2 < self.params.miss.nearby_distance ** 2) & (who[pv] != idx[:, None])
+        dyn = np.flatnonzero((c == ObjectClass.BALL) | (c == ObjectClass.ROBOT))
+        if len(dyn):                   # every report against every ball and robot report of its own view
+            pv, dv = view[idx], view[idx[dyn]]
+            gap2 = (x[:, None] - x[dyn]) ** 2 + (y[:, None] - y[dyn]) ** 2
+            close = (gap2 < self.params.miss.nearby_distance ** 2) & (pv[:, None] == dv)
+            close[dyn, np.arange(len(dyn))] = False                      # not oneself
             nearby = close.any(axis=1)
+        else:
+            nearby = np.zeros(len(idx), bool)
         rows["sighting"][idx] = (distant * int(Sighting.DISTANT) | partial * int(Sighting.PARTIAL)
                                  | nearby * int(Sighting.NEARBY))
 
