@@ -184,6 +184,9 @@ class Perceiver:
         context = _ViewContext(f, o, heading, frames, observer_team)
         point_rows = self._point_rows(v[keep], j[keep], reported[keep], xk[keep], yk[keep], context,
                                       size_factor[keep], yaw_noise[keep])
+        # The circle keeps the bits of its rim test (every other point report gets them from the report itself).
+        point_rows[0]["sighting"] = (distant_k[keep] * int(Sighting.DISTANT)
+                                     | partial_k[keep] * int(Sighting.PARTIAL))
         line_rows, lines_seen = self._line_rows(ox[:, 0], oy[:, 0], ch[:, 0], sh[:, 0], rng)
         rows = [line_rows]
         if p.mode != "none" and p.noise_magnitude > 0.0:
@@ -372,15 +375,19 @@ class Perceiver:
         reach = np.arcsin(clamp(self.class_reach_radius[c] / np.maximum(d, _EPS), 0.0, 1.0))
         partial = np.abs(np.arctan2(y, x)) > self.params.field_of_view / 2 - reach
         distant = d > self.class_near[c]
-        dyn = np.flatnonzero((c == ObjectClass.BALL) | (c == ObjectClass.ROBOT))
-        if len(dyn):                   # every report against every ball and robot report of its own view
-            pv, dv = view[idx], view[idx[dyn]]
-            gap2 = (x[:, None] - x[dyn]) ** 2 + (y[:, None] - y[dyn]) ** 2
-            close = (gap2 < self.params.miss.nearby_distance ** 2) & (pv[:, None] == dv)
-            close[dyn, np.arange(len(dyn))] = False                      # not oneself
-            nearby = close.any(axis=1)
-        else:
-            nearby = np.zeros(len(idx), bool)
+        dyn = (c == ObjectClass.BALL) | (c == ObjectClass.ROBOT)
+        nearby = np.zeros(len(idx), bool)
+        if dyn.any():                  # each report against its own view's ball and robot reports only
+            pv = view[idx]
+            dv = pv[dyn]
+            first = np.searchsorted(dv, pv)                  # views are sorted: a view's dynamic reports are a run
+            count = np.searchsorted(dv, pv, side="right") - first
+            own = np.flatnonzero(dyn)
+            for k in range(int(count.max())):
+                at = np.minimum(first + k, len(dv) - 1)
+                other = own[at]
+                gap2 = (x - x[other]) ** 2 + (y - y[other]) ** 2
+                nearby |= (k < count) & (other != np.arange(len(idx))) & (gap2 < self.params.miss.nearby_distance ** 2)
         rows["sighting"][idx] = (distant * int(Sighting.DISTANT) | partial * int(Sighting.PARTIAL)
                                  | nearby * int(Sighting.NEARBY))
 
@@ -455,7 +462,10 @@ class Perceiver:
         sx, sy, tx, ty = sx[keep], sy[keep], tx[keep], ty[keep]
         # Endpoint order by a rule of the observer's frame alone (nearer end first), so a mirrored or rotated
         # situation gives the mirrored or identical report; an order that follows the field would be a compass.
-        swap = np.hypot(tx, ty) < np.hypot(sx, sy)
+        # Exact ties (a line square to the gaze, clipped by both edges) go right end first: rotations stay
+        # consistent; a perfect tie cannot be mirror-symmetric.
+        gap = np.hypot(tx, ty) - np.hypot(sx, sy)
+        swap = (gap < -1e-6) | ((np.abs(gap) <= 1e-6) & (ty < sy))
         sx, tx = np.where(swap, tx, sx), np.where(swap, sx, tx)
         sy, ty = np.where(swap, ty, sy), np.where(swap, sy, ty)
         rows = np.zeros(len(v), DETECTION_DTYPE)
