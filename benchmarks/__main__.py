@@ -10,7 +10,8 @@ import sys
 from collections.abc import Sequence
 
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
-SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "ros": "ros_graph", "policy": "policy"}
+SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
+          "policy": "policy"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -25,6 +26,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "sim":   # its options are cheap to declare without importing the simulator
             from benchmarks.sim_options import add_arguments
             add_arguments(sub)
+        if name == "vector":   # numpy only
+            from benchmarks.vector import add_arguments as add_vector_arguments
+            add_vector_arguments(sub)
         if name == "policy":   # declaring its options imports no torch
             from benchmarks.policy import add_arguments as add_policy_arguments
             add_policy_arguments(sub)

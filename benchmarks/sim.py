@@ -36,14 +36,17 @@ def _world_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], 
     return run
 
 
+def perception_setting(args: Any) -> Any:
+    """The ``perception`` argument of the envs from ``--noise``, ``--preset`` and ``--noise-magnitude``."""
+    if args.noise == "none":
+        return "none"
+    return {"preset": args.preset, "mode": args.noise, "noise_magnitude": args.noise_magnitude}
+
+
 def _pettingzoo_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
     from dynenv_ros.envs.robocup_v0 import parallel_env
-    if args.noise == "none":
-        perception: Any = "none"
-    else:
-        perception = {"preset": args.preset, "mode": args.noise, "noise_magnitude": args.noise_magnitude}
-    env = parallel_env(players_per_team=args.players_per_team, observation=args.observation, perception=perception,
-                       image_size=_image_size(args.image_size))
+    env = parallel_env(players_per_team=args.players_per_team, observation=args.observation,
+                       perception=perception_setting(args), image_size=_image_size(args.image_size))
     env.reset(seed=args.seed)
     names = env.possible_agents
     actions = [dict(zip(names, row)) for row in pool]
@@ -58,7 +61,9 @@ def _pettingzoo_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[i
 
 def _vector_stepper(args: Any, config: Any, pool: np.ndarray) -> tuple[Callable[[int], None], Any]:
     from dynenv_ros.envs.vector import SoccerVectorEnv
-    env = SoccerVectorEnv(args.envs, backend=args.backend, config=config)
+    observation = "padded" if args.observation == "padded" else "full"
+    env = SoccerVectorEnv(args.envs, backend=args.backend, config=config, observation=observation,
+                          perception=perception_setting(args))
     env.reset(seed=args.seed)
     batches = np.stack([np.roll(pool, e, axis=0) for e in range(args.envs)], axis=1)
 
@@ -83,6 +88,10 @@ def run(args: Any) -> int:
     if args.steps < 1 or args.envs < 1:
         print("--steps and --envs must be at least 1", file=sys.stderr)
         return 2
+    if args.envs > 1 and args.observation in ("partial", "image"):
+        print("vectorised batches (--envs > 1) observe 'padded' (perception) or 'full' (ground truth; also 'none')",
+              file=sys.stderr)
+        return 2
     cores = pin_cores(args.cores)
     from dynenv_ros.soccer.config import SoccerConfig
     config = SoccerConfig(players_per_team=args.players_per_team)
@@ -106,14 +115,15 @@ def run(args: Any) -> int:
         closer.close()
     figures = {
         "scenario": args.scenario, "players_per_team": args.players_per_team, "steps": args.steps,
-        "observation": args.observation, "noise": args.noise if args.observation in ("partial", "image") else "n/a",
+        "observation": args.observation,
+        "noise": args.noise if args.observation in ("partial", "padded", "image") else "n/a",
         "preset": args.preset, "noise_magnitude": args.noise_magnitude,
         "image_size": args.image_size if args.observation == "image" else None, "envs": args.envs,
         "backend": args.backend if args.envs > 1 else "single", "cores": len(cores),
         "env_steps_per_s": round(best, 1), "ms_per_env_step": round(1000.0 / best, 4),
         "physics_ticks_per_s": round(best * config.rates.motion_period_ticks),
         "robot_frames_per_s": round(best * config.rates.frames_per_period * config.n_robots)
-        if args.observation in ("partial", "image") else None,
+        if args.observation in ("partial", "padded", "image") else None,
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
         "torch_imported": "torch" in sys.modules, "python": platform.python_version(),
     }

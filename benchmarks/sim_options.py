@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 
 SCENARIOS = ("robocup",)
-OBSERVATIONS = ("none", "full", "partial", "image")
+OBSERVATIONS = ("none", "full", "partial", "padded", "image")
 NOISE = ("realistic", "random", "none")
 
 
@@ -13,10 +13,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--players-per-team", type=int, default=2)
     parser.add_argument("--steps", type=int, default=5000, help="motion periods (env steps) to time")
     parser.add_argument("--observation", choices=OBSERVATIONS, default="none",
-                        help="none: the world's physics and rules only; full / partial / image: the whole PettingZoo "
-                             "step with that observation mode")
+                        help="none: the world's physics and rules only; full / partial / padded / image: the whole "
+                             "PettingZoo step with that observation mode (with --envs > 1: padded, or full = none)")
     parser.add_argument("--noise", choices=NOISE, default="realistic",
-                        help="perception error mode (partial and image observations)")
+                        help="perception error mode (partial, padded and image observations)")
     parser.add_argument("--preset", choices=("realistic", "dynenv"), default="realistic",
                         help="perception parameter preset for --noise realistic/random")
     parser.add_argument("--noise-magnitude", type=float, default=1.0, help="0..5")

@@ -159,7 +159,7 @@ def test_render_gives_an_rgb_array():
 def _vector_rollout(backend, periods=30):
     rng = np.random.default_rng(5)
     with SoccerVectorEnv(3, backend=backend, config={"players_per_team": 1, "episode_seconds": 10.0,
-                                                        "falls": {"p_walk": 0.05}}) as env:
+                                                        "falls": {"p_walk": 0.05}}, observation="full") as env:
         obs = [env.reset(seed=11)]
         rewards, finals = [], []
         for _ in range(periods):
@@ -172,6 +172,7 @@ def _vector_rollout(backend, periods=30):
 
 
 def test_vector_backends_agree_and_reset_finished_episodes():
+    """Ground-truth batches (the padded ones with perception: test_vector_env.py)."""
     a_obs, a_rew, a_finals = _vector_rollout("inprocess")
     b_obs, b_rew, b_finals = _vector_rollout("subprocess")
     np.testing.assert_array_equal(a_obs, b_obs)
@@ -184,7 +185,7 @@ def test_vector_backends_agree_and_reset_finished_episodes():
 
 
 def test_vector_env_refuses_bad_shapes_and_backends():
-    with SoccerVectorEnv(2, config={"players_per_team": 1}) as env:
+    with SoccerVectorEnv(2, config={"players_per_team": 1}, observation="full") as env:
         env.reset(seed=0)
         with pytest.raises(ValueError, match=r"shape \(2, 2, 4\)"):
             env.step(np.zeros((3, 2, 4), int))

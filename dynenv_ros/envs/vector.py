@@ -1,35 +1,64 @@
 """Many independent soccer worlds stepped together, as arrays: in this process or in worker processes.
 
-Both backends give identical results for the same seed (each world has its own generator, spawned from one
-``SeedSequence``); which is faster depends on the machine — see docs/benchmarks.md (`dynenv-bench vector`).
-Finished episodes reset automatically; the last observation of a finished episode is returned separately.
+``SoccerVectorEnv(E, observation="padded")`` (the default) returns what every robot perceives — the emulated vision
+pipeline's detections, with its misses, confusions and errors — in the fixed-shape layout of
+``envs.padded_layout``: a dict of float32 arrays with leading (E, A) axes, exactly ``PaddedLayout.empty(E, A)``'s
+keys and shapes (``env.layout``), the same arrays ``robocup_v0.parallel_env(observation="padded")`` gives a world
+with the same seed. Rewards include the observation term (what was truly seen). ``observation="full"`` gives the
+noise-free ground truth (E, A, D) instead, without perception.
+
+Each world writes its rows straight into its slice of the batch's arrays (``SoccerObservations.build_padded``). The
+subprocess backend keeps those arrays in shared memory — one block per key, created by this process, each worker
+writing its worlds' slice in place, the actions in a block of their own — so a step's pipe traffic is one short
+message each way per worker, never a detection; the blocks are unlinked on ``close()``, when the env is
+garbage-collected, and if start-up fails.
+
+Both backends give bit-identical results for the same seed: each world has its own generator, seeded from one
+``SeedSequence`` (``_seeds``), and actions are validated in this process before any world moves. Which backend is
+faster depends on the machine: see docs/benchmarks.md (`dynenv-bench vector`). Finished episodes reset
+automatically; the last observation of a finished episode is returned separately in ``final_observations``.
 """
 from __future__ import annotations
 
+import math
 import multiprocessing as mp
 import os
+import pickle
+import weakref
 from dataclasses import dataclass
+from multiprocessing import shared_memory
 from multiprocessing.connection import Connection
-from typing import Any, Mapping
+from typing import Any, Mapping, Union
 
 import numpy as np
 
-from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder
+from dynenv_ros.envs.padded_layout import PaddedLayout
+from dynenv_ros.envs.soccer_observations import SoccerObservations, perception_params
+from dynenv_ros.perception.params import PerceptionParams
+from dynenv_ros.sim.reward_terms import RewardTerm
+from dynenv_ros.soccer.actions import Kick, Turn, Walk, parse_action
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.world import SoccerWorld
 
+# backend="auto": worker processes from this many worlds on (measured on 2 cores, docs/benchmarks.md): a world with
+# perception costs ~4x one with ground truth only, so workers pay for their pipe round trips much sooner.
+AUTO_SUBPROCESS_MIN_ENVS = {"padded": 2, "full": 8}
+VECTOR_OBSERVATIONS = ("padded", "full")
+FULL_KEY = "observation"        # the storage key of ground-truth observations
+N_TERMS = len(RewardTerm)
 
-AUTO_SUBPROCESS_MIN_ENVS = 8
+Observation = Union[dict[str, np.ndarray], np.ndarray]
 
 
 @dataclass
 class BatchStep:
-    observations: np.ndarray       # (E, A, D) float32, after any automatic reset
-    rewards: np.ndarray            # (E, A) sum of the terms
-    reward_terms: np.ndarray       # (E, T, A)
+    observations: Observation      # padded: {key: (E, A, ...)}; full: (E, A, D) float32 — after any automatic reset
+    rewards: np.ndarray            # (E, A) float64, the sum of the terms
+    reward_terms: np.ndarray       # (E, T, A) float64, T = RewardTerm (observation term included in padded mode)
     terminated: np.ndarray         # (E,) bool
     truncated: np.ndarray          # (E,) bool
-    final_observations: dict[int, np.ndarray]   # env index -> (A, D) last observation of a finished episode
+    final_observations: dict[int, Observation]   # env index -> last observation of its finished episode, (A, ...)
+    dropped_detections: np.ndarray  # (E, A) int64: detection rows beyond the layout's maxima (padded; else 0)
 
 
 def _seeds(seed: int | None, count: int) -> list[int]:
@@ -37,169 +66,404 @@ def _seeds(seed: int | None, count: int) -> list[int]:
     return [int(child.generate_state(1, np.uint64)[0]) for child in children]
 
 
-class InProcessBatch:
-    """Worlds stepped one after another in this process."""
+@dataclass(frozen=True)
+class _Settings:
+    """What every world of a batch is built from (pickled once to each worker)."""
+    config: SoccerConfig
+    observation: str
+    perception: PerceptionParams
+    max_landmarks: int | None
+    max_objects: int | None
 
-    def __init__(self, num_envs: int, config: SoccerConfig) -> None:
+    def observations(self) -> SoccerObservations:
+        return SoccerObservations(self.config, self.observation, self.perception,
+                                  max_landmarks=self.max_landmarks, max_objects=self.max_objects)
+
+
+def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Every array a batch writes, with a leading env axis: observations ``obs/<key>``, final observations
+    ``final/<key>``, and the per-step items."""
+    obs = settings.observations()
+    E, A = num_envs, settings.config.n_robots
+    if settings.observation == "padded":
+        shapes = obs.layout.shapes()
+    else:
+        shapes = {FULL_KEY: obs.space.shape}
+    spec: dict[str, tuple[tuple[int, ...], np.dtype]] = {}
+    for prefix in ("obs/", "final/"):
+        spec.update({prefix + key: ((E, A) + tuple(shape), np.dtype(np.float32)) for key, shape in shapes.items()})
+    spec["reward_terms"] = ((E, N_TERMS, A), np.dtype(np.float64))
+    spec["terminated"] = ((E,), np.dtype(bool))
+    spec["truncated"] = ((E,), np.dtype(bool))
+    spec["dropped"] = ((E, A), np.dtype(np.int64))
+    return spec
+
+
+class InProcessBatch:
+    """Worlds stepped one after another in this process, writing into ``arrays`` (see ``_storage``; each with a
+    leading axis of ``num_envs``). A worker process runs one of these over its slice of the shared arrays."""
+
+    def __init__(self, num_envs: int, settings: _Settings, arrays: dict[str, np.ndarray] | None = None) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
-        self.config = config
-        self.worlds = [SoccerWorld(config) for _ in range(num_envs)]
-        self.encoder = GroundTruthEncoder(config)
+        self.settings = settings
+        self.config = settings.config
+        self.padded = settings.observation == "padded"
+        self.worlds = [SoccerWorld(self.config) for _ in range(num_envs)]
+        self.observers = [settings.observations() for _ in range(num_envs)]
+        if arrays is None:
+            arrays = {key: np.zeros(shape, dtype) for key, (shape, dtype) in _storage(settings, num_envs).items()}
+        self.arrays = arrays
+        keys = [k[4:] for k in arrays if k.startswith("obs/")]
+        # Per world, views of its slice: what build_padded(out=...) fills in place.
+        self._obs = [{k: arrays["obs/" + k][e] for k in keys} for e in range(num_envs)]
+        self._final = [{k: arrays["final/" + k][e] for k in keys} for e in range(num_envs)]
 
     @property
     def num_envs(self) -> int:
         return len(self.worlds)
 
-    def reset(self, seeds: list[int | None]) -> np.ndarray:
-        for world, seed in zip(self.worlds, seeds):
-            world.reset(seed=seed)
-        return np.stack([self.encoder.observations(w) for w in self.worlds])
+    def _observe_initial(self, e: int) -> None:
+        world, obs = self.worlds[e], self.observers[e]
+        obs.reset(world)
+        if self.padded:
+            obs.initial_padded(out=self._obs[e])
+        else:
+            self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
 
-    def step(self, actions: np.ndarray) -> BatchStep:
-        actions = np.asarray(actions)
-        expected = (self.num_envs, self.config.n_robots)
-        if actions.shape[:2] != expected:
-            raise ValueError(f"actions must have shape {expected + (4,)}, got {actions.shape}")
-        # Validate everything before any world moves.
-        parsed = [w.parse_actions(list(a), [f"env {e} robot {i}" for i in range(len(a))])
-                  for e, (w, a) in enumerate(zip(self.worlds, actions))]
-        n_terms = 4
-        obs = np.empty((self.num_envs, self.config.n_robots, self.encoder.observation_space.shape[0]), np.float32)
-        terms = np.empty((self.num_envs, n_terms, self.config.n_robots))
-        terminated = np.zeros(self.num_envs, bool)
-        truncated = np.zeros(self.num_envs, bool)
-        finals: dict[int, np.ndarray] = {}
-        for e, (world, acts) in enumerate(zip(self.worlds, parsed)):
-            result = world.step(acts)
+    def reset(self, seeds: list[int | None]) -> None:
+        for e, (world, seed) in enumerate(zip(self.worlds, seeds)):
+            world.reset(seed=seed)
+            self._observe_initial(e)
+        self.arrays["dropped"][:] = 0
+
+    def step(self, actions: Any) -> None:
+        """``actions`` already validated (``validate_actions``): one row of A actions per world."""
+        terms, dropped = self.arrays["reward_terms"], self.arrays["dropped"]
+        terminated, truncated = self.arrays["terminated"], self.arrays["truncated"]
+        for e, (world, obs, acts) in enumerate(zip(self.worlds, self.observers, actions)):
+            result = world.step(list(acts), on_frame=obs.on_frame)
             terms[e] = result.rewards
+            if self.padded:
+                terms[e, RewardTerm.OBSERVATION] += obs.build_padded(out=self._obs[e])
+                dropped[e] = obs.dropped_rows
+            else:
+                self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
             terminated[e], truncated[e] = result.terminated, result.truncated
-            obs[e] = self.encoder.observations(world)
             if result.terminated or result.truncated:
-                finals[e] = obs[e].copy()
+                for key, final in self._final[e].items():
+                    final[...] = self._obs[e][key]
                 world.reset(seed=int(world.rng.integers(2**63)))
-                obs[e] = self.encoder.observations(world)
-        return BatchStep(obs, terms.sum(axis=1), terms, terminated, truncated, finals)
+                self._observe_initial(e)
 
     def close(self) -> None:
         pass
 
 
-def _worker(conn: Connection, num_envs: int, config: SoccerConfig) -> None:
-    batch = InProcessBatch(num_envs, config)
-    while True:
-        command, payload = conn.recv()
+# -- actions -----------------------------------------------------------------------------------------------------
+
+def _fast_valid(actions: np.ndarray, config: SoccerConfig) -> bool:
+    """True when every row is a numeric action ``parse_action`` accepts, checked as whole arrays (no Python per
+    robot); False sends the batch through ``parse_action`` for the error message."""
+    kind = actions.dtype.kind
+    if kind not in "iuf":
+        return False
+    m = config.motion
+    discrete = config.head_mode == "discrete"
+    if kind == "f":
+        integral = actions if discrete else actions[..., :3]
+        if not (np.isfinite(actions).all() and (integral == np.floor(integral)).all()):
+            return False
+    if discrete:       # [walk, turn, kick, head index] within 0 .. count-1
+        return bool((actions >= 0).all() and (actions < (len(Walk), len(Turn), len(Kick), 2 * m.head_units + 1)).all())
+    motion = actions[..., :3]
+    return bool((motion >= 0).all() and (motion < (len(Walk), len(Turn), len(Kick))).all()
+                and (np.abs(actions[..., 3].astype(np.float64)) <= m.head_step * m.head_units + 1e-9).all())
+
+
+def validate_actions(actions: Any, config: SoccerConfig, num_envs: int) -> Any:
+    """Check a whole batch of actions before any world moves: the array itself when every row is valid, else the
+    parsed ``SoccerAction``s; ValueError names the env, the robot and the field."""
+    arr = np.asarray(actions)
+    expected = (num_envs, config.n_robots)
+    if arr.shape[:2] != expected:
+        raise ValueError(f"actions must have shape {expected + (4,)}, got {arr.shape}")
+    if arr.shape == expected + (4,) and _fast_valid(arr, config):
+        return arr
+    m = config.motion
+    return [[parse_action(f"env {e} robot {i}", raw, head_mode=config.head_mode, head_step=m.head_step,
+                          head_units=m.head_units) for i, raw in enumerate(row)] for e, row in enumerate(arr)]
+
+
+# -- shared memory and workers -----------------------------------------------------------------------------------
+
+def _release_blocks(blocks: list[shared_memory.SharedMemory]) -> None:
+    for block in blocks:
         try:
-            if command == "reset":
-                conn.send(("ok", batch.reset(payload)))
-            elif command == "step":
-                conn.send(("ok", batch.step(payload)))
-            elif command == "close":
-                conn.send(("ok", None))
+            block.close()
+        except BufferError:      # someone still holds a view (copy=False); the mapping goes with the last view
+            pass
+        try:
+            block.unlink()
+        except FileNotFoundError:
+            pass
+
+
+class SharedArrays:
+    """Named numpy arrays, one shared-memory block each, created (and unlinked) by this process."""
+
+    def __init__(self, spec: dict[str, tuple[tuple[int, ...], np.dtype]]) -> None:
+        self.blocks: dict[str, shared_memory.SharedMemory] = {}
+        created: list[shared_memory.SharedMemory] = []      # the finalizer's list, filled as blocks are made
+        self._finalizer = weakref.finalize(self, _release_blocks, created)
+        try:
+            for key, (shape, dtype) in spec.items():
+                size = max(1, math.prod(shape) * np.dtype(dtype).itemsize)
+                created.append(shared_memory.SharedMemory(create=True, size=size))
+                self.blocks[key] = created[-1]
+        except BaseException:
+            self._finalizer()
+            raise
+        self.spec = spec
+        self.arrays = {key: np.ndarray(shape, dtype, buffer=self.blocks[key].buf)
+                       for key, (shape, dtype) in spec.items()}
+
+    def names(self) -> dict[str, tuple[str, tuple[int, ...], str]]:
+        return {key: (self.blocks[key].name, shape, np.dtype(dtype).str) for key, (shape, dtype) in self.spec.items()}
+
+    def close(self) -> None:
+        self.arrays = {}
+        self._finalizer()
+
+
+STEP = b"s"      # parent -> worker: step with the actions in the shared block; anything else is a pickled command
+OK = b""         # worker -> parent: done; anything else is a pickled exception
+
+
+def _worker(conn: Connection, blocks: dict[str, tuple[str, tuple[int, ...], str]], start: int, count: int,
+            settings: _Settings, core: int | None = None) -> None:
+    if core is not None:
+        os.sched_setaffinity(0, [core])
+    attached = [shared_memory.SharedMemory(name=name) for name, _, _ in blocks.values()]
+    try:
+        arrays = {key: np.ndarray(shape, np.dtype(dtype), buffer=shm.buf)[start:start + count]
+                  for (key, (_, shape, dtype)), shm in zip(blocks.items(), attached)}
+        actions = arrays.pop("actions")
+        batch = InProcessBatch(count, settings, arrays)
+        while True:
+            try:
+                message = conn.recv_bytes()
+            except (EOFError, OSError):     # the parent is gone
                 return
-        except Exception as exc:     # report to the parent, keep serving
-            conn.send(("error", exc))
+            try:
+                if message == STEP:
+                    batch.step(actions)
+                else:
+                    command, payload = pickle.loads(message)
+                    if command == "close":
+                        conn.send_bytes(OK)
+                        return
+                    {"reset": batch.reset, "step": batch.step}[command](payload)   # seeds / parsed actions
+                conn.send_bytes(OK)
+            except Exception as exc:     # report to the parent, keep serving
+                try:
+                    reply = pickle.dumps(exc)
+                except Exception:       # not picklable
+                    reply = pickle.dumps(RuntimeError(f"{type(exc).__name__}: {exc}"))
+                conn.send_bytes(reply)
+    finally:
+        arrays = actions = batch = None       # drop the views before closing the blocks
+        for shm in attached:
+            try:
+                shm.close()
+            except BufferError:
+                pass
+
+
+def _shutdown(conns: list[Connection], procs: list[Any], shared: SharedArrays | None) -> None:
+    for conn in conns:
+        try:
+            conn.send_bytes(pickle.dumps(("close", None)))
+        except OSError:
+            pass
+    for conn in conns:
+        try:
+            if conn.poll(5):
+                conn.recv_bytes()
+        except (EOFError, OSError):
+            pass
+        conn.close()
+    for proc in procs:
+        proc.join(timeout=5)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(timeout=5)
+    if shared is not None:
+        shared.close()
 
 
 class SubprocessBatch:
-    """Worlds split over worker processes (one per core by default), stepped concurrently."""
+    """Worlds split over worker processes (one per core by default), stepped concurrently; every array lives in
+    shared memory (``self.arrays``, actions included), the pipes carry commands only. ``pin_workers``: worker w
+    runs only on the w-th CPU this process may use (no migrations between steps; see docs/benchmarks.md)."""
 
-    def __init__(self, num_envs: int, config: SoccerConfig, workers: int | None = None) -> None:
+    def __init__(self, num_envs: int, settings: _Settings, workers: int | None = None,
+                 pin_workers: bool = False) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
-        workers = min(num_envs, workers or os.cpu_count() or 1)
-        self.config = config
+        cpus = sorted(os.sched_getaffinity(0))
+        workers = min(num_envs, workers or len(cpus))
+        self.config = settings.config
         self.num_envs = num_envs
         self.sizes = [num_envs // workers + (1 if w < num_envs % workers else 0) for w in range(workers)]
-        context = mp.get_context("forkserver")
         self._conns: list[Connection] = []
-        self._procs = []
-        for size in self.sizes:
-            parent, child = context.Pipe()
-            proc = context.Process(target=_worker, args=(child, size, config), daemon=True)
-            proc.start()
-            child.close()
-            self._conns.append(parent)
-            self._procs.append(proc)
+        self._procs: list[Any] = []
+        self._awaiting = False
+        spec = _storage(settings, num_envs)
+        spec["actions"] = ((num_envs, self.config.n_robots, 4), np.dtype(np.float64))   # written before each step
+        self._shared = SharedArrays(spec)
+        self._finalizer = weakref.finalize(self, _shutdown, self._conns, self._procs, self._shared)
+        self.arrays = self._shared.arrays
+        try:
+            context = mp.get_context("forkserver")
+            names = self._shared.names()
+            start = 0
+            for w, size in enumerate(self.sizes):
+                parent, child = context.Pipe()
+                self._conns.append(parent)
+                core = cpus[w % len(cpus)] if pin_workers else None
+                proc = context.Process(target=_worker, args=(child, names, start, size, settings, core), daemon=True)
+                proc.start()
+                child.close()
+                self._procs.append(proc)
+                start += size
+        except BaseException:
+            self._finalizer()
+            raise
 
-    def _call(self, command: str, payloads: list[Any]) -> list[Any]:
-        for conn, payload in zip(self._conns, payloads):
-            conn.send((command, payload))
-        replies = []
-        for w, conn in enumerate(self._conns):
+    def _call(self, messages: list[bytes]) -> None:
+        if self._awaiting:
+            raise RuntimeError("an earlier call to the soccer workers was interrupted, so their replies are out of "
+                               "step; close() this env and make a new one")
+        self._awaiting = True              # until every reply is in (not so after a KeyboardInterrupt mid-step)
+        sent, errors, died = [], [], None
+        for w, (conn, message) in enumerate(zip(self._conns, messages)):
             try:
-                replies.append(conn.recv())
+                conn.send_bytes(message)
+                sent.append(w)
+            except OSError as exc:        # BrokenPipeError: the worker is gone
+                died = died or (w, exc)
+        for w in sent:                    # every worker that got the command answers, keeping the pipes in step
+            try:
+                reply = self._conns[w].recv_bytes()
             except (EOFError, OSError) as exc:
-                raise RuntimeError(f"soccer worker process {w} died ({exc!r}); see its error output above. Scripts "
-                                   "that start workers need an `if __name__ == '__main__':` guard") from exc
-        for status, value in replies:
-            if status == "error":
-                raise value
-        return [value for _, value in replies]
+                died = died or (w, exc)
+                continue
+            if reply != OK:
+                errors.append(pickle.loads(reply))
+        self._awaiting = False
+        if died:
+            w, exc = died
+            raise RuntimeError(f"soccer worker process {w} died ({exc!r}); see its error output above. Scripts "
+                               "that start workers need an `if __name__ == '__main__':` guard") from exc
+        if errors:
+            raise errors[0]
+
+    def _command(self, command: str, payload: Any) -> None:
+        self._call([pickle.dumps((command, part)) for part in self._split(payload)])
 
     def _split(self, items: Any) -> list[Any]:
         bounds = np.cumsum([0] + self.sizes)
         return [items[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
-    def reset(self, seeds: list[int | None]) -> np.ndarray:
-        return np.concatenate(self._call("reset", self._split(seeds)))
+    def reset(self, seeds: list[int | None]) -> None:
+        self._command("reset", seeds)
 
-    def step(self, actions: np.ndarray) -> BatchStep:
-        actions = np.asarray(actions)
-        expected = (self.num_envs, self.config.n_robots)
-        if actions.shape[:2] != expected:
-            raise ValueError(f"actions must have shape {expected + (4,)}, got {actions.shape}")
-        parts: list[BatchStep] = self._call("step", self._split(actions))
-        finals: dict[int, np.ndarray] = {}
-        offset = 0
-        for size, part in zip(self.sizes, parts):
-            finals.update({offset + e: o for e, o in part.final_observations.items()})
-            offset += size
-        return BatchStep(*(np.concatenate([getattr(p, f) for p in parts])
-                           for f in ("observations", "rewards", "reward_terms", "terminated", "truncated")),
-                         finals)
+    def step(self, actions: Any) -> None:
+        if isinstance(actions, np.ndarray):       # numeric and valid: through shared memory
+            self.arrays["actions"][...] = actions
+            self._call([STEP] * len(self._conns))
+        else:                                     # parsed SoccerActions (rare forms): pickled
+            self._command("step", actions)
 
     def close(self) -> None:
-        for conn in self._conns:
-            try:
-                conn.send(("close", None))
-                conn.recv()
-            except (BrokenPipeError, EOFError, OSError):
-                pass
-        for proc in self._procs:
-            proc.join(timeout=5)
-            if proc.is_alive():
-                proc.kill()
-        self._conns, self._procs = [], []
+        self.arrays = {}
+        self._finalizer()
 
 
 class SoccerVectorEnv:
-    """``num_envs`` soccer worlds as one batch: ``reset(seed) -> (E, A, D)``, ``step(actions (E, A, 4))``."""
+    """``num_envs`` soccer worlds as one batch: ``reset(seed)`` and ``step(actions (E, A, 4)) -> BatchStep``.
+
+    ``observation="padded"`` (default): perceived detections as ``{key: (E, A, ...)}`` float32 arrays
+    (``self.layout``, ``self.single_observation_space``), perception as ``robocup_v0``'s ``perception`` argument;
+    ``"full"``: ground truth (E, A, D). ``copy=False`` returns the batch's own arrays, overwritten by the next step.
+    Subprocess backend: ``workers`` processes (default one per CPU this process may use), ``pin_workers=True`` pins
+    worker w to the w-th of those CPUs.
+    """
 
     def __init__(self, num_envs: int, backend: str = "auto", workers: int | None = None,
-                 config: SoccerConfig | Mapping[str, Any] | None = None) -> None:
+                 config: SoccerConfig | Mapping[str, Any] | None = None, observation: str = "padded",
+                 perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
+                 max_landmarks: int | None = None, max_objects: int | None = None, copy: bool = True,
+                 pin_workers: bool = False) -> None:
         self.config = config if isinstance(config, SoccerConfig) else SoccerConfig.from_mapping(config)
-        if backend == "auto":   # measured crossover on 2 cores: workers pay off from about 8 worlds (benchmarks.md)
-            backend = "subprocess" if num_envs >= AUTO_SUBPROCESS_MIN_ENVS and (os.cpu_count() or 1) > 1 \
-                else "inprocess"
+        if observation not in VECTOR_OBSERVATIONS:
+            raise ValueError(f"observation must be one of {VECTOR_OBSERVATIONS}, got {observation!r}")
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        settings = _Settings(self.config, observation, perception_params(perception), max_landmarks, max_objects)
+        observations = settings.observations()      # checks the layout maxima; gives the spaces
+        self.observation = observation
+        self.layout: PaddedLayout | None = observations.layout if observation == "padded" else None
+        self.single_observation_space = observations.space
+        if backend == "auto":
+            backend = "subprocess" if num_envs >= AUTO_SUBPROCESS_MIN_ENVS[observation] \
+                and len(os.sched_getaffinity(0)) > 1 else "inprocess"
         if backend == "inprocess":
-            self._batch: InProcessBatch | SubprocessBatch = InProcessBatch(num_envs, self.config)
+            self._batch: InProcessBatch | SubprocessBatch = InProcessBatch(num_envs, settings)
         elif backend == "subprocess":
-            self._batch = SubprocessBatch(num_envs, self.config, workers)
+            self._batch = SubprocessBatch(num_envs, settings, workers, pin_workers)
         else:
             raise ValueError(f"backend must be 'auto', 'inprocess' or 'subprocess', got {backend!r}")
         self.backend = backend
         self.num_envs = num_envs
-        encoder = GroundTruthEncoder(self.config)
-        self.single_observation_space = encoder.observation_space
+        self.copy = copy
+        arrays = self._batch.arrays
+        self._keys = [k[4:] for k in arrays if k.startswith("obs/")]
+        self._was_reset = self._closed = False
 
-    def reset(self, seed: int | None = None) -> np.ndarray:
-        return self._batch.reset(_seeds(seed, self.num_envs))
+    def _observation(self, prefix: str, index: Any = slice(None), copy: bool = True) -> Observation:
+        arrays = self._batch.arrays
+        if self.observation == "full":
+            value = arrays[prefix + FULL_KEY][index]
+            return value.copy() if copy else value
+        return {k: arrays[prefix + k][index].copy() if copy else arrays[prefix + k][index] for k in self._keys}
 
-    def step(self, actions: np.ndarray) -> BatchStep:
-        return self._batch.step(actions)
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError("SoccerVectorEnv is closed")
+
+    def reset(self, seed: int | None = None) -> Observation:
+        self._check_open()
+        self._batch.reset(_seeds(seed, self.num_envs))
+        self._was_reset = True
+        return self._observation("obs/", copy=self.copy)
+
+    def step(self, actions: Any) -> BatchStep:
+        self._check_open()
+        valid = validate_actions(actions, self.config, self.num_envs)   # before any world moves
+        if not self._was_reset:
+            raise RuntimeError("SoccerVectorEnv.step() before reset(); call reset(seed) first")
+        self._batch.step(valid)
+        arrays = self._batch.arrays
+        terms = arrays["reward_terms"].copy()
+        terminated, truncated = arrays["terminated"].copy(), arrays["truncated"].copy()
+        finals = {int(e): self._observation("final/", int(e)) for e in np.flatnonzero(terminated | truncated)}
+        return BatchStep(self._observation("obs/", copy=self.copy), terms.sum(axis=1), terms, terminated,
+                         truncated, finals, arrays["dropped"].copy())
 
     def close(self) -> None:
+        self._closed = True
         self._batch.close()
 
     def __enter__(self) -> "SoccerVectorEnv":

@@ -1,0 +1,167 @@
+"""dynenv-bench vector: the vectorised batch with perception, in this process on one core against worker processes
+on every core.
+
+Both batches hold ``--envs`` worlds (2v2, padded observations, realistic perception by default) and step them with
+random high-level actions from a pre-drawn pool (the policy costs nothing); the figure is env steps per second
+summed over worlds, the whole ``SoccerVectorEnv.step`` included (action checks, perception, packing, the copies
+handed back). The in-process batch runs pinned to one core, the subprocess batch (one worker per core, each pinned
+to its core unless ``--no-pin-workers``) with every core this process may use.
+
+What the cores themselves allow is timed too: the ``ceiling`` runs one plain in-process batch per core (the worlds
+split as among the workers), each in its own process pinned to its core, started together, with no pipe, shared
+memory or lock step between them (a chunk lasts as long as the slower of them). ``subprocess / ceiling`` is then
+what the subprocess backend keeps of what the machine can give (lost: pipes, copies, each step waiting for the
+slower worker); ``ceiling / inprocess`` is how far the cores scale at all (below 2 where two cores slow each other
+down: shared caches, hyper-threads, other work on the machine or its host).
+
+On a shared machine the speed drifts by ±10 % within seconds, so the three are timed interleaved in chunks of
+``--chunk`` batch steps (in-process, subprocess, ceiling, in-process, …) and each figure is its env steps over its
+summed time: all three see the same conditions. ``--repeat`` rounds of ``--steps`` batch steps each; the figures
+are those of all rounds together, with the lowest and highest per-round ratio beside them.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import platform
+import time
+from typing import Any
+
+import numpy as np
+
+from benchmarks.sim_options import NOISE
+from benchmarks.timing import print_table
+
+WARMUP_STEPS = 20
+ACTION_POOL = 256
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--envs", type=int, default=8, help="worlds in each batch")
+    parser.add_argument("--players-per-team", type=int, default=2)
+    parser.add_argument("--steps", type=int, default=200,
+                        help="batch steps timed per round for each of the three (env steps = steps x envs)")
+    parser.add_argument("--chunk", type=int, default=10, help="batch steps per interleaved chunk")
+    parser.add_argument("--observation", choices=("padded", "full"), default="padded")
+    parser.add_argument("--noise", choices=NOISE, default="realistic", help="perception error mode (padded)")
+    parser.add_argument("--preset", choices=("realistic", "dynenv"), default="realistic")
+    parser.add_argument("--noise-magnitude", type=float, default=1.0, help="0..5")
+    parser.add_argument("--workers", type=int, default=0, help="subprocess workers; 0 = one per core")
+    parser.add_argument("--pin-workers", action=argparse.BooleanOptionalAction, default=True,
+                        help="pin subprocess worker w to core w (SoccerVectorEnv(pin_workers=True))")
+    parser.add_argument("--cores", type=int, default=0,
+                        help="cores for the subprocess batch (the first N this process may use); 0 = all of them")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+
+
+def _plain_batch(conn: Any, core: int, envs: int, kwargs: dict[str, Any], batches: np.ndarray, seed: int) -> None:
+    """One process of the ceiling: pinned to ``core``, an in-process batch of ``envs`` worlds; steps ``n`` batch
+    steps whenever it receives ``n`` and answers the seconds they took (0 ends it)."""
+    from dynenv_ros.envs.vector import SoccerVectorEnv
+    os.sched_setaffinity(0, [core])
+    with SoccerVectorEnv(envs, backend="inprocess", **kwargs) as env:
+        env.reset(seed=seed)
+        _seconds(env, batches[:, :envs], WARMUP_STEPS, 0)
+        conn.send(None)
+        start = WARMUP_STEPS
+        while steps := conn.recv():
+            conn.send(_seconds(env, batches[:, :envs], steps, start))
+            start += steps
+
+
+def _seconds(env: Any, batches: np.ndarray, steps: int, start: int) -> float:
+    begin = time.perf_counter()
+    for k in range(start, start + steps):
+        env.step(batches[k % ACTION_POOL])
+    return time.perf_counter() - begin
+
+
+def run(args: Any) -> int:
+    if min(args.envs, args.steps, args.chunk) < 1 or not 1 <= args.players_per_team <= 5:
+        raise SystemExit("--envs, --steps and --chunk must be at least 1, --players-per-team in 1..5")
+    from benchmarks.sim import perception_setting
+    from dynenv_ros.envs.vector import SoccerVectorEnv
+    from dynenv_ros.soccer.config import SoccerConfig
+
+    allowed = sorted(os.sched_getaffinity(0))
+    cores = allowed[:args.cores] if args.cores > 0 else allowed
+    one_core = cores[:1]
+    config = SoccerConfig(players_per_team=args.players_per_team)
+    rng = np.random.default_rng(args.seed)
+    pool = rng.integers([0, 0, 0, 0], [5, 3, 3, 2 * config.motion.head_units + 1],
+                        size=(ACTION_POOL, config.n_robots, 4))
+    batches = np.stack([np.roll(pool, e, axis=0) for e in range(args.envs)], axis=1)
+    kwargs = dict(config=config, observation=args.observation,
+                  perception=perception_setting(args) if args.observation == "padded" else "none")
+    os.sched_setaffinity(0, cores)            # the forkserver, and so every worker, may use all of these
+    workers = args.workers or len(cores)
+    subprocess = SoccerVectorEnv(args.envs, backend="subprocess", workers=workers, pin_workers=args.pin_workers,
+                                 **kwargs)
+    inprocess = SoccerVectorEnv(args.envs, backend="inprocess", **kwargs)
+    context = mp.get_context("forkserver")
+    plain = []
+    names = ("inprocess", "subprocess", "ceiling")
+    seconds = {name: np.zeros(args.repeat) for name in names}      # per round
+    try:
+        shares = subprocess._batch.sizes
+        for w, share in enumerate(shares):
+            parent, child = context.Pipe()
+            proc = context.Process(target=_plain_batch, daemon=True, args=(
+                child, cores[w % len(cores)], share, kwargs, batches, args.seed))
+            proc.start()
+            plain.append((parent, proc))
+        for env, pinned in ((inprocess, one_core), (subprocess, cores)):
+            os.sched_setaffinity(0, pinned)
+            env.reset(seed=args.seed)
+            _seconds(env, batches, WARMUP_STEPS, 0)
+        for conn, _ in plain:
+            conn.recv()                       # warmed up
+        start = WARMUP_STEPS
+        for r in range(args.repeat):
+            for done in range(0, args.steps, args.chunk):
+                n = min(args.chunk, args.steps - done)
+                for name, env, pinned in (("inprocess", inprocess, one_core), ("subprocess", subprocess, cores)):
+                    os.sched_setaffinity(0, pinned)
+                    seconds[name][r] += _seconds(env, batches, n, start)
+                for conn, _ in plain:
+                    conn.send(n)
+                seconds["ceiling"][r] += max(conn.recv() for conn, _ in plain)   # started together
+                start += n
+    finally:
+        for conn, proc in plain:
+            try:
+                conn.send(0)
+            except OSError:
+                pass
+            proc.join(timeout=10)
+            if proc.is_alive():
+                proc.kill()
+        inprocess.close()
+        subprocess.close()
+        os.sched_setaffinity(0, allowed)
+    env_steps = args.steps * args.envs
+    rate = {name: env_steps * args.repeat / seconds[name].sum() for name in names}
+    per_round = seconds["inprocess"] / seconds["subprocess"]
+    figures = {
+        "envs": args.envs, "players_per_team": args.players_per_team, "observation": args.observation,
+        "perception": kwargs["perception"], "steps": args.steps, "chunk": args.chunk, "rounds": args.repeat,
+        "workers": workers, "pin_workers": args.pin_workers, "inprocess_cores": len(one_core),
+        "subprocess_cores": len(cores),
+        "inprocess_env_steps_per_s": round(rate["inprocess"], 1),
+        "subprocess_env_steps_per_s": round(rate["subprocess"], 1),
+        "ratio": round(rate["subprocess"] / rate["inprocess"], 3),
+        "ratio_per_round_min_max": [round(float(per_round.min()), 3), round(float(per_round.max()), 3)],
+        "ceiling_env_steps_per_s": round(rate["ceiling"], 1),
+        "ceiling_over_inprocess": round(rate["ceiling"] / rate["inprocess"], 3),
+        "subprocess_over_ceiling": round(rate["subprocess"] / rate["ceiling"], 3),
+        "python": platform.python_version(),
+    }
+    if args.json:
+        print(json.dumps(figures))
+    else:
+        print_table(f"dynenv-bench vector: {args.envs} worlds {args.players_per_team}v{args.players_per_team} "
+                    f"{args.observation}", [(k, str(v)) for k, v in figures.items()])
+    return 0
