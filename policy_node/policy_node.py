@@ -21,8 +21,7 @@ from dynenv_msgs.srv import LoadPolicy
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
-from dynenv_ros.envs.padded_layout import (LANDMARK_CLASSES, OBJECT_CLASSES, PaddedLayout, clamp_features,
-                                           pack_frames)
+from dynenv_ros.envs.padded_layout import PaddedLayout, clamp_features, pack_frames
 from dynenv_ros.perception.detections import as_features, rows_from_messages
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.node_runner import run_node
@@ -183,11 +182,7 @@ def pack_messages(periods: list[list[DetectionArray]], previous: list[tuple], ma
     the number of rows dropped (farthest first) beyond the maxima."""
     frames = [[clamp_features(as_features(rows_from_messages(msg.detections))) for msg in period]
               for period in periods]
-    lengths = [max([0] + [int(np.isin(rows[:, 0], classes).sum()) for entry in frames for rows in entry])
-               for classes in (_LANDMARK_IDS, _OBJECT_IDS)]
-    layout = PaddedLayout(max(len(entry) for entry in frames), max_landmarks or max(1, lengths[0]),
-                          max_objects or max(1, lengths[1]))
-    observation, dropped = pack_frames(layout, frames)
+    observation, dropped = pack_frames(PaddedLayout.fitting(frames, max_landmarks, max_objects), frames)
     for b, period in enumerate(periods):
         for k, msg in enumerate(period):
             observation["proprioception"][b, k] = (msg.head_yaw, msg.self_fallen, msg.self_penalized,
@@ -196,10 +191,6 @@ def pack_messages(periods: list[list[DetectionArray]], previous: list[tuple], ma
         observation["game"][b] = (last.ball_owner, last.ball_owner_seconds, last.game_seconds_remaining)
         observation["previous_action"][b] = previous[b]
     return observation, int(dropped.sum())
-
-
-_LANDMARK_IDS = [int(c) for c in LANDMARK_CLASSES]
-_OBJECT_IDS = [int(c) for c in OBJECT_CLASSES]
 
 
 def _sample(step, head_mode: str, generator: torch.Generator, greedy: bool, head_max: float) -> np.ndarray:

@@ -149,7 +149,7 @@ def test_the_policy_node_packs_its_messages_into_the_same_arrays():
     world.step([[0, 0, 0, 3]] * 4, on_frame=observations.on_frame)
     vision = observations.vision
     perception = vision.perceive()
-    expected = observations._pack(perception, vision.proprioception, vision.game_controller[-1])
+    expected = observations._pack(perception)
     n, frames = 4, len(perception) // 4
     periods = []
     for i in range(n):

@@ -68,6 +68,19 @@ class PaddedLayout:
         return cls(frames, DEFAULT_MAX_LANDMARKS if max_landmarks is None else max_landmarks,
                    2 * players_per_team + EXTRA_OBJECT_SLOTS if max_objects is None else max_objects)
 
+    @classmethod
+    def fitting(cls, frames_per_robot: list[list[np.ndarray]], max_landmarks: int | None = None,
+                max_objects: int | None = None) -> "PaddedLayout":
+        """The smallest layout that holds these rows (per robot, per frame a (k, 19) array), or the given maxima
+        where set (a fixed-shape runtime's)."""
+        longest = np.zeros(2, np.int64)
+        for frames in frames_per_robot:
+            for rows in frames:
+                stream = STREAM_OF_CLASS[np.asarray(rows)[:, 0].astype(np.int64) & 255]
+                longest = np.maximum(longest, np.bincount(stream[stream >= 0], minlength=2))
+        return cls(max([len(frames) for frames in frames_per_robot] + [1]),
+                   max_landmarks or max(1, int(longest[0])), max_objects or max(1, int(longest[1])))
+
     def shapes(self) -> dict[str, tuple[int, ...]]:
         F, L, O = self.frames, self.max_landmarks, self.max_objects
         return {"landmarks": (F, L, FEATURES), "landmark_mask": (F, L), "objects": (F, O, FEATURES),

@@ -118,7 +118,7 @@ class SoccerObservations:
             raise RuntimeError("build_padded() needs observation='padded'")
         perception = self.vision.perceive()
         rewards = self.vision.observation_rewards(perception)
-        self.arrays = self._pack(perception, self.vision.proprioception, self.vision.game_controller[-1], out)
+        self.arrays = self._pack(perception, out)
         return rewards
 
     def initial_padded(self, out: dict[str, np.ndarray] | None = None) -> None:
@@ -126,8 +126,8 @@ class SoccerObservations:
             self.on_frame(k)
         self.build_padded(out)
 
-    def _pack(self, perception, proprio: np.ndarray, game: np.ndarray,
-              out: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+    def _pack(self, perception, out: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+        """The period's perception, the robots' proprioception and the GameController's last word, packed."""
         n = self.config.n_robots
         frames = len(perception) // n
         arrays = self.layout.empty(n) if out is None else out
@@ -135,8 +135,8 @@ class SoccerObservations:
         self.dropped_rows = self.layout.pack_rows(
             clamp_features(as_features(perception.detections)), perception.offsets, views % n, views // n,
             arrays, clear=out is not None).reshape(frames, n).sum(axis=0)
-        arrays["proprioception"][:, :frames] = proprio.transpose(1, 0, 2)
-        arrays["game"][:] = game
+        arrays["proprioception"][:, :frames] = self.vision.proprioception.transpose(1, 0, 2)
+        arrays["game"][:] = self.vision.game_controller[-1]
         arrays["previous_action"][:] = previous_actions(self.world.last_actions)
         return arrays
 
@@ -146,6 +146,9 @@ class SoccerObservations:
         if self.mode == "full":
             rows = self.ground_truth.observations(self.world)
             return [rows[i] for i in range(n)], np.zeros(n)
+        if self.mode == "padded":
+            rewards = self.build_padded()
+            return [{key: value[i] for key, value in self.arrays.items()} for i in range(n)], rewards
         perception = self.vision.perceive()
         rewards = self.vision.observation_rewards(perception)
         proprio = self.vision.proprioception                                # (F, n, 4)
@@ -157,9 +160,6 @@ class SoccerObservations:
             out = [{"detections": tuple(features[off[k * n + i]:off[k * n + i + 1]] for k in range(frames)),
                     "proprioception": proprio[:, i], "game": game[i]} for i in range(n)]
             return out, rewards
-        if self.mode == "padded":
-            arrays = self._pack(perception, proprio, game)
-            return [{key: value[i] for key, value in arrays.items()} for i in range(n)], rewards
         from dynenv_ros.perception.camera import render_segmentation
         out = []
         for i in range(n):

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynenv_ros.core.arrays import clamp
-from dynenv_ros.core.object_classes import ObjectClass, Sighting, Subtype
+from dynenv_ros.core.object_classes import ObjectClass, Sighting
 from dynenv_ros.perception.detections import DETECTION_DTYPE
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.perception.scene import SceneFrames, SceneObjects, Views
@@ -60,10 +60,16 @@ class Perceiver:
         self.params = params
         cls = objects.class_id
         table = params.classes
-        self.near = np.array([table[ObjectClass(c)].near_range for c in cls])
-        self.max_range = np.array([table[ObjectClass(c)].max_range for c in cls])
-        self.miss_scale = np.array([table[ObjectClass(c)].miss_scale for c in cls])
-        self.visibility_radius = np.array([table[ObjectClass(c)].visibility_radius for c in cls])
+        # Per class id (what a report of that class gets), and per scene object (what the object itself gets).
+        self.class_near, self.class_max = np.full(256, np.inf), np.full(256, np.inf)
+        self.class_miss_scale, self.class_reach_radius = np.ones(256), np.zeros(256)
+        self.class_prior_logit = np.zeros(256)
+        for c, cp in table.items():
+            self.class_near[c], self.class_max[c] = cp.near_range, cp.max_range
+            self.class_miss_scale[c], self.class_reach_radius[c] = cp.miss_scale, cp.visibility_radius
+            self.class_prior_logit[c] = math.log(cp.correct_prior / (1.0 - cp.correct_prior))
+        self.near, self.max_range = self.class_near[cls], self.class_max[cls]
+        self.miss_scale, self.visibility_radius = self.class_miss_scale[cls], self.class_reach_radius[cls]
         self.is_robot = cls == ObjectClass.ROBOT
         self.is_landmark = np.isin(cls, LANDMARK_CLASSES)
         self.occluder_index = np.flatnonzero(objects.occluder)
@@ -79,24 +85,17 @@ class Perceiver:
                                                                                          np.sin(angles)))
             self.occluder_index = self.occluder_index[self.occluder_index != self.circle_index]
         self._fp_classes = np.asarray(params.false_positives.classes, np.uint8)
-        # Per reported class: what a made-up report (false positive, confusion) of that class must look like.
-        self.class_size = _NOMINAL_SIZES.copy()
-        for c in np.unique(cls):
-            self.class_size[c] = objects.size_x[np.flatnonzero(cls == c)[0]]
-        self.class_near = np.full(256, np.inf)
-        self.class_max = np.full(256, np.inf)
-        self.class_reach_radius = np.zeros(256)
-        self.class_prior_logit = np.zeros(256)
-        for c, cp in table.items():
-            self.class_near[c], self.class_max[c] = cp.near_range, cp.max_range
-            self.class_reach_radius[c] = cp.visibility_radius
-            self.class_prior_logit[c] = math.log(cp.correct_prior / (1.0 - cp.correct_prior))
         self.robot_index = np.flatnonzero(self.is_robot)
-        # A made-up report's subtype: the one its class always has, or (crossings: L, T, X) a random real one's.
+        # What a made-up report (false positive, confusion) of a class looks like: the size of the scene's objects
+        # of that class (a class the scene lacks: its nominal size), and their subtype — the one the class always
+        # has, or (crossings: L, T, X) a random real one's.
+        self.class_size = _NOMINAL_SIZES.copy()
         self._class_subtype = np.zeros(256, np.uint8)
         self._varied_subtypes: dict[int, np.ndarray] = {}
         for c in np.unique(cls):
-            subtypes = objects.subtype[cls == c]
+            members = cls == c
+            self.class_size[c] = objects.size_x[members][0]
+            subtypes = objects.subtype[members]
             if c != ObjectClass.ROBOT and (subtypes != subtypes[0]).any():
                 self._varied_subtypes[int(c)] = subtypes.copy()
             else:

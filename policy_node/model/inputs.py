@@ -77,12 +77,7 @@ def collate(observations: Sequence[Sequence[np.ndarray]], max_landmarks: int | N
     into the padded layout — with the batch's own maxima where none are given; beyond a fixed maximum the
     farthest rows are dropped, as everywhere."""
     frames = [[np.asarray(rows, np.float32).reshape(-1, FEATURES) for rows in entry] for entry in observations]
-    counts = [(int(np.isin(rows[:, 0], [int(c) for c in LANDMARK_CLASSES]).sum()),
-               int(np.isin(rows[:, 0], [int(c) for c in OBJECT_CLASSES]).sum())) for entry in frames for rows in entry]
-    layout = PaddedLayout(max((len(entry) for entry in frames), default=1) or 1,
-                          max_landmarks or max([c[0] for c in counts] + [1]),
-                          max_objects or max([c[1] for c in counts] + [1]))
-    arrays, _ = pack_frames(layout, frames)
+    arrays, _ = pack_frames(PaddedLayout.fitting(frames, max_landmarks, max_objects), frames)
     return streams_from_padded(arrays)
 
 
