@@ -169,3 +169,12 @@ def test_the_policy_node_packs_its_messages_into_the_same_arrays():
     assert dropped == 0
     for key in KEYS:
         np.testing.assert_allclose(got[key], expected[key], rtol=0, atol=1e-6, err_msg=key)
+
+
+@pytest.mark.parametrize("settings,message", [({"max_landmarks": 0}, "max_landmarks"),
+                                              ({"max_objects": "x"}, "max_objects"),
+                                              ({"max_objects": 2.5}, "max_objects"),
+                                              ({"observation": "ragged"}, "observation")])
+def test_bad_layout_settings_are_refused_by_name(settings, message):
+    with pytest.raises(ValueError, match=message):
+        parallel_env(**{"observation": "padded", **settings})

@@ -505,7 +505,11 @@ def test_a_line_is_clipped_to_the_view_and_reported_by_its_closest_point():
     ({"field_of_view": 4.0}, "field_of_view"), ({"confusions": [{"source": "ball", "target": "kite",
                                                                  "probability": 1}]}, "unknown class"),
     ({"confidence": "reliability"}, "confidence"), ({"occlusion": {"model": "wedge"}}, "occlusion.model"),
-    ({"position": {"model": "gaussian"}}, "position.model")])
+    ({"position": {"model": "gaussian"}}, "position.model"), ({"confidence_separation": -1.0}, "confidence_separation"),
+    ({"confidence_separation": "high"}, "confidence_separation"),
+    ({"classes": {**{name: {"near_range": 1.0, "max_range": 2.0} for name in (
+        "robot", "goalpost", "penalty_cross", "line_crossing", "field_line", "center_circle")},
+        "ball": {"near_range": 3.0, "max_range": 6.0, "correct_prior": 1.0}}}, "correct_prior")])
 def test_bad_parameters_are_refused_by_name(values, message):
     base = {"classes": {n: {"near_range": 1.0, "max_range": 2.0} for n in (
         "ball", "robot", "goalpost", "penalty_cross", "line_crossing", "field_line", "center_circle")}}
