@@ -46,7 +46,7 @@ def _record(robots: int, periods: int, seed: int) -> list[tuple[list, Any, Any]]
     import torch
 
     from dynenv_ros.envs.robocup_v0 import parallel_env
-    from policy_node.model.inputs import encode_previous_action
+    from dynenv_ros.agent.inputs import encode_previous_action
 
     per_team = (robots + 1) // 2
     env = parallel_env(players_per_team=per_team, perception={"preset": "realistic", "noise_magnitude": 1.0})
@@ -118,9 +118,9 @@ def run(args: Any) -> int:
         torch.set_num_interop_threads(1)
     except RuntimeError:       # already fixed by earlier torch work in this process
         pass
-    from policy_node.export import OnnxPolicy, TorchPolicy, export_onnx
-    from policy_node.model.inputs import collate
-    from policy_node.model.network import DynEnvAgent, parameter_count
+    from dynenv_ros.agent.export import OnnxPolicy, TorchPolicy, export_onnx
+    from dynenv_ros.agent.inputs import collate
+    from dynenv_ros.agent.network import DynEnvAgent, parameter_count
 
     torch.manual_seed(args.seed)
     model = DynEnvAgent(feature_size=args.feature_size, head_mode=args.head_mode).eval()

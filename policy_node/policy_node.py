@@ -28,10 +28,10 @@ from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_int, declare_str
 from dynenv_ros.ros.qos import sim_stream
 from dynenv_ros.soccer.config import robot_names
-from policy_node.checkpoint import load_checkpoint, sha256
-from policy_node.export import TorchPolicy
-from policy_node.model.inputs import side_inputs, streams_from_padded
-from policy_node.model.network import DynEnvAgent
+from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
+from dynenv_ros.agent.export import TorchPolicy
+from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
+from dynenv_ros.agent.network import DynEnvAgent
 
 RUNTIMES = ("torch", "onnxruntime")
 
@@ -90,7 +90,7 @@ class PolicyNode(Node):
             raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
         if runtime == "torch":
             return TorchPolicy(load_checkpoint(path)), sha256(path)
-        from policy_node.export import OnnxPolicy
+        from dynenv_ros.agent.export import OnnxPolicy
         try:
             return OnnxPolicy(path), sha256(path)
         except Exception as error:

@@ -1,4 +1,4 @@
-"""The agent's losses (policy_node/model/losses.py): LTP against a hand-computed example, gradients reaching every
+"""The agent's losses (dynenv_ros/agent/losses.py): LTP against a hand-computed example, gradients reaching every
 parameter, masking, the slot assignment against brute force, reconstruction and its ignore rule, empty inputs."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from policy_node.model.losses import (ANCHORS, ROBOCUP_HEADS, ForwardModel, InverseModel, LongTermPredictor,
+from dynenv_ros.agent.losses import (ANCHORS, ROBOCUP_HEADS, ForwardModel, InverseModel, LongTermPredictor,
                                       RCMAttention, assign_slots, assignment_cost, brute_force_assignment,
                                       icm_losses, localization_loss, ltp_loss, one_hot_actions, pose_features,
                                       reconstruction_loss)
@@ -352,7 +352,7 @@ def test_helpers():
 
 def test_the_long_term_prediction_loss_is_actually_optimised():
     """DynEnv computed LTP but never optimised it (facts §12.12): here an optimiser on it learns the dynamics."""
-    from policy_node.model.losses import LongTermPredictor, RCMAttention, ltp_loss
+    from dynenv_ros.agent.losses import LongTermPredictor, RCMAttention, ltp_loss
     g = torch.Generator().manual_seed(0)
     T, N, D, A = 6, 8, 8, 4
     actions = torch.nn.functional.one_hot(torch.randint(0, A, (T, N), generator=g), A).float()

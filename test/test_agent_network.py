@@ -7,9 +7,9 @@ import pytest
 import torch
 
 from dynenv_ros.envs.robocup_v0 import parallel_env
-from policy_node.model.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, collate,
+from dynenv_ros.agent.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, collate,
                                    encode_previous_action)
-from policy_node.model.network import DynEnvAgent, parameter_count
+from dynenv_ros.agent.network import DynEnvAgent, parameter_count
 
 
 def _observations(seed=0, robots=2):
@@ -198,7 +198,7 @@ def test_a_tiny_localization_task_is_learned():
 
 
 def test_reconstruction_loss_trains_the_head_and_the_object_stream():
-    from policy_node.model.losses import ANCHORS, reconstruction_loss
+    from dynenv_ros.agent.losses import ANCHORS, reconstruction_loss
     torch.manual_seed(0)
     model = DynEnvAgent(feature_size=16)
     out = _run(model, _observations())
@@ -213,7 +213,7 @@ def test_reconstruction_loss_trains_the_head_and_the_object_stream():
 # ---- Recurrent Temporal Attention: a slot stays valid once any frame of the period has filled it
 
 def _rta(size=16):
-    from policy_node.model.network import RecurrentTemporalAttention
+    from dynenv_ros.agent.network import RecurrentTemporalAttention
     torch.manual_seed(0)
     return RecurrentTemporalAttention(size).eval()
 

@@ -5,8 +5,8 @@ import pickle
 import pytest
 import torch
 
-from policy_node.checkpoint import load_checkpoint, save_checkpoint, sha256
-from policy_node.model.network import DynEnvAgent
+from dynenv_ros.agent.checkpoint import load_checkpoint, save_checkpoint, sha256
+from dynenv_ros.agent.network import DynEnvAgent
 
 
 class _Payload:

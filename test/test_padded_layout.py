@@ -15,7 +15,7 @@ from dynenv_ros.envs.soccer_observations import SoccerObservations
 from dynenv_ros.ros.conversions import detection_array
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.world import SoccerWorld
-from policy_node.model.inputs import collate, side_inputs, streams_from_padded
+from dynenv_ros.agent.inputs import collate, side_inputs, streams_from_padded
 from policy_node.policy_node import pack_messages
 
 HEAD_STEP = math.radians(12.5)          # docs/soccer.md: head index 0..6, 12.5° per unit, centred on 3

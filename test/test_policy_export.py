@@ -11,10 +11,10 @@ pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
 
 from dynenv_ros.envs.robocup_v0 import parallel_env  # noqa: E402
-from policy_node.export import OnnxPolicy, TorchPolicy, export_onnx  # noqa: E402
-from policy_node.model.inputs import (FEATURES, PROPRIOCEPTION, collate, encode_previous_action,  # noqa: E402
+from dynenv_ros.agent.export import OnnxPolicy, TorchPolicy, export_onnx  # noqa: E402
+from dynenv_ros.agent.inputs import (FEATURES, PROPRIOCEPTION, collate, encode_previous_action,  # noqa: E402
                                       self_state)
-from policy_node.model.network import DynEnvAgent  # noqa: E402
+from dynenv_ros.agent.network import DynEnvAgent  # noqa: E402
 
 FRAMES, MAX_LANDMARKS, MAX_OBJECTS = 5, 48, 12
 PERIODS = 3

@@ -7,8 +7,8 @@ from dynenv_msgs.srv import LoadPolicy
 from rclpy.parameter import Parameter
 
 from dynenv_ros.nodes.sim_node import SimNode
-from policy_node.checkpoint import save_checkpoint
-from policy_node.model.network import DynEnvAgent
+from dynenv_ros.agent.checkpoint import save_checkpoint
+from dynenv_ros.agent.network import DynEnvAgent
 from policy_node.policy_node import PolicyNode
 from ros_harness import spin_until
 
@@ -72,7 +72,7 @@ def test_checkpoints_load_and_bad_ones_are_refused(make_node, executor, tmp_path
 
 
 def test_an_exported_onnx_policy_plays_and_can_be_swapped_in(make_node, executor, tmp_path):
-    from policy_node.export import export_onnx
+    from dynenv_ros.agent.export import export_onnx
     torch.manual_seed(6)
     onnx_file = tmp_path / "agent.onnx"
     export_onnx(DynEnvAgent(), onnx_file)

@@ -52,8 +52,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from policy_node.model.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
-from policy_node.model.network import DynEnvAgent, State
+from dynenv_ros.agent.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
+from dynenv_ros.agent.network import DynEnvAgent, State
 
 INPUT_NAMES = ("landmark_features", "landmark_kind", "landmark_mask", "object_features", "object_kind",
                "object_mask", "previous_action", "proprioception", "h_loc", "c_loc", "h_obj", "c_obj")

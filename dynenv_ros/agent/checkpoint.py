@@ -9,7 +9,7 @@ from typing import Any
 
 import torch
 
-from policy_node.model.network import DynEnvAgent
+from dynenv_ros.agent.network import DynEnvAgent
 
 FORMAT = "dynenv_agent/1"
 

@@ -15,7 +15,7 @@ import torch
 from torch import nn
 from torch.distributions import Categorical, Normal
 
-from policy_node.model.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
+from dynenv_ros.agent.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
 
 POSE_SIZE = 6            # [x, y, cos(θ+h), sin(θ+h), cos h, sin h] in the team frame
 State = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
