@@ -24,6 +24,7 @@ from gymnasium import spaces
 
 from dynenv_ros.envs.padded_layout import (ACTION_COLUMNS, FEATURE_BOUND, GAME_COLUMNS, PROPRIOCEPTION_COLUMNS,
                                            PaddedLayout, clamp_features)
+from dynenv_ros.envs.learning_targets import LearningTargets
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder
 from dynenv_ros.perception.detections import FEATURE_COLUMNS, as_features
 from dynenv_ros.perception.params import PerceptionParams, load_preset
@@ -88,6 +89,7 @@ class SoccerObservations:
             self.space = spaces.Dict({"images": spaces.Box(0, 255, shape, np.uint8),
                                       "proprioception": proprio_space, "game": game_space})
         self.dropped_rows = np.zeros(config.n_robots, np.int64)   # padded: rows beyond the maxima, last period
+        self._targets: LearningTargets | None = None              # made on the first build_padded(targets=...)
 
     def reset(self, world: SoccerWorld) -> None:
         self.world = world
@@ -111,20 +113,28 @@ class SoccerObservations:
                 self.on_frame(k)
         return self.build()[0]
 
-    def build_padded(self, out: dict[str, np.ndarray] | None = None) -> np.ndarray:
+    def build_padded(self, out: dict[str, np.ndarray] | None = None,
+                     targets: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """Padded mode without per-robot dicts: fill ``out`` (``layout.empty(n_robots)``, or new arrays kept in
-        ``self.arrays``) and return the observation reward per robot. For vectorised batches."""
+        ``self.arrays``) and return the observation reward per robot. For vectorised batches. ``targets``
+        (``learning_targets.empty_targets(players_per_team, n_robots)``): also filled, with the learning targets of
+        the same instant."""
         if self.mode != "padded":
             raise RuntimeError("build_padded() needs observation='padded'")
         perception = self.vision.perceive()
         rewards = self.vision.observation_rewards(perception)
         self.arrays = self._pack(perception, out)
+        if targets is not None:
+            if self._targets is None:
+                self._targets = LearningTargets(self.config.players_per_team)
+            self._targets.fill(self.vision, perception, targets)
         return rewards
 
-    def initial_padded(self, out: dict[str, np.ndarray] | None = None) -> None:
+    def initial_padded(self, out: dict[str, np.ndarray] | None = None,
+                       targets: dict[str, np.ndarray] | None = None) -> None:
         for k in range(self.frames):
             self.on_frame(k)
-        self.build_padded(out)
+        self.build_padded(out, targets)
 
     def _pack(self, perception, out: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
         """The period's perception, the robots' proprioception and the GameController's last word, packed."""

@@ -17,6 +17,8 @@ Both backends give bit-identical results for the same seed: each world has its o
 ``SeedSequence`` (``_seeds``), and actions are validated in this process before any world moves. Which backend is
 faster depends on the machine: see docs/benchmarks.md (`dynenv-bench vector`). Finished episodes reset
 automatically; the last observation of a finished episode is returned separately in ``final_observations``.
+``targets=True`` adds the self-supervised localization and reconstruction targets of every robot
+(``envs.learning_targets``), written by the worlds into the batch's arrays like the observations.
 """
 from __future__ import annotations
 
@@ -25,13 +27,14 @@ import multiprocessing as mp
 import os
 import pickle
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing import shared_memory
 from multiprocessing.connection import Connection
 from typing import Any, Mapping, Union
 
 import numpy as np
 
+from dynenv_ros.envs.learning_targets import target_shapes
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.envs.soccer_observations import SoccerObservations, perception_params
 from dynenv_ros.perception.params import PerceptionParams
@@ -59,6 +62,10 @@ class BatchStep:
     truncated: np.ndarray          # (E,) bool
     final_observations: dict[int, Observation]   # env index -> last observation of its finished episode, (A, ...)
     dropped_detections: np.ndarray  # (E, A) int64: detection rows beyond the layout's maxima (padded; else 0)
+    # targets=True: the learning targets of the same instant as ``observations`` (envs.learning_targets), as
+    # {key: (E, A, ...)} float32, and those of each finished episode's last observation; else None and {}.
+    targets: dict[str, np.ndarray] | None = None
+    final_targets: dict[int, dict[str, np.ndarray]] = field(default_factory=dict)
 
 
 def _seeds(seed: int | None, count: int) -> list[int]:
@@ -74,6 +81,7 @@ class _Settings:
     perception: PerceptionParams
     max_landmarks: int | None
     max_objects: int | None
+    targets: bool = False
 
     def observations(self) -> SoccerObservations:
         return SoccerObservations(self.config, self.observation, self.perception,
@@ -82,7 +90,8 @@ class _Settings:
 
 def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     """Every array a batch writes, with a leading env axis: observations ``obs/<key>``, final observations
-    ``final/<key>``, and the per-step items."""
+    ``final/<key>``, learning targets ``targets/<key>`` and ``final_targets/<key>`` (``settings.targets``), and
+    the per-step items."""
     obs = settings.observations()
     E, A = num_envs, settings.config.n_robots
     if settings.observation == "padded":
@@ -92,6 +101,10 @@ def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, .
     spec: dict[str, tuple[tuple[int, ...], np.dtype]] = {}
     for prefix in ("obs/", "final/"):
         spec.update({prefix + key: ((E, A) + tuple(shape), np.dtype(np.float32)) for key, shape in shapes.items()})
+    if settings.targets:
+        for prefix in ("targets/", "final_targets/"):
+            spec.update({prefix + key: ((E, A) + shape, np.dtype(np.float32))
+                         for key, shape in target_shapes(settings.config.players_per_team).items()})
     spec["reward_terms"] = ((E, N_TERMS, A), np.dtype(np.float64))
     spec["terminated"] = ((E,), np.dtype(bool))
     spec["truncated"] = ((E,), np.dtype(bool))
@@ -118,6 +131,9 @@ class InProcessBatch:
         # Per world, views of its slice: what build_padded(out=...) fills in place.
         self._obs = [{k: arrays["obs/" + k][e] for k in keys} for e in range(num_envs)]
         self._final = [{k: arrays["final/" + k][e] for k in keys} for e in range(num_envs)]
+        target_keys = [k[8:] for k in arrays if k.startswith("targets/")]
+        self._targets = [{k: arrays["targets/" + k][e] for k in target_keys} or None for e in range(num_envs)]
+        self._final_targets = [{k: arrays["final_targets/" + k][e] for k in target_keys} for e in range(num_envs)]
 
     @property
     def num_envs(self) -> int:
@@ -127,7 +143,7 @@ class InProcessBatch:
         world, obs = self.worlds[e], self.observers[e]
         obs.reset(world)
         if self.padded:
-            obs.initial_padded(out=self._obs[e])
+            obs.initial_padded(out=self._obs[e], targets=self._targets[e])
         else:
             self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
 
@@ -145,7 +161,7 @@ class InProcessBatch:
             result = world.step(list(acts), on_frame=obs.on_frame)
             terms[e] = result.rewards
             if self.padded:
-                terms[e, RewardTerm.OBSERVATION] += obs.build_padded(out=self._obs[e])
+                terms[e, RewardTerm.OBSERVATION] += obs.build_padded(out=self._obs[e], targets=self._targets[e])
                 dropped[e] = obs.dropped_rows
             else:
                 self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
@@ -153,6 +169,8 @@ class InProcessBatch:
             if result.terminated or result.truncated:
                 for key, final in self._final[e].items():
                     final[...] = self._obs[e][key]
+                for key, final in self._final_targets[e].items():
+                    final[...] = self._targets[e][key]
                 world.reset(seed=int(world.rng.integers(2**63)))
                 self._observe_initial(e)
 
@@ -399,19 +417,29 @@ class SoccerVectorEnv:
     ``"full"``: ground truth (E, A, D). ``copy=False`` returns the batch's own arrays, overwritten by the next step.
     Subprocess backend: ``workers`` processes (default one per CPU this process may use), ``pin_workers=True`` pins
     worker w to the w-th of those CPUs.
+
+    ``targets=True`` (padded only): every world also writes the self-supervised localization and reconstruction
+    targets of its robots (``envs.learning_targets``: ``pose`` (E, A, 6), ``ball`` (E, A, 3), ``robots`` (E, A, R, 6),
+    ``ball_seen`` (E, A), ``robots_seen`` (E, A, R), float32, team frame), of the same instant as the observations:
+    ``BatchStep.targets`` and ``final_targets`` after a step, ``self.targets`` for the observations returned last
+    (after ``reset()`` too). Shapes without the (E, A) axes: ``self.target_shapes``.
     """
 
     def __init__(self, num_envs: int, backend: str = "auto", workers: int | None = None,
                  config: SoccerConfig | Mapping[str, Any] | None = None, observation: str = "padded",
                  perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
                  max_landmarks: int | None = None, max_objects: int | None = None, copy: bool = True,
-                 pin_workers: bool = False) -> None:
+                 pin_workers: bool = False, targets: bool = False) -> None:
         self.config = config if isinstance(config, SoccerConfig) else SoccerConfig.from_mapping(config)
         if observation not in VECTOR_OBSERVATIONS:
             raise ValueError(f"observation must be one of {VECTOR_OBSERVATIONS}, got {observation!r}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
-        settings = _Settings(self.config, observation, perception_params(perception), max_landmarks, max_objects)
+        if targets and observation != "padded":
+            raise ValueError(f"targets=True needs observation='padded' (the targets come with perception), "
+                             f"got observation={observation!r}")
+        settings = _Settings(self.config, observation, perception_params(perception), max_landmarks, max_objects,
+                             bool(targets))
         observations = settings.observations()      # checks the layout maxima; gives the spaces
         self.observation = observation
         self.layout: PaddedLayout | None = observations.layout if observation == "padded" else None
@@ -430,6 +458,10 @@ class SoccerVectorEnv:
         self.copy = copy
         arrays = self._batch.arrays
         self._keys = [k[4:] for k in arrays if k.startswith("obs/")]
+        self._target_keys = [k[8:] for k in arrays if k.startswith("targets/")]
+        self.with_targets = bool(targets)
+        self.target_shapes: dict[str, tuple[int, ...]] | None = \
+            target_shapes(self.config.players_per_team) if targets else None
         self._was_reset = self._closed = False
 
     def _observation(self, prefix: str, index: Any = slice(None), copy: bool = True) -> Observation:
@@ -438,6 +470,20 @@ class SoccerVectorEnv:
             value = arrays[prefix + FULL_KEY][index]
             return value.copy() if copy else value
         return {k: arrays[prefix + k][index].copy() if copy else arrays[prefix + k][index] for k in self._keys}
+
+    def _targets(self, prefix: str, index: Any = slice(None), copy: bool = True) -> dict[str, np.ndarray]:
+        arrays = self._batch.arrays
+        return {k: arrays[prefix + k][index].copy() if copy else arrays[prefix + k][index] for k in self._target_keys}
+
+    @property
+    def targets(self) -> dict[str, np.ndarray]:
+        """The learning targets of the observations returned last (by ``reset()`` or ``step()``), copied."""
+        self._check_open()
+        if not self.with_targets:
+            raise RuntimeError("this SoccerVectorEnv was made without targets=True")
+        if not self._was_reset:
+            raise RuntimeError("no targets before reset(); call reset(seed) first")
+        return self._targets("targets/")
 
     def _check_open(self) -> None:
         if self._closed:
@@ -458,9 +504,15 @@ class SoccerVectorEnv:
         arrays = self._batch.arrays
         terms = arrays["reward_terms"].copy()
         terminated, truncated = arrays["terminated"].copy(), arrays["truncated"].copy()
-        finals = {int(e): self._observation("final/", int(e)) for e in np.flatnonzero(terminated | truncated)}
+        ended = [int(e) for e in np.flatnonzero(terminated | truncated)]
+        finals = {e: self._observation("final/", e) for e in ended}
+        if not self.with_targets:
+            targets, final_targets = None, {}
+        else:
+            targets = self._targets("targets/", copy=self.copy)
+            final_targets = {e: self._targets("final_targets/", e) for e in ended}
         return BatchStep(self._observation("obs/", copy=self.copy), terms.sum(axis=1), terms, terminated,
-                         truncated, finals, arrays["dropped"].copy())
+                         truncated, finals, arrays["dropped"].copy(), targets, final_targets)
 
     def close(self) -> None:
         self._closed = True

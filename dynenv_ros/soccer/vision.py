@@ -83,6 +83,12 @@ class SoccerVision:
         """Field positions of the scene's objects at a frame of the last perceived period (for drawing)."""
         return self._x[frame], self._y[frame]
 
+    def robot_states(self, frame: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every robot's body yaw (field frame), head yaw (relative to the body) and fallen flag at a frame of the
+        last perceived period (views, no copy)."""
+        n = self.world.n_robots
+        return self._yaw[frame, :n], self._head[frame], self._fallen[frame, :n]
+
     def frames_recorded(self) -> int:
         return len(self._records)
 
