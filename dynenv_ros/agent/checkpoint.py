@@ -1,36 +1,43 @@
-"""Agent checkpoints: a plain dict of tensors and numbers, loaded with ``torch.load(weights_only=True)`` so a
-checkpoint can never run code; written atomically so a crash mid-write leaves the previous file intact."""
+"""Policy files: one self-describing ``.safetensors`` file per trained agent — the weights, plus the agent's
+constructor settings and the caller's metadata as JSON strings in the safetensors header. No pickle anywhere, so a
+policy file can never run code; written atomically (temp file, fsync, rename) so a crash mid-write leaves the
+previous file intact.
+
+Layout of a policy file (format ``dynenv_policy/1``):
+
+* tensors: ``model.state_dict()`` under its own names;
+* header metadata (string → string): ``format`` = ``dynenv_policy/1``, ``config`` = JSON of the ``DynEnvAgent``
+  constructor arguments (feature_size, head_mode, head_units, head_max), ``meta`` = JSON of the caller's metadata,
+  ``data_sha256`` = SHA-256 of the tensor data section (so a flipped byte in the weights is caught on load).
+
+This module is the single implementation of the format; ``dynenv_ros.learning.checkpoints`` re-exports
+``save_policy``/``load_policy`` and uses the helpers here (atomic writes, state-dict fitting) for the training
+checkpoints. ``save_checkpoint``/``load_checkpoint`` are the older names the policy node uses.
+"""
 from __future__ import annotations
 
 import hashlib
+import json
 import os
+import struct
+import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import torch
+from safetensors.torch import load as _st_load
+from safetensors.torch import save as _st_save
 
 from dynenv_ros.agent.network import DynEnvAgent
 
-FORMAT = "dynenv_agent/1"
+FORMAT = "dynenv_policy/1"
+POLICY_SUFFIX = ".safetensors"
+_HEADER_LIMIT = 100 * 1024 * 1024      # safetensors' own limit on the JSON header
 
 
-def save_checkpoint(model: DynEnvAgent, path: str | os.PathLike[str], extra: dict[str, Any] | None = None) -> str:
-    """Write ``path`` (via ``path.tmp`` and a rename); return its SHA-256."""
-    target = Path(path)
-    if not target.parent.is_dir():
-        raise ValueError(f"cannot write checkpoint {target}: folder {target.parent} does not exist")
-    payload = {"format": FORMAT,
-               "config": {"feature_size": model.feature_size, "head_mode": model.head_mode,
-                          "head_units": (model.head_head.out_features - 1) // 2 if model.head_mode == "discrete"
-                          else 3, "head_max": float(model.head_max)},
-               "state_dict": model.state_dict(), "extra": dict(extra or {})}
-    tmp = target.with_name(target.name + ".tmp")
-    torch.save(payload, tmp)
-    os.replace(tmp, target)
-    return sha256(target)
-
-
+# -- generic helpers (also used by the training checkpoints) -------------------------------------------------------
 def sha256(path: str | os.PathLike[str]) -> str:
+    """Hex SHA-256 of a file's bytes."""
     digest = hashlib.sha256()
     with open(path, "rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
@@ -38,22 +45,192 @@ def sha256(path: str | os.PathLike[str]) -> str:
     return digest.hexdigest()
 
 
-def load_checkpoint(path: str | os.PathLike[str]) -> DynEnvAgent:
-    """The model in eval mode. Refuses missing, corrupt, foreign or code-carrying files with a clear ValueError."""
+def fsync_dir(path: str | os.PathLike[str]) -> None:
+    """Make a rename/creation inside folder ``path`` durable (no-op where folders cannot be opened)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_synced(path: str | os.PathLike[str], data: bytes) -> None:
+    """Write ``data`` to ``path`` and fsync the file (not atomic by itself: use inside a temp folder)."""
+    with open(path, "wb") as handle:
+        handle.write(data)
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+def atomic_write(path: str | os.PathLike[str], data: bytes) -> None:
+    """Replace ``path`` with ``data`` atomically: a temp file in the same folder, fsync, ``os.replace``, fsync of
+    the folder. A kill at any moment leaves either the old file or the new one, never a partial one."""
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    fsync_dir(target.parent)
+
+
+def tensors_for_saving(tensors: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """CPU, contiguous, storage-owning copies (safetensors refuses tensors that share memory)."""
+    out = {}
+    for name, tensor in tensors.items():
+        if not isinstance(name, str) or not isinstance(tensor, torch.Tensor):
+            raise TypeError(f"tensor entry {name!r} must map a str to a torch.Tensor, got {type(tensor).__name__}")
+        out[name] = tensor.detach().to("cpu", copy=True).contiguous()
+    return out
+
+
+def safetensors_header(data: bytes) -> tuple[dict[str, Any], int]:
+    """The parsed JSON header of safetensors bytes and the offset where the tensor data starts; ValueError if the
+    bytes do not start with a well-formed header."""
+    if len(data) < 8:
+        raise ValueError(f"{len(data)} bytes, shorter than a safetensors header")
+    (size,) = struct.unpack("<Q", data[:8])
+    if size > _HEADER_LIMIT or 8 + size > len(data):
+        raise ValueError(f"header length {size} does not fit a file of {len(data)} bytes")
+    try:
+        header = json.loads(data[8:8 + size].decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ValueError(f"header is not JSON: {error}") from None
+    if not isinstance(header, dict):
+        raise ValueError("header is not a JSON object")
+    return header, 8 + size
+
+
+def read_safetensors(data: bytes) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """Tensors (on the CPU) and header metadata from safetensors bytes; ValueError on anything malformed."""
+    try:
+        header, _ = safetensors_header(data)
+        tensors = _st_load(data)
+    except Exception as error:                      # SafetensorError, ValueError, …: all mean "damaged"
+        raise ValueError(f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}") from None
+    metadata = header.get("__metadata__") or {}
+    if not isinstance(metadata, dict):
+        raise ValueError("header metadata is not a mapping")
+    return tensors, metadata
+
+
+def check_state_dict_fits(model: torch.nn.Module, state: Mapping[str, torch.Tensor], source: str) -> None:
+    """ValueError naming the first key that keeps ``state`` from loading strictly into ``model``: in the model's
+    own order, a key the state lacks or whose shape differs; then (in sorted order) a key the model does not have."""
+    expected = model.state_dict()
+    for key, tensor in expected.items():
+        if key not in state:
+            raise ValueError(f"{source} does not fit the model: missing key {key!r}")
+        if tuple(state[key].shape) != tuple(tensor.shape):
+            raise ValueError(f"{source} does not fit the model: key {key!r} has shape {tuple(state[key].shape)}, "
+                             f"the model expects {tuple(tensor.shape)}")
+    for key in sorted(state):
+        if key not in expected:
+            raise ValueError(f"{source} does not fit the model: unexpected key {key!r}")
+
+
+def json_dumps(value: Any, what: str) -> str:
+    """Compact, sorted JSON; ValueError saying ``what`` could not be stored otherwise."""
+    try:
+        return json.dumps(value, sort_keys=True, separators=(",", ":"))
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{what} is not JSON-serialisable: {error}") from None
+
+
+# -- policy files --------------------------------------------------------------------------------------------------
+def agent_config(model: DynEnvAgent) -> dict[str, Any]:
+    """The ``DynEnvAgent`` constructor arguments that rebuild ``model``'s architecture."""
+    discrete = model.head_mode == "discrete"
+    return {"feature_size": int(model.feature_size), "head_mode": str(model.head_mode),
+            "head_units": (model.head_head.out_features - 1) // 2 if discrete else 3,
+            "head_max": float(model.head_max)}
+
+
+def _policy_bytes(model: DynEnvAgent, meta: Mapping[str, Any] | None) -> bytes:
+    tensors = tensors_for_saving(model.state_dict())
+    metadata = {"format": FORMAT, "config": json_dumps(agent_config(model), "the agent's config"),
+                "meta": json_dumps(dict(meta or {}), "policy meta")}
+    first = _st_save(tensors, metadata=metadata)
+    _, start = safetensors_header(first)
+    metadata["data_sha256"] = hashlib.sha256(first[start:]).hexdigest()
+    data = _st_save(tensors, metadata=metadata)
+    _, start2 = safetensors_header(data)
+    if data[start2:] != first[start:]:                  # the data section never depends on the metadata
+        raise RuntimeError("safetensors serialisation is not deterministic; cannot checksum the policy")
+    return data
+
+
+def _write_policy(model: DynEnvAgent, path: str | os.PathLike[str], meta: Mapping[str, Any] | None) -> str:
+    target = Path(path)
+    if not target.parent.is_dir():
+        raise ValueError(f"cannot write policy {target}: folder {target.parent} does not exist")
+    data = _policy_bytes(model, meta)
+    atomic_write(target, data)
+    return hashlib.sha256(data).hexdigest()
+
+
+def save_policy(model: DynEnvAgent, path: str | os.PathLike[str], meta: Mapping[str, Any] | None = None) -> str:
+    """Write the policy file ``path`` (must end in ``.safetensors``) atomically; return its SHA-256 (hex).
+    ``meta`` must be JSON-serialisable (tuples come back as lists)."""
+    if not str(path).endswith(POLICY_SUFFIX):
+        raise ValueError(f"a policy file name must end in {POLICY_SUFFIX}, got {str(path)!r}")
+    return _write_policy(model, path, meta)
+
+
+def load_policy(path: str | os.PathLike[str]) -> tuple[DynEnvAgent, dict[str, Any]]:
+    """The agent (eval mode, on the CPU) and the caller's meta. Refuses with ValueError: a missing file
+    ("does not exist"), a damaged one ("cannot be read safely" — truncated, not safetensors, a pickle, or a tensor
+    checksum mismatch), a foreign one ("not a dynenv_policy/1 file") and one whose weights do not fit the agent
+    its config describes ("does not fit")."""
     source = Path(path)
     if not source.is_file():
-        raise ValueError(f"checkpoint {source} does not exist")
+        raise ValueError(f"policy file {source} does not exist")
+    data = source.read_bytes()
     try:
-        payload = torch.load(source, map_location="cpu", weights_only=True)
-    except Exception as error:       # unpickling refused or a damaged file: never fall back to full pickle
-        raise ValueError(f"checkpoint {source} cannot be read safely: {type(error).__name__}: "
-                         f"{str(error).splitlines()[0] if str(error) else ''}") from None
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise ValueError(f"checkpoint {source} is not a {FORMAT} checkpoint")
-    config = payload.get("config", {})
+        tensors, metadata = read_safetensors(data)
+    except ValueError as error:
+        raise ValueError(f"policy file {source} cannot be read safely: {error}") from None
+    if metadata.get("format") != FORMAT:
+        raise ValueError(f"policy file {source} is not a {FORMAT} file (format {metadata.get('format')!r})")
+    _, start = safetensors_header(data)
+    if hashlib.sha256(data[start:]).hexdigest() != metadata.get("data_sha256"):
+        raise ValueError(f"policy file {source} cannot be read safely: tensor data checksum mismatch (damaged)")
+    try:
+        config = json.loads(metadata["config"])
+        meta = json.loads(metadata.get("meta", "{}"))
+    except (KeyError, json.JSONDecodeError) as error:
+        raise ValueError(f"policy file {source} cannot be read safely: bad metadata ({error})") from None
+    if not isinstance(config, dict) or not isinstance(meta, dict):
+        raise ValueError(f"policy file {source} cannot be read safely: config/meta are not JSON objects")
     try:
         model = DynEnvAgent(**config)
-        model.load_state_dict(payload["state_dict"])
-    except (TypeError, KeyError, RuntimeError) as error:
-        raise ValueError(f"checkpoint {source} does not fit the agent: {str(error).splitlines()[0]}") from None
-    return model.eval()
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"policy file {source} does not fit the agent: config {config}: {error}") from None
+    check_state_dict_fits(model, tensors, f"policy file {source}")
+    model.load_state_dict(tensors)
+    return model.eval(), meta
+
+
+# -- the older names (policy node, tests) --------------------------------------------------------------------------
+def save_checkpoint(model: DynEnvAgent, path: str | os.PathLike[str], extra: dict[str, Any] | None = None) -> str:
+    """``save_policy`` without the file-name rule (the content is a policy file whatever the name); ``extra`` is
+    the meta. Returns the file's SHA-256."""
+    return _write_policy(model, path, extra)
+
+
+def load_checkpoint(path: str | os.PathLike[str]) -> DynEnvAgent:
+    """``load_policy`` without the meta: the model in eval mode."""
+    return load_policy(path)[0]

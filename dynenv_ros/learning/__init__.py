@@ -1,0 +1,1 @@
+"""ROS-free learning: rollouts, algorithms, losses wiring, checkpoints, evaluation."""

@@ -1,0 +1,404 @@
+"""The typed training configuration: one frozen dataclass, checked on construction, loaded from a YAML preset plus
+``--set key=value`` overrides, and round-tripped through JSON for checkpoint metadata.
+
+Paper values are those of the DynEnv paper's Table 1 (A2C). Every field carries its help text in
+``dataclasses.field(metadata={"help": ...})`` (see ``field_help()``), so a CLI can print it.
+
+Errors are ``ConfigError`` (a ``ValueError``) with ``.key`` the offending field and a message that starts with it.
+
+Rules worth knowing:
+
+* Integers are integers: ``True`` is not an int here, and ``2.0`` or ``"2"`` is refused for an int field. Float
+  fields accept ints (stored as floats). YAML ``1e-4`` (no dot) reads as a float, unlike plain PyYAML.
+* ``variant`` picks the paper row (see ``Losses``/``TrainConfig.losses``); ``use_localization`` and
+  ``use_reconstruction`` (None = from the variant) switch those two self-supervised losses on or off on any row.
+* ``variant: recon`` REQUIRES ``pretrained_encoder`` (the paper's recon row is defined by the pretrained
+  reconstruction encoder). To train localization + reconstruction from scratch, use ``variant: pred`` with
+  ``use_localization: true`` and ``use_reconstruction: true``. The path's existence is checked by the trainer when it
+  loads it, not here (a config read back from a checkpoint may name a file of another machine).
+* ``ltp_horizon <= rollout_length`` is required only when the LTP loss is on; ``ppo_minibatches`` may not exceed
+  the number of learning robot sequences (``learning_robots``) only when ``algorithm`` is ppo.
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import yaml
+
+ALGORITHMS = ("a2c", "ppo")
+VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
+OPPONENTS = ("self", "snapshot", "scripted", "random")
+BACKENDS = ("auto", "inprocess", "subprocess")
+HEAD_MODES = ("discrete", "continuous")
+PERCEPTIONS = ("realistic", "dynenv", "none")        # the presets of dynenv_ros.perception (config/perception/)
+MAX_PLAYERS_PER_TEAM = 5
+_DEVICE = re.compile(r"^(cpu|cuda(:\d+)?|mps)$")
+
+
+class ConfigError(ValueError):
+    """A training setting is unknown, of the wrong type or impossible; ``key`` names it."""
+
+    def __init__(self, key: str, reason: str) -> None:
+        super().__init__(f"{key}: {reason}")
+        self.key = key
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class Losses:
+    """Which losses a run trains besides the actor-critic loss (a paper row, possibly with overrides)."""
+    icm_forward: bool      # ICM's plain forward model: predict φ(s_{t+1}) from φ(s_t) and a_t (weight forward_coef)
+    inverse: bool          # inverse model: predict a_t from φ(s_t), φ(s_{t+1}) (weight inverse_coef)
+    rcm_attention: bool    # RCM's forward model, its error weighted by the attention confidences (forward_coef)
+    ltp: bool              # long-term prediction over ltp_horizon periods (weight ltp_coef)
+    localization: bool     # pose regression of the localization stream (weight self_supervised_coef)
+    reconstruction: bool   # object reconstruction from the object stream (weight self_supervised_coef)
+
+    @property
+    def forward(self) -> bool:
+        """A forward model (plain or attention-weighted) is trained: curiosity can be an intrinsic reward."""
+        return self.icm_forward or self.rcm_attention
+
+    @property
+    def curiosity(self) -> bool:
+        return self.forward or self.inverse or self.ltp
+
+    def as_dict(self) -> dict[str, bool]:
+        return dataclasses.asdict(self)
+
+
+# The paper's rows (before use_localization/use_reconstruction overrides).
+VARIANT_LOSSES: dict[str, Losses] = {
+    # vanilla A2C/PPO: no curiosity, no self-supervision
+    "baseline": Losses(icm_forward=False, inverse=False, rcm_attention=False, ltp=False, localization=False,
+                       reconstruction=False),
+    # ICM: forward + inverse
+    "icm": Losses(icm_forward=True, inverse=True, rcm_attention=False, ltp=False, localization=False,
+                  reconstruction=False),
+    # RCM: attention-weighted forward + inverse
+    "rcm": Losses(icm_forward=False, inverse=True, rcm_attention=True, ltp=False, localization=False,
+                  reconstruction=False),
+    # pred: RCM + long-term prediction
+    "pred": Losses(icm_forward=False, inverse=True, rcm_attention=True, ltp=True, localization=False,
+                   reconstruction=False),
+    # recon: pred + localization + reconstruction, starting from the pretrained reconstruction encoder
+    "recon": Losses(icm_forward=False, inverse=True, rcm_attention=True, ltp=True, localization=True,
+                    reconstruction=True),
+}
+
+
+def _f(default: Any, help: str) -> Any:       # noqa: A002 - "help" reads best at the call sites
+    return field(default=default, metadata={"help": help})
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run needs, checked on construction (``ConfigError`` on anything wrong)."""
+
+    # -- what is trained ---------------------------------------------------------------------------------------
+    algorithm: str = _f("a2c", "Policy-gradient algorithm: 'a2c' (paper) or 'ppo'.")
+    variant: str = _f("pred", "Paper row: 'baseline' (no curiosity), 'icm' (forward + inverse), 'rcm' "
+                              "(attention-weighted forward + inverse), 'pred' (RCM + LTP, paper's best), "
+                              "'recon' (pred + localization + reconstruction from the pretrained encoder; needs "
+                              "pretrained_encoder).")
+    use_localization: bool | None = _f(None, "Override: train the localization (pose) loss; null = as the variant.")
+    use_reconstruction: bool | None = _f(None, "Override: train the object reconstruction loss; null = as the "
+                                               "variant.")
+
+    # -- environment -------------------------------------------------------------------------------------------
+    players_per_team: int = _f(2, f"Robots per team, 1..{MAX_PLAYERS_PER_TEAM} (paper: 2, i.e. 2v2).")
+    num_envs: int = _f(8, "Parallel worlds (paper: 8).")
+    perception: str = _f("realistic", f"Perception preset: one of {PERCEPTIONS}.")
+    backend: str = _f("auto", "Vector env backend: 'auto' (worker processes for many worlds), 'inprocess', "
+                              "'subprocess'.")
+
+    # -- schedule ----------------------------------------------------------------------------------------------
+    rollout_length: int = _f(6, "Motion periods per rollout and world before each update (paper: 6).")
+    total_env_steps: int = _f(2_000_000, "Stop after this many env steps; one env step = one motion period of one "
+                                         "world (paper: 60,000 updates x 8 worlds x 6 = 2,880,000).")
+    max_minutes: float | None = _f(None, "Stop (and checkpoint) after this much wall time in minutes; null = no "
+                                         "limit.")
+
+    # -- returns -----------------------------------------------------------------------------------------------
+    gamma: float = _f(0.99, "Discount per motion period, in (0, 1] (paper: 0.99).")
+    gae_lambda: float = _f(1.0, "GAE λ in [0, 1]; 1 = A2C's n-step returns (paper), PPO usually 0.95.")
+
+    # -- optimiser ---------------------------------------------------------------------------------------------
+    learning_rate: float = _f(1e-4, "Adam learning rate (paper: 1e-4).")
+    adam_eps: float = _f(1e-5, "Adam epsilon.")
+    max_grad_norm: float = _f(0.5, "Global gradient-norm clip (paper: 0.5).")
+
+    # -- actor-critic loss -------------------------------------------------------------------------------------
+    value_coef: float = _f(0.5, "Weight of the value loss (paper: 0.5).")
+    entropy_coef: float = _f(0.1, "Weight of the entropy bonus (paper: 0.1).")
+
+    # -- PPO only ----------------------------------------------------------------------------------------------
+    ppo_epochs: int = _f(4, "PPO: passes over each rollout.")
+    ppo_minibatches: int = _f(4, "PPO: minibatches per pass; they split robot sequences, so at most "
+                                 "learning_robots.")
+    ppo_clip: float = _f(0.2, "PPO: ratio clip ε.")
+    clip_value_loss: bool = _f(False, "PPO: clip the value update like the policy ratio.")
+    normalize_advantages: bool = _f(False, "Normalise advantages per minibatch (A2C: per rollout).")
+    target_kl: float | None = _f(None, "PPO: stop a rollout's epochs early once the approximate KL exceeds this; "
+                                       "null = never.")
+
+    # -- curiosity and self-supervision ------------------------------------------------------------------------
+    forward_coef: float = _f(1e-2, "Weight of the forward-model loss (ICM or RCM) (paper: 1e-2).")
+    inverse_coef: float = _f(1e-2, "Weight of the inverse-model loss, the paper's ICM β (paper: 1e-2).")
+    ltp_coef: float = _f(1e-3, "Weight of the long-term prediction loss (paper: 1e-3).")
+    ltp_horizon: int = _f(6, "LTP horizon in motion periods; at most rollout_length (paper: 6).")
+    self_supervised_coef: float = _f(1e-2, "Weight of localization + reconstruction, the paper's recon factor "
+                                           "(paper: 1e-2).")
+    intrinsic_reward_coef: float = _f(0.0, "Curiosity (forward-model error) as an intrinsic reward with its own "
+                                           "advantage when > 0; 0 = curiosity only as auxiliary losses (paper).")
+    pretrained_encoder: str | None = _f(None, "Path of a pretrained localization/reconstruction checkpoint; "
+                                              "required by variant 'recon'.")
+    privileged_pose_seeding: bool = _f(False, "Re-seed the localization LSTM from the true pose every rollout, as "
+                                              "the original code did (privileged information).")
+
+    # -- opponents ---------------------------------------------------------------------------------------------
+    opponent: str = _f("self", "Team B: 'self' (both teams learn, shared weights), 'snapshot' (frozen past "
+                               "copies), 'scripted', 'random'.")
+    snapshot_every_updates: int = _f(200, "Opponent 'snapshot': add a frozen copy every this many updates.")
+    snapshot_pool: int = _f(5, "Opponent 'snapshot': most recent copies kept to play against.")
+
+    # -- network -----------------------------------------------------------------------------------------------
+    feature_size: int = _f(64, "Width D of the agent's streams (paper: 64).")
+    head_mode: str = _f("discrete", "Head-turn action: 'discrete' (paper) or 'continuous'.")
+
+    # -- run ---------------------------------------------------------------------------------------------------
+    seed: int = _f(0, "Seed of weights, worlds and action sampling (>= 0).")
+    device: str = _f("cpu", "Torch device for learning: 'cpu', 'cuda', 'cuda:N' or 'mps'.")
+    torch_threads: int = _f(1, "torch.set_num_threads for the learner (>= 1).")
+    log_every_updates: int = _f(10, "Write scalars every this many updates.")
+    checkpoint_every_minutes: float = _f(5.0, "Write a training checkpoint every this many minutes of wall time.")
+    keep_checkpoints: int = _f(3, "Training checkpoints kept (the newest ones).")
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    # -- derived -----------------------------------------------------------------------------------------------
+    def losses(self) -> Losses:
+        """The variant's losses with the use_localization/use_reconstruction overrides applied."""
+        row = VARIANT_LOSSES[self.variant]
+        return dataclasses.replace(
+            row,
+            localization=row.localization if self.use_localization is None else self.use_localization,
+            reconstruction=row.reconstruction if self.use_reconstruction is None else self.use_reconstruction)
+
+    @property
+    def learning_robots(self) -> int:
+        """Robot sequences per rollout that are learned from: both teams in self-play, team A otherwise."""
+        return self.num_envs * self.players_per_team * (2 if self.opponent == "self" else 1)
+
+    @property
+    def env_steps_per_update(self) -> int:
+        return self.num_envs * self.rollout_length
+
+    # -- JSON --------------------------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """Every field, JSON-ready (str, int, float, bool, None only)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> TrainConfig:
+        """Inverse of ``to_dict``; missing keys take their defaults, unknown keys are refused."""
+        if not isinstance(values, Mapping):
+            raise ConfigError("<config>", f"expected a mapping of settings, got {type(values).__name__}")
+        for key in values:
+            _check_known(key)
+        return cls(**dict(values))
+
+    def replace(self, **changes: Any) -> TrainConfig:
+        """A copy with ``changes`` (checked like everything else)."""
+        for key in changes:
+            _check_known(key)
+        return dataclasses.replace(self, **changes)
+
+    # -- checks ------------------------------------------------------------------------------------------------
+    def validate(self) -> None:
+        """Raise ConfigError for a wrong type or an impossible value (types first, then ranges, then relations)."""
+        for f in dataclasses.fields(self):
+            value = _check_type(f.name, getattr(self, f.name), _FIELD_TYPES[f.name])
+            object.__setattr__(self, f.name, value)             # ints given for floats become floats
+        _choice("algorithm", self.algorithm, ALGORITHMS)
+        _choice("variant", self.variant, VARIANTS)
+        _choice("opponent", self.opponent, OPPONENTS)
+        _choice("backend", self.backend, BACKENDS)
+        _choice("head_mode", self.head_mode, HEAD_MODES)
+        _choice("perception", self.perception, PERCEPTIONS)
+        if not _DEVICE.match(self.device):
+            raise ConfigError("device", f"expected 'cpu', 'cuda', 'cuda:N' or 'mps', got {self.device!r}")
+        for key in ("num_envs", "rollout_length", "total_env_steps", "ppo_epochs", "ppo_minibatches", "ltp_horizon",
+                    "snapshot_every_updates", "snapshot_pool", "feature_size", "torch_threads", "log_every_updates",
+                    "keep_checkpoints"):
+            if getattr(self, key) < 1:
+                raise ConfigError(key, f"must be >= 1, got {getattr(self, key)}")
+        if not 1 <= self.players_per_team <= MAX_PLAYERS_PER_TEAM:
+            raise ConfigError("players_per_team", f"must be in 1..{MAX_PLAYERS_PER_TEAM}, got {self.players_per_team}")
+        if self.seed < 0:
+            raise ConfigError("seed", f"must be >= 0, got {self.seed}")
+        for key in ("gamma", "gae_lambda", "learning_rate", "adam_eps", "max_grad_norm", "value_coef",
+                    "entropy_coef", "ppo_clip", "forward_coef", "inverse_coef", "ltp_coef", "self_supervised_coef",
+                    "intrinsic_reward_coef", "checkpoint_every_minutes", "max_minutes", "target_kl"):
+            value = getattr(self, key)
+            if value is not None and not math.isfinite(value):
+                raise ConfigError(key, f"must be finite, got {value}")
+        if not 0.0 < self.gamma <= 1.0:
+            raise ConfigError("gamma", f"must be in (0, 1], got {self.gamma}")
+        if not 0.0 <= self.gae_lambda <= 1.0:
+            raise ConfigError("gae_lambda", f"must be in [0, 1], got {self.gae_lambda}")
+        for key in ("learning_rate", "adam_eps", "max_grad_norm", "ppo_clip", "checkpoint_every_minutes",
+                    "max_minutes", "target_kl"):
+            value = getattr(self, key)
+            if value is not None and value <= 0.0:
+                raise ConfigError(key, f"must be > 0, got {value}")
+        for key in ("value_coef", "entropy_coef", "forward_coef", "inverse_coef", "ltp_coef", "self_supervised_coef",
+                    "intrinsic_reward_coef"):
+            if getattr(self, key) < 0.0:
+                raise ConfigError(key, f"must be >= 0 (a weight), got {getattr(self, key)}")
+        losses = self.losses()
+        if losses.ltp and self.ltp_horizon > self.rollout_length:
+            raise ConfigError("ltp_horizon", f"{self.ltp_horizon} exceeds rollout_length {self.rollout_length} "
+                                             f"(the LTP target must lie inside the rollout)")
+        if self.algorithm == "ppo" and self.ppo_minibatches > self.learning_robots:
+            raise ConfigError("ppo_minibatches", f"{self.ppo_minibatches} minibatches of robot sequences, but a "
+                                                 f"rollout has only {self.learning_robots} learning robots "
+                                                 f"(num_envs x players_per_team"
+                                                 f"{' x 2 teams' if self.opponent == 'self' else ''})")
+        if self.variant == "recon" and not self.pretrained_encoder:
+            raise ConfigError("pretrained_encoder", "variant 'recon' requires the pretrained reconstruction "
+                                                    "encoder; to train localization + reconstruction from scratch "
+                                                    "use variant 'pred' with use_localization and "
+                                                    "use_reconstruction true")
+        if self.intrinsic_reward_coef > 0.0 and not losses.forward:
+            raise ConfigError("intrinsic_reward_coef", f"> 0 needs a forward model, which variant "
+                                                       f"{self.variant!r} does not train")
+
+
+# -- type checking -------------------------------------------------------------------------------------------------
+# (base type, None allowed) per field, from the annotations (strings under `from __future__ import annotations`).
+_BASE_TYPES = {"int": int, "float": float, "bool": bool, "str": str}
+
+
+def _parse_annotation(annotation: str) -> tuple[type, bool]:
+    parts = [p.strip() for p in str(annotation).split("|")]
+    optional = "None" in parts
+    (base,) = [p for p in parts if p != "None"]
+    return _BASE_TYPES[base], optional
+
+
+_FIELD_TYPES: dict[str, tuple[type, bool]] = {f.name: _parse_annotation(f.type)
+                                              for f in dataclasses.fields(TrainConfig)}
+
+
+def _check_type(key: str, value: Any, expected: tuple[type, bool]) -> Any:
+    kind, optional = expected
+    if value is None:
+        if optional:
+            return None
+        raise ConfigError(key, f"expected {kind.__name__}, got null")
+    described = f"{type(value).__name__} {value!r}"
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(key, f"expected true or false, got {described}")
+        return value
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            hint = " (write it without a decimal point or exponent)" if isinstance(value, float) and \
+                value.is_integer() else ""
+            raise ConfigError(key, f"expected an integer, got {described}{hint}")
+        return value
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(key, f"expected a number, got {described}")
+        return float(value)
+    if not isinstance(value, str):
+        raise ConfigError(key, f"expected a string, got {described}")
+    return value
+
+
+def _choice(key: str, value: str, choices: Sequence[str]) -> None:
+    if value not in choices:
+        close = difflib.get_close_matches(value, choices, n=1)
+        raise ConfigError(key, f"unknown value {value!r}; expected one of {', '.join(choices)}"
+                               + (f" (did you mean {close[0]!r}?)" if close else ""))
+
+
+def _check_known(key: Any) -> None:
+    if not isinstance(key, str):
+        raise ConfigError(str(key), "setting names must be strings")
+    if key not in _FIELD_TYPES:
+        close = difflib.get_close_matches(key, list(_FIELD_TYPES), n=1)
+        raise ConfigError(key, "unknown setting" + (f"; did you mean {close[0]!r}?" if close else
+                                                    f"; known settings: {', '.join(_FIELD_TYPES)}"))
+
+
+def field_help() -> dict[str, str]:
+    """Each field's help text, in declaration order."""
+    return {f.name: f.metadata["help"] for f in dataclasses.fields(TrainConfig)}
+
+
+# -- YAML ------------------------------------------------------------------------------------------------------------
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that also reads YAML 1.2 floats without a dot (1e-4, 3E5) as floats."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
+
+
+def parse_value(text: str) -> Any:
+    """A ``--set`` value: YAML scalar syntax (``1e-4``, ``true``, ``null``, ``'quoted'``)."""
+    try:
+        return yaml.load(text, Loader=_Loader)       # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as error:
+        raise ValueError(f"not a YAML value: {error}") from None
+
+
+def load_config(path: str | Path | None, overrides: Sequence[str] = (), base: TrainConfig | None = None
+                ) -> TrainConfig:
+    """Defaults (or ``base``, e.g. a resumed run's config) ← the YAML file ``path`` (a mapping of settings; None = defaults only) ← ``overrides``
+    (``"key=value"``, value in YAML syntax), then checked once. ConfigError names the offending key (and the file
+    or override it came from)."""
+    values: dict[str, Any] = base.to_dict() if base is not None else {}
+    if path is not None:
+        source = Path(path)
+        try:
+            text = source.read_text(encoding="utf-8")
+        except OSError as error:
+            raise ConfigError("<config>", f"cannot read {source}: {error}") from None
+        try:
+            loaded = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+        except yaml.YAMLError as error:
+            raise ConfigError("<config>", f"{source} is not valid YAML: {error}") from None
+        if loaded is None:
+            loaded = {}
+        if not isinstance(loaded, dict):
+            raise ConfigError("<config>", f"{source} must hold a mapping of settings, got {type(loaded).__name__}")
+        for key, value in loaded.items():
+            try:
+                _check_known(key)
+            except ConfigError as error:
+                raise ConfigError(error.key, f"{error.reason} (in {source})") from None
+            values[key] = value
+    for item in overrides:
+        key, sep, text = str(item).partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ConfigError(key or str(item), f"override {item!r} must look like key=value")
+        _check_known(key)
+        try:
+            values[key] = parse_value(text)
+        except ValueError as error:
+            raise ConfigError(key, f"override {item!r}: {error}") from None
+        _check_type(key, values[key], _FIELD_TYPES[key])         # name the override's type error right here
+    return TrainConfig(**values)
