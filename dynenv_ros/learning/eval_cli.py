@@ -1,0 +1,133 @@
+"""dynenv-eval: evaluate a soccer team policy over seeds, and compare two evaluations with BEST.
+
+    dynenv-eval CHECKPOINT --opponent scripted --episodes 10 --seeds 0 1 2 3 4 --out agent.json
+    dynenv-eval random --opponent scripted --episodes 10 --seeds 0 1 2 3 4 --out random.json
+    dynenv-eval compare random.json agent.json --metric paper_metric --png best.png
+
+The evaluated team and the opponent are each a checkpoint path, "random", "scripted" (= keeper_and_chasers),
+"chaser" or "keeper_and_chasers". The evaluated team plays team A in the even episodes of each seed and team B in
+the odd ones (--sides). Seeds are the statistical unit: the per-seed means go into the JSON and the table, and
+"compare" runs BEST on them (the second file is the proposal: P(improvement) = P(mean of B > mean of A)).
+Bad arguments exit with code 2 and a one-line reason.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import NoReturn, Sequence
+
+PROG = "dynenv-eval"
+PERCEPTIONS = ("realistic", "dynenv", "none")
+
+
+class _Parser(argparse.ArgumentParser):
+    """Errors as one line on stderr and exit code 2 (no usage block)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _eval_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("policy", help="checkpoint path, or random / scripted / chaser / keeper_and_chasers")
+    parser.add_argument("--opponent", default="scripted",
+                        help="checkpoint path, or random / scripted / chaser / keeper_and_chasers (default scripted)")
+    parser.add_argument("--episodes", type=int, default=4, help="episodes per seed (default 4)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds (default 0 1 2)")
+    parser.add_argument("--players-per-team", type=int, default=2)
+    parser.add_argument("--perception", choices=PERCEPTIONS, default="realistic")
+    parser.add_argument("--noise-magnitude", type=float, help="perception noise 0..5 (default: the preset's)")
+    parser.add_argument("--episode-seconds", type=float, help="episode length (default: the env's 120 s)")
+    parser.add_argument("--sides", choices=("alternate", "a", "b"), default="alternate",
+                        help="the evaluated team's side (default: alternate, A in even episodes)")
+    parser.add_argument("--greedy", action="store_true", help="checkpoints take their most likely action")
+    parser.add_argument("--out", type=Path, help="write the full result (JSON) here")
+    parser.add_argument("--torch-threads", type=int, default=1,
+                        help="torch threads while a checkpoint plays (default 1: a team's batch is tiny)")
+    parser.add_argument("--quiet", action="store_true", help="no per-episode progress on stderr")
+    return parser
+
+
+def _compare_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=f"{PROG} compare", description="BEST (Kruschke 2013) on the per-seed values of a "
+                     "metric in two dynenv-eval results; B is the proposal, A the baseline.")
+    parser.add_argument("a", type=Path, help="baseline result JSON")
+    parser.add_argument("b", type=Path, help="proposal result JSON")
+    parser.add_argument("--metric", default="total", help="per-seed metric (default total; e.g. paper_metric, "
+                        "goal_difference, win_rate)")
+    parser.add_argument("--png", type=Path, help="write the posterior plot here")
+    parser.add_argument("--out", type=Path, help="write the posterior summary (JSON) here")
+    parser.add_argument("--draws", type=int, default=1000)
+    parser.add_argument("--tune", type=int, default=1000)
+    parser.add_argument("--chains", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=0, help="sampler seed")
+    return parser
+
+
+def _fail(message: str) -> int:
+    print(f"{PROG}: {message}".splitlines()[0], file=sys.stderr)
+    return 2
+
+
+def _check_folder(path: Path | None, flag: str) -> None:
+    if path is not None and not path.parent.is_dir():
+        raise ValueError(f"{flag} {path}: folder {path.parent} does not exist")
+
+
+def run_eval(args: argparse.Namespace) -> int:
+    from dynenv_ros.learning.evaluation import evaluate, format_table, write_json
+    if args.episodes < 1:
+        return _fail(f"--episodes must be at least 1, got {args.episodes}")
+    if args.torch_threads < 1:
+        return _fail(f"--torch-threads must be at least 1, got {args.torch_threads}")
+    if any(s < 0 for s in args.seeds):
+        return _fail(f"--seeds must be non-negative, got {args.seeds}")
+    perception = args.perception if args.noise_magnitude is None else {
+        "preset": args.perception, "noise_magnitude": args.noise_magnitude}
+    env_config = {} if args.episode_seconds is None else {"episode_seconds": args.episode_seconds}
+    progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
+    try:
+        _check_folder(args.out, "--out")
+        result = evaluate(args.policy, args.opponent, episodes=args.episodes, seeds=args.seeds,
+                          players_per_team=args.players_per_team, perception=perception, sides=args.sides,
+                          greedy=args.greedy, env_config=env_config, progress=progress,
+                          torch_threads=args.torch_threads)
+    except (ValueError, OSError) as error:     # a missing or corrupt checkpoint, a bad setting
+        return _fail(str(error))
+    print(format_table(result))
+    if args.out is not None:
+        write_json(result, args.out)
+        print(f"wrote {args.out}")
+    return 0
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    from dynenv_ros.learning.best import compare_evaluations, format_result
+    try:
+        _check_folder(args.png, "--png")
+        _check_folder(args.out, "--out")
+        result = compare_evaluations(args.a, args.b, args.metric, png=args.png, draws=args.draws, tune=args.tune,
+                                     chains=args.chains, random_seed=args.seed)
+    except (ValueError, OSError) as error:
+        return _fail(str(error))
+    print(format_result(result, labels=(args.a.stem, args.b.stem), metric=args.metric))
+    if args.png is not None:
+        print(f"wrote {args.png}")
+    if args.out is not None:
+        summary = {"a": str(args.a), "b": str(args.b), "metric": args.metric, **result.as_dict()}
+        args.out.write_text(json.dumps(summary, indent=1) + "\n")
+        print(f"wrote {args.out}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "compare":
+        return run_compare(_compare_parser().parse_args(argv[1:]))
+    return run_eval(_eval_parser().parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

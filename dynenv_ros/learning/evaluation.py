@@ -1,0 +1,492 @@
+"""Evaluate a soccer team policy against an opponent: many episodes per seed, seeds as the statistical unit.
+
+ROS-free. A *team policy* drives the ``players_per_team`` robots of one side (``TeamPolicy``: ``reset`` at every
+episode start, ``act`` once per motion period); both sides use the same interface, so any pairing works — a
+checkpoint against ``random``, ``scripted`` or another checkpoint, and ``random`` or ``scripted`` as the evaluated
+side too (baseline rows produced the same way)::
+
+    result = evaluate("runs/agent.pt", "scripted", episodes=4, seeds=[0, 1, 2])
+    print(format_table(result)); write_json(result, "results.json")
+
+Policies (``make_team_policy``):
+
+- a checkpoint path: ``load_checkpoint(path)``; actions sampled from the policy (``greedy=True``: the most likely
+  action); one recurrent state per robot, fresh at every episode start.
+- ``"scripted"``: ``keeper_and_chasers`` (``soccer.scripted``: a goalkeeper in slot 0, chasers elsewhere; a team
+  of one is a chaser), the default of ``dynenv-play`` and the nearer to a real SPL line-up; ``"chaser"`` and
+  ``"keeper_and_chasers"`` name a kind explicitly.
+- ``"random"``: every action dimension uniform over the env's action space, from a seeded generator.
+
+Sides: with ``sides="alternate"`` (default) the evaluated team is team A in the even episodes of a seed and team B
+in the odd ones (team A kicks off, as in the env), so neither the side nor the kick-off favours it; ``"a"`` or
+``"b"`` fix the side.
+
+Seeding: for seed s and episode e, ``SeedSequence(s, spawn_key=(e,))`` spawns three children — the env's reset
+seed (world, physics noise, perception), the evaluated team's generator and the opponent's — so every episode is
+reproducible on its own and the same call gives the same result; two policies evaluated with the same seeds meet
+the same env seeds (common random numbers).
+
+Per episode and side the record holds each reward term summed over the episode and averaged over the team's
+robots, their total, the paper's metric (``paper_metric``), goals for and against, the result, and the team's
+falls and penalties (counted from the world's ``fall`` and ``penalty`` events, so a robot that falls again while
+getting up counts twice, and a penalty is counted when given). Per seed, each number is averaged over that seed's
+episodes; the summary gives the mean and standard deviation over seeds.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from dynenv_ros.sim.reward_terms import RewardTerm
+
+FORMAT = "dynenv_eval/1"
+TERMS = tuple(term.name.lower() for term in RewardTerm)
+OBSERVATION = RewardTerm.OBSERVATION.name.lower()
+SCRIPTED_KINDS = ("chaser", "keeper_and_chasers")
+DEFAULT_SCRIPTED = "keeper_and_chasers"
+SIDES = ("alternate", "a", "b")
+RESULTS = ("win", "draw", "loss")
+# Per-seed numbers (means over the seed's episodes); ``compare`` metrics are these names.
+SEED_METRICS = ("total", "paper_metric", "positive", *TERMS, "goals_for", "goals_against", "goal_difference",
+                "win_rate", "draw_rate", "loss_rate", "falls", "penalties", "opponent_total",
+                "opponent_paper_metric")
+
+
+# -- the paper's metric ------------------------------------------------------------------------------------------
+def positive_part(terms: Mapping[str, float]) -> float:
+    """Σ over the reward terms of one robot and one env step of max(0, term)."""
+    return float(sum(max(0.0, float(v)) for v in terms.values()))
+
+
+def positive_reward(step_terms: Iterable[Mapping[str, float]]) -> float:
+    """DynEnv's ``episode_p_r`` for one robot: the positive-only reward, Σ over env steps of ``positive_part``.
+
+    DynEnv summed, per env step, the positive parts of the team reward and of the observation reward plus the
+    positive personal rewards (facts §6.1). This world books the team share and the touch-chain share of a ball
+    event into one term, so the positive part is taken per reward term (primary, rule, auxiliary, observation)
+    and per env step (one motion period) — the same granularity as DynEnv's step, with team and personal parts
+    of one step netted within a term.
+    """
+    return float(sum(positive_part(terms) for terms in step_terms))
+
+
+def paper_metric(step_terms: Iterable[Mapping[str, float]]) -> float:
+    """The RoboCup metric of the paper (facts §11): positive reward minus observation reward, for one robot and
+    episode — ``positive_reward(step_terms)`` minus Σ over steps of the ``observation`` term. The observation
+    reward is never negative, so this is Σ over steps and over the non-observation terms of max(0, term)."""
+    steps = list(step_terms)
+    return positive_reward(steps) - float(sum(float(t.get(OBSERVATION, 0.0)) for t in steps))
+
+
+# -- team policies -----------------------------------------------------------------------------------------------
+class TeamPolicy:
+    """Drives one side. ``reset`` at each episode start with the env, the robot indexes it drives (into
+    ``env.possible_agents``; team A is 0..n-1, team B n..2n-1) and its SeedSequence; ``act`` gets the padded
+    observations of those robots in that order and returns one env action per robot."""
+
+    kind = "team"
+
+    def describe(self) -> dict[str, Any]:
+        return {"kind": self.kind}
+
+    def reset(self, env: Any, robots: Sequence[int], seed: np.random.SeedSequence) -> None:
+        raise NotImplementedError
+
+    def act(self, env: Any, observations: Sequence[Mapping[str, np.ndarray]]) -> list[Any]:
+        raise NotImplementedError
+
+
+class RandomTeam(TeamPolicy):
+    """Each robot's action uniform over the env's action space (every dimension independent)."""
+
+    kind = "random"
+
+    def reset(self, env, robots, seed):
+        self.rng = np.random.default_rng(seed)
+        self.spaces = [env.action_space(env.possible_agents[i]) for i in robots]
+
+    def act(self, env, observations):
+        return [sample_space(space, self.rng) for space in self.spaces]
+
+
+def sample_space(space: Any, rng: np.random.Generator) -> Any:
+    """A uniform sample of a gymnasium MultiDiscrete, Discrete, Box or Dict space from ``rng``."""
+    from gymnasium import spaces
+    if isinstance(space, spaces.MultiDiscrete):
+        return (space.start + rng.integers(space.nvec)).astype(np.int64)
+    if isinstance(space, spaces.Discrete):
+        return int(space.start + rng.integers(space.n))
+    if isinstance(space, spaces.Box):
+        return rng.uniform(space.low, space.high).astype(space.dtype)
+    if isinstance(space, spaces.Dict):
+        return {key: sample_space(sub, rng) for key, sub in space.spaces.items()}
+    raise ValueError(f"cannot sample a {type(space).__name__} action space")
+
+
+class ScriptedTeam(TeamPolicy):
+    """A team of ``soccer.scripted`` policies (they read the ground-truth snapshot, not the observations)."""
+
+    kind = "scripted"
+
+    def __init__(self, team: str = DEFAULT_SCRIPTED) -> None:
+        if team not in SCRIPTED_KINDS:
+            raise ValueError(f"scripted team must be one of {', '.join(SCRIPTED_KINDS)}, got {team!r}")
+        self.team = team
+
+    def describe(self):
+        return {"kind": self.kind, "team": self.team}
+
+    def reset(self, env, robots, seed):
+        from dynenv_ros.soccer.scripted import team_policies
+        c = env.config
+        policies = team_policies(c.players_per_team, self.team, np.random.default_rng(seed), field=c.field,
+                                 head_mode=c.head_mode, motion=c.motion)
+        self.robots = list(robots)
+        self.policies = [policies[i] for i in self.robots]
+
+    def act(self, env, observations):
+        snapshot = env.world.snapshot()
+        return [policy.act(snapshot, i) for policy, i in zip(self.policies, self.robots)]
+
+
+class AgentTeam(TeamPolicy):
+    """A ``DynEnvAgent`` driving every robot of the side in one batch, one recurrent state per robot (fresh at each
+    episode start); stochastic from a seeded torch generator unless ``greedy``. Needs padded observations."""
+
+    kind = "checkpoint"
+
+    def __init__(self, model: Any, greedy: bool = False, path: str | None = None,
+                 sha256: str | None = None) -> None:
+        self.model = model.eval()
+        self.greedy = bool(greedy)
+        self.path, self.sha256 = path, sha256
+
+    def describe(self):
+        return {"kind": self.kind, "path": self.path, "sha256": self.sha256, "greedy": self.greedy}
+
+    def reset(self, env, robots, seed):
+        import torch
+        self.n = len(robots)
+        self.state = self.model.initial_state(self.n)
+        self.generator = torch.Generator().manual_seed(int(seed.generate_state(1, np.uint32)[0]))
+        self.env_head_max = float(env.config.motion.head_max_delta)
+
+    def act(self, env, observations):
+        import torch
+        from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
+        from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk
+        if len(observations) != self.n:
+            raise ValueError(f"AgentTeam drives {self.n} robots, got {len(observations)} observations")
+        if not all(isinstance(o, Mapping) and "landmarks" in o for o in observations):
+            raise ValueError("AgentTeam needs padded observations (robocup_v0 observation='padded')")
+        batch = {key: np.stack([np.asarray(o[key]) for o in observations]) for key in observations[0]}
+        head_max = float(self.model.head_max)
+        with torch.inference_mode():
+            landmarks, objects = streams_from_padded(batch)
+            previous, proprioception = side_inputs(batch, head_max)
+            step = self.model(landmarks, objects, previous, proprioception, self.state)
+            actions = self.model.act(step, generator=self.generator, greedy=self.greedy).numpy()
+        self.state = step.state
+        units = _head_units(self.model, step)
+        result = []
+        for walk, turn, kick, head in actions:
+            # The checkpoint's own head discretisation: index 0..2u ↦ (index − u)·head_max/u rad per period.
+            delta = (int(head) - units) * head_max / units if units else float(head)
+            delta = max(-self.env_head_max, min(self.env_head_max, delta))
+            result.append(SoccerAction(Walk(int(walk)), Turn(int(turn)), Kick(int(kick)), delta))
+        return result
+
+
+def _head_units(model: Any, step: Any) -> int:
+    """Head units of a discrete-head model (0 for a continuous head)."""
+    if getattr(model, "head_mode", "discrete") != "discrete":
+        return 0
+    units = getattr(model, "head_units", None)
+    if units is None:
+        units = (int(step.head.shape[-1]) - 1) // 2
+    return int(units)
+
+
+def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy:
+    """``"random"``, ``"scripted"`` (= ``keeper_and_chasers``), ``"chaser"``, ``"keeper_and_chasers"`` or a
+    checkpoint path (loaded with ``load_checkpoint``; its ValueError passes through). A TeamPolicy is returned
+    as is."""
+    if isinstance(spec, TeamPolicy):
+        return spec
+    if spec == "random":
+        return RandomTeam()
+    if spec == "scripted":
+        return ScriptedTeam(DEFAULT_SCRIPTED)
+    if spec in SCRIPTED_KINDS:
+        return ScriptedTeam(spec)
+    from dynenv_ros.agent.checkpoint import load_checkpoint
+    model = load_checkpoint(spec)
+    return AgentTeam(model, greedy=greedy, path=str(spec), sha256=_sha256(spec))
+
+
+def _sha256(path: str | os.PathLike[str]) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+# -- seeding -----------------------------------------------------------------------------------------------------
+def episode_seeds(seed: int, episode: int) -> tuple[int, np.random.SeedSequence, np.random.SeedSequence]:
+    """(env reset seed, evaluated team's SeedSequence, opponent's SeedSequence) of episode ``episode`` of seed
+    ``seed``: the three children of ``SeedSequence(seed, spawn_key=(episode,))``."""
+    env_ss, evaluated, opponent = np.random.SeedSequence(seed, spawn_key=(episode,)).spawn(3)
+    return int(env_ss.generate_state(1, np.uint32)[0]), evaluated, opponent
+
+
+# -- one episode -------------------------------------------------------------------------------------------------
+def play_episode(env: Any, team_a: TeamPolicy, team_b: TeamPolicy, env_seed: int,
+                 seed_a: np.random.SeedSequence, seed_b: np.random.SeedSequence,
+                 kickoff: str = "a") -> dict[str, Any]:
+    """One episode of ``team_a`` (robots 0..n-1) against ``team_b``; per side: terms, total, positive and paper
+    metric (each summed over the episode, averaged over the side's robots), goals, falls and penalties."""
+    n = env.config.players_per_team
+    robots = {"a": list(range(n)), "b": list(range(n, 2 * n))}
+    observations, _ = env.reset(seed=env_seed, options={"kickoff_team": kickoff})
+    names = env.possible_agents
+    team_a.reset(env, robots["a"], seed_a)
+    team_b.reset(env, robots["b"], seed_b)
+    teams = {"a": team_a, "b": team_b}
+    terms = np.zeros((len(names), len(TERMS)))
+    positive = np.zeros(len(names))
+    falls = np.zeros(len(names), np.int64)
+    penalties = np.zeros(len(names), np.int64)
+    periods = 0
+    while env.agents:
+        actions: dict[str, Any] = {}
+        for side, team in teams.items():
+            chosen = team.act(env, [observations[names[i]] for i in robots[side]])
+            if len(chosen) != n:
+                raise ValueError(f"team {side} returned {len(chosen)} actions for {n} robots")
+            actions.update({names[i]: a for i, a in zip(robots[side], chosen)})
+        observations, _, _, _, infos = env.step(actions)
+        periods += 1
+        for i, name in enumerate(names):
+            step_terms = {t: float(infos[name]["reward_terms"][t]) for t in TERMS}
+            terms[i] += list(step_terms.values())
+            positive[i] += positive_part(step_terms)
+        for event in env.world.events:
+            if event.robot is not None and event.kind == "fall":
+                falls[event.robot] += 1
+            elif event.robot is not None and event.kind == "penalty":
+                penalties[event.robot] += 1
+    snapshot = env.world.snapshot()
+    goals = {"a": int(snapshot.score_team_a), "b": int(snapshot.score_team_b)}
+    observation = terms[:, TERMS.index(OBSERVATION)]
+    out: dict[str, Any] = {"periods": periods}
+    for side, other in (("a", "b"), ("b", "a")):
+        idx = robots[side]
+        out[side] = {"terms": {t: float(terms[idx, k].mean()) for k, t in enumerate(TERMS)},
+                     "total": float(terms[idx].sum(axis=1).mean()),
+                     "positive": float(positive[idx].mean()),
+                     "paper_metric": float((positive[idx] - observation[idx]).mean()),
+                     "goals_for": goals[side], "goals_against": goals[other],
+                     "falls": int(falls[idx].sum()), "penalties": int(penalties[idx].sum())}
+    return out
+
+
+def _result(goals_for: int, goals_against: int) -> str:
+    return "win" if goals_for > goals_against else "loss" if goals_for < goals_against else "draw"
+
+
+# -- evaluation --------------------------------------------------------------------------------------------------
+def evaluate(evaluated: str | TeamPolicy, opponent: str | TeamPolicy, *, episodes: int = 4,
+             seeds: Sequence[int] = (0, 1, 2), players_per_team: int = 2, perception: Any = "realistic",
+             sides: str = "alternate", greedy: bool = False, env_config: Mapping[str, Any] | None = None,
+             progress: Callable[[str], None] | None = None, torch_threads: int | None = 1) -> dict[str, Any]:
+    """Play ``episodes`` episodes per seed of ``evaluated`` against ``opponent`` (specs for ``make_team_policy``
+    or TeamPolicy instances; ``greedy`` applies to checkpoints given by path). ``env_config``: further
+    ``SoccerConfig`` settings (e.g. ``{"episode_seconds": 30}``). Returns the JSON-ready result: ``settings``,
+    ``evaluated`` / ``opponent`` descriptions, ``episodes`` (every record), ``per_seed`` (means over each seed's
+    episodes), ``summary`` (mean, sd and n over seeds of each per-seed number) and ``counts`` (wins, draws,
+    losses, episodes).
+
+    ``torch_threads``: torch's intra-op threads while a checkpoint plays (restored afterwards; None leaves them
+    alone). One thread is the default: a period's batch is a team of robots, far too small to split, and on busy
+    cores several threads made each decision 50 times slower (200 ms instead of 4 ms)."""
+    if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) or episodes < 1:
+        raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
+    seeds = list(seeds)
+    if not seeds:
+        raise ValueError("give at least one seed")
+    for seed in seeds:
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seeds must be non-negative integers, got {seed!r}")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be distinct, got {seeds}")
+    if sides not in SIDES:
+        raise ValueError(f"sides must be one of {', '.join(SIDES)}, got {sides!r}")
+    config = dict(env_config or {})
+    for key in ("players_per_team", "observation", "perception", "render_mode"):
+        if key in config:
+            raise ValueError(f"env_config must not set {key!r}; it is an argument of evaluate")
+    ours, theirs = make_team_policy(evaluated, greedy), make_team_policy(opponent, greedy)
+    if ours is theirs:
+        raise ValueError("the evaluated team and the opponent must be two TeamPolicy instances")
+    if torch_threads is not None and (isinstance(ours, AgentTeam) or isinstance(theirs, AgentTeam)):
+        import torch
+        threads = torch.get_num_threads()
+        torch.set_num_threads(int(torch_threads))
+        try:
+            return _evaluate(ours, theirs, evaluated, opponent, episodes, seeds, players_per_team, perception,
+                             sides, greedy, config, progress)
+        finally:
+            torch.set_num_threads(threads)
+    return _evaluate(ours, theirs, evaluated, opponent, episodes, seeds, players_per_team, perception, sides, greedy,
+                     config, progress)
+
+
+def _evaluate(ours: TeamPolicy, theirs: TeamPolicy, evaluated: str | TeamPolicy, opponent: str | TeamPolicy,
+              episodes: int, seeds: list[int], players_per_team: int, perception: Any, sides: str, greedy: bool,
+              config: dict[str, Any], progress: Callable[[str], None] | None) -> dict[str, Any]:
+    from dynenv_ros.envs.robocup_v0 import parallel_env
+    env = parallel_env(players_per_team=players_per_team, observation="padded", perception=perception, **config)
+    records = []
+    for seed in seeds:
+        for episode in range(int(episodes)):
+            env_seed, our_seed, their_seed = episode_seeds(int(seed), episode)
+            side = sides if sides != "alternate" else ("a" if episode % 2 == 0 else "b")
+            if side == "a":
+                game = play_episode(env, ours, theirs, env_seed, our_seed, their_seed)
+            else:
+                game = play_episode(env, theirs, ours, env_seed, their_seed, our_seed)
+            mine, other = game[side], game["b" if side == "a" else "a"]
+            record = {"seed": int(seed), "episode": episode, "side": side, "env_seed": env_seed, "kickoff": "a",
+                      "periods": game["periods"], **mine,
+                      "result": _result(mine["goals_for"], mine["goals_against"]),
+                      "opponent": {k: other[k] for k in ("terms", "total", "positive", "paper_metric", "falls",
+                                                         "penalties")}}
+            records.append(record)
+            if progress is not None:
+                progress(f"seed {seed} episode {episode} ({side}): {record['result']} "
+                         f"{mine['goals_for']}:{mine['goals_against']}, total {mine['total']:.2f}")
+    per_seed = [seed_means(int(seed), [r for r in records if r["seed"] == int(seed)]) for seed in seeds]
+    settings = {"episodes": int(episodes), "seeds": [int(s) for s in seeds], "players_per_team": players_per_team,
+                "perception": perception, "sides": sides, "greedy": bool(greedy), "env_config": config,
+                "scripted_default": DEFAULT_SCRIPTED,
+                "seeding": "SeedSequence(seed, spawn_key=(episode,)).spawn(3) -> env, evaluated, opponent"}
+    return {"format": FORMAT, "settings": settings,
+            "evaluated": {"spec": _spec_name(evaluated), **ours.describe()},
+            "opponent": {"spec": _spec_name(opponent), **theirs.describe()},
+            "episodes": records, "per_seed": per_seed, "summary": summarize(per_seed),
+            "counts": {"episodes": len(records), "wins": sum(r["result"] == "win" for r in records),
+                       "draws": sum(r["result"] == "draw" for r in records),
+                       "losses": sum(r["result"] == "loss" for r in records)}}
+
+
+def _spec_name(spec: str | TeamPolicy) -> str:
+    return spec if isinstance(spec, str) else type(spec).__name__
+
+
+def seed_means(seed: int, records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """One seed's numbers (``SEED_METRICS``), each the mean over its episode records."""
+    def mean(values: Iterable[float]) -> float:
+        return float(np.mean([float(v) for v in values]))
+    row: dict[str, Any] = {"seed": seed, "episodes": len(records)}
+    row["total"] = mean(r["total"] for r in records)
+    row["paper_metric"] = mean(r["paper_metric"] for r in records)
+    row["positive"] = mean(r["positive"] for r in records)
+    for term in TERMS:
+        row[term] = mean(r["terms"][term] for r in records)
+    row["goals_for"] = mean(r["goals_for"] for r in records)
+    row["goals_against"] = mean(r["goals_against"] for r in records)
+    row["goal_difference"] = mean(r["goals_for"] - r["goals_against"] for r in records)
+    for result in RESULTS:
+        row[f"{result}_rate"] = mean(r["result"] == result for r in records)
+    row["falls"] = mean(r["falls"] for r in records)
+    row["penalties"] = mean(r["penalties"] for r in records)
+    row["opponent_total"] = mean(r["opponent"]["total"] for r in records)
+    row["opponent_paper_metric"] = mean(r["opponent"]["paper_metric"] for r in records)
+    return row
+
+
+def summarize(per_seed: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
+    """Mean, sample standard deviation (0 for one seed) and n over seeds of every per-seed number."""
+    out = {}
+    for metric in SEED_METRICS:
+        values = np.array([row[metric] for row in per_seed], float)
+        out[metric] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
+                       "n": int(len(values))}
+    return out
+
+
+# -- output ------------------------------------------------------------------------------------------------------
+def format_table(result: Mapping[str, Any]) -> str:
+    """A Markdown table: one row per seed and a mean ± sd row over seeds."""
+    ev, op = result["evaluated"], result["opponent"]
+    columns = [("W/D/L", None), ("GF", "goals_for"), ("GA", "goals_against"), ("total", "total"),
+               ("paper", "paper_metric"), ("obs", OBSERVATION), ("falls", "falls"), ("pen", "penalties")]
+    lines = [f"{ev['spec']} vs {op['spec']}: {result['settings']['episodes']} episodes x "
+             f"{len(result['per_seed'])} seeds, {result['settings']['players_per_team']} per team, "
+             f"sides {result['settings']['sides']}", "",
+             "| seed | " + " | ".join(name for name, _ in columns) + " |",
+             "|---:|" + "---:|" * len(columns)]
+    for row in result["per_seed"]:
+        n = row["episodes"]
+        wdl = "/".join(str(round(row[f"{r}_rate"] * n)) for r in RESULTS)
+        cells = [wdl] + [f"{row[key]:.3g}" if abs(row[key]) < 1000 else f"{row[key]:.4g}"
+                         for _, key in columns[1:]]
+        lines.append(f"| {row['seed']} | " + " | ".join(cells) + " |")
+    summary, counts = result["summary"], result["counts"]
+    wdl = f"{counts['wins']}/{counts['draws']}/{counts['losses']}"
+    cells = [wdl] + [_mean_sd(summary[key]) for _, key in columns[1:]]
+    lines.append("| mean ± sd | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _mean_sd(stats: Mapping[str, float]) -> str:
+    return f"{stats['mean']:.3g} ± {stats['sd']:.2g}"
+
+
+def write_json(result: Mapping[str, Any], path: str | os.PathLike[str]) -> None:
+    """Write the result (via ``path.tmp`` and a rename)."""
+    target = Path(path)
+    if not target.parent.is_dir():
+        raise ValueError(f"cannot write {target}: folder {target.parent} does not exist")
+    tmp = target.with_name(target.name + ".tmp")
+    tmp.write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
+    os.replace(tmp, target)
+
+
+def load_evaluation(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A result written by ``write_json``; a clear ValueError for a missing, unreadable or foreign file."""
+    source = Path(path)
+    if not source.is_file():
+        raise ValueError(f"evaluation file {source} does not exist")
+    try:
+        data = json.loads(source.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ValueError(f"evaluation file {source} is not readable JSON: {error}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("per_seed"), list):
+        raise ValueError(f"evaluation file {source} is not a {FORMAT} result")
+    return data
+
+
+def seed_values(result: Mapping[str, Any], metric: str) -> list[float]:
+    """The per-seed values of ``metric`` (one of ``SEED_METRICS``) in a result."""
+    rows = result["per_seed"]
+    if not rows or metric not in rows[0]:
+        known = ", ".join(SEED_METRICS)
+        raise ValueError(f"unknown metric {metric!r}; known: {known}")
+    values = [float(row[metric]) for row in rows]
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"metric {metric!r} has non-finite per-seed values")
+    return values
+
+
+__all__ = ["TeamPolicy", "RandomTeam", "ScriptedTeam", "AgentTeam", "make_team_policy", "sample_space",
+           "episode_seeds", "play_episode", "evaluate", "seed_means", "summarize", "format_table", "write_json",
+           "load_evaluation", "seed_values", "positive_part", "positive_reward", "paper_metric", "TERMS",
+           "SEED_METRICS", "DEFAULT_SCRIPTED", "FORMAT"]
