@@ -358,7 +358,10 @@ def reconstruction_loss(pred_slots: Tensor, pred_conf: Tensor, targets: Tensor, 
     fields = MSE of the other fields there, plus the mean BCE-with-logits of the fields listed in ``binary_fields``
     (indices into K, targets in {0, 1}); confidence = mean BCE-with-logits over the slots, target 1 on slots assigned
     to seen targets, 0 on the others, except that an unassigned slot whose predicted x, y lies within
-    ``ignore_radius`` of any present object — seen or not, since it is then no false positive — is left out).
+    ``ignore_radius`` of a present object the agent has NOT seen is left out — it may be a correct guess about
+    something out of view, so it is no clear false positive. A second slot next to a *seen* object is a
+    duplicate (that object already has its assigned slot) and is pushed to 0: DynEnv exempted slots near any
+    object, so duplicates were never penalised and its precision counted them as hits).
     ``ignore_radius`` is in the units of the positions (DynEnv's 0.4 was in normalised units, ≈ 2.1 m).
     """
     slots, fields = pred_slots.shape[-2:]
@@ -401,7 +404,7 @@ def reconstruction_loss(pred_slots: Tensor, pred_conf: Tensor, targets: Tensor, 
     positive[b_idx, s_idx] = True
     with torch.no_grad():
         distance2 = ((flat_pred[:, :, None, :2] - flat_targets[:, None, :, :2]) ** 2).sum(-1)   # (B, S, M)
-        near = ((distance2 < ignore_radius ** 2) & real[:, None, :]).any(-1)
+        near = ((distance2 < ignore_radius ** 2) & (real & ~known)[:, None, :]).any(-1)
     scored = agents[:, None] & (positive | ~near)
     bce = F.binary_cross_entropy_with_logits(flat_conf, positive.to(flat_conf.dtype), reduction="none")
     return {"position": position, "fields": field_loss, "confidence": masked_mean(bce, scored)}
