@@ -268,3 +268,34 @@ def test_bad_actions_are_refused_before_any_world_moves(backend):
         _assert_identical(env.step(good).observations, twin.step(good).observations)
     with pytest.raises(ValueError, match="backend"):
         SoccerVectorEnv(2, backend="threads")
+
+
+def test_scripted_team_b_plays_in_the_worlds_and_ignores_given_rows():
+    """Team B driven by the worlds' chasers: the rows given for team B make no difference, the chasers reach the
+    ball (they score against a team that stands still), and both backends agree."""
+    import numpy as np
+    from dynenv_ros.envs.vector import SoccerVectorEnv
+    config = {"players_per_team": 1, "episode_seconds": 60.0}
+    results = []
+    for backend, junk in (("inprocess", 0), ("inprocess", 4), ("subprocess", 2)):
+        with SoccerVectorEnv(2, backend=backend, config=config, perception="none",
+                             scripted_team_b="chaser") as env:
+            env.reset(seed=11)
+            actions = np.zeros((2, 2, 4), np.int64)
+            actions[:, 0] = [0, 1, 0, 3]          # team A stands still, head centred
+            actions[:, 1] = [junk, 0, junk % 3, junk]
+            total = np.zeros((2, 4, 2))
+            for _ in range(120):
+                total += env.step(actions).reward_terms
+            results.append(total)
+    np.testing.assert_array_equal(results[0], results[1])
+    np.testing.assert_array_equal(results[0], results[2])
+    primary = results[0][:, 0].sum(axis=0)        # (robots,): goal rewards over both worlds
+    assert primary[1] > 0 > primary[0]            # the chaser scored against the team standing still
+
+
+def test_scripted_team_b_refuses_unknown_kinds():
+    import pytest
+    from dynenv_ros.envs.vector import SoccerVectorEnv
+    with pytest.raises(ValueError, match="scripted_team_b"):
+        SoccerVectorEnv(1, backend="inprocess", scripted_team_b="random")

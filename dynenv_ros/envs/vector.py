@@ -41,6 +41,7 @@ from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.actions import Kick, Turn, Walk, parse_action
 from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.soccer.scripted import team_policies
 from dynenv_ros.soccer.world import SoccerWorld
 
 # backend="auto": worker processes from this many worlds on (measured on 2 cores, docs/benchmarks.md): a world with
@@ -82,6 +83,7 @@ class _Settings:
     max_landmarks: int | None
     max_objects: int | None
     targets: bool = False
+    scripted_team_b: str | None = None
 
     def observations(self) -> SoccerObservations:
         return SoccerObservations(self.config, self.observation, self.perception,
@@ -122,6 +124,13 @@ class InProcessBatch:
         self.settings = settings
         self.config = settings.config
         self.padded = settings.observation == "padded"
+        self._scripted: list[Any] = []
+        self._scripted_robots = range(0)
+        if settings.scripted_team_b is not None:
+            n = self.config.players_per_team
+            self._scripted = team_policies(n, settings.scripted_team_b, field=self.config.field,
+                                           head_mode=self.config.head_mode, motion=self.config.motion)
+            self._scripted_robots = range(n, 2 * n)
         self.worlds = [SoccerWorld(self.config) for _ in range(num_envs)]
         self.observers = [settings.observations() for _ in range(num_envs)]
         if arrays is None:
@@ -158,7 +167,12 @@ class InProcessBatch:
         terms, dropped = self.arrays["reward_terms"], self.arrays["dropped"]
         terminated, truncated = self.arrays["terminated"], self.arrays["truncated"]
         for e, (world, obs, acts) in enumerate(zip(self.worlds, self.observers, actions)):
-            result = world.step(list(acts), on_frame=obs.on_frame)
+            acts = list(acts)
+            if self._scripted:                   # team B played by the world's own scripted policies
+                snapshot = world.snapshot()
+                for i in self._scripted_robots:
+                    acts[i] = self._scripted[i].act(snapshot, i)
+            result = world.step(acts, on_frame=obs.on_frame)
             terms[e] = result.rewards
             if self.padded:
                 terms[e, RewardTerm.OBSERVATION] += obs.build_padded(out=self._obs[e], targets=self._targets[e])
@@ -423,13 +437,18 @@ class SoccerVectorEnv:
     ``ball_seen`` (E, A), ``robots_seen`` (E, A, R), float32, team frame), of the same instant as the observations:
     ``BatchStep.targets`` and ``final_targets`` after a step, ``self.targets`` for the observations returned last
     (after ``reset()`` too). Shapes without the (E, A) axes: ``self.target_shapes``.
+
+    ``scripted_team_b="chaser"`` or ``"keeper_and_chasers"``: every world drives its team B robots with that scripted
+    team (``soccer.scripted``, reading the world's own ground truth in the world's process), and the rows given
+    for those robots are ignored (send zeros). Why in the worlds: a scripted policy needs the ground truth, which
+    would otherwise have to cross the process boundary every step.
     """
 
     def __init__(self, num_envs: int, backend: str = "auto", workers: int | None = None,
                  config: SoccerConfig | Mapping[str, Any] | None = None, observation: str = "padded",
                  perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
                  max_landmarks: int | None = None, max_objects: int | None = None, copy: bool = True,
-                 pin_workers: bool = False, targets: bool = False) -> None:
+                 pin_workers: bool = False, targets: bool = False, scripted_team_b: str | None = None) -> None:
         self.config = config if isinstance(config, SoccerConfig) else SoccerConfig.from_mapping(config)
         if observation not in VECTOR_OBSERVATIONS:
             raise ValueError(f"observation must be one of {VECTOR_OBSERVATIONS}, got {observation!r}")
@@ -438,8 +457,10 @@ class SoccerVectorEnv:
         if targets and observation != "padded":
             raise ValueError(f"targets=True needs observation='padded' (the targets come with perception), "
                              f"got observation={observation!r}")
+        if scripted_team_b not in (None, "chaser", "keeper_and_chasers"):
+            raise ValueError(f"scripted_team_b must be None, 'chaser' or 'keeper_and_chasers', got {scripted_team_b!r}")
         settings = _Settings(self.config, observation, perception_params(perception), max_landmarks, max_objects,
-                             bool(targets))
+                             bool(targets), scripted_team_b)
         observations = settings.observations()      # checks the layout maxima; gives the spaces
         self.observation = observation
         self.layout: PaddedLayout | None = observations.layout if observation == "padded" else None
