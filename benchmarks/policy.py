@@ -6,6 +6,9 @@ timed on its own) → one batched forward pass with the recurrent state fed back
 random weights (speed does not depend on training). The process is pinned to ``--cores`` cores and both runtimes
 use ``--threads`` threads, since on a robot the policy shares the CPU with everything else. With ``--repeat``, each
 case runs that many times and the run with the lowest median total is reported.
+
+``--agent`` times the training side instead (``benchmarks/agent.py``): the torch model's acting forward and
+``forward_sequence`` + backward for a batch of worlds' robots.
 """
 from __future__ import annotations
 
@@ -37,6 +40,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="CPU cores this process may use (pinned with sched_setaffinity); 0 = no pinning")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    parser.add_argument("--agent", action="store_true",
+                        help="instead: the agent's passes in torch as a trainer runs them (acting forward of all "
+                             "robots of --envs worlds, forward_sequence + backward over --sequence periods; "
+                             "benchmarks/agent.py)")
+    from benchmarks.agent import add_arguments as add_agent_arguments
+    add_agent_arguments(parser)
 
 
 def _record(robots: int, periods: int, seed: int) -> list[tuple[list, Any, Any]]:
@@ -46,7 +55,7 @@ def _record(robots: int, periods: int, seed: int) -> list[tuple[list, Any, Any]]
     import torch
 
     from dynenv_ros.envs.robocup_v0 import parallel_env
-    from dynenv_ros.agent.inputs import encode_previous_action
+    from dynenv_ros.agent.inputs import encode_previous_action, self_state
 
     per_team = (robots + 1) // 2
     env = parallel_env(players_per_team=per_team, perception={"preset": "realistic", "noise_magnitude": 1.0})
@@ -63,8 +72,8 @@ def _record(robots: int, periods: int, seed: int) -> list[tuple[list, Any, Any]]
         a = torch.tensor(np.stack([actions[agent] for agent in agents]))
         # the encoding only divides the head turn by head_max, so head units over units give the same [-1, 1]
         previous = encode_previous_action(a[:, 0], a[:, 1], a[:, 2], a[:, 3] - units, float(units))
-        proprio = torch.tensor(np.stack([obs[agent]["proprioception"][-1] for agent in agents]),
-                               dtype=torch.float32)
+        proprio = self_state(np.stack([obs[agent]["proprioception"][-1] for agent in agents]),
+                             np.stack([obs[agent]["game"] for agent in agents]))
         out.append(([obs[agent]["detections"] for agent in agents], previous, proprio))
     return out
 
@@ -99,6 +108,9 @@ def _time_case(policy: Callable, collate: Callable, periods: list, decisions: in
 
 
 def run(args: Any) -> int:
+    if getattr(args, "agent", False):
+        from benchmarks.agent import run as run_agent
+        return run_agent(args)
     try:
         robot_counts = [int(text) for text in str(args.robots).split(",") if text.strip()]
     except ValueError:

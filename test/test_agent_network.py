@@ -9,7 +9,7 @@ import torch
 from dynenv_ros.envs.robocup_v0 import parallel_env
 from dynenv_ros.agent.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, collate,
                                    encode_previous_action)
-from dynenv_ros.agent.network import DynEnvAgent, parameter_count
+from dynenv_ros.agent.network import AgentStep, DynEnvAgent, parameter_count
 
 
 def _observations(seed=0, robots=2):
@@ -295,3 +295,274 @@ def test_agent_features_keep_the_period_when_its_last_frame_is_empty(model):
     assert torch.allclose(moved_objects.pose, base.pose)
     assert (moved_objects.object_features - base.object_features).abs().max() > 1e-3
     assert (moved_landmarks.pose - base.pose).abs().max() > 1e-4
+
+
+# ---- Training passes: forward_sequence, and the sparse/bucketed computation against a dense reference
+
+def _rollout(periods=4, max_landmarks=48, max_objects=12, seed=0):
+    """``periods`` consecutive motion periods of a 2v2 game with sampled actions, as forward_sequence's inputs:
+    streams (T, 4, F, N, ...) collated at fixed maxima (lots of trailing padding), previous actions, self-state."""
+    from dynenv_ros.agent.inputs import StreamBatch, self_state
+    env = parallel_env(players_per_team=2, perception={"preset": "realistic", "noise_magnitude": 2.0})
+    env.reset(seed=seed)
+    for i, agent in enumerate(env.possible_agents):
+        env.action_space(agent).seed(seed + i)
+    steps = []
+    for _ in range(periods):
+        actions = {a: env.action_space(a).sample() for a in env.agents}
+        obs, *_ = env.step(actions)
+        a = torch.tensor(np.stack([actions[agent] for agent in env.possible_agents]))
+        previous = encode_previous_action(a[:, 0], a[:, 1], a[:, 2], (a[:, 3] - 3) * 0.2, 0.6)
+        proprio = self_state(np.stack([obs[agent]["proprioception"][-1] for agent in env.possible_agents]),
+                             np.stack([obs[agent]["game"] for agent in env.possible_agents]))
+        landmarks, objects = collate([obs[agent]["detections"] for agent in env.possible_agents],
+                                     max_landmarks=max_landmarks, max_objects=max_objects)
+        steps.append((landmarks, objects, previous, proprio))
+
+    def stack(index):
+        if isinstance(steps[0][index], StreamBatch):
+            return StreamBatch(*(torch.stack([getattr(s[index], name) for s in steps])
+                                 for name in ("features", "kind", "mask")))
+        return torch.stack([s[index] for s in steps])
+
+    return tuple(stack(i) for i in range(4))
+
+
+_OUTPUTS = ("walk", "turn", "kick", "head", "value", "pose", "phi", "object_features", "landmark_confidence",
+            "object_confidence", "ball", "ball_confidence", "robots", "robot_confidence")
+
+
+def _scalar(outputs, weights):
+    """A fixed random linear function of every output (so every output's gradient path is checked)."""
+    return sum((getattr(outputs, name) * weights[name]).sum() for name in _OUTPUTS)
+
+
+def _weights(outputs):
+    generator = torch.Generator().manual_seed(5)
+    return {name: torch.randn(getattr(outputs, name).shape, generator=generator) for name in _OUTPUTS}
+
+
+def _gradients(model, loss):
+    model.zero_grad(set_to_none=True)
+    loss.backward()
+    return {name: p.grad.clone() for name, p in model.named_parameters() if p.grad is not None}
+
+
+def _same_gradients(a, b, tol=1e-4):
+    """Per parameter, max |a − b| ≤ tol · max |b|; a parameter without a gradient on one side (a class block no
+    row of that class reached) must have an all-zero one on the other."""
+    for name in a.keys() | b.keys():
+        if name not in a or name not in b:
+            assert (a.get(name, b.get(name)) == 0).all(), name
+            continue
+        scale = b[name].abs().max().clamp(min=1e-6)
+        assert (a[name] - b[name]).abs().max() <= tol * scale, (name, ((a[name] - b[name]).abs().max() / scale).item())
+
+
+def _at(batch, t):
+    return type(batch)(batch.features[t], batch.kind[t], batch.mask[t])
+
+
+@pytest.mark.parametrize("head_mode", ["discrete", "continuous"])
+def test_forward_sequence_equals_stepping_forward_with_the_state_carried_and_reset(head_mode):
+    torch.manual_seed(0)
+    model = DynEnvAgent(feature_size=32, head_mode=head_mode)
+    landmarks, objects, previous, proprio = _rollout(periods=4)
+    T, B = previous.shape[:2]
+    generator = torch.Generator().manual_seed(1)
+    start = tuple(torch.randn(B, 32, generator=generator) for _ in range(4))      # mid-episode state
+    resets = torch.zeros(T, B, dtype=torch.bool)
+    resets[2, 1] = resets[2, 3] = True                     # two robots' episodes restart at period 2
+    resets[0, 2] = True                                    # and one at the very first period
+    sequence = model.forward_sequence(landmarks, objects, previous, proprio, start, resets)
+    steps, state = [], start
+    for t in range(T):
+        keep = (~resets[t]).float().unsqueeze(-1)
+        step = model(_at(landmarks, t), _at(objects, t), previous[t], proprio[t], tuple(s * keep for s in state))
+        steps.append(step)
+        state = step.state
+    for name in _OUTPUTS:
+        stepped = torch.stack([getattr(step, name) for step in steps])
+        assert getattr(sequence, name).shape == stepped.shape, name
+        assert torch.allclose(getattr(sequence, name), stepped, atol=1e-5, rtol=0), name
+    for a, b in zip(sequence.state, state):
+        assert torch.allclose(a, b, atol=1e-5, rtol=0)
+    weights = _weights(sequence)
+    by_sequence = _gradients(model, _scalar(sequence, weights) + sum(s.sum() for s in sequence.state))
+    steps, state = [], start
+    for t in range(T):
+        keep = (~resets[t]).float().unsqueeze(-1)
+        step = model(_at(landmarks, t), _at(objects, t), previous[t], proprio[t], tuple(s * keep for s in state))
+        steps.append(step)
+        state = step.state
+    stepped = type(sequence)(**{name: torch.stack([getattr(s, name) for s in steps]) for name in _OUTPUTS},
+                             state=state)
+    by_steps = _gradients(model, _scalar(stepped, weights) + sum(s.sum() for s in stepped.state))
+    _same_gradients(by_sequence, by_steps)
+    # a reset really cuts the state: the restarted robots' later outputs do not depend on the state before
+    other = model.forward_sequence(landmarks, objects, previous, proprio, tuple(s + 1.0 for s in start), resets)
+    assert torch.allclose(other.phi[2:, [1, 3]], sequence.phi[2:, [1, 3]], atol=1e-6)
+    assert (other.phi[2:, 0] - sequence.phi[2:, 0]).abs().max() > 1e-3
+
+
+def test_forward_is_forward_sequence_of_one_period(model):
+    landmarks, objects, previous, proprio = _rollout(periods=1)
+    state = model.initial_state(4)
+    one = model.forward_sequence(landmarks, objects, previous, proprio, state)
+    step = model(_at(landmarks, 0), _at(objects, 0), previous[0], proprio[0], state)
+    for name in _OUTPUTS:
+        assert torch.allclose(getattr(one, name)[0], getattr(step, name), atol=1e-6, rtol=0), name
+    with pytest.raises(ValueError, match="resets"):
+        model.forward_sequence(landmarks, objects, previous, proprio, state, torch.zeros(2, 4, dtype=torch.bool))
+
+
+def _dense_reference(model, landmarks, objects, previous, proprio, state):
+    """The agent as first written, slow and literal: every class's block on every slot (padding included) and the
+    right one gathered, no slot cut, ``nn.MultiheadAttention``'s own function on the attention parameters,
+    ``nn.LSTMCell`` called as a module — on the model's parameters, so outputs and gradients compare."""
+    import torch.nn.functional as F
+
+    def embed(stream, batch):
+        every = torch.stack([block(batch.features) for block in stream.embed.blocks], dim=-2)
+        index = batch.kind.unsqueeze(-1).unsqueeze(-1).expand(*batch.kind.shape, 1, every.shape[-1])
+        return every.gather(-2, index).squeeze(-2)
+
+    def attention(module, query, key, padding):
+        out, _ = F.multi_head_attention_forward(
+            query.transpose(0, 1), key.transpose(0, 1), key.transpose(0, 1), module.embed_dim, 1,
+            module.in_proj_weight, module.in_proj_bias, module.bias_k, module.bias_v, False, 0.0,
+            module.out_proj.weight, module.out_proj.bias, training=False, key_padding_mask=padding,
+            need_weights=False)
+        return out.transpose(0, 1)
+
+    def rta(stream, batch):
+        module, x, mask = stream.rta, embed(stream, batch), batch.mask
+        B, frames, N, D = x.shape
+        attended = attention(module.object_attention, x.reshape(B * frames, N, D), x.reshape(B * frames, N, D),
+                             mask.reshape(B * frames, N))
+        attended = attended.reshape(B, frames, N, D).masked_fill(mask.unsqueeze(-1), 0.0)
+        summary, padded_so_far = attended[:, 0], mask[:, 0]
+        for t in range(1, frames):
+            fed_back = attention(module.temporal_attention, attended[:, t], summary, padded_so_far)
+            padded_so_far = padded_so_far & mask[:, t]
+            summary = module.norm(attended[:, t] + fed_back).masked_fill(padded_so_far.unsqueeze(-1), 0.0)
+        confidence = torch.sigmoid(module.confidence(summary)).squeeze(-1).masked_fill(padded_so_far, 0.0)
+        pooled = (confidence.unsqueeze(-1) * summary).sum(1) / (1.0 + confidence.sum(1, keepdim=True))
+        return pooled, confidence
+
+    def stream_step(stream, batch, side, stream_state):
+        pooled, confidence = rta(stream, batch)
+        h, c = stream.lstm(stream.transform(torch.cat([pooled, side], dim=-1)), stream_state)
+        return stream.norm(h), (h, c), confidence
+
+    loc, loc_state, landmark_confidence = stream_step(model.localization, landmarks,
+                                                      torch.cat([previous, proprio], dim=-1), state[:2])
+    pose = model.pose_head(loc)
+    obj, obj_state, object_confidence = stream_step(model.objects, objects,
+                                                    torch.cat([pose.detach(), proprio], dim=-1), state[2:])
+    phi = torch.cat([loc, obj], dim=-1)
+    if model.head_mode == "discrete":
+        head = model.head_head(phi)
+    else:
+        mean = model.head_max * torch.tanh(model.head_head(phi))
+        head = torch.cat([mean, model.head_log_std.expand_as(mean)], dim=-1)
+    ball, ball_conf, robots, robot_conf = model.reconstruction(obj)
+    return AgentStep(walk=model.walk_head(phi), turn=model.turn_head(phi), kick=model.kick_head(phi), head=head,
+                     value=model.critic(phi).squeeze(-1), pose=pose, phi=phi, object_features=obj,
+                     state=loc_state + obj_state, landmark_confidence=landmark_confidence,
+                     object_confidence=object_confidence, ball=ball, ball_confidence=ball_conf, robots=robots,
+                     robot_confidence=robot_conf)
+
+
+def _flat(batch, order=None):
+    """(T, B, F, N, ...) → (T·B, F, N, ...), slots permuted by ``order`` (padding scattered through the frame)."""
+    from dynenv_ros.agent.inputs import StreamBatch
+    out = StreamBatch(batch.features.flatten(0, 1), batch.kind.flatten(0, 1), batch.mask.flatten(0, 1))
+    if order is not None:
+        out = StreamBatch(out.features[:, :, order], out.kind[:, :, order], out.mask[:, :, order])
+    return out
+
+
+@pytest.mark.parametrize("max_buckets,head_mode,scattered", [(1, "discrete", False), (3, "discrete", False),
+                                                              (3, "continuous", True), (8, "continuous", False)])
+def test_sparse_embedding_slot_cuts_and_buckets_equal_the_dense_computation(monkeypatch, max_buckets, head_mode,
+                                                                            scattered):
+    """Outputs and gradients of the network (each row through its own class's block only, padded rows skipped,
+    slots cut per bucket of periods, folded attention, its own LSTM step) against the dense literal reference,
+    on 12 robot-periods of real detections collated at fixed maxima — with the padding left trailing or
+    scattered through each frame, in one bucket or several."""
+    from dynenv_ros.agent import network
+    plan = network.plan_buckets
+    plans = []
+
+    def recording_plan(used, limit=3):
+        plans.append(plan(used, max_buckets))
+        return plans[-1]
+
+    monkeypatch.setattr(network, "plan_buckets", recording_plan)
+    monkeypatch.setattr(network, "_BUCKET_WORK", 0.0)        # split wherever lengths differ (few periods here)
+    torch.manual_seed(0)
+    model = DynEnvAgent(feature_size=32, head_mode=head_mode)
+    landmarks, objects, previous, proprio = _rollout(periods=3)
+    order = torch.randperm(48, generator=torch.Generator().manual_seed(3)) if scattered else None
+    object_order = torch.randperm(12, generator=torch.Generator().manual_seed(4)) if scattered else None
+    landmarks, objects = _flat(landmarks, order), _flat(objects, object_order)
+    previous, proprio = previous.flatten(0, 1), proprio.flatten(0, 1)
+    gaps = landmarks.mask[..., :-1] & ~landmarks.mask[..., 1:]     # a padded slot before a filled one
+    assert gaps.any() == scattered and landmarks.mask[:, :, -8:].all()  # trailing padding, or scattered too
+    generator = torch.Generator().manual_seed(2)
+    state = tuple(torch.randn(12, 32, generator=generator) for _ in range(4))
+    fast = model(landmarks, objects, previous, proprio, state)
+    if max_buckets > 1 and not scattered:
+        assert max(len(p) for p in plans) > 1, plans          # the several-bucket path ran
+    slow = _dense_reference(model, landmarks, objects, previous, proprio, state)
+    for name in _OUTPUTS:
+        assert torch.allclose(getattr(fast, name), getattr(slow, name), atol=1e-5, rtol=0), name
+    weights = _weights(fast)
+    _same_gradients(_gradients(model, _scalar(fast, weights)), _gradients(model, _scalar(slow, weights)))
+
+
+def test_single_head_attention_is_multihead_attention_with_the_same_state_dict():
+    """Parameter names, shapes and initialisation of nn.MultiheadAttention(D, 1, add_bias_kv=True); loaded into
+    one, it computes the same function."""
+    from dynenv_ros.agent.network import SingleHeadAttention
+    torch.manual_seed(0)
+    ours = SingleHeadAttention(16)
+    torch.manual_seed(0)
+    theirs = torch.nn.MultiheadAttention(16, 1, add_bias_kv=True, batch_first=True)
+    assert {k: v.shape for k, v in ours.state_dict().items()} == {k: v.shape for k, v in theirs.state_dict().items()}
+    assert all(torch.equal(v, theirs.state_dict()[k]) for k, v in ours.state_dict().items())
+    generator = torch.Generator().manual_seed(1)
+    with torch.no_grad():
+        for parameter in ours.parameters():
+            parameter.add_(0.3 * torch.randn(parameter.shape, generator=generator))   # biases nonzero too
+    theirs.load_state_dict(ours.state_dict())
+    query, key = torch.randn(3, 5, 16, generator=generator), torch.randn(3, 7, 16, generator=generator)
+    padding = torch.zeros(3, 7, dtype=torch.bool)
+    padding[0, 3:] = True
+    padding[2, :] = True                                     # every key padded: only the bias key remains
+    expected = theirs(query, key, key, key_padding_mask=padding, need_weights=False)[0]
+    assert torch.allclose(ours(query, key, padding), expected, atol=1e-5)
+    assert torch.allclose(ours(query), theirs(query, query, query, need_weights=False)[0], atol=1e-5)
+
+
+def test_plan_buckets_keeps_every_period_and_its_slots():
+    from dynenv_ros.agent.network import plan_buckets
+    for used in ([1] * 30 + [19] * 3, list(range(1, 41)), [5], [3, 3, 3, 12, 12, 40]):
+        plan = plan_buckets(torch.tensor(used))
+        assert sum(count for count, _ in plan) == len(used) and 1 <= len(plan) <= 3
+        edges = np.cumsum([count for count, _ in plan])
+        assert [slots for _, slots in plan] == [used[e - 1] for e in edges]   # each bucket cut to its longest
+    assert len(plan_buckets(torch.tensor([2] * 200 + [30] * 200))) == 2
+    assert plan_buckets(torch.tensor([4, 4, 5])) == [(3, 5)]                  # not worth a second bucket
+
+
+def test_embedding_refuses_an_unknown_class_on_a_real_row():
+    from dynenv_ros.agent.network import ClassEmbedding
+    embedding = ClassEmbedding(8)
+    features, kind = torch.randn(2, 3, FEATURES), torch.tensor([[1, 2, 99], [0, 1, 2]])
+    with pytest.raises(ValueError, match="class index"):
+        embedding(features, kind, torch.zeros(2, 3, dtype=torch.bool))
+    padded = torch.tensor([[False, False, True], [False, False, False]])
+    out = embedding(features, kind, padded)                  # the same index on a padded row is ignored
+    assert out.shape == (2, 3, 8) and (out[0, 2] == 0).all() and (out[1].abs().sum(-1) > 0).all()

@@ -30,18 +30,16 @@ Masks are ONNX ``bool`` tensors (numpy ``bool_``), the same type ``collate`` pro
 The model's configuration and the fixed shapes are stored as JSON under the metadata key ``dynenv.policy``, so the
 onnxruntime side needs no checkpoint to know its head mode or the shapes it accepts.
 
-The graph computes the network's function, not its literal op sequence: the exported copy of the model skips work
-on padded slots (trailing all-padded slots are cut, each detection is embedded by its own class's block only) and
-writes the RTA's single-head attention as the few ops it is. Outputs agree with the torch model to float rounding
-(the tests hold them to 1e-5 over consecutive periods); 10 robots take ~1.4 ms on one core instead of ~8 ms for the
-literal trace.
+The graph is the network's own forward pass, traced: it skips work on padded slots (trailing all-padded slots are
+cut, each detection is embedded by its own class's block only) and computes the RTA's single-head attention in its
+folded form (``network.SingleHeadAttention``), so it is a few hundred plain nodes. Outputs agree with the torch
+model to float rounding (the tests hold them to 1e-5 over consecutive periods); 10 robots take ~1.5 ms on one core.
 """
 from __future__ import annotations
 
 import copy
 import io
 import json
-import math
 import os
 import warnings
 from dataclasses import dataclass
@@ -76,128 +74,31 @@ class PolicyStep:
     state: State
 
 
-class _SparseClassEmbedding(nn.Module):
-    """``ClassEmbedding`` computed on the rows that need it: each detection goes through its own class's block only,
-    and padded slots (``kind`` −1, set by the wrapper from the mask) through none and embed to zero.
-
-    Why: the network's version runs every class's block on every slot, padding included, and keeps one — with the
-    fixed deployment maxima (48 landmark slots for ~11 real landmarks a frame) that is ~30× the needed work and most
-    of the decision's time. The result is the same for every real row; a padded slot's embedding never reaches an
-    output (it is a masked key, and its query output is zeroed — a slot empty in this frame but filled in an earlier
-    one enters the temporal attention with a zero query whatever its embedding), so zero is as good as anything
-    there."""
-
-    def __init__(self, embedding: nn.Module) -> None:
-        super().__init__()
-        self.blocks = embedding.blocks
-
-    def forward(self, features: torch.Tensor, kind: torch.Tensor) -> torch.Tensor:
-        rows = features.reshape(-1, features.shape[-1])
-        flat_kind = kind.reshape(-1)
-        out = None
-        for index, block in enumerate(self.blocks):
-            selected = torch.nonzero(flat_kind == index).squeeze(1)
-            embedded = block(rows.index_select(0, selected))
-            if out is None:
-                out = rows.new_zeros((rows.shape[0], embedded.shape[-1]))
-            out = out.index_put((selected,), embedded)
-        return out.reshape(*kind.shape, out.shape[-1])
-
-
-class _LeanAttention(nn.Module):
-    """Single-head ``nn.MultiheadAttention`` with ``add_bias_kv`` (what the RTA uses) written as the few ops it is.
-
-    Why: the exporter traces ``F.multi_head_attention_forward`` into ~100 shape, reshape and transpose nodes per
-    call, and a decision makes ten calls; at a few microseconds of onnxruntime overhead per node that is most of a
-    millisecond. Same parameters, same maths (in-projection, learned bias key/value after it, scaled dot product
-    with padded keys excluded, out-projection); inference only (no dropout)."""
-
-    def __init__(self, attention: nn.MultiheadAttention) -> None:
-        super().__init__()
-        self.attention = attention
-        self.scale = 1.0 / math.sqrt(attention.embed_dim)
-
-    @staticmethod
-    def supports(attention: nn.Module) -> bool:
-        return (isinstance(attention, nn.MultiheadAttention) and attention.num_heads == 1 and attention.batch_first
-                and attention.bias_k is not None and attention.in_proj_weight is not None
-                and attention.in_proj_bias is not None and attention.out_proj.bias is not None)
-
-    def forward(self, query: torch.Tensor, key: torch.Tensor, value: torch.Tensor,
-                key_padding_mask: torch.Tensor | None = None, need_weights: bool = False
-                ) -> tuple[torch.Tensor, None]:
-        a = self.attention
-        if query is key and key is value:
-            q, k, v = nn.functional.linear(query, a.in_proj_weight, a.in_proj_bias).chunk(3, dim=-1)
-        else:
-            w_q, w_kv = a.in_proj_weight.split([a.embed_dim, 2 * a.embed_dim])
-            b_q, b_kv = a.in_proj_bias.split([a.embed_dim, 2 * a.embed_dim])
-            q = nn.functional.linear(query, w_q, b_q)
-            if key is value:
-                k, v = nn.functional.linear(key, w_kv, b_kv).chunk(2, dim=-1)
-            else:
-                w_k, w_v = w_kv.chunk(2)
-                b_k, b_v = b_kv.chunk(2)
-                k, v = nn.functional.linear(key, w_k, b_k), nn.functional.linear(value, w_v, b_v)
-        # the bias key/value: one extra, never padded, key per sequence
-        k = torch.cat([k, a.bias_k.expand(k.shape[0], 1, k.shape[-1])], dim=1)
-        v = torch.cat([v, a.bias_v.expand(v.shape[0], 1, v.shape[-1])], dim=1)
-        scores = torch.matmul(q * self.scale, k.transpose(1, 2))
-        if key_padding_mask is not None:
-            padded = torch.cat([key_padding_mask, torch.zeros_like(key_padding_mask[:, :1])], dim=1)
-            scores = scores.masked_fill(padded.unsqueeze(1), float("-inf"))
-        return a.out_proj(torch.matmul(torch.softmax(scores, dim=-1), v)), None
-
-
-def _trimmed(features: torch.Tensor, kind: torch.Tensor, mask: torch.Tensor) -> StreamBatch:
-    """The stream without the trailing slots that are padded in every robot and frame, and with ``kind`` −1 on the
-    padded slots that remain (for ``_SparseClassEmbedding``).
-
-    Why: the fixed maxima are sized for the worst frame, a typical batch fills a third of them, and attention cost
-    grows with the square of the slots. A slot padded in every frame is never filled so far, so the RTA's carried
-    mask (valid once filled in any frame) zeroes it, excludes it as a key and leaves it out of the pooling at every
-    step: it never changes an output (the network's padding invariance), and dropping it is exact. Slots padded only
-    in some frames are kept — they can hold a summary from an earlier frame. At least one slot is kept so no axis
-    becomes empty."""
-    slots = features.shape[2]
-    position = torch.arange(1, slots + 1, dtype=torch.int64)
-    used = torch.clamp((position * (~mask).to(torch.int64)).amax(), min=1)
-    keep = torch.arange(used)
-    mask = mask.index_select(2, keep)
-    return StreamBatch(features.index_select(2, keep), kind.index_select(2, keep).masked_fill(mask, -1), mask)
-
-
 class _ExportWrapper(nn.Module):
     """Explicit tensors in, a flat tuple out: the exporter cannot take dataclasses or nested tuples. Runs an eval
-    copy of the model (the caller's is left as it is) with all-padded trailing slots cut (``_trimmed``), class
-    embeddings that skip padded slots (``_SparseClassEmbedding``) and lean attention (``_LeanAttention``, where the
-    attention is the kind it handles); the network's own forward code does the rest — the RTA's recurrence and its
-    carried mask included, traced as they are — so its outputs are the model's."""
+    copy of the model (the caller's is left as it is); the network's own forward code does everything — under the
+    tracer it takes its graph-only paths (``network._tracing``): all-padded trailing slots cut (``network.trim``),
+    each detection embedded by its own class's block only, the folded single-head attention — so its outputs are
+    the model's."""
 
     def __init__(self, model: DynEnvAgent) -> None:
         super().__init__()
         self.model = copy.deepcopy(model).eval()
-        for stream in (self.model.localization, self.model.objects):
-            stream.embed = _SparseClassEmbedding(stream.embed)
-            for name in ("object_attention", "temporal_attention"):
-                if _LeanAttention.supports(getattr(stream.rta, name)):
-                    setattr(stream.rta, name, _LeanAttention(getattr(stream.rta, name)))
 
     def forward(self, landmark_features: torch.Tensor, landmark_kind: torch.Tensor, landmark_mask: torch.Tensor,
                 object_features: torch.Tensor, object_kind: torch.Tensor, object_mask: torch.Tensor,
                 previous_action: torch.Tensor, proprioception: torch.Tensor, h_loc: torch.Tensor,
                 c_loc: torch.Tensor, h_obj: torch.Tensor, c_obj: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        step = self.model(_trimmed(landmark_features, landmark_kind, landmark_mask),
-                          _trimmed(object_features, object_kind, object_mask),
+        step = self.model(StreamBatch(landmark_features, landmark_kind, landmark_mask),
+                          StreamBatch(object_features, object_kind, object_mask),
                           previous_action, proprioception, (h_loc, c_loc, h_obj, c_obj))
         return (step.walk, step.turn, step.kick, step.head, step.value, step.pose, *step.state)
 
 
 def _example_inputs(model: DynEnvAgent, batch: int, frames: int, max_landmarks: int, max_objects: int
                     ) -> tuple[torch.Tensor, ...]:
-    """Inputs with a batch of 2 and a mixed mask. Not 1: ``nn.MultiheadAttention`` (traced where ``_LeanAttention``
-    does not apply) tests ``attn_mask.size(0) == 1`` in Python, and a trace at batch 1 bakes in a broadcast that is
-    wrong for larger batches (seen: onnxruntime then fails at batch 4)."""
+    """Inputs with a batch of 2 and a mixed mask (a batch of 1 risks a trace that bakes in a broadcast valid only
+    for one robot: seen with ``nn.MultiheadAttention``, which the network no longer uses)."""
     generator = torch.Generator().manual_seed(0)
 
     def stream(n: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -235,8 +136,8 @@ def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int
     example = _example_inputs(model, 2, frames, max_landmarks, max_objects)
     buffer = io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
-        # Known and harmless: the legacy exporter's deprecation notice, Slice folding it skips, and the shape
-        # tests inside nn.MultiheadAttention, which the batch of 2 resolves to the branch valid for any batch.
+        # Known and harmless: the legacy exporter's deprecation notice, Slice folding it skips, and tracer notes
+        # from torch.nn.functional.
         warnings.filterwarnings("ignore", message="You are using the legacy TorchScript",
                                 category=DeprecationWarning)
         warnings.filterwarnings("ignore", message="The feature will be removed", category=DeprecationWarning,

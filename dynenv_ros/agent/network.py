@@ -4,13 +4,22 @@ localization stream and an object stream with LSTMs across periods, one actor he
 continuous head turn included) and a critic.
 
 The recurrent state is explicit (a tuple of four (B, D) tensors in and out) so that a policy node can keep one
-per robot and an ONNX export can carry it as inputs and outputs.
+per robot and an ONNX export can carry it as inputs and outputs. ``DynEnvAgent.forward`` runs one motion period of
+B robots (acting); ``forward_sequence`` runs T periods of B robots (a rollout, for training) with episode resets,
+giving what T ``forward`` calls give.
+
+Built for speed on a CPU core without changing the function (the tests compare outputs and gradients with the
+dense, literal computation): each detection goes through its own class's embedding only, padded slots are skipped,
+periods are bucketed by how many slots they use and cut to that, the single-head attentions run in a folded form
+(half the matrix work), and in ``forward_sequence`` the embeddings and the RTA see all T·B periods at once — only
+the LSTM cells step through time. Figures: docs/benchmarks.md, "Agent forward/backward (issue 11)".
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import nn
 from torch.distributions import Categorical, Normal
@@ -30,20 +39,175 @@ class EmbedBlock(nn.Module):
                                  nn.Linear(hidden, size, bias=False), nn.LeakyReLU(0.1), nn.LayerNorm(size))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
+        # ``self.net(x)`` written out with its layers' parameters: the same ops without six module calls (their
+        # Python overhead is most of the cost at the few hundred rows a class has in one batch)
+        first, _, first_norm, second, _, second_norm = self.net
+        functional = nn.functional
+        x = functional.layer_norm(functional.leaky_relu(functional.linear(x, first.weight), 0.1),
+                                  first_norm.normalized_shape, first_norm.weight, first_norm.bias, first_norm.eps)
+        return functional.layer_norm(functional.leaky_relu(functional.linear(x, second.weight), 0.1),
+                                     second_norm.normalized_shape, second_norm.weight, second_norm.bias,
+                                     second_norm.eps)
+
+
+def _tracing() -> bool:
+    """True while the ONNX exporter traces the model: the paths below that read data-dependent sizes into Python
+    (row counts per class, the number of used slots) then take the equivalent graph-only form."""
+    return torch.jit.is_tracing() or torch.onnx.is_in_onnx_export()
 
 
 class ClassEmbedding(nn.Module):
-    """One EmbedBlock per object class, all with the same output size; each row goes through its class's block."""
+    """One EmbedBlock per object class, all with the same output size; each row goes through its own class's block
+    only, and a padded row (``mask`` True) through none: it embeds to zero.
+
+    Why sparse: running every class's block on every slot and keeping one (the obvious batched form) is C× the
+    needed work, padding included. A padded slot's embedding never reaches an output — it is a masked key, its
+    query's output is zeroed, and a slot empty in this frame but filled earlier enters the temporal attention with
+    a zero query whatever its embedding — so zero is as good as anything there, and gradients are the dense form's.
+    In eager mode the real rows are sorted by class once and each class present runs its block on one contiguous
+    slice; under the ONNX tracer (no Python sizes) each class selects its rows with ``nonzero``."""
 
     def __init__(self, size: int, classes: int = NUM_CLASSES) -> None:
         super().__init__()
         self.blocks = nn.ModuleList(EmbedBlock(FEATURES, size) for _ in range(classes))
+        self.size = size
 
-    def forward(self, features: torch.Tensor, kind: torch.Tensor) -> torch.Tensor:
-        every = torch.stack([block(features) for block in self.blocks], dim=-2)      # (..., C, D)
-        index = kind.unsqueeze(-1).unsqueeze(-1).expand(*kind.shape, 1, every.shape[-1])
-        return every.gather(-2, index).squeeze(-2)
+    def forward(self, features: torch.Tensor, kind: torch.Tensor, mask: torch.Tensor | None = None
+                ) -> torch.Tensor:
+        """features (..., FEATURES), kind (...) class index, mask (...) True = padded → (..., size)."""
+        rows = features.reshape(-1, features.shape[-1])
+        flat_kind = kind.reshape(-1)
+        if mask is not None:
+            flat_kind = flat_kind.masked_fill(mask.reshape(-1), -1)
+        if _tracing():
+            out = rows.new_zeros((rows.shape[0], self.size))
+            for index, block in enumerate(self.blocks):
+                selected = torch.nonzero(flat_kind == index).squeeze(1)
+                out = out.index_put((selected,), block(rows.index_select(0, selected)))
+            return out.reshape(*kind.shape, self.size)
+        counts = torch.bincount(flat_kind + 1, minlength=len(self.blocks) + 1).tolist()    # [padded, class 0, …]
+        if len(counts) > len(self.blocks) + 1:
+            raise ValueError(f"class index outside 0..{len(self.blocks) - 1} on an unpadded row")
+        padded = counts[0]
+        out = rows.new_zeros((rows.shape[0], self.size))
+        if padded < rows.shape[0]:
+            order = torch.argsort(flat_kind, stable=True)[padded:]            # real rows, grouped by class
+            parts = rows.index_select(0, order).split(counts[1:])
+            embedded = torch.cat([block(part) for block, part in zip(self.blocks, parts) if part.shape[0]])
+            out = out.index_copy(0, order, embedded)
+        return out.reshape(*kind.shape, self.size)
+
+
+def trim(batch: StreamBatch) -> StreamBatch:
+    """The stream without its trailing slots that are padded in every batch entry and frame (at least one slot is
+    kept, so no axis becomes empty).
+
+    Exact: a slot padded in every frame is never filled so far, so the RTA's carried mask zeroes it, excludes it as
+    a key and leaves it out of the pooling at every frame — it never changes an output. Slots padded only in some
+    frames or entries are kept (they can hold a summary from an earlier frame). Why: fixed maxima are sized for the
+    worst frame, a typical batch fills half of them, and the attention's cost grows with the slots."""
+    mask = batch.mask
+    slots = mask.shape[-1]
+    if _tracing():
+        position = torch.arange(1, slots + 1, dtype=torch.int64)
+        used = torch.clamp((position * (~mask).to(torch.int64)).amax(), min=1)
+        keep = torch.arange(used)
+        last = mask.dim() - 1
+        return StreamBatch(batch.features.index_select(last, keep), batch.kind.index_select(last, keep),
+                           mask.index_select(last, keep))
+    filled = torch.nonzero((~mask).reshape(-1, slots).any(0))
+    used = int(filled[-1]) + 1 if filled.numel() else 1
+    if used == slots:
+        return batch
+    return StreamBatch(batch.features[..., :used, :], batch.kind[..., :used], mask[..., :used])
+
+
+def _bias_slot(x: torch.Tensor) -> torch.Tensor:
+    """The extra key slot [0, …, 0, 1] of ``_with_bias_slot``, (1, 1, D + 1), to build once per call."""
+    return nn.functional.pad(x.new_ones(1, 1, 1), (x.shape[-1], 0))
+
+
+def _with_bias_slot(x: torch.Tensor, slot: torch.Tensor | None = None) -> torch.Tensor:
+    """(S, N, D) → (S, N + 1, D + 1): each row with a 0 appended, then one more row [0, …, 0, 1] — the keys (and
+    values) of ``SingleHeadAttention``'s folded form, whose last slot stands for the learned bias key/value.
+    ``slot``: ``_bias_slot(x)`` where the caller already has it."""
+    slot = _bias_slot(x) if slot is None else slot
+    return torch.cat([nn.functional.pad(x, (0, 1)), slot.expand(x.shape[0], 1, slot.shape[-1])], dim=1)
+
+
+class SingleHeadAttention(nn.Module):
+    """``nn.MultiheadAttention(size, 1, add_bias_kv=True, batch_first=True)`` — the same parameters (names, shapes,
+    initialisation: the same seed gives the same weights, checkpoints load either way) and the same function —
+    computed in a folded form that needs half the work.
+
+    The module's function, for a query x_i and keys/values y_j (padded ones excluded) plus the learned bias key
+    b_k/value b_v: q_i = W_q x_i + c_q, k_j = W_k y_j + c_k, v_j = W_v y_j + c_v, p = softmax_j(s·q_i·k_j, with the
+    bias key's score s·q_i·b_k), out_i = W_o(Σ_j p_j v_j + p_b b_v) + c_o, s = 1/√D. Subtracting s·q_i·c_k from
+    every score (a softmax does not change) and using Σ_j p_j + p_b = 1:
+
+        scores: s·q_i·k_j → (s W_kᵀ q_i) · y_j,      bias key: s·q_i·(b_k − c_k)
+        out_i  = W_o [W_v | b_v − c_v] [Σ_j p_j y_j ; p_b] + W_o c_v + c_o
+
+    so with keys = values = [y_j ; 0] plus one extra slot [0 ; 1] for the bias (``_with_bias_slot``), the query is
+    one (D+1)×D projection of x_i and the output one D×(D+1) projection of the attention's result: no key or value
+    projections at all (the attention reads the inputs themselves), and the products of the weight matrices (D×D,
+    negligible) are formed once per forward pass. Exact up to float rounding (the tests hold outputs and gradients
+    to the unfolded computation). No dropout, no attention weights returned (the RTA needs neither).
+
+    The attention itself is baddbmm (scores plus the additive key mask) → softmax → bmm, which measured faster on
+    one CPU core than ``scaled_dot_product_attention`` at these sizes, forward and backward (docs/benchmarks.md,
+    "Agent forward/backward"); it is also a handful of plain ONNX nodes."""
+
+    def __init__(self, size: int) -> None:
+        super().__init__()
+        self.embed_dim = size
+        self.scale = 1.0 / math.sqrt(size)
+        # registration order and initialisation as nn.MultiheadAttention's (the same seed gives the same weights)
+        self.in_proj_weight = nn.Parameter(torch.empty(3 * size, size))
+        self.in_proj_bias = nn.Parameter(torch.empty(3 * size))
+        self.out_proj = nn.Linear(size, size)
+        self.bias_k = nn.Parameter(torch.empty(1, 1, size))
+        self.bias_v = nn.Parameter(torch.empty(1, 1, size))
+        nn.init.xavier_uniform_(self.in_proj_weight)
+        nn.init.constant_(self.in_proj_bias, 0.0)
+        nn.init.constant_(self.out_proj.bias, 0.0)
+        nn.init.xavier_normal_(self.bias_k)
+        nn.init.xavier_normal_(self.bias_v)
+
+    def folded(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(query weight (D+1, D), query bias (D+1), output weight (D, D+1), output bias (D)) of the folded form."""
+        D = self.embed_dim
+        w_q, w_k, w_v = self.in_proj_weight.split(D)
+        c_q, c_k, c_v = self.in_proj_bias.split(D)
+        keys = torch.cat([w_k.t(), (self.bias_k.reshape(1, D) - c_k)], dim=0) * self.scale     # (D+1, D)
+        values = torch.cat([w_v, (self.bias_v.reshape(D, 1) - c_v.unsqueeze(1))], dim=1)       # (D, D+1)
+        return (keys @ w_q, keys @ c_q, self.out_proj.weight @ values,
+                self.out_proj.weight @ c_v + self.out_proj.bias)
+
+    def key_mask(self, key_padding_mask: torch.Tensor) -> torch.Tensor:
+        """(..., 1, N + 1) additive mask of key_padding_mask (..., N): −inf on padded keys, 0 on the others and on
+        the bias slot (never padded, so no query has all its keys masked)."""
+        padded = torch.cat([key_padding_mask, torch.zeros_like(key_padding_mask[..., :1])], dim=-1)
+        additive = torch.zeros(padded.shape, dtype=self.bias_k.dtype).masked_fill(padded, float("-inf"))
+        return additive.unsqueeze(-2)
+
+    @staticmethod
+    def attend(query: torch.Tensor, keys: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """query (S, L, D+1) folded, keys (S, N+1, D+1) from ``_with_bias_slot``, mask (S, 1, N+1) from
+        ``key_mask`` → (S, L, D+1), the attention-weighted keys (input of the folded output projection)."""
+        return torch.bmm(torch.softmax(torch.baddbmm(mask, query, keys.transpose(1, 2)), dim=-1), keys)
+
+    def forward(self, query: torch.Tensor, key: torch.Tensor | None = None,
+                key_padding_mask: torch.Tensor | None = None) -> torch.Tensor:
+        """query (S, L, D), key = value (S, N, D) (None: self-attention), key_padding_mask (S, N) True = padded →
+        (S, L, D), what ``nn.MultiheadAttention`` gives (its first output)."""
+        key = query if key is None else key
+        if key_padding_mask is None:
+            key_padding_mask = torch.zeros(key.shape[:2], dtype=torch.bool)
+        w_query, b_query, w_out, b_out = self.folded()
+        attended = self.attend(nn.functional.linear(query, w_query, b_query), _with_bias_slot(key),
+                               self.key_mask(key_padding_mask))
+        return nn.functional.linear(attended, w_out, b_out)
 
 
 class RecurrentTemporalAttention(nn.Module):
@@ -56,44 +220,107 @@ class RecurrentTemporalAttention(nn.Module):
     the residual lets the newest detections themselves reach the output.
 
     Mask rule: a summary slot is valid once it has held a detection in ANY frame so far (padded_so_far =
-    padded_so_far & padded_t, as DynEnv's M = M ∧ mask_t); only slots never filled yet are zeroed, excluded as keys
-    and left out of the pooling. A slot that is empty in the current frame but was filled earlier keeps a summary
-    (its query is zero, so it becomes the attention's read of the earlier summary). Why: the summary is the memory
-    of the whole motion period; masking it by the current frame alone made the pooled output zero whenever the
-    period's last frame was empty, whatever the earlier frames saw (the object stream, 2v2 under a random policy:
-    12–15 % of periods have an empty last frame after a ball or robot was seen earlier in the period).
+    padded_so_far & padded_t, as DynEnv's M = M ∧ mask_t); only slots never filled yet are excluded as keys and left
+    out of the pooling (what such a slot holds never reaches an output, so it is not zeroed). A slot that is empty
+    in the current frame but was filled earlier keeps a summary (its query is zero, so it becomes the attention's
+    read of the earlier summary). Why: the summary is the memory of the whole motion period; masking it by the
+    current frame alone made the pooled output zero whenever the period's last frame was empty, whatever the
+    earlier frames saw (the object stream, 2v2 under a random policy: 12–15 % of periods have an empty last frame
+    after a ball or robot was seen earlier in the period).
 
     Both attentions carry a learned bias key/value, so a frame without detections still has one key to attend to.
     Pooling: Σ c_i·x_i / (1 + Σ c_i), c_i = sigmoid(w·x_i). Dividing by the confidences (not by the count, as DynEnv
     did) makes the output independent of how many low-confidence detections are present; the +1 keeps an empty or
     all-doubtful frame at a small, finite output instead of dividing by zero.
+
+    Nothing here depends on earlier motion periods, so a whole rollout (T·B periods) goes through in one batch.
     """
 
     def __init__(self, size: int) -> None:
         super().__init__()
-        self.object_attention = nn.MultiheadAttention(size, 1, add_bias_kv=True, batch_first=True)
-        self.temporal_attention = nn.MultiheadAttention(size, 1, add_bias_kv=True, batch_first=True)
+        self.object_attention = SingleHeadAttention(size)
+        self.temporal_attention = SingleHeadAttention(size)
         self.norm = nn.LayerNorm(size)
         self.confidence = nn.Linear(size, 1)
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """x (B, F, N, D), mask (B, F, N) True = padded → pooled (B, D), confidences (B, N) of the final summary's
         slots (0 on slots no frame of the period filled)."""
-        B, F, N, D = x.shape
-        flat = x.reshape(B * F, N, D)
-        flat_mask = mask.reshape(B * F, N)
-        attended = self.object_attention(flat, flat, flat, key_padding_mask=flat_mask, need_weights=False)[0]
-        attended = attended.reshape(B, F, N, D).masked_fill(mask.unsqueeze(-1), 0.0)
-        summary, padded_so_far = attended[:, 0], mask[:, 0]
-        for t in range(1, F):
-            query = attended[:, t]
-            fed_back = self.temporal_attention(query, summary, summary, key_padding_mask=padded_so_far,
-                                               need_weights=False)[0]
-            padded_so_far = padded_so_far & mask[:, t]
-            summary = self.norm(query + fed_back).masked_fill(padded_so_far.unsqueeze(-1), 0.0)
-        confidence = torch.sigmoid(self.confidence(summary)).squeeze(-1).masked_fill(padded_so_far, 0.0)
-        pooled = (confidence.unsqueeze(-1) * summary).sum(1) / (1.0 + confidence.sum(1, keepdim=True))
+        return self.frames_first(x.transpose(0, 1), mask.transpose(0, 1))
+
+    def folded(self) -> tuple[tuple[torch.Tensor, ...], tuple[torch.Tensor, ...]]:
+        """Both attentions' folded weights (``SingleHeadAttention.folded``), to form once per forward pass."""
+        return self.object_attention.folded(), self.temporal_attention.folded()
+
+    def frames_first(self, x: torch.Tensor, mask: torch.Tensor,
+                     folded: tuple[tuple[torch.Tensor, ...], tuple[torch.Tensor, ...]] | None = None
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``forward`` with the frame axis first: x (F, B, N, D), mask (F, B, N) (each frame's rows contiguous);
+        ``folded``: ``self.folded()`` where the caller already has it."""
+        F, B, N, D = x.shape
+        linear = nn.functional.linear
+        folded_object, folded_temporal = self.folded() if folded is None else folded
+        padded_so_far = (~mask).long().cumsum(0) == 0      # (F, B, N): no frame up to this one filled the slot
+        # additive key masks of both attentions at once: −inf on padded keys, 0 on the rest and the bias slot
+        key_masks = nn.functional.pad(torch.where(torch.stack([mask, padded_so_far]), float("-inf"), 0.0),
+                                      (0, 1)).to(x.dtype).unsqueeze(-2)          # (2, F, B, 1, N + 1)
+        slot = _bias_slot(x)
+        w_query, b_query, w_out, b_out = folded_object
+        rows = x.reshape(F * B, N, D)
+        attended = SingleHeadAttention.attend(linear(rows, w_query, b_query), _with_bias_slot(rows, slot),
+                                              key_masks[0].reshape(F * B, 1, N + 1))
+        attended = linear(attended, w_out, b_out).reshape(F, B, N, D).masked_fill(mask.unsqueeze(-1), 0.0)
+        # one frame at a time (unbind, not slicing: backward then stacks the frames' gradients once instead of
+        # filling a zero tensor of the whole stack for every slice)
+        frames = attended.unbind(0)
+        summary = frames[0]
+        w_query, b_query, w_out, b_out = folded_temporal
+        temporal_masks = key_masks[1].unbind(0)
+        for t in range(1, len(frames)):   # (not range(1, F): under the ONNX tracer F is a traced size)
+            frame = frames[t].reshape(B * N, D)
+            read = SingleHeadAttention.attend(linear(frame, w_query, b_query).view(B, N, D + 1),
+                                              _with_bias_slot(summary, slot), temporal_masks[t - 1])
+            summary = nn.functional.layer_norm(
+                torch.addmm(frame + b_out, read.reshape(B * N, D + 1), w_out.t()), self.norm.normalized_shape,
+                self.norm.weight, self.norm.bias, self.norm.eps).reshape(B, N, D)
+        confidence = torch.sigmoid(linear(summary, self.confidence.weight, self.confidence.bias)).squeeze(-1)
+        confidence = confidence.masked_fill(padded_so_far[-1], 0.0)
+        pooled = torch.bmm(confidence.unsqueeze(1), summary).squeeze(1) / (1.0 + confidence.sum(1, keepdim=True))
         return pooled, confidence
+
+
+# plan_buckets' cost model, fitted on one CPU core (forward + backward of the RTA): a period padded to n slots costs
+# about n·(n + _SLOT_WORK) (attention grows with n², projections and norms with n), one more bucket _BUCKET_WORK
+# (its ~150 more operator calls) in the same units.
+_SLOT_WORK = 28.0
+_BUCKET_WORK = 3000.0
+
+
+def plan_buckets(used: torch.Tensor, max_buckets: int = 3) -> list[tuple[int, int]]:
+    """How to split periods sorted by their used slots (``used``, ascending) into at most ``max_buckets``
+    contiguous buckets, each padded to its last (longest) period: [(periods, slots), ...], the cheapest split
+    under the cost model above (dynamic programme over the distinct lengths, at most N of them)."""
+    values, counts = torch.unique_consecutive(used, return_counts=True)
+    v = values.numpy().astype(np.float64)
+    ends = np.concatenate([[0], np.cumsum(counts.numpy())])
+    V = len(v)
+    first, last = np.arange(V)[:, None], np.arange(V)[None, :]
+    cost = (ends[last + 1] - ends[first]) * v[last] * (v[last] + _SLOT_WORK) + _BUCKET_WORK
+    cost = np.where(last >= first, cost, np.inf)        # cost[a, b]: distinct lengths a..b in one bucket
+    # best[k][b]: distinct lengths 0..b in k + 1 buckets; start[k][b]: where its last bucket starts
+    best, starts = [cost[0]], [np.zeros(V, np.int64)]
+    for _ in range(1, min(max_buckets, V)):
+        options = np.concatenate([np.full((1, V), np.inf), best[-1][:-1, None] + cost[1:]])   # [a, b]: last from a
+        starts.append(np.argmin(options, axis=0))
+        best.append(options[starts[-1], np.arange(V)])
+    k = int(np.argmin([b[V - 1] for b in best]))
+    bounds, b = [V], V - 1
+    while k >= 0:
+        a = int(starts[k][b])
+        bounds.append(a)
+        b, k = a - 1, k - 1
+    bounds = bounds[::-1]
+    return [(int(ends[b] - ends[a]), int(v[b - 1])) for a, b in zip(bounds, bounds[1:])]
 
 
 class Stream(nn.Module):
@@ -107,11 +334,78 @@ class Stream(nn.Module):
         self.lstm = nn.LSTMCell(size, size)
         self.norm = nn.LayerNorm(size)
 
+    def encode(self, batch: StreamBatch) -> tuple[torch.Tensor, torch.Tensor]:
+        """(pooled (B, D), confidence (B, N)) of a batch of periods, streams (B, F, N, ...).
+
+        Padded work is skipped where that is exact: every detection goes through its own class's embedding only
+        (``ClassEmbedding``); the periods are sorted by how many slots they use (last slot any frame filled) and
+        run through the RTA in up to three buckets, each cut to its own longest period (``plan_buckets`` weighs
+        the work saved against the calls added) — slots a period never fills never change its outputs (see
+        ``trim``), and the RTA treats every period on its own. Confidences are padded back to N with zeros.
+        Under the ONNX tracer: one bucket (``trim``), confidences left at the cut width (not exported)."""
+        B, F, N = batch.mask.shape
+        if _tracing():
+            batch = trim(StreamBatch(batch.features.transpose(0, 1), batch.kind.transpose(0, 1),
+                                     batch.mask.transpose(0, 1)))
+            return self.rta.frames_first(self.embed(batch.features, batch.kind, batch.mask), batch.mask)
+        if B == 0:
+            return batch.features.new_zeros(0, self.embed.size), batch.features.new_zeros(0, N)
+        used = ((~batch.mask).any(1) * torch.arange(1, N + 1)).amax(-1).clamp(min=1)       # (B,)
+        used, order = torch.sort(used, stable=True)
+        plan = plan_buckets(used)
+        # one gather of every bucket's rows: bucket by bucket, frames first (each frame's rows contiguous for the
+        # RTA), each cut to its bucket's slots
+        frame_offsets = (torch.arange(F) * N).view(F, 1, 1)
+        index, start = [], 0
+        for count, slots in plan:
+            periods = (order[start:start + count] * (F * N)).view(1, count, 1)
+            index.append((periods + frame_offsets + torch.arange(slots).view(1, 1, slots)).reshape(-1))
+            start += count
+        index = torch.cat(index)
+        sizes = [F * count * slots for count, slots in plan]
+        mask = batch.mask.reshape(-1).index_select(0, index)
+        rows = self.embed(batch.features.reshape(-1, FEATURES).index_select(0, index),
+                          batch.kind.reshape(-1).index_select(0, index), mask)
+        pooled, confidence, folded = [], [], self.rta.folded()
+        for (count, slots), embedded, padded in zip(plan, rows.split(sizes), mask.split(sizes)):
+            result = self.rta.frames_first(embedded.view(F, count, slots, -1), padded.view(F, count, slots), folded)
+            pooled.append(result[0])
+            confidence.append(nn.functional.pad(result[1], (0, N - slots)))
+        if len(plan) == 1:
+            pooled, confidence = pooled[0], confidence[0]
+        else:
+            pooled, confidence = torch.cat(pooled), torch.cat(confidence)
+        inverse = torch.empty_like(order)
+        inverse[order] = torch.arange(B)
+        return pooled.index_select(0, inverse), confidence.index_select(0, inverse)
+
+    def recur(self, x: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor], resets: torch.Tensor | None = None
+              ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
+        """The LSTM cell (``self.lstm``'s weights, its maths) over T periods: x (T·B, D) period-major, state (B, D)
+        each, resets (T, B) True = zero the state before that period (None: one period, no reset) → (the cell's
+        outputs (T·B, D), the final state). The input projection of all T periods is one matrix product."""
+        h, c = state
+        B, lstm = h.shape[0], self.lstm
+        gates_in = nn.functional.linear(x, lstm.weight_ih, lstm.bias_ih + lstm.bias_hh)
+        outputs = []
+        for t, step_in in enumerate(gates_in.split(B) if resets is not None else [gates_in]):
+            if resets is not None:
+                reset = resets[t].unsqueeze(-1)
+                h, c = h.masked_fill(reset, 0.0), c.masked_fill(reset, 0.0)
+            gates = torch.addmm(step_in, h, lstm.weight_hh.t())
+            sigmoid = torch.sigmoid(gates)
+            i, f, _, o = sigmoid.chunk(4, dim=1)
+            c = torch.addcmul(f * c, i, torch.tanh(gates[:, 2 * lstm.hidden_size:3 * lstm.hidden_size]))
+            h = o * torch.tanh(c)
+            outputs.append(h)
+        return (torch.cat(outputs) if len(outputs) > 1 else outputs[0]), (h, c)
+
     def forward(self, batch: StreamBatch, side: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor]
                 ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor], torch.Tensor]:
-        pooled, confidence = self.rta(self.embed(batch.features, batch.kind), batch.mask)
-        h, c = self.lstm(self.transform(torch.cat([pooled, side], dim=-1)), state)
-        return self.norm(h), (h, c), confidence
+        """One period: (features (B, D), next state, confidence (B, N))."""
+        pooled, confidence = self.encode(batch)
+        h, state = self.recur(self.transform(torch.cat([pooled, side], dim=-1)), state)
+        return self.norm(h), state, confidence
 
 
 class ReconstructionHead(nn.Module):
@@ -150,6 +444,12 @@ class AgentStep:
     robot_confidence: torch.Tensor | None = None   # (B, S) logits
 
 
+@dataclass
+class AgentSequence(AgentStep):
+    """``DynEnvAgent.forward_sequence``'s outputs: every field of ``AgentStep`` with leading (T, B) axes instead of
+    (B,) — except ``state``, the recurrent state after the last period, (B, D) each."""
+
+
 class DynEnvAgent(nn.Module):
     def __init__(self, feature_size: int = 64, head_mode: str = "discrete", head_units: int = 3,
                  head_max: float = math.radians(37.5)) -> None:
@@ -178,11 +478,46 @@ class DynEnvAgent(nn.Module):
 
     def forward(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                 proprioception: torch.Tensor, state: State) -> AgentStep:
-        loc, loc_state, landmark_confidence = self.localization(
-            landmarks, torch.cat([previous_action, proprioception], dim=-1), state[:2])
+        """One motion period of B robots: streams (B, F, N, ...), previous_action (B, 12), proprioception (B, 7),
+        state four (B, D) tensors."""
+        return self._periods(landmarks, objects, previous_action, proprioception, state, None)
+
+    def forward_sequence(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
+                         proprioception: torch.Tensor, state: State, resets: torch.Tensor | None = None
+                         ) -> AgentSequence:
+        """T consecutive motion periods of B robots (a rollout): streams (T, B, F, N, ...), previous_action
+        (T, B, 12), proprioception (T, B, 7), ``state`` the four (B, D) tensors before the first period, ``resets``
+        (T, B) bool, True = the robot's episode starts at that period (its recurrent state is zeroed before it;
+        None: no resets). Gives what T calls of ``forward`` with the state carried (and zeroed at the resets) give,
+        stacked; the embeddings and the RTA run over all T·B periods at once (they do not depend on earlier
+        periods), only the two LSTM cells step through the periods."""
+        T, B = previous_action.shape[:2]
+        if resets is None:
+            resets = torch.zeros(T, B, dtype=torch.bool)
+        if resets.shape != (T, B):
+            raise ValueError(f"resets must have shape {(T, B)}, got {tuple(resets.shape)}")
+
+        def flat(batch: StreamBatch) -> StreamBatch:
+            return StreamBatch(batch.features.flatten(0, 1), batch.kind.flatten(0, 1), batch.mask.flatten(0, 1))
+
+        step = self._periods(flat(landmarks), flat(objects), previous_action.flatten(0, 1),
+                             proprioception.flatten(0, 1), state, resets)
+        fields = {name: value.unflatten(0, (T, B)) for name, value in vars(step).items()
+                  if isinstance(value, torch.Tensor)}
+        return AgentSequence(**fields, state=step.state)
+
+    def _periods(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
+                 proprioception: torch.Tensor, state: State, resets: torch.Tensor | None) -> AgentStep:
+        """T·B periods, period-major (T = 1 when resets is None), as one flat batch; the LSTMs step through T."""
+        loc_pooled, landmark_confidence = self.localization.encode(landmarks)
+        obj_pooled, object_confidence = self.objects.encode(objects)
+        loc_in = self.localization.transform(torch.cat([loc_pooled, previous_action, proprioception], dim=-1))
+        loc_h, loc_state = self.localization.recur(loc_in, state[:2], resets)
+        loc = self.localization.norm(loc_h)
         pose = self.pose_head(loc)
-        obj, obj_state, object_confidence = self.objects(
-            objects, torch.cat([pose.detach(), proprioception], dim=-1), state[2:])
+        obj_in = self.objects.transform(torch.cat([obj_pooled, pose.detach(), proprioception], dim=-1))
+        obj_h, obj_state = self.objects.recur(obj_in, state[2:], resets)
+        obj = self.objects.norm(obj_h)
         phi = torch.cat([loc, obj], dim=-1)
         if self.head_mode == "discrete":
             head = self.head_head(phi)
@@ -200,7 +535,7 @@ class DynEnvAgent(nn.Module):
         if self.head_mode == "discrete":
             heads.append(Categorical(logits=step.head))
         else:
-            heads.append(Normal(step.head[:, 0], step.head[:, 1].exp()))
+            heads.append(Normal(step.head[..., 0], step.head[..., 1].exp()))
         return heads
 
     def act(self, step: AgentStep, generator: torch.Generator | None = None, greedy: bool = False
