@@ -22,6 +22,9 @@ TOOLS = [
     "dynenv-play = dynenv_ros.envs.play:main",
     "dynenv-bag = dynenv_ros.bags.inspect:main",
     "dynenv-record = dynenv_ros.nodes.recorder:cli_main",
+    "dynenv-eval = dynenv_ros.learning.eval_cli:main",
+    "dynenv-train = dynenv_ros.learning.train_cli:main",
+    "dynenv-pretrain = dynenv_ros.learning.pretrain:main",
 ]
 
 setup(
@@ -33,6 +36,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/config/perception", glob("config/perception/*.yaml")),
+        (f"share/{PACKAGE}/config/train", glob("config/train/*.yaml")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

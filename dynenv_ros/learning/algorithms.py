@@ -1,0 +1,240 @@
+"""PPO and A2C updates of the DynEnv agent, with the paper's auxiliary losses.
+
+One function, ``update``, serves both algorithms (A2C is the one-epoch, one-minibatch, unclipped special case):
+
+1. Advantages from the behaviour values stored at acting time (``advantages.generalized_advantages``; A2C uses
+   λ = 1, the paper's n-step returns over the rollout, bootstrapped with the critic).
+2. For each epoch, the robots are split into minibatches of *whole sequences*; each minibatch is re-run from the
+   recurrent state stored at the rollout's start (``Rollout.initial_state``), with the state zeroed where an episode
+   starts, by ``DynEnvAgent.forward_sequence`` over the T+1 observations (the last one gives φ_T for curiosity).
+3. Loss = policy + value_coef·value − entropy_coef·entropy + forward_coef·forward + inverse_coef·inverse +
+   ltp_coef·LTP + self_supervised_coef·(localization + reconstruction), each term switchable by the variant.
+
+Policy loss: PPO's clipped surrogate min(r·A, clip(r, 1±ε)·A) with r = π(a|s)/π_old(a|s) on the stored behaviour
+log-probabilities (DynEnv's PPO had the sign flipped and compared freshly resampled actions, §12.13); A2C's
+−log π(a|s)·A. Both are averaged over the steps where the robot could act (not fallen or penalized: its action had
+no effect there, so those samples only add variance). Entropy is per agent (the sum over the action heads of each
+robot's own policy entropy), not DynEnv's "batch entropy" of the mean policy (§9.4).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from dynenv_ros.agent.inputs import side_inputs, streams_from_padded, StreamBatch
+from dynenv_ros.agent.losses import (icm_losses, localization_loss, ltp_loss, masked_mean, one_hot_actions,
+                                     reconstruction_loss)
+from dynenv_ros.learning.advantages import generalized_advantages
+from dynenv_ros.learning.heads import Learner
+
+BALL_ANCHOR = ((0.0, 0.0),)
+
+
+@dataclass
+class UpdateSettings:
+    """The numbers of one update (from ``TrainConfig``; see its field documentation)."""
+    algorithm: str = "a2c"
+    gamma: float = 0.99
+    gae_lambda: float = 1.0
+    epochs: int = 1
+    minibatches: int = 1
+    clip: float = 0.2
+    clip_value_loss: bool = False
+    normalize_advantages: bool = False
+    target_kl: float | None = None
+    policy_coef: float = 1.0          # 0 with value and entropy 0: the auxiliary losses alone (pretraining)
+    value_coef: float = 0.5
+    entropy_coef: float = 0.1
+    max_grad_norm: float = 0.5
+    forward_coef: float = 1e-2
+    inverse_coef: float = 1e-2
+    ltp_coef: float = 1e-3
+    self_supervised_coef: float = 1e-2
+    use_forward: bool = True
+    use_rcm: bool = True
+    use_inverse: bool = True
+    use_ltp: bool = True
+    use_localization: bool = False
+    use_reconstruction: bool = False
+    intrinsic_reward_coef: float = 0.0
+
+    @property
+    def ppo(self) -> bool:
+        return self.algorithm == "ppo"
+
+
+def _flat(x: Tensor) -> Tensor:
+    return x.reshape(-1, *x.shape[2:])
+
+
+def sequence_inputs(obs: Mapping[str, Tensor], head_max: float) -> tuple[StreamBatch, StreamBatch, Tensor, Tensor]:
+    """The network's inputs for observations with (T, B) leading axes."""
+    T, B = obs["game"].shape[:2]
+    flat = {k: _flat(v) for k, v in obs.items()}
+    previous, self_state = side_inputs(flat, head_max)
+    landmarks, objects = streams_from_padded(obs)
+    return landmarks, objects, previous.reshape(T, B, -1), self_state.reshape(T, B, -1)
+
+
+def run_sequence(agent: Any, obs: Mapping[str, Tensor], state: tuple[Tensor, ...], starts: Tensor) -> Any:
+    landmarks, objects, previous, self_state = sequence_inputs(obs, agent.head_max)
+    return agent.forward_sequence(landmarks, objects, previous, self_state, state, starts)
+
+
+def log_prob_entropy(agent: Any, out: Any, actions: Tensor) -> tuple[Tensor, Tensor]:
+    """log π(a|s) and the policy entropy, each summed over the action heads; (T, B) inputs give (T, B)."""
+    T, B = actions.shape[:2]
+    step = SimpleNamespace(walk=_flat(out.walk), turn=_flat(out.turn), kick=_flat(out.kick), head=_flat(out.head))
+    dists = agent.distributions(step)
+    flat_actions = _flat(actions).unbind(-1)
+    log_prob = sum(d.log_prob(a.float() if isinstance(d, torch.distributions.Normal) else a)
+                   for d, a in zip(dists, flat_actions))
+    entropy = sum(d.entropy() for d in dists)
+    return log_prob.reshape(T, B), entropy.reshape(T, B)
+
+
+def self_supervised_losses(out: Any, targets: Mapping[str, Tensor], use_localization: bool,
+                           use_reconstruction: bool) -> dict[str, Tensor]:
+    """Localization (pose) and reconstruction (ball, robots) losses over every observation of the rollout."""
+    losses: dict[str, Tensor] = {}
+    if use_localization:
+        losses["localization"] = localization_loss(out.pose, targets["pose"])
+    if use_reconstruction:
+        ball = reconstruction_loss(out.ball.unsqueeze(-2), out.ball_confidence.unsqueeze(-1),
+                                   targets["ball"].unsqueeze(-2), targets["ball_known"].unsqueeze(-1) > 0.5,
+                                   anchors=BALL_ANCHOR)
+        robots = reconstruction_loss(out.robots, out.robot_confidence, targets["robots"],
+                                     targets["robots_known"] > 0.5, binary_fields=(4, 5))
+        losses["reconstruction"] = sum(ball.values()) + sum(robots.values())
+        losses["recon_ball_position"] = ball["position"].detach()
+        losses["recon_robot_position"] = robots["position"].detach()
+    return losses
+
+
+def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[str, Any], settings: UpdateSettings,
+           generator: torch.Generator | None = None) -> dict[str, float]:
+    """One PPO or A2C update on a rollout (``Rollout.as_tensors()``); returns the logged scalars."""
+    s = settings
+    agent = learner.agent
+    T, B = rollout["actions"].shape[:2]
+    advantages, returns = generalized_advantages(
+        rollout["rewards"], rollout["values"], rollout["episode_end"], rollout["truncated"],
+        rollout["final_values"], s.gamma, s.gae_lambda)
+    minibatches = max(1, min(s.minibatches, B))
+    stats: dict[str, list[float]] = {}
+
+    def log(name: str, value: Tensor | float) -> None:
+        stats.setdefault(name, []).append(float(value))
+
+    epochs = s.epochs if s.ppo else 1
+    timing = {"forward_backward": 0.0, "optimizer": 0.0}
+    stop = False
+    for epoch in range(epochs):
+        order = torch.randperm(B, generator=generator) if minibatches > 1 else torch.arange(B)
+        for chunk in order.chunk(minibatches):
+            started = time.perf_counter()
+            loss, kl = _minibatch_loss(learner, rollout, chunk, advantages, returns, s, log)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            backward_done = time.perf_counter()
+            norm = torch.nn.utils.clip_grad_norm_(learner.parameters(), s.max_grad_norm)
+            optimizer.step()
+            timing["forward_backward"] += backward_done - started
+            timing["optimizer"] += time.perf_counter() - backward_done
+            log("grad_norm", norm)
+            if s.ppo and s.target_kl is not None and kl > s.target_kl:
+                stop = True
+                break
+        if stop:
+            break
+    out = {name: float(np.mean(values)) for name, values in stats.items()}
+    out["epochs_run"] = float(epoch + 1)
+    out["seconds_forward_backward"] = timing["forward_backward"]
+    out["seconds_optimizer"] = timing["optimizer"]
+    explained = 1.0 - torch.var(returns - rollout["values"][:-1]) / torch.var(returns).clamp(min=1e-8)
+    out["explained_variance"] = float(explained)
+    return out
+
+
+def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, advantages: Tensor,
+                    returns: Tensor, s: UpdateSettings, log) -> tuple[Tensor, float]:
+    agent = learner.agent
+    T = rollout["actions"].shape[0]
+    obs = {k: v[:, rows] for k, v in rollout["obs"].items()}
+    state = tuple(x[rows] for x in rollout["initial_state"])
+    out = run_sequence(agent, obs, state, rollout["starts"][:, rows])
+    actions = rollout["actions"][:, rows]
+    acting = rollout["can_act"][:T, rows]
+    step_out = SimpleNamespace(walk=out.walk[:T], turn=out.turn[:T], kick=out.kick[:T], head=out.head[:T])
+    log_prob, entropy = log_prob_entropy(agent, step_out, actions)
+    adv = advantages[:, rows]
+    if s.normalize_advantages:
+        valid = adv[acting] if acting.any() else adv.reshape(-1)
+        adv = (adv - valid.mean()) / (valid.std(unbiased=False) + 1e-8)
+    old_log_prob = rollout["log_probs"][:, rows]
+    log_ratio = log_prob - old_log_prob
+    ratio = log_ratio.exp()
+    if s.ppo:
+        surrogate = torch.minimum(ratio * adv, ratio.clamp(1 - s.clip, 1 + s.clip) * adv)
+        policy_loss = -masked_mean(surrogate, acting)
+    else:
+        policy_loss = -masked_mean(log_prob * adv, acting)
+    value = out.value[:T]
+    target = returns[:, rows]
+    value_error = (value - target) ** 2
+    if s.clip_value_loss:
+        old = rollout["values"][:T, rows]
+        clipped = old + (value - old).clamp(-s.clip, s.clip)
+        value_error = torch.maximum(value_error, (clipped - target) ** 2)
+    value_loss = value_error.mean()
+    entropy_mean = masked_mean(entropy, acting)
+    loss = s.policy_coef * policy_loss + s.value_coef * value_loss - s.entropy_coef * entropy_mean
+    with torch.no_grad():
+        approx_kl = masked_mean((ratio - 1) - log_ratio, acting)
+        clip_fraction = masked_mean(((ratio - 1).abs() > s.clip).float(), acting)
+    log("policy_loss", policy_loss.detach())
+    log("value_loss", value_loss.detach())
+    log("entropy", entropy_mean.detach())
+    log("approx_kl", approx_kl)
+    log("clip_fraction", clip_fraction)
+
+    curious = s.use_forward or s.use_inverse or s.use_ltp
+    if curious:
+        transition = acting & ~rollout["episode_end"][:, rows]
+        onehot = one_hot_actions(actions)
+        heads = learner.curiosity
+        phi = out.phi
+        icm = icm_losses(phi, onehot, actions, heads.forward_model, heads.inverse_model, transition,
+                         attention=heads.rcm_attention if s.use_rcm else None)
+        if s.use_forward:
+            loss = loss + s.forward_coef * icm["forward"]
+            log("forward_loss", icm["forward"].detach())
+        if s.use_inverse:
+            loss = loss + s.inverse_coef * icm["inverse"]
+            log("inverse_loss", icm["inverse"].detach())
+        if s.use_ltp:
+            ltp = ltp_loss(phi, onehot, heads.ltp, heads.ltp_attention, transition)
+            loss = loss + s.ltp_coef * ltp.loss
+            log("ltp_loss", ltp.loss.detach())
+    if s.use_localization or s.use_reconstruction:
+        targets = {k: v[:, rows] for k, v in rollout["targets"].items()}
+        supervised = self_supervised_losses(out, targets, s.use_localization, s.use_reconstruction)
+        for name in ("localization", "reconstruction"):
+            if name in supervised:
+                loss = loss + s.self_supervised_coef * supervised[name]
+        for name, value in supervised.items():
+            log(f"{name}_loss" if not name.startswith("recon_") else name, value.detach())
+        if s.use_localization:
+            with torch.no_grad():
+                error = (out.pose[..., :2] - targets["pose"][..., :2]).norm(dim=-1)
+            for metres in (0.25, 0.5, 1.0):
+                log(f"localization_within_{int(metres * 100)}cm", (error < metres).float().mean())
+    log("loss", loss.detach())
+    return loss, float(approx_kl)

@@ -1,0 +1,42 @@
+"""The learner's modules beside the policy network: the paper's curiosity heads (ICM forward and inverse models,
+the RCM attention, the LTP predictors and their attention), an optional intrinsic critic and the privileged pose
+seeder. Only the policy network (``DynEnvAgent``) ships; these exist for training and are checkpointed with it."""
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from dynenv_ros.agent.losses import (ROBOCUP_HEADS, ForwardModel, InverseModel, LongTermPredictor, RCMAttention)
+from dynenv_ros.agent.network import POSE_SIZE, DynEnvAgent
+
+
+class CuriosityHeads(nn.Module):
+    """Forward model f(φ_t, a_t), inverse model g(φ_t, φ_{t+1}), the RCM attention W(φ_{t+1}), and the LTP chain
+    with its own attention over the previous error (paper eqs. 1–6; facts §9.5 for the sizes: hidden 140)."""
+
+    def __init__(self, feature_size: int, horizon: int, head_sizes: tuple[int, ...] = ROBOCUP_HEADS) -> None:
+        super().__init__()
+        action_size = sum(head_sizes)
+        self.forward_model = ForwardModel(feature_size, action_size)
+        self.inverse_model = InverseModel(feature_size, head_sizes)
+        self.rcm_attention = RCMAttention(feature_size)
+        self.ltp = LongTermPredictor(feature_size, action_size, horizon)
+        self.ltp_attention = RCMAttention(feature_size)
+
+
+class Learner(nn.Module):
+    """Everything the optimiser trains: the agent, the curiosity heads, an intrinsic critic (used only when
+    curiosity is also an intrinsic reward) and the pose seeder (used only with privileged pose seeding)."""
+
+    def __init__(self, agent: DynEnvAgent, horizon: int) -> None:
+        super().__init__()
+        phi = 2 * agent.feature_size
+        self.agent = agent
+        self.curiosity = CuriosityHeads(phi, horizon)
+        self.intrinsic_critic = nn.Sequential(nn.Linear(phi, agent.feature_size), nn.LeakyReLU(0.1),
+                                              nn.Linear(agent.feature_size, 1))
+        self.pose_seeder = nn.Linear(POSE_SIZE, agent.feature_size)
+
+    def seeded_cell(self, pose: Tensor) -> Tensor:
+        """The localization LSTM's cell state from a pose (DynEnv's ``set_state``: tanh of a linear map)."""
+        return torch.tanh(self.pose_seeder(pose))

@@ -1,0 +1,244 @@
+"""Rollouts: the vectorised soccer batch stepped by the current policy, stored as fixed-shape arrays.
+
+One rollout is T motion periods of every world. Stored per step t and learning robot b (robots flattened world
+by world, ``(E, A_learning) -> B``):
+
+- ``obs[key]`` (T+1, B, ...): the padded observation layout (``envs.padded_layout``), observation t being what
+  the policy acted on at step t; observation T is the one after the last step (the next rollout's first).
+- ``actions`` (T, B, 4) int64, ``log_probs`` and ``values`` (T, B) of the behaviour policy at acting time (PPO's
+  ratio is taken against these, never against resampled actions — DynEnv's PPO bug, facts §12.13).
+- ``rewards`` (T, B) and ``reward_terms`` (T, B, 4); ``episode_end``, ``truncated`` (T, B); ``final_values``
+  (T, B): the critic at the finished episode's final observation (truncation bootstrap).
+- ``starts`` (T+1, B): observation t is an episode's first (the recurrent state is zeroed before it).
+- ``can_act`` (T+1, B): the robot was neither fallen nor penalized, so its action had an effect.
+- ``targets`` (T+1, B, ...): the self-supervised targets of observation t (``SoccerVectorEnv(targets=True)``),
+  with ``ball_known`` / ``robots_known``: seen at least once since the episode began (DynEnv wiped this memory
+  every 6-step rollout, §12.18; here it lasts the episode).
+- ``initial_state``: the recurrent state before step 0, so the learner re-runs whole sequences from it.
+
+Everything is numpy until ``as_tensors``; nothing per detection is ever a Python object.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
+from dynenv_ros.agent.network import DynEnvAgent, State
+from dynenv_ros.envs.padded_layout import PROPRIOCEPTION_COLUMNS
+from dynenv_ros.envs.vector import SoccerVectorEnv
+
+FALLEN = PROPRIOCEPTION_COLUMNS.index("fallen")
+PENALIZED = PROPRIOCEPTION_COLUMNS.index("penalized")
+TARGET_KEYS = ("pose", "ball", "robots", "ball_seen", "robots_seen")
+
+
+def flatten_robots(value: np.ndarray, robots: np.ndarray) -> np.ndarray:
+    """(E, A, ...) → (E·len(robots), ...): the learning robots of every world, world by world."""
+    picked = value[:, robots]
+    return picked.reshape(-1, *picked.shape[2:])
+
+
+def can_act(proprioception: np.ndarray) -> np.ndarray:
+    """(…, F, 4) proprioception → (…) bool: neither fallen nor penalized at the period's last frame."""
+    last = proprioception[..., -1, :]
+    return (last[..., FALLEN] < 0.5) & (last[..., PENALIZED] < 0.5)
+
+
+def policy_step(agent: DynEnvAgent, obs: Mapping[str, Any], state: State):
+    """One acting forward on padded observations with robots leading (numpy or torch)."""
+    landmarks, objects = streams_from_padded(obs)
+    previous, self_state = side_inputs(obs, agent.head_max)
+    return agent(landmarks, objects, previous, self_state, state)
+
+
+def reset_state(state: State, starts: Tensor) -> State:
+    """The state with the rows of robots starting an episode zeroed."""
+    keep = (~starts).to(state[0].dtype).unsqueeze(-1)
+    return tuple(s * keep for s in state)  # type: ignore[return-value]
+
+
+def sample_actions(agent: DynEnvAgent, step: Any, generator: torch.Generator | None, greedy: bool = False
+                   ) -> tuple[Tensor, Tensor]:
+    """(actions (B, 4), their log-probabilities (B,)) — the sum over the action heads."""
+    actions = agent.act(step, generator=generator, greedy=greedy)
+    log_prob = sum(d.log_prob(a) for d, a in zip(agent.distributions(step), actions.unbind(-1)))
+    return actions, log_prob
+
+
+@dataclass
+class Rollout:
+    """One rollout's arrays (see the module docstring); ``robots_per_world`` learning robots in each world."""
+    obs: dict[str, np.ndarray]
+    actions: np.ndarray
+    log_probs: np.ndarray
+    values: np.ndarray
+    rewards: np.ndarray
+    reward_terms: np.ndarray
+    episode_end: np.ndarray
+    truncated: np.ndarray
+    final_values: np.ndarray
+    starts: np.ndarray
+    can_act: np.ndarray
+    initial_state: State
+    targets: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def steps(self) -> int:
+        return self.actions.shape[0]
+
+    @property
+    def robots(self) -> int:
+        return self.actions.shape[1]
+
+    def as_tensors(self, device: torch.device | str = "cpu") -> dict[str, Any]:
+        """Every array as a tensor on ``device`` (observation and target dicts stay dicts)."""
+        def tensor(x: np.ndarray) -> Tensor:
+            return torch.from_numpy(np.ascontiguousarray(x)).to(device)
+        out: dict[str, Any] = {"obs": {k: tensor(v) for k, v in self.obs.items()},
+                               "targets": {k: tensor(v) for k, v in self.targets.items()},
+                               "initial_state": tuple(s.to(device) for s in self.initial_state)}
+        for name in ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
+                     "final_values", "starts", "can_act"):
+            out[name] = tensor(getattr(self, name))
+        return out
+
+
+class Opponent:
+    """Who plays the robots the learner does not control. ``act`` gets their observations (E, k, ...) and the
+    robots starting an episode (E, k); returns (E, k, 4) integer actions."""
+
+    def act(self, obs: Mapping[str, np.ndarray], starts: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+
+class RolloutCollector:
+    """Steps ``env`` with ``agent`` (and ``opponent`` for the robots not in ``learning_robots``), T periods at a
+    time, carrying episode state (recurrent state, seen-so-far memory) across rollouts."""
+
+    def __init__(self, env: SoccerVectorEnv, agent: DynEnvAgent, learning_robots: np.ndarray,
+                 opponent: Opponent | None, generator: torch.Generator, seed: int,
+                 reward_transform: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+        self.env, self.agent = env, agent
+        self.learning_robots = np.asarray(learning_robots, np.int64)
+        self.other_robots = np.setdiff1d(np.arange(env.config.n_robots), self.learning_robots)
+        if len(self.other_robots) and opponent is None:
+            raise ValueError("robots outside learning_robots need an opponent")
+        self.opponent = opponent
+        self.generator = generator
+        self.with_targets = bool(getattr(env, "with_targets", False))
+        self.reward_transform = reward_transform
+        self._obs = env.reset(seed=seed)
+        self._targets = env.targets if self.with_targets else {}
+        batch = env.num_envs * len(self.learning_robots)
+        self.state: State = agent.initial_state(batch)
+        self._starts = np.ones(batch, bool)
+        self._other_starts = np.ones((env.num_envs, len(self.other_robots)), bool)
+        self._known: dict[str, np.ndarray] = {}
+        if self.with_targets:
+            self._known = {"ball_known": np.zeros(batch, np.float32),
+                           "robots_known": np.zeros((batch, self._targets["robots_seen"].shape[-1]), np.float32)}
+        self.episode_returns = np.zeros(batch)
+        self.episode_terms = np.zeros((batch, 4))
+        self.episode_positive = np.zeros(batch)
+        self.finished: list[dict[str, float]] = []     # finished episodes since the caller last cleared it
+
+    def _learning_obs(self, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {k: flatten_robots(v, self.learning_robots) for k, v in obs.items()}
+
+    def _remember_seen(self, targets: Mapping[str, np.ndarray], starts: np.ndarray) -> dict[str, np.ndarray]:
+        """Seen-before flags including this observation; reset where an episode starts."""
+        ball = flatten_robots(targets["ball_seen"], self.learning_robots)
+        robots = flatten_robots(targets["robots_seen"], self.learning_robots)
+        self._known["ball_known"] = np.maximum(np.where(starts, 0.0, self._known["ball_known"]), ball)
+        self._known["robots_known"] = np.maximum(np.where(starts[:, None], 0.0, self._known["robots_known"]),
+                                                 robots)
+        return dict(self._known)
+
+    @torch.no_grad()
+    def collect(self, steps: int) -> Rollout:
+        E, k = self.env.num_envs, len(self.learning_robots)
+        B = E * k
+        first = self._learning_obs(self._obs)
+        obs = {key: np.empty((steps + 1, *v.shape), v.dtype) for key, v in first.items()}
+        targets: dict[str, np.ndarray] = {}
+        actions = np.zeros((steps, B, 4), np.int64)
+        log_probs, values = np.zeros((steps, B), np.float32), np.zeros((steps + 1, B), np.float32)
+        rewards, terms = np.zeros((steps, B), np.float32), np.zeros((steps, B, 4), np.float32)
+        episode_end, truncated = np.zeros((steps, B), bool), np.zeros((steps, B), bool)
+        final_values = np.zeros((steps, B), np.float32)
+        starts, acting = np.zeros((steps + 1, B), bool), np.zeros((steps + 1, B), bool)
+        initial_state = tuple(s.clone() for s in reset_state(self.state, torch.from_numpy(self._starts)))
+        current = first
+        for t in range(steps + 1):
+            for key, v in current.items():
+                obs[key][t] = v
+            starts[t], acting[t] = self._starts, can_act(current["proprioception"])
+            if self.with_targets:
+                seen = self._remember_seen(self._targets, self._starts)
+                for key in TARGET_KEYS:
+                    value = flatten_robots(self._targets[key], self.learning_robots)
+                    targets.setdefault(key, np.empty((steps + 1, *value.shape), np.float32))[t] = value
+                for key, value in seen.items():
+                    targets.setdefault(key, np.empty((steps + 1, *value.shape), np.float32))[t] = value
+            state = reset_state(self.state, torch.from_numpy(self._starts))
+            step = policy_step(self.agent, current, state)
+            values[t] = step.value.numpy()
+            if t == steps:          # the bootstrap value only; the next rollout acts on this observation
+                break
+            sampled, log_prob = sample_actions(self.agent, step, self.generator)
+            actions[t], log_probs[t] = sampled.numpy().astype(np.int64), log_prob.numpy()
+            self.state = step.state
+            full = np.zeros((E, self.env.config.n_robots, 4), np.int64)
+            full[:, self.learning_robots] = actions[t].reshape(E, k, 4)
+            if len(self.other_robots):
+                other_obs = {key: v[:, self.other_robots] for key, v in self._obs.items()}
+                full[:, self.other_robots] = self.opponent.act(other_obs, self._other_starts)
+            result = self.env.step(full)
+            step_terms = flatten_robots(result.reward_terms.transpose(0, 2, 1), self.learning_robots)
+            terms[t] = step_terms
+            rewards[t] = step_terms.sum(-1) if self.reward_transform is None else self.reward_transform(step_terms)
+            ended = result.terminated | result.truncated                       # (E,)
+            episode_end[t] = np.repeat(ended, k)
+            truncated[t] = np.repeat(result.truncated & ~result.terminated, k)
+            if result.truncated.any():
+                final_values[t] = self._final_values(result, truncated[t])
+            self._account(step_terms, episode_end[t])
+            self._obs = result.observations
+            if self.with_targets:
+                self._targets = result.targets
+            self._starts = episode_end[t].copy()
+            self._other_starts = np.repeat(ended[:, None], len(self.other_robots), axis=1)
+            current = self._learning_obs(self._obs)
+        return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
+                       starts, acting, initial_state, targets)
+
+    def _final_values(self, result: Any, truncated: np.ndarray) -> np.ndarray:
+        """V(final observation) for the robots of truncated worlds, from the state the episode left them in."""
+        out = np.zeros(len(truncated), np.float32)
+        rows = np.flatnonzero(truncated)
+        k = len(self.learning_robots)
+        final = {key: np.stack([result.final_observations[int(r // k)][key][self.learning_robots[r % k]]
+                                for r in rows]) for key in self._obs}
+        state = tuple(s[torch.from_numpy(rows)] for s in self.state)
+        out[rows] = policy_step(self.agent, final, state).value.numpy()
+        return out
+
+    def _account(self, terms: np.ndarray, ended: np.ndarray) -> None:
+        self.episode_terms += terms
+        self.episode_returns += terms.sum(-1)
+        self.episode_positive += np.maximum(terms, 0.0).sum(-1)
+        for r in np.flatnonzero(ended):
+            t = self.episode_terms[r]
+            # the paper's metric (facts §6.1, §11): the positive parts of every term, per period, minus the
+            # observation reward
+            self.finished.append({"return": float(self.episode_returns[r]), "primary": float(t[0]),
+                                  "rule": float(t[1]), "auxiliary": float(t[2]), "observation": float(t[3]),
+                                  "paper_metric": float(self.episode_positive[r] - t[3])})
+        self.episode_returns[ended] = 0.0
+        self.episode_terms[ended] = 0.0
+        self.episode_positive[ended] = 0.0

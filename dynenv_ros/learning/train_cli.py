@@ -1,0 +1,104 @@
+"""dynenv-train: train the DynEnv agent in-process (no ROS) on the soccer world.
+
+    dynenv-train --config paper_a2c --run-dir runs/pred_s0 --seed 0
+    dynenv-train --config quick --set num_envs=2 --set variant=baseline
+    dynenv-train --resume runs/pred_s0
+
+``--config`` takes a preset name from config/train/ or a YAML path; ``--set key=value`` overrides any field of
+``TrainConfig`` (values in YAML syntax). Bad configs are refused with the key and the reason before any work.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+PRESET_DIRS = (Path(__file__).resolve().parents[2] / "config" / "train",)
+
+
+def preset_path(name: str) -> Path:
+    """A YAML path as given, or a preset name looked up in config/train/ (the source tree, then the install)."""
+    path = Path(name)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        if not path.is_file():
+            raise ValueError(f"config file {path} does not exist")
+        return path
+    dirs = list(PRESET_DIRS)
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        dirs.append(Path(get_package_share_directory("dynenv_ros")) / "config" / "train")
+    except Exception:       # not installed through colcon: the source tree's presets only
+        pass
+    for folder in dirs:
+        candidate = folder / f"{name}.yaml"
+        if candidate.is_file():
+            return candidate
+    known = sorted({p.stem for folder in dirs if folder.is_dir() for p in folder.glob("*.yaml")})
+    raise ValueError(f"no config preset {name!r}; presets: {', '.join(known) or 'none found'}")
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="dynenv-train", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--config", default="paper_a2c", help="preset name in config/train/ or a YAML file")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help="override one config field (repeatable)")
+    parser.add_argument("--seed", type=int, help="shorthand for --set seed=N")
+    parser.add_argument("--device", help="shorthand for --set device=D (cpu, cuda, cuda:1)")
+    parser.add_argument("--run-dir", help="where the run writes (default runs/<algorithm>_<variant>_s<seed>)")
+    parser.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its last checkpoint")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar (logs still written)")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
+    try:
+        if args.resume:
+            run_dir = Path(args.resume)
+            saved = run_dir / "config.json"
+            if not saved.is_file():
+                raise ValueError(f"--resume {run_dir}: no config.json there, not a run directory")
+            cfg = TrainConfig.from_dict(json.loads(saved.read_text()))
+            if args.overrides or args.seed is not None or args.device:
+                cfg = load_config(None, _overrides(args), base=cfg)
+        else:
+            cfg = load_config(preset_path(args.config), _overrides(args))
+            run_dir = Path(args.run_dir or f"runs/{cfg.algorithm}_{cfg.variant}_s{cfg.seed}")
+            if (run_dir / "checkpoints").exists():
+                raise ValueError(f"{run_dir} already holds a run; use --resume {run_dir} or another --run-dir")
+        _check_device(cfg.device)
+    except (ConfigError, ValueError) as error:
+        print(f"dynenv-train: {error}", file=sys.stderr)
+        return 2
+    from dynenv_ros.learning.trainer import Trainer
+    try:
+        trainer = Trainer(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
+    except ValueError as error:        # a checkpoint or pretrained file that is missing, corrupt or does not fit
+        print(f"dynenv-train: {error}", file=sys.stderr)
+        return 2
+    summary = trainer.run()
+    print(f"dynenv-train: {summary['env_steps']} env steps, {summary['updates']} updates, "
+          f"{summary['episodes']} episodes in {summary['wall_seconds']:.0f} s -> {run_dir}")
+    return 0
+
+
+def _overrides(args: argparse.Namespace) -> list[str]:
+    extra = list(args.overrides)
+    if args.seed is not None:
+        extra.append(f"seed={args.seed}")
+    if args.device:
+        extra.append(f"device={args.device}")
+    return extra
+
+
+def _check_device(device: str) -> None:
+    import torch
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(f"device {device!r} asked for, but torch sees no CUDA GPU here")
+    torch.device(device)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,213 @@
+"""The in-process trainer: the vectorised soccer batch, the agent, PPO or A2C with the paper's auxiliary losses,
+logging, atomic checkpoints and resumption — no ROS. ``dynenv-train`` (``train_cli``) runs it; the trainer node
+reuses its pieces (``RolloutCollector``, ``update``, ``checkpoints``).
+
+A run directory holds: ``config.json`` (the resolved config), ``metrics.csv`` and ``tensorboard/`` (every scalar),
+``checkpoints/`` (the last few, safetensors + JSON, see ``checkpoints``), and at the end ``policy.safetensors``,
+``policy.onnx``, ``curves.png`` and ``summary.json``. Resuming (``--resume RUN_DIR``) restores the networks, the
+optimiser, the step counters and the random generators from the latest checkpoint; the worlds restart with fresh
+episodes seeded from (seed, update), since a world's physics state is not checkpointed — an episode cut by a kill
+is simply not counted.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.envs.vector import SoccerVectorEnv
+from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.algorithms import UpdateSettings, update
+from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.heads import Learner
+from dynenv_ros.learning.opponents import SCRIPTED_TEAM, RandomOpponent, SnapshotOpponent, WorldScriptedOpponent
+from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.run_log import RunLogger, plot_curves
+from dynenv_ros.soccer.config import SoccerConfig
+
+VERSION = "dynenv_ros.learning/1"
+
+
+def update_settings(cfg: TrainConfig) -> UpdateSettings:
+    """The variant's loss switches and the config's numbers, in the form ``update`` takes."""
+    losses = cfg.losses()
+    on = (lambda name: bool(losses[name])) if isinstance(losses, dict) else (lambda name: bool(getattr(losses, name)))
+    ppo = cfg.algorithm == "ppo"
+    return UpdateSettings(
+        algorithm=cfg.algorithm, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
+        epochs=cfg.ppo_epochs if ppo else 1, minibatches=cfg.ppo_minibatches if ppo else 1, clip=cfg.ppo_clip,
+        clip_value_loss=cfg.clip_value_loss, normalize_advantages=cfg.normalize_advantages,
+        target_kl=cfg.target_kl, value_coef=cfg.value_coef, entropy_coef=cfg.entropy_coef,
+        max_grad_norm=cfg.max_grad_norm, forward_coef=cfg.forward_coef, inverse_coef=cfg.inverse_coef,
+        ltp_coef=cfg.ltp_coef, self_supervised_coef=cfg.self_supervised_coef,
+        use_forward=on("icm_forward"), use_rcm=on("rcm_attention"), use_inverse=on("inverse"), use_ltp=on("ltp"),
+        use_localization=on("localization"), use_reconstruction=on("reconstruction"),
+        intrinsic_reward_coef=cfg.intrinsic_reward_coef)
+
+
+class Trainer:
+    def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True) -> None:
+        self.cfg, self.run_dir, self.progress = cfg, Path(run_dir), progress
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        torch.set_num_threads(cfg.torch_threads)
+        self.device = torch.device(cfg.device)
+        self.settings = update_settings(cfg)
+        soccer = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode})
+        self.soccer = soccer
+        seeds = np.random.SeedSequence(cfg.seed).spawn(4)
+        self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
+        self.rng = np.random.default_rng(seeds[1])
+        self.env_seed = int(seeds[2].generate_state(1)[0])
+        agent = DynEnvAgent(cfg.feature_size, cfg.head_mode, soccer.motion.head_units, soccer.motion.head_max_delta)
+        torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only; no global RNG use after this
+        self.learner = Learner(agent, cfg.ltp_horizon).to(self.device)
+        self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
+        self.env_steps = self.updates = self.episodes = 0
+        self.wall_before = 0.0
+        if resume:
+            self._resume()
+        elif cfg.pretrained_encoder:
+            self._load_encoder(cfg.pretrained_encoder)
+        (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
+        needs_targets = self.settings.use_localization or self.settings.use_reconstruction
+        self.env = SoccerVectorEnv(cfg.num_envs, backend=cfg.backend, config=soccer, observation="padded",
+                                   perception=cfg.perception, targets=needs_targets,
+                                   scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None)
+        n = cfg.players_per_team
+        learning = np.arange(2 * n) if cfg.opponent == "self" else np.arange(n)
+        self.opponent: Any = None
+        if cfg.opponent == "random":
+            self.opponent = RandomOpponent(self.rng, 2 * soccer.motion.head_units + 1)
+        elif cfg.opponent == "snapshot":
+            self.opponent = SnapshotOpponent(agent, cfg.snapshot_pool, self.generator, self.rng)
+        elif cfg.opponent == "scripted":
+            self.opponent = WorldScriptedOpponent()
+        self.collector = RolloutCollector(self.env, agent, learning, self.opponent, self.generator,
+                                          seed=self.env_seed + self.updates)
+        self.logger = RunLogger(self.run_dir)
+
+    # -- checkpoints ------------------------------------------------------------------------------------------
+    def _meta(self) -> dict[str, Any]:
+        return {"version": VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
+                "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
+                "episodes": self.episodes, "wall_seconds": self.wall_before + self._elapsed(),
+                "observation_layout": {k: list(v) for k, v in self.env.layout.shapes().items()},
+                "numpy_rng": self.rng.bit_generator.state, "code_revision": checkpoints.code_revision()}
+
+    def save_checkpoint(self) -> Path:
+        extra = {"torch_generator": self.generator.get_state()}
+        return checkpoints.save_training_checkpoint(self.run_dir, self.env_steps, self.learner, self.optimizer,
+                                                    self._meta(), extra, keep=self.cfg.keep_checkpoints)
+
+    def _resume(self) -> None:
+        meta, extra = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
+        self.env_steps, self.updates = int(meta["env_steps"]), int(meta["updates"])
+        self.episodes, self.wall_before = int(meta.get("episodes", 0)), float(meta.get("wall_seconds", 0.0))
+        self.rng.bit_generator.state = meta["numpy_rng"]
+        if "torch_generator" in extra:
+            self.generator.set_state(extra["torch_generator"])
+
+    def _load_encoder(self, path: str) -> None:
+        """The localization and object streams (and reconstruction head) of a pretrained policy file."""
+        pretrained, _ = checkpoints.load_policy(path)
+        wanted = ("localization.", "pose_head.", "objects.", "reconstruction.")
+        state = {k: v for k, v in pretrained.state_dict().items() if k.startswith(wanted)}
+        missing = self.learner.agent.load_state_dict(state, strict=False)
+        if missing.unexpected_keys:
+            raise ValueError(f"pretrained encoder {path} has unexpected keys, e.g. {missing.unexpected_keys[0]}")
+
+    # -- the loop ---------------------------------------------------------------------------------------------
+    def _elapsed(self) -> float:
+        return time.perf_counter() - self._started
+
+    def run(self) -> dict[str, Any]:
+        cfg = self.cfg
+        self._started = time.perf_counter()
+        per_update = cfg.num_envs * cfg.rollout_length
+        deadline = math.inf if cfg.max_minutes is None else cfg.max_minutes * 60.0
+        last_checkpoint = time.perf_counter()
+        window = {"steps": 0, "time": time.perf_counter(), "rollout": 0.0, "learn": 0.0}
+        returns: list[dict[str, float]] = []
+        bar = None
+        if self.progress:
+            from tqdm import tqdm
+            bar = tqdm(total=cfg.total_env_steps, initial=self.env_steps, unit="step", dynamic_ncols=True,
+                       desc=f"{cfg.algorithm}/{cfg.variant}")
+        try:
+            while self.env_steps < cfg.total_env_steps and self._elapsed() < deadline:
+                t0 = time.perf_counter()
+                self.learner.eval()
+                rollout = self.collector.collect(cfg.rollout_length)
+                t1 = time.perf_counter()
+                self.learner.train()
+                stats = update(self.learner, self.optimizer, rollout.as_tensors(self.device), self.settings,
+                               self.generator)
+                t2 = time.perf_counter()
+                self.env_steps += per_update
+                self.updates += 1
+                window["steps"] += per_update
+                window["rollout"] += t1 - t0
+                window["learn"] += t2 - t1
+                finished, self.collector.finished = self.collector.finished, []
+                self.episodes += len(finished)
+                returns.extend(finished)
+                if self.opponent is not None and cfg.opponent == "snapshot" \
+                        and self.updates % cfg.snapshot_every_updates == 0:
+                    self.opponent.refresh(self.learner.agent)
+                if bar is not None:
+                    bar.update(per_update)
+                if self.updates % cfg.log_every_updates == 0:
+                    self._log(stats, window, returns, bar)
+                    returns = []
+                    window = {"steps": 0, "time": time.perf_counter(), "rollout": 0.0, "learn": 0.0}
+                if time.perf_counter() - last_checkpoint > cfg.checkpoint_every_minutes * 60.0:
+                    self.save_checkpoint()
+                    last_checkpoint = time.perf_counter()
+            if window["steps"]:             # the updates since the last log line
+                self._log(stats, window, returns, bar, updates=window["steps"] // per_update)
+        finally:
+            if bar is not None:
+                bar.close()
+        return self.finish()
+
+    def _log(self, stats: dict[str, float], window: dict[str, float], returns: list[dict[str, float]],
+             bar: Any, updates: int | None = None) -> None:
+        updates = updates or self.cfg.log_every_updates
+        elapsed = max(time.perf_counter() - window["time"], 1e-9)
+        scalars = {f"train/{k}": v for k, v in stats.items()}
+        scalars["speed/env_steps_per_second"] = window["steps"] / elapsed
+        scalars["speed/rollout_seconds_per_update"] = window["rollout"] / updates
+        scalars["speed/learn_seconds_per_update"] = window["learn"] / updates
+        if returns:
+            for key in returns[0]:
+                scalars[f"episode/{key}"] = float(np.mean([r[key] for r in returns]))
+        self.logger.log(self.env_steps, self.updates, self.wall_before + self._elapsed(), scalars)
+        if bar is not None:
+            postfix = {"sps": f"{scalars['speed/env_steps_per_second']:.0f}"}
+            if returns:
+                postfix["return"] = f"{scalars['episode/return']:.2f}"
+            bar.set_postfix(postfix)
+
+    def finish(self) -> dict[str, Any]:
+        """Final checkpoint, the shipped policy (safetensors + ONNX), curves and a summary."""
+        self.save_checkpoint()
+        meta = {k: v for k, v in self._meta().items() if k != "numpy_rng"}
+        agent = self.learner.agent
+        checkpoints.save_policy(agent, str(self.run_dir / "policy.safetensors"), meta)
+        from dynenv_ros.agent.export import export_onnx
+        export_onnx(agent.cpu(), self.run_dir / "policy.onnx")
+        agent.to(self.device)
+        self.logger.close()
+        plot_curves(self.run_dir)
+        summary = {"env_steps": self.env_steps, "updates": self.updates, "episodes": self.episodes,
+                   "wall_seconds": self.wall_before + self._elapsed()}
+        (self.run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        self.env.close()
+        return summary
