@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
@@ -371,3 +372,17 @@ def test_the_long_term_prediction_loss_is_actually_optimised():
         loss.backward()
         optimiser.step()
     assert loss.item() < 0.1 * first
+
+
+def test_batched_assignment_is_optimal_like_brute_force():
+    from dynenv_ros.agent.losses import ANCHORS, assign_slots_batch, assignment_cost, brute_force_assignment
+    rng = np.random.default_rng(4)
+    anchors = np.array(ANCHORS)
+    targets = rng.uniform(-4.5, 4.5, size=(200, 3, 2))
+    seen = rng.random((200, 3)) < 0.7
+    got = assign_slots_batch(anchors, targets, seen)
+    for b in range(200):
+        best = brute_force_assignment(anchors, targets[b], seen[b])
+        assert len(set(got[b].tolist())) == 3                       # distinct slots
+        assert assignment_cost(anchors, targets[b], seen[b], got[b]) == pytest.approx(
+            assignment_cost(anchors, targets[b], seen[b], best), abs=1e-12)
