@@ -173,3 +173,17 @@ def test_a2c_update_changes_parameters_and_reports_losses(rollout_setup):
                 "localization_loss", "reconstruction_loss", "explained_variance"):
         assert np.isfinite(stats[key]), key
     assert any(not torch.equal(b, p) for b, p in zip(before, learner.agent.parameters()))
+
+
+def test_ltp_is_optimised_through_the_training_update():
+    """DynEnv logged LTP but never optimised it (facts §12.12); here ``update`` — the trainer's own step — lowers it
+    and moves the LTP predictors' weights."""
+    env, learner, collector = _setup(targets=False, worlds=1, seed=8)
+    rollout = collector.collect(4)
+    env.close()
+    optimizer = torch.optim.Adam(learner.parameters(), lr=1e-2)
+    before = [p.detach().clone() for p in learner.curiosity.ltp.parameters()]
+    settings = _only(use_ltp=True, ltp_coef=1.0)
+    losses = [update(learner, optimizer, rollout.as_tensors(), settings)["ltp_loss"] for _ in range(40)]
+    assert losses[-1] < 0.5 * losses[0]
+    assert all(not torch.equal(b, p) for b, p in zip(before, learner.curiosity.ltp.parameters()))
