@@ -187,3 +187,24 @@ def test_ltp_is_optimised_through_the_training_update():
     losses = [update(learner, optimizer, rollout.as_tensors(), settings)["ltp_loss"] for _ in range(40)]
     assert losses[-1] < 0.5 * losses[0]
     assert all(not torch.equal(b, p) for b, p in zip(before, learner.curiosity.ltp.parameters()))
+
+
+def test_privileged_pose_seeding_is_off_by_default_and_trains_the_seeder_when_on():
+    env, learner, collector = _setup(targets=True, worlds=1, seed=9)
+    plain = collector.collect(3)
+    assert plain.seed_pose is None
+    seeded_collector = RolloutCollector(env, learner.agent, np.arange(2), None, torch.Generator().manual_seed(1),
+                                        seed=9, pose_seeder=learner.seeded_state,
+                                        seed_noise=np.zeros(6, np.float32), rng=np.random.default_rng(0))
+    rollout = seeded_collector.collect(3)
+    env.close()
+    # noise 0: the seed is the true pose of the rollout's first observation
+    np.testing.assert_allclose(rollout.seed_pose, rollout.targets["pose"][0], atol=1e-6)
+    with torch.no_grad():
+        expected = learner.seeded_state(torch.from_numpy(rollout.seed_pose))
+    for got, want in zip(rollout.initial_state, expected):
+        torch.testing.assert_close(got, want)
+    grads = _grads(learner, _only(use_localization=True, self_supervised_coef=1.0), rollout)
+    assert _touched(grads, "pose_seeder")
+    grads = _grads(learner, _only(use_localization=True, self_supervised_coef=1.0), plain)
+    assert not _touched(grads, "pose_seeder")

@@ -169,6 +169,8 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
     T = rollout["actions"].shape[0]
     obs = {k: v[:, rows] for k, v in rollout["obs"].items()}
     state = tuple(x[rows] for x in rollout["initial_state"])
+    if "seed_pose" in rollout:       # privileged seeding: rebuilt with gradient, so the seeder learns
+        state = learner.seeded_state(rollout["seed_pose"][rows])
     out = run_sequence(agent, obs, state, rollout["starts"][:, rows])
     actions = rollout["actions"][:, rows]
     acting = rollout["can_act"][:T, rows]

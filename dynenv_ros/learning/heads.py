@@ -40,3 +40,10 @@ class Learner(nn.Module):
     def seeded_cell(self, pose: Tensor) -> Tensor:
         """The localization LSTM's cell state from a pose (DynEnv's ``set_state``: tanh of a linear map)."""
         return torch.tanh(self.pose_seeder(pose))
+
+    def seeded_state(self, pose: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """DynEnv's privileged rollout start: every recurrent state zero except the localization cell, seeded
+        from a (noisy) true pose — the object memory is wiped too, as there."""
+        cell = self.seeded_cell(pose)
+        zeros = torch.zeros_like(cell)
+        return (zeros, cell, zeros.clone(), zeros.clone())

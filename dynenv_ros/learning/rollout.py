@@ -86,6 +86,7 @@ class Rollout:
     can_act: np.ndarray
     initial_state: State
     targets: dict[str, np.ndarray] = field(default_factory=dict)
+    seed_pose: np.ndarray | None = None     # (B, 6) privileged seeding only: the noisy true pose at step 0
 
     @property
     def steps(self) -> int:
@@ -105,6 +106,8 @@ class Rollout:
         for name in ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
                      "final_values", "starts", "can_act"):
             out[name] = tensor(getattr(self, name))
+        if self.seed_pose is not None:
+            out["seed_pose"] = tensor(self.seed_pose)
         return out
 
 
@@ -122,7 +125,9 @@ class RolloutCollector:
 
     def __init__(self, env: SoccerVectorEnv, agent: DynEnvAgent, learning_robots: np.ndarray,
                  opponent: Opponent | None, generator: torch.Generator, seed: int,
-                 reward_transform: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 reward_transform: Callable[[np.ndarray], np.ndarray] | None = None,
+                 pose_seeder: Callable[[Tensor], State] | None = None, seed_noise: np.ndarray | None = None,
+                 rng: np.random.Generator | None = None) -> None:
         self.env, self.agent = env, agent
         self.learning_robots = np.asarray(learning_robots, np.int64)
         self.other_robots = np.setdiff1d(np.arange(env.config.n_robots), self.learning_robots)
@@ -132,6 +137,11 @@ class RolloutCollector:
         self.generator = generator
         self.with_targets = bool(getattr(env, "with_targets", False))
         self.reward_transform = reward_transform
+        # DynEnv's privileged re-initialisation (facts §9.6, §12.18), off unless a seeder is given: at every
+        # rollout's start the whole recurrent state is replaced by pose_seeder(true pose + N(0, seed_noise²)).
+        self.pose_seeder, self.seed_noise, self.rng = pose_seeder, seed_noise, rng
+        if pose_seeder is not None and not self.with_targets:
+            raise ValueError("privileged pose seeding needs the true pose: SoccerVectorEnv(targets=True)")
         self._obs = env.reset(seed=seed)
         self._targets = env.targets if self.with_targets else {}
         batch = env.num_envs * len(self.learning_robots)
@@ -172,6 +182,12 @@ class RolloutCollector:
         episode_end, truncated = np.zeros((steps, B), bool), np.zeros((steps, B), bool)
         final_values = np.zeros((steps, B), np.float32)
         starts, acting = np.zeros((steps + 1, B), bool), np.zeros((steps + 1, B), bool)
+        seed_pose = None
+        if self.pose_seeder is not None:
+            true_pose = flatten_robots(self._targets["pose"], self.learning_robots)
+            seed_pose = (true_pose + self.rng.normal(size=true_pose.shape) * self.seed_noise).astype(np.float32)
+            self.state = self.pose_seeder(torch.from_numpy(seed_pose))
+            self._starts = np.zeros_like(self._starts)       # the seeded state is this rollout's start
         initial_state = tuple(s.clone() for s in reset_state(self.state, torch.from_numpy(self._starts)))
         current = first
         for t in range(steps + 1):
@@ -215,7 +231,7 @@ class RolloutCollector:
             self._other_starts = np.repeat(ended[:, None], len(self.other_robots), axis=1)
             current = self._learning_obs(self._obs)
         return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
-                       starts, acting, initial_state, targets)
+                       starts, acting, initial_state, targets, seed_pose)
 
     def _final_values(self, result: Any, truncated: np.ndarray) -> np.ndarray:
         """V(final observation) for the robots of truncated worlds, from the state the episode left them in."""

@@ -33,6 +33,9 @@ from dynenv_ros.learning.run_log import RunLogger, plot_curves
 from dynenv_ros.soccer.config import SoccerConfig
 
 VERSION = "dynenv_ros.learning/1"
+# DynEnv's privileged seeding noise: N(0, 0.05²) in its normalised units (1 unit = 5.2 m) on x, y; 0.05 on the
+# unit-vector components of the pose (facts §9.6).
+SEED_NOISE = np.array([0.26, 0.26, 0.05, 0.05, 0.05, 0.05], np.float32)
 
 
 def update_settings(cfg: TrainConfig) -> UpdateSettings:
@@ -76,7 +79,8 @@ class Trainer:
         elif cfg.pretrained_encoder:
             self._load_encoder(cfg.pretrained_encoder)
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
-        needs_targets = self.settings.use_localization or self.settings.use_reconstruction
+        needs_targets = self.settings.use_localization or self.settings.use_reconstruction \
+            or cfg.privileged_pose_seeding
         self.env = SoccerVectorEnv(cfg.num_envs, backend=cfg.backend, config=soccer, observation="padded",
                                    perception=cfg.perception, targets=needs_targets,
                                    scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None)
@@ -89,8 +93,11 @@ class Trainer:
             self.opponent = SnapshotOpponent(agent, cfg.snapshot_pool, self.generator, self.rng)
         elif cfg.opponent == "scripted":
             self.opponent = WorldScriptedOpponent()
+        seeding: dict[str, Any] = {}
+        if cfg.privileged_pose_seeding:
+            seeding = {"pose_seeder": self.learner.seeded_state, "seed_noise": SEED_NOISE, "rng": self.rng}
         self.collector = RolloutCollector(self.env, agent, learning, self.opponent, self.generator,
-                                          seed=self.env_seed + self.updates)
+                                          seed=self.env_seed + self.updates, **seeding)
         self.logger = RunLogger(self.run_dir)
 
     # -- checkpoints ------------------------------------------------------------------------------------------
