@@ -208,3 +208,22 @@ def test_privileged_pose_seeding_is_off_by_default_and_trains_the_seeder_when_on
     assert _touched(grads, "pose_seeder")
     grads = _grads(learner, _only(use_localization=True, self_supervised_coef=1.0), plain)
     assert not _touched(grads, "pose_seeder")
+
+
+def test_intrinsic_reward_adds_its_own_advantage_and_trains_its_critic(rollout_setup):
+    _, learner, _, rollout = rollout_setup
+    from dynenv_ros.learning.algorithms import _intrinsic
+    settings = UpdateSettings(intrinsic_reward_coef=1.0)
+    advantages, returns, reward = _intrinsic(learner, rollout.as_tensors(), settings)
+    ended = torch.from_numpy(rollout.episode_end)
+    assert (reward[ended] == 0).all() and (reward[~ended] > 0).all()      # a squared error, never negative
+    assert advantages.shape == reward.shape == returns.shape
+    optimizer = torch.optim.Adam(learner.parameters(), lr=1e-3)
+    before = [p.detach().clone() for p in learner.intrinsic_critic.parameters()]
+    stats = update(learner, optimizer, rollout.as_tensors(), settings)
+    assert stats["intrinsic_reward"] > 0 and np.isfinite(stats["intrinsic_value_loss"])
+    assert all(not torch.equal(b, p) for b, p in zip(before, learner.intrinsic_critic.parameters()))
+    # off (the paper): the intrinsic critic is untouched
+    before = [p.detach().clone() for p in learner.intrinsic_critic.parameters()]
+    update(learner, optimizer, rollout.as_tensors(), UpdateSettings())
+    assert all(torch.equal(b, p) for b, p in zip(before, learner.intrinsic_critic.parameters()))

@@ -164,3 +164,10 @@ def test_config_is_frozen_and_replace_revalidates():
         config.replace(num_envs=0)
     with pytest.raises(ConfigError, match="^num_env: unknown setting"):
         config.replace(num_env=3)
+
+
+def test_continuous_head_is_refused_for_training_with_the_reason():
+    from dynenv_ros.learning.config import ConfigError, load_config
+    import pytest
+    with pytest.raises(ConfigError, match="head_mode: only 'discrete'"):
+        load_config(None, ["head_mode=continuous"])

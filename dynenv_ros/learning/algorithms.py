@@ -129,6 +129,11 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
         rollout["final_values"], s.gamma, s.gae_lambda)
     minibatches = max(1, min(s.minibatches, B))
     stats: dict[str, list[float]] = {}
+    intrinsic_returns = None
+    if s.intrinsic_reward_coef > 0:
+        intrinsic_advantages, intrinsic_returns, intrinsic = _intrinsic(learner, rollout, s)
+        advantages = advantages + intrinsic_advantages
+        stats["intrinsic_reward"] = [float(intrinsic.mean())]
 
     def log(name: str, value: Tensor | float) -> None:
         stats.setdefault(name, []).append(float(value))
@@ -140,7 +145,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
         order = torch.randperm(B, generator=generator) if minibatches > 1 else torch.arange(B)
         for chunk in order.chunk(minibatches):
             started = time.perf_counter()
-            loss, kl = _minibatch_loss(learner, rollout, chunk, advantages, returns, s, log)
+            loss, kl = _minibatch_loss(learner, rollout, chunk, advantages, returns, s, log, intrinsic_returns)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             backward_done = time.perf_counter()
@@ -163,15 +168,40 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
     return out
 
 
+def _initial_state(learner: Learner, rollout: Mapping[str, Any], rows: Tensor) -> tuple[Tensor, ...]:
+    if "seed_pose" in rollout:       # privileged seeding: rebuilt with gradient, so the seeder learns
+        return learner.seeded_state(rollout["seed_pose"][rows])
+    return tuple(x[rows] for x in rollout["initial_state"])
+
+
+@torch.no_grad()
+def _intrinsic(learner: Learner, rollout: Mapping[str, Any], s: UpdateSettings) -> tuple[Tensor, Tensor, Tensor]:
+    """Curiosity as a reward (off in the paper, facts §6.3): the forward model's error on each transition
+    (attention-weighted under RCM), scaled by ``intrinsic_reward_coef``, with its own critic and advantage —
+    added to the extrinsic advantage. An episode's last transition has no successor and earns nothing."""
+    T, B = rollout["actions"].shape[:2]
+    rows = torch.arange(B)
+    out = run_sequence(learner.agent, rollout["obs"], _initial_state(learner, rollout, rows), rollout["starts"])
+    phi = out.phi
+    heads = learner.curiosity
+    error = (heads.forward_model(phi[:-1], one_hot_actions(rollout["actions"])) - phi[1:]) ** 2
+    if s.use_rcm:
+        error = error * heads.rcm_attention(phi[1:])
+    ended = rollout["episode_end"]
+    reward = s.intrinsic_reward_coef * error.mean(-1) * (~ended).to(error.dtype)
+    values = learner.intrinsic_critic(phi).squeeze(-1)
+    advantages, returns = generalized_advantages(reward, values, ended, torch.zeros_like(ended),
+                                                 torch.zeros_like(reward), s.gamma, s.gae_lambda)
+    return advantages, returns, reward
+
+
 def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, advantages: Tensor,
-                    returns: Tensor, s: UpdateSettings, log) -> tuple[Tensor, float]:
+                    returns: Tensor, s: UpdateSettings, log, intrinsic_returns: Tensor | None = None
+                    ) -> tuple[Tensor, float]:
     agent = learner.agent
     T = rollout["actions"].shape[0]
     obs = {k: v[:, rows] for k, v in rollout["obs"].items()}
-    state = tuple(x[rows] for x in rollout["initial_state"])
-    if "seed_pose" in rollout:       # privileged seeding: rebuilt with gradient, so the seeder learns
-        state = learner.seeded_state(rollout["seed_pose"][rows])
-    out = run_sequence(agent, obs, state, rollout["starts"][:, rows])
+    out = run_sequence(agent, obs, _initial_state(learner, rollout, rows), rollout["starts"][:, rows])
     actions = rollout["actions"][:, rows]
     acting = rollout["can_act"][:T, rows]
     step_out = SimpleNamespace(walk=out.walk[:T], turn=out.turn[:T], kick=out.kick[:T], head=out.head[:T])
@@ -198,6 +228,11 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
     value_loss = value_error.mean()
     entropy_mean = masked_mean(entropy, acting)
     loss = s.policy_coef * policy_loss + s.value_coef * value_loss - s.entropy_coef * entropy_mean
+    if intrinsic_returns is not None:
+        intrinsic_value = learner.intrinsic_critic(out.phi[:T].detach()).squeeze(-1)
+        intrinsic_value_loss = ((intrinsic_value - intrinsic_returns[:, rows]) ** 2).mean()
+        loss = loss + s.value_coef * intrinsic_value_loss
+        log("intrinsic_value_loss", intrinsic_value_loss.detach())
     with torch.no_grad():
         approx_kl = masked_mean((ratio - 1) - log_ratio, acting)
         clip_fraction = masked_mean(((ratio - 1).abs() > s.clip).float(), acting)

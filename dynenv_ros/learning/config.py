@@ -232,6 +232,10 @@ class TrainConfig:
         _choice("opponent", self.opponent, OPPONENTS)
         _choice("backend", self.backend, BACKENDS)
         _choice("head_mode", self.head_mode, HEAD_MODES)
+        if self.head_mode != "discrete":
+            raise ConfigError("head_mode", "only 'discrete' can be trained so far: the rollout stores integer actions "
+                              "and the curiosity heads one-hot encode the 7 head choices (the continuous head runs "
+                              "in the policy node and the env, not in the trainer yet)")
         _choice("perception", self.perception, PERCEPTIONS)
         if not _DEVICE.match(self.device):
             raise ConfigError("device", f"expected 'cpu', 'cuda', 'cuda:N' or 'mps', got {self.device!r}")
