@@ -4,7 +4,7 @@ per motion period out.
 For each controlled robot (all, or one team — so two policies can play each other) it buffers the vision frames of
 the current period, and once every controlled robot has all of them it runs the network for all of them in one
 batch, keeps each robot's recurrent state and publishes each robot's action for the next period. State resets
-at episode boundaries. Weights come from a checkpoint (``torch.load(weights_only=True)``) or an ONNX file, at start
+at episode boundaries. Weights come from a policy file (safetensors, no pickle: ``agent.checkpoint``) or an ONNX file, at start
 or through the LoadPolicy service, swapped between two decisions so no period is dropped.
 """
 from __future__ import annotations
@@ -55,7 +55,7 @@ class PolicyNode(Node):
                            choices=("", "a", "b"))
         self.runtime_name = declare_str(self, "runtime", "torch", "Inference runtime.", choices=RUNTIMES,
                                         read_only=True)
-        checkpoint = declare_str(self, "checkpoint", "", "Weights: a .pt checkpoint (torch) or .onnx file; empty: "
+        checkpoint = declare_str(self, "checkpoint", "", "Weights: a .safetensors policy file (torch) or .onnx file; empty: "
                                  "untrained weights from 'seed' (smoke tests only).", read_only=True)
         seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed of action sampling (and untrained weights).",
                            read_only=True)
