@@ -25,7 +25,7 @@ import sys
 import time
 from typing import Any, Callable
 
-from benchmarks.timing import pin_cores, print_table
+from benchmarks.timing import pin_cores, print_table, torch_threads
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -107,11 +107,7 @@ def run(args: Any) -> int:
     cores = pin_cores(args.cores)
     import torch
 
-    torch.set_num_threads(args.threads)
-    try:
-        torch.set_num_interop_threads(1)
-    except RuntimeError:
-        pass
+    torch_threads(args.threads)
     from dynenv_ros.agent.network import DynEnvAgent, parameter_count
 
     observations, head_max = _record(args.envs, args.sequence, args.seed)

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from benchmarks.timing import pin_cores, print_table
+from benchmarks.timing import pin_cores, print_table, torch_threads
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -125,11 +125,7 @@ def run(args: Any) -> int:
     cores = pin_cores(args.cores)
     import torch
 
-    torch.set_num_threads(args.threads)
-    try:
-        torch.set_num_interop_threads(1)
-    except RuntimeError:       # already fixed by earlier torch work in this process
-        pass
+    torch_threads(args.threads)
     from dynenv_ros.agent.export import OnnxPolicy, TorchPolicy, export_onnx
     from dynenv_ros.agent.inputs import collate
     from dynenv_ros.agent.network import DynEnvAgent, parameter_count

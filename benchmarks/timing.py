@@ -30,3 +30,13 @@ def pin_cores(cores: int) -> list[int]:
         allowed = allowed[:cores]
         os.sched_setaffinity(0, allowed)
     return allowed
+
+
+def torch_threads(threads: int) -> None:
+    """Intra-op threads as asked and one inter-op thread (figures per core, as the docs report them)."""
+    import torch
+    torch.set_num_threads(threads)
+    try:
+        torch.set_num_interop_threads(1)
+    except RuntimeError:       # already fixed by earlier torch work in this process
+        pass

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from dynenv_ros.soccer.actions import SoccerAction
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.world import SoccerWorld
@@ -40,3 +42,21 @@ def idle_steps(world: SoccerWorld, periods: int, overrides: dict[int, SoccerActi
 
 def kinds(events: list, kind: str) -> list:
     return [e for e in events if e.kind == kind]
+
+
+def assert_identical(a: Any, b: Any) -> None:
+    """Nested dicts / sequences / arrays equal bit for bit (NaN included), dtypes and shapes too."""
+    if isinstance(a, dict):
+        assert sorted(a) == sorted(b)
+        for key in a:
+            assert_identical(a[key], b[key])
+    elif isinstance(a, (tuple, list)):
+        assert len(a) == len(b)
+        for x, y in zip(a, b):
+            assert_identical(x, y)
+    elif a is None:
+        assert b is None
+    else:
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.dtype == b.dtype and a.shape == b.shape
+        assert a.tobytes() == b.tobytes()

@@ -297,6 +297,17 @@ def test_agent_features_keep_the_period_when_its_last_frame_is_empty(model):
     assert (moved_landmarks.pose - base.pose).abs().max() > 1e-4
 
 
+def _step_by_step(model, landmarks, objects, previous, proprio, start, resets):
+    """``forward`` period by period with the state carried and zeroed where ``resets`` says: (steps, last state)."""
+    steps, state = [], start
+    for t in range(previous.shape[0]):
+        keep = (~resets[t]).float().unsqueeze(-1)
+        step = model(_at(landmarks, t), _at(objects, t), previous[t], proprio[t], tuple(s * keep for s in state))
+        steps.append(step)
+        state = step.state
+    return steps, state
+
+
 # ---- Training passes: forward_sequence, and the sparse/bucketed computation against a dense reference
 
 def _rollout(periods=4, max_landmarks=48, max_objects=12, seed=0):
@@ -375,12 +386,7 @@ def test_forward_sequence_equals_stepping_forward_with_the_state_carried_and_res
     resets[2, 1] = resets[2, 3] = True                     # two robots' episodes restart at period 2
     resets[0, 2] = True                                    # and one at the very first period
     sequence = model.forward_sequence(landmarks, objects, previous, proprio, start, resets)
-    steps, state = [], start
-    for t in range(T):
-        keep = (~resets[t]).float().unsqueeze(-1)
-        step = model(_at(landmarks, t), _at(objects, t), previous[t], proprio[t], tuple(s * keep for s in state))
-        steps.append(step)
-        state = step.state
+    steps, state = _step_by_step(model, landmarks, objects, previous, proprio, start, resets)
     for name in _OUTPUTS:
         stepped = torch.stack([getattr(step, name) for step in steps])
         assert getattr(sequence, name).shape == stepped.shape, name
@@ -389,12 +395,7 @@ def test_forward_sequence_equals_stepping_forward_with_the_state_carried_and_res
         assert torch.allclose(a, b, atol=1e-5, rtol=0)
     weights = _weights(sequence)
     by_sequence = _gradients(model, _scalar(sequence, weights) + sum(s.sum() for s in sequence.state))
-    steps, state = [], start
-    for t in range(T):
-        keep = (~resets[t]).float().unsqueeze(-1)
-        step = model(_at(landmarks, t), _at(objects, t), previous[t], proprio[t], tuple(s * keep for s in state))
-        steps.append(step)
-        state = step.state
+    steps, state = _step_by_step(model, landmarks, objects, previous, proprio, start, resets)
     stepped = type(sequence)(**{name: torch.stack([getattr(s, name) for s in steps]) for name in _OUTPUTS},
                              state=state)
     by_steps = _gradients(model, _scalar(stepped, weights) + sum(s.sum() for s in stepped.state))

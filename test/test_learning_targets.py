@@ -12,7 +12,7 @@ from dynenv_ros.envs.soccer_observations import SoccerObservations
 from dynenv_ros.envs.vector import SoccerVectorEnv
 from dynenv_ros.soccer.actions import SoccerAction, Turn, Walk
 from dynenv_ros.soccer.world import TEAM_B
-from soccer_helpers import IDLE, make_world
+from soccer_helpers import IDLE, assert_identical, make_world
 
 PI = math.pi
 # 10 s episodes = 20 motion periods, robots fall now and then (the worlds' generators matter).
@@ -209,31 +209,14 @@ def _rollout(backend, steps, targets=True, envs=3, seed=11):
             out.append((result.observations, result.targets, result.final_targets, result.final_observations,
                         result.rewards, result.terminated, result.truncated))
             if targets:
-                _assert_identical(env.targets, result.targets)
+                assert_identical(env.targets, result.targets)
     return out
-
-
-def _assert_identical(a, b):
-    if isinstance(a, dict):
-        assert sorted(a) == sorted(b)
-        for key in a:
-            _assert_identical(a[key], b[key])
-    elif isinstance(a, (tuple, list)):
-        assert len(a) == len(b)
-        for x, y in zip(a, b):
-            _assert_identical(x, y)
-    elif a is None:
-        assert b is None
-    else:
-        a, b = np.asarray(a), np.asarray(b)
-        assert a.dtype == b.dtype and a.shape == b.shape
-        assert a.tobytes() == b.tobytes()
 
 
 def test_backends_give_bit_identical_targets_across_an_episode_end():
     a = _rollout("inprocess", 30)
     b = _rollout("subprocess", 30)       # 2 workers: worlds 0-1 and 2
-    _assert_identical(a, b)
+    assert_identical(a, b)
     ends = [k for k, step in enumerate(a[1:]) if step[6].any()]
     assert ends == [19]
     assert sorted(a[20][2]) == [0, 1, 2]                  # final targets of every world
@@ -243,9 +226,9 @@ def test_backends_give_bit_identical_targets_across_an_episode_end():
 def test_targets_leave_the_observations_and_rewards_unchanged():
     with_targets = _rollout("inprocess", 25)
     without = _rollout("inprocess", 25, targets=False)
-    _assert_identical([with_targets[0][0]] + [s[0] for s in with_targets[1:]],
+    assert_identical([with_targets[0][0]] + [s[0] for s in with_targets[1:]],
                       [without[0][0]] + [s[0] for s in without[1:]])
-    _assert_identical([s[3:] for s in with_targets[1:]], [s[3:] for s in without[1:]])
+    assert_identical([s[3:] for s in with_targets[1:]], [s[3:] for s in without[1:]])
     assert all(s[1] is None and s[2] == {} for s in without[1:])
 
 

@@ -10,6 +10,7 @@ from dynenv_ros.envs import vector
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.envs.robocup_v0 import parallel_env
 from dynenv_ros.envs.vector import SoccerVectorEnv, _seeds
+from soccer_helpers import assert_identical
 
 # 10 s episodes = 20 motion periods; robots fall now and then, so the worlds' generators matter.
 SHORT = {"players_per_team": 1, "episode_seconds": 10.0, "falls": {"p_walk": 0.05}}
@@ -34,25 +35,10 @@ def _rollout(backend, steps, envs=3, seed=11, **kwargs):
     return out
 
 
-def _assert_identical(a, b):
-    if isinstance(a, dict):
-        assert sorted(a) == sorted(b)
-        for key in a:
-            _assert_identical(a[key], b[key])
-    elif isinstance(a, (tuple, list)):
-        assert len(a) == len(b)
-        for x, y in zip(a, b):
-            _assert_identical(x, y)
-    else:
-        a, b = np.asarray(a), np.asarray(b)
-        assert a.dtype == b.dtype and a.shape == b.shape
-        assert a.tobytes() == b.tobytes()     # bit for bit, NaN included
-
-
 def test_backends_give_bit_identical_padded_batches_across_episode_ends():
     a = _rollout("inprocess", 300)
     b = _rollout("subprocess", 300)   # 2 workers: worlds 0-1 and 2
-    _assert_identical(a, b)
+    assert_identical(a, b)
     ends = [k for k, step in enumerate(a[1:]) if step[4].any()]
     assert ends == [19 + 20 * i for i in range(15)]     # 15 episode ends crossed
 
@@ -60,7 +46,7 @@ def test_backends_give_bit_identical_padded_batches_across_episode_ends():
 def test_backends_agree_with_few_slots_and_dropped_rows():
     a = _rollout("inprocess", 30, max_landmarks=2, max_objects=1)
     b = _rollout("subprocess", 30, max_landmarks=2, max_objects=1)
-    _assert_identical(a, b)
+    assert_identical(a, b)
     assert sum(int(step[6].sum()) for step in a[1:]) > 0
 
 
@@ -176,7 +162,7 @@ def test_copy_false_hands_out_the_batchs_own_arrays():
         first = env.reset(seed=0)
         kept = {k: v.copy() for k, v in first.items()}
         env.step(np.zeros((2, 2, 4), int))
-        _assert_identical(first, kept)
+        assert_identical(first, kept)
 
 
 def _blocks_of(env):
@@ -265,7 +251,7 @@ def test_bad_actions_are_refused_before_any_world_moves(backend):
         bad[0, 0, 3] = 2.5
         with pytest.raises(ValueError, match="env 0 robot 0: action field 'head'"):
             env.step(bad)
-        _assert_identical(env.step(good).observations, twin.step(good).observations)
+        assert_identical(env.step(good).observations, twin.step(good).observations)
     with pytest.raises(ValueError, match="backend"):
         SoccerVectorEnv(2, backend="threads")
 

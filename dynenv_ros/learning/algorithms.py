@@ -18,7 +18,6 @@ robot's own policy entropy), not DynEnv's "batch entropy" of the mean policy (§
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -122,7 +121,6 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
            generator: torch.Generator | None = None) -> dict[str, float]:
     """One PPO or A2C update on a rollout (``Rollout.as_tensors()``); returns the logged scalars."""
     s = settings
-    agent = learner.agent
     T, B = rollout["actions"].shape[:2]
     advantages, returns = generalized_advantages(
         rollout["rewards"], rollout["values"], rollout["episode_end"], rollout["truncated"],

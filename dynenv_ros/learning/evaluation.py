@@ -34,7 +34,6 @@ episodes; the summary gives the mean and standard deviation over seeds.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -225,17 +224,9 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
         return ScriptedTeam(DEFAULT_SCRIPTED)
     if spec in SCRIPTED_KINDS:
         return ScriptedTeam(spec)
-    from dynenv_ros.agent.checkpoint import load_checkpoint
+    from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
     model = load_checkpoint(spec)
-    return AgentTeam(model, greedy=greedy, path=str(spec), sha256=_sha256(spec))
-
-
-def _sha256(path: str | os.PathLike[str]) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    return AgentTeam(model, greedy=greedy, path=str(spec), sha256=sha256(spec))
 
 
 # -- seeding -----------------------------------------------------------------------------------------------------
