@@ -49,6 +49,7 @@ class MainJobConfig:
     players_per_team: int = 2
     perception: str = "realistic"
     policy: str = "keeper_and_chasers"
+    team_a: str = "scripted"         # soccer: 'scripted' (the policy above) or a policy file (.onnx/.safetensors)
     gif: bool = True
     timeout_s: float = 180.0
     domain_id: int = -1  # -1: pick one from the process id, so parallel runs do not meet
@@ -90,6 +91,18 @@ class MainJobConfig:
             raise ConfigError(f"perception must be one of {PERCEPTION_PRESETS}, got {self.perception!r}")
         if self.policy not in POLICIES:
             raise ConfigError(f"policy must be one of {POLICIES}, got {self.policy!r}")
+        if self.team_a != "scripted":
+            path = team_a_policy(self.team_a)
+            if path.suffix not in (".onnx", ".safetensors"):
+                raise ConfigError(f"team_a must be 'scripted' or a .onnx / .safetensors policy file, got {self.team_a!r}")
+            if not path.is_file():
+                raise ConfigError(f"team_a: policy file {path} does not exist")
+
+
+def team_a_policy(value: str) -> Path:
+    """A policy file named in the config: absolute, or relative to the repository (where the shipped one lies)."""
+    path = Path(value)
+    return path if path.is_absolute() else Path(__file__).resolve().parent.parent / path
 
 
 def load_config(path: Path, overrides: dict[str, Any]) -> MainJobConfig:
@@ -136,13 +149,22 @@ def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path, config: MainJobCon
 
 def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
     names = robot_names(config.players_per_team)
+    learned = config.team_a != "scripted"
+    scripted_nodes = len(names) - (config.players_per_team if learned else 0)
     sim = NodeLaunch("sim_node", "dynenv_ros.nodes.sim_node", {
         "players_per_team": config.players_per_team, "seed": config.seed, "perception_preset": config.perception,
         "mode": "stepped", "episode_seconds": config.duration_s, "auto_reset": False, "exit_when_finished": True,
         "report_path": str(run_dir / "sim_report.json"), "wait_for_subscribers": 2,
-        "wait_for_ground_truth_subscribers": len(names) + 1, "wait_for_recorder": True}, ends_run=True)
+        "wait_for_ground_truth_subscribers": scripted_nodes + 1, "wait_for_recorder": True}, ends_run=True)
     policies = []
+    if learned:       # one policy node drives all of team A (onnxruntime for .onnx files)
+        path = team_a_policy(config.team_a)
+        policies.append(NodeLaunch("policy_team_a", "policy_node.policy_node", {
+            "players_per_team": config.players_per_team, "team": "a", "checkpoint": str(path),
+            "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch", "seed": config.seed}))
     for i, name in enumerate(names):
+        if learned and i < config.players_per_team:
+            continue
         slot = i % config.players_per_team
         kind = {"chaser": "chaser", "random": "random"}.get(
             config.policy, "keeper" if slot == 0 and config.players_per_team > 1 else "chaser")
@@ -173,6 +195,8 @@ def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig
     diag = report["diagnostics"]
     rejected = sum(int(v) for k, v in diag.items() if k.startswith("rejected_"))
     scores = report["episode_scores"]
+    team_a = config.policy if config.team_a == "scripted" else f"{config.team_a} (policy node)"
+    print(f"  teams: A {team_a}, B {config.policy} (scripted)")
     print(f"  game: {diag['sim_time_s']} s of sim time in {diag['periods_run']} periods, "
           f"score A {scores[-1][0]} : {scores[-1][1]} B" if scores else "  game: unfinished")
     print(f"  stepped-mode real-time factor {diag['real_time_factor_running']}x "

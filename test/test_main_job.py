@@ -42,6 +42,22 @@ def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
     assert (tmp_path / "game.gif").stat().st_size > 0 and (tmp_path / "bag").is_dir()
 
 
+def test_main_job_plays_a_trained_policy_for_team_a(tmp_path, capsys):
+    """team_a=<policy file>: one policy node (onnxruntime) drives team A against the scripted team B."""
+    import torch
+    from dynenv_ros.agent.export import export_onnx
+    from dynenv_ros.agent.network import DynEnvAgent
+    torch.manual_seed(0)
+    policy = tmp_path / "policy.onnx"
+    export_onnx(DynEnvAgent(), policy)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    output = _run_main(run_dir, capsys, "duration_s=3", "players_per_team=1", f"team_a={policy}", "gif=false")
+    report = json.loads((run_dir / "sim_report.json").read_text())
+    assert report["diagnostics"]["periods_run"] == "6" and report["diagnostics"]["missing"] == "0"
+    assert f"teams: A {policy} (policy node)" in output and "dynenv-run: OK" in output
+
+
 def test_graph_reports_a_listener_that_does_not_get_what_it_expects(tmp_path):
     domain = int(os.environ["ROS_DOMAIN_ID"])
     nodes = [NodeLaunch("talker", "dynenv_ros.nodes.selfcheck_talker", {"seed": 1, "samples_per_type": 2}),
@@ -78,6 +94,8 @@ def test_graph_times_out_and_stops_every_process(tmp_path):
     ({"players_per_team": 6}, "players_per_team must be in"),
     ({"perception": "perfect"}, "perception must be one of"),
     ({"policy": "genius"}, "policy must be one of"),
+    ({"team_a": "no/such/policy.onnx"}, "does not exist"),
+    ({"team_a": "README.md"}, "team_a must be 'scripted' or a .onnx"),
 ])
 def test_bad_settings_are_refused_with_a_reason(settings, message):
     with pytest.raises(ConfigError, match=message):
