@@ -60,7 +60,8 @@ class SnapshotOpponent(Opponent):
         E, k = starts.shape
         flat = {key: v.reshape(E * k, *v.shape[2:]) for key, v in obs.items()}
         if self.state is None or self.state[0].shape[0] != E * k:
-            self.state = self.playing.initial_state(E * k)
+            device = next(self.playing.parameters()).device
+            self.state = tuple(s.to(device) for s in self.playing.initial_state(E * k))
         state = reset_state(self.state, torch.from_numpy(starts.reshape(-1)))
         step = policy_step(self.playing, flat, state)
         actions, _ = sample_actions(self.playing, step, self.generator)

@@ -21,6 +21,7 @@ Everything is numpy until ``as_tensors``; nothing per detection is ever a Python
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Any, Callable, Mapping
 
 import numpy as np
@@ -49,24 +50,35 @@ def can_act(proprioception: np.ndarray) -> np.ndarray:
     return (last[..., FALLEN] < 0.5) & (last[..., PENALIZED] < 0.5)
 
 
+def device_of(module: torch.nn.Module) -> torch.device:
+    return next(module.parameters()).device
+
+
 def policy_step(agent: DynEnvAgent, obs: Mapping[str, Any], state: State):
-    """One acting forward on padded observations with robots leading (numpy or torch)."""
+    """One acting forward on padded observations with robots leading (numpy or torch), on the agent's device."""
+    device = device_of(agent)
     landmarks, objects = streams_from_padded(obs)
     previous, self_state = side_inputs(obs, agent.head_max)
+    if device.type != "cpu":
+        landmarks, objects = (type(b)(b.features.to(device), b.kind.to(device), b.mask.to(device))
+                              for b in (landmarks, objects))
+        previous, self_state = previous.to(device), self_state.to(device)
     return agent(landmarks, objects, previous, self_state, state)
 
 
 def reset_state(state: State, starts: Tensor) -> State:
     """The state with the rows of robots starting an episode zeroed."""
-    keep = (~starts).to(state[0].dtype).unsqueeze(-1)
+    keep = (~starts.to(state[0].device)).to(state[0].dtype).unsqueeze(-1)
     return tuple(s * keep for s in state)  # type: ignore[return-value]
 
 
 def sample_actions(agent: DynEnvAgent, step: Any, generator: torch.Generator | None, greedy: bool = False
                    ) -> tuple[Tensor, Tensor]:
-    """(actions (B, 4), their log-probabilities (B,)) — the sum over the action heads."""
-    actions = agent.act(step, generator=generator, greedy=greedy)
-    log_prob = sum(d.log_prob(a) for d, a in zip(agent.distributions(step), actions.unbind(-1)))
+    """(actions (B, 4), their log-probabilities (B,)) on the CPU — the sum over the action heads. Sampling is on
+    the CPU whatever the learner's device, so one CPU generator makes runs reproducible on any device."""
+    heads = SimpleNamespace(walk=step.walk.cpu(), turn=step.turn.cpu(), kick=step.kick.cpu(), head=step.head.cpu())
+    actions = agent.act(heads, generator=generator, greedy=greedy)
+    log_prob = sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
     return actions, log_prob
 
 
@@ -145,7 +157,7 @@ class RolloutCollector:
         self._obs = env.reset(seed=seed)
         self._targets = env.targets if self.with_targets else {}
         batch = env.num_envs * len(self.learning_robots)
-        self.state: State = agent.initial_state(batch)
+        self.state: State = tuple(s.to(device_of(agent)) for s in agent.initial_state(batch))  # type: ignore
         self._starts = np.ones(batch, bool)
         self._other_starts = np.ones((env.num_envs, len(self.other_robots)), bool)
         self._known: dict[str, np.ndarray] = {}
@@ -186,7 +198,7 @@ class RolloutCollector:
         if self.pose_seeder is not None:
             true_pose = flatten_robots(self._targets["pose"], self.learning_robots)
             seed_pose = (true_pose + self.rng.normal(size=true_pose.shape) * self.seed_noise).astype(np.float32)
-            self.state = self.pose_seeder(torch.from_numpy(seed_pose))
+            self.state = self.pose_seeder(torch.from_numpy(seed_pose).to(device_of(self.agent)))
             self._starts = np.zeros_like(self._starts)       # the seeded state is this rollout's start
         initial_state = tuple(s.clone() for s in reset_state(self.state, torch.from_numpy(self._starts)))
         current = first
@@ -203,7 +215,7 @@ class RolloutCollector:
                     targets.setdefault(key, np.empty((steps + 1, *value.shape), np.float32))[t] = value
             state = reset_state(self.state, torch.from_numpy(self._starts))
             step = policy_step(self.agent, current, state)
-            values[t] = step.value.numpy()
+            values[t] = step.value.cpu().numpy()
             if t == steps:          # the bootstrap value only; the next rollout acts on this observation
                 break
             sampled, log_prob = sample_actions(self.agent, step, self.generator)
@@ -240,8 +252,8 @@ class RolloutCollector:
         k = len(self.learning_robots)
         final = {key: np.stack([result.final_observations[int(r // k)][key][self.learning_robots[r % k]]
                                 for r in rows]) for key in self._obs}
-        state = tuple(s[torch.from_numpy(rows)] for s in self.state)
-        out[rows] = policy_step(self.agent, final, state).value.numpy()
+        state = tuple(s[torch.from_numpy(rows).to(s.device)] for s in self.state)
+        out[rows] = policy_step(self.agent, final, state).value.cpu().numpy()
         return out
 
     def _account(self, terms: np.ndarray, ended: np.ndarray) -> None:
