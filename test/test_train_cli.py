@@ -47,7 +47,7 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
                "--set", "total_env_steps=100000", "--set", "max_minutes=5"]
     process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
-        deadline = time.monotonic() + 240
+        deadline = time.monotonic() + 480
         while time.monotonic() < deadline:
             found = checkpoints.list_checkpoints(run_dir / "checkpoints") if (run_dir / "checkpoints").exists() \
                 else []
@@ -56,7 +56,7 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
             assert process.poll() is None, process.stderr.read().decode()
             time.sleep(0.2)
         else:
-            pytest.fail("no checkpoint within 240 s")
+            pytest.fail("no checkpoint within 480 s")
         os.kill(process.pid, signal.SIGKILL)
         process.wait(timeout=30)
     finally:
