@@ -38,6 +38,7 @@ class ConfigError(ValueError):
 
 POLICIES = ("keeper_and_chasers", "chaser", "random")
 PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
+SHIPPED_POLICY = "policy_node/pretrained/policy.onnx"     # relative to the repository (see team_a_policy)
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ class MainJobConfig:
     players_per_team: int = 2
     perception: str = "realistic"
     policy: str = "keeper_and_chasers"
-    team_a: str = "scripted"         # soccer: 'scripted' (the policy above) or a policy file (.onnx/.safetensors)
+    team_a: str = SHIPPED_POLICY     # soccer: a policy file (.onnx/.safetensors) or 'scripted' (the policy above)
     gif: bool = True
     timeout_s: float = 180.0
     domain_id: int = -1  # -1: pick one from the process id, so parallel runs do not meet

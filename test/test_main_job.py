@@ -34,7 +34,7 @@ def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
 
 
 def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
-    """The README's run command: simulator, a scripted policy node per robot, recorder; lossless bag and a GIF."""
+    """The README's run command: simulator, the shipped policy for team A, scripted team B, recorder; lossless bag, GIF."""
     output = _run_main(tmp_path, capsys, "duration_s=5", "players_per_team=1")
     report = json.loads((tmp_path / "sim_report.json").read_text())
     assert report["diagnostics"]["periods_run"] == "10" and report["diagnostics"]["missing"] == "0"
