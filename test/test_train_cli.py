@@ -109,3 +109,29 @@ def test_empty_metrics_file_gets_its_header(tmp_path):
     (tmp_path / "metrics.csv").write_text("")          # killed before the header reached the disk
     RunLogger(tmp_path, tensorboard=False).close()
     assert (tmp_path / "metrics.csv").read_text() == "env_steps,update,wall_seconds,name,value\n"
+
+
+def test_resume_of_a_folder_that_is_no_run_is_refused(tmp_path, capsys):
+    assert main(["--resume", str(tmp_path)]) == 2
+    assert "not a run directory" in capsys.readouterr().err
+
+
+def test_resume_with_every_checkpoint_damaged_is_refused_and_loses_nothing(tmp_path, capsys):
+    run_dir = tmp_path / "run"
+    assert main(["--config", "quick", "--run-dir", str(run_dir), "--no-progress", *TINY,
+                 "--set", "total_env_steps=4"]) == 0
+    capsys.readouterr()
+    weights = next((run_dir / "checkpoints").glob("step_*")) / "model.safetensors"
+    damaged = bytearray(weights.read_bytes())
+    damaged[-1] ^= 0xFF
+    weights.write_bytes(bytes(damaged))
+    assert main(["--resume", str(run_dir), "--no-progress", "--set", "total_env_steps=8"]) == 2
+    err = capsys.readouterr().err
+    assert "dynenv-train:" in err and "Traceback" not in err
+    assert weights.read_bytes() == bytes(damaged)            # the evidence is left as it was
+
+
+def test_missing_pretrained_encoder_is_refused(tmp_path, capsys):
+    code = main(["--config", "quick", "--run-dir", str(tmp_path / "run"), "--set", "variant=recon",
+                 "--set", f"pretrained_encoder={tmp_path / 'nope.safetensors'}"])
+    assert code == 2 and "does not exist" in capsys.readouterr().err

@@ -208,11 +208,12 @@ class RolloutCollector:
             starts[t], acting[t] = self._starts, can_act(current["proprioception"])
             if self.with_targets:
                 seen = self._remember_seen(self._targets, self._starts)
-                for key in TARGET_KEYS:
-                    value = flatten_robots(self._targets[key], self.learning_robots)
-                    targets.setdefault(key, np.empty((steps + 1, *value.shape), np.float32))[t] = value
-                for key, value in seen.items():
-                    targets.setdefault(key, np.empty((steps + 1, *value.shape), np.float32))[t] = value
+                values_now = {key: flatten_robots(self._targets[key], self.learning_robots) for key in TARGET_KEYS}
+                values_now.update(seen)
+                if not targets:          # allocated once per rollout, filled step by step
+                    targets = {k: np.empty((steps + 1, *v.shape), np.float32) for k, v in values_now.items()}
+                for key, value in values_now.items():
+                    targets[key][t] = value
             state = reset_state(self.state, torch.from_numpy(self._starts))
             step = policy_step(self.agent, current, state)
             values[t] = step.value.cpu().numpy()

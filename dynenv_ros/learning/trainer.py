@@ -40,7 +40,6 @@ SEED_NOISE = np.array([0.26, 0.26, 0.05, 0.05, 0.05, 0.05], np.float32)
 def update_settings(cfg: TrainConfig) -> UpdateSettings:
     """The variant's loss switches and the config's numbers, in the form ``update`` takes."""
     losses = cfg.losses()
-    on = (lambda name: bool(losses[name])) if isinstance(losses, dict) else (lambda name: bool(getattr(losses, name)))
     ppo = cfg.algorithm == "ppo"
     return UpdateSettings(
         algorithm=cfg.algorithm, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
@@ -49,8 +48,8 @@ def update_settings(cfg: TrainConfig) -> UpdateSettings:
         target_kl=cfg.target_kl, value_coef=cfg.value_coef, entropy_coef=cfg.entropy_coef,
         max_grad_norm=cfg.max_grad_norm, forward_coef=cfg.forward_coef, inverse_coef=cfg.inverse_coef,
         ltp_coef=cfg.ltp_coef, self_supervised_coef=cfg.self_supervised_coef,
-        use_forward=on("icm_forward"), use_rcm=on("rcm_attention"), use_inverse=on("inverse"), use_ltp=on("ltp"),
-        use_localization=on("localization"), use_reconstruction=on("reconstruction"),
+        use_forward=losses.icm_forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
+        use_localization=losses.localization, use_reconstruction=losses.reconstruction,
         intrinsic_reward_coef=cfg.intrinsic_reward_coef)
 
 
