@@ -37,6 +37,7 @@ import numpy as np
 from dynenv_ros.envs.learning_targets import target_shapes
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.envs.soccer_observations import SoccerObservations, perception_params
+from dynenv_ros.envs.teacher import TEACHERS, Teacher
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.actions import Kick, Turn, Walk, parse_action
@@ -67,6 +68,9 @@ class BatchStep:
     # {key: (E, A, ...)} float32, and those of each finished episode's last observation; else None and {}.
     targets: dict[str, np.ndarray] | None = None
     final_targets: dict[int, dict[str, np.ndarray]] = field(default_factory=dict)
+    # teacher=KIND: (E, A, 4) int64, the scripted teacher's action for each robot at ``observations``' instant
+    # (envs.teacher); else None.
+    teacher_actions: np.ndarray | None = None
 
 
 def _seeds(seed: int | None, count: int) -> list[int]:
@@ -84,6 +88,7 @@ class _Settings:
     max_objects: int | None
     targets: bool = False
     scripted_team_b: str | None = None
+    teacher: str | None = None
 
     def observations(self) -> SoccerObservations:
         return SoccerObservations(self.config, self.observation, self.perception,
@@ -107,6 +112,8 @@ def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, .
         for prefix in ("targets/", "final_targets/"):
             spec.update({prefix + key: ((E, A) + shape, np.dtype(np.float32))
                          for key, shape in target_shapes(settings.config.players_per_team).items()})
+    if settings.teacher is not None:
+        spec["teacher"] = ((E, A, 4), np.dtype(np.int64))
     spec["reward_terms"] = ((E, N_TERMS, A), np.dtype(np.float64))
     spec["terminated"] = ((E,), np.dtype(bool))
     spec["truncated"] = ((E,), np.dtype(bool))
@@ -131,6 +138,7 @@ class InProcessBatch:
             self._scripted = team_policies(n, settings.scripted_team_b, field=self.config.field,
                                            head_mode=self.config.head_mode, motion=self.config.motion)
             self._scripted_robots = range(n, 2 * n)
+        self._teacher = Teacher(self.config, settings.teacher) if settings.teacher is not None else None
         self.worlds = [SoccerWorld(self.config) for _ in range(num_envs)]
         self.observers = [settings.observations() for _ in range(num_envs)]
         if arrays is None:
@@ -155,6 +163,8 @@ class InProcessBatch:
             obs.initial_padded(out=self._obs[e], targets=self._targets[e])
         else:
             self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
+        if self._teacher is not None:
+            self._teacher.label(world, self.arrays["teacher"][e])
 
     def reset(self, seeds: list[int | None]) -> None:
         for e, (world, seed) in enumerate(zip(self.worlds, seeds)):
@@ -187,6 +197,8 @@ class InProcessBatch:
                     final[...] = self._targets[e][key]
                 world.reset(seed=int(world.rng.integers(2**63)))
                 self._observe_initial(e)
+            elif self._teacher is not None:
+                self._teacher.label(world, self.arrays["teacher"][e])
 
     def close(self) -> None:
         pass
@@ -442,13 +454,18 @@ class SoccerVectorEnv:
     team (``soccer.scripted``, reading the world's own ground truth in the world's process), and the rows given
     for those robots are ignored (send zeros). Why in the worlds: a scripted policy needs the ground truth, which
     would otherwise have to cross the process boundary every step.
+
+    ``teacher="chaser"`` or ``"keeper_and_chasers"``: every world also labels each robot with that scripted team's
+    action for the state its observation shows (``envs.teacher``), as (E, A, 4) discrete action indices:
+    ``BatchStep.teacher_actions``, and ``self.teacher_actions`` for the observations returned last.
     """
 
     def __init__(self, num_envs: int, backend: str = "auto", workers: int | None = None,
                  config: SoccerConfig | Mapping[str, Any] | None = None, observation: str = "padded",
                  perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
                  max_landmarks: int | None = None, max_objects: int | None = None, copy: bool = True,
-                 pin_workers: bool = False, targets: bool = False, scripted_team_b: str | None = None) -> None:
+                 pin_workers: bool = False, targets: bool = False, scripted_team_b: str | None = None,
+                 teacher: str | None = None) -> None:
         self.config = config if isinstance(config, SoccerConfig) else SoccerConfig.from_mapping(config)
         if observation not in VECTOR_OBSERVATIONS:
             raise ValueError(f"observation must be one of {VECTOR_OBSERVATIONS}, got {observation!r}")
@@ -459,8 +476,12 @@ class SoccerVectorEnv:
                              f"got observation={observation!r}")
         if scripted_team_b not in (None, "chaser", "keeper_and_chasers"):
             raise ValueError(f"scripted_team_b must be None, 'chaser' or 'keeper_and_chasers', got {scripted_team_b!r}")
+        if teacher is not None and teacher not in TEACHERS:
+            raise ValueError(f"teacher must be None or one of {TEACHERS}, got {teacher!r}")
+        if teacher is not None and self.config.head_mode != "discrete":
+            raise ValueError("teacher labels need head_mode='discrete' (the agent's head is then an index)")
         settings = _Settings(self.config, observation, perception_params(perception), max_landmarks, max_objects,
-                             bool(targets), scripted_team_b)
+                             bool(targets), scripted_team_b, teacher)
         observations = settings.observations()      # checks the layout maxima; gives the spaces
         self.observation = observation
         self.layout: PaddedLayout | None = observations.layout if observation == "padded" else None
@@ -481,6 +502,7 @@ class SoccerVectorEnv:
         self._keys = [k[4:] for k in arrays if k.startswith("obs/")]
         self._target_keys = [k[8:] for k in arrays if k.startswith("targets/")]
         self.with_targets = bool(targets)
+        self.teacher = teacher
         self.target_shapes: dict[str, tuple[int, ...]] | None = \
             target_shapes(self.config.players_per_team) if targets else None
         self._was_reset = self._closed = False
@@ -505,6 +527,16 @@ class SoccerVectorEnv:
         if not self._was_reset:
             raise RuntimeError("no targets before reset(); call reset(seed) first")
         return self._targets("targets/")
+
+    @property
+    def teacher_actions(self) -> np.ndarray:
+        """The teacher's (E, A, 4) labels of the observations returned last, copied."""
+        self._check_open()
+        if self.teacher is None:
+            raise RuntimeError("this SoccerVectorEnv was made without a teacher")
+        if not self._was_reset:
+            raise RuntimeError("no teacher labels before reset(); call reset(seed) first")
+        return self._batch.arrays["teacher"].copy()
 
     def _check_open(self) -> None:
         if self._closed:
@@ -532,8 +564,9 @@ class SoccerVectorEnv:
         else:
             targets = self._targets("targets/", copy=self.copy)
             final_targets = {e: self._targets("final_targets/", e) for e in ended}
+        teacher = arrays["teacher"].copy() if self.teacher is not None else None
         return BatchStep(self._observation("obs/", copy=self.copy), terms.sum(axis=1), terms, terminated,
-                         truncated, finals, arrays["dropped"].copy(), targets, final_targets)
+                         truncated, finals, arrays["dropped"].copy(), targets, final_targets, teacher)
 
     def close(self) -> None:
         self._closed = True

@@ -8,7 +8,8 @@ One function, ``update``, serves both algorithms (A2C is the one-epoch, one-mini
    recurrent state stored at the rollout's start (``Rollout.initial_state``), with the state zeroed where an episode
    starts, by ``DynEnvAgent.forward_sequence`` over the T+1 observations (the last one gives φ_T for curiosity).
 3. Loss = policy + value_coef·value − entropy_coef·entropy + forward_coef·forward + inverse_coef·inverse +
-   ltp_coef·LTP + self_supervised_coef·(localization + reconstruction), each term switchable by the variant.
+   ltp_coef·LTP + self_supervised_coef·(localization + reconstruction), each term switchable by the variant,
+   + imitation_coef·imitation when the rollout has teacher labels (not in the paper; see ``TrainConfig.teacher``).
 
 Policy loss: PPO's clipped surrogate min(r·A, clip(r, 1±ε)·A) with r = π(a|s)/π_old(a|s) on the stored behaviour
 log-probabilities (DynEnv's PPO had the sign flipped and compared freshly resampled actions, §12.13); A2C's
@@ -63,6 +64,7 @@ class UpdateSettings:
     use_localization: bool = False
     use_reconstruction: bool = False
     intrinsic_reward_coef: float = 0.0
+    imitation_coef: float = 0.0       # weight of −log π(teacher's action | s); the trainer sets it per update
 
     @property
     def ppo(self) -> bool:
@@ -271,5 +273,25 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
                 error = (out.pose[..., :2] - targets["pose"][..., :2]).norm(dim=-1)
             for metres in (0.25, 0.5, 1.0):
                 log(f"localization_within_{int(metres * 100)}cm", (error < metres).float().mean())
+    if s.imitation_coef > 0.0 and "teacher_actions" in rollout:
+        imitation, agreement = imitation_loss(agent, step_out, rollout["teacher_actions"][:, rows], acting)
+        loss = loss + s.imitation_coef * imitation
+        log("imitation_loss", imitation.detach())
+        for name, value in agreement.items():
+            log(name, value)
     log("loss", loss.detach())
     return loss, float(approx_kl)
+
+
+def imitation_loss(agent: Any, out: Any, teacher: Tensor, acting: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
+    """−log π(teacher's action | s) summed over the heads, averaged over the steps where the robot could act; and
+    agreement fractions over those steps: the policy's most likely action equals the teacher's on every head
+    (``teacher_agreement``) and on each head (``teacher_agreement_<head>``)."""
+    log_prob, _ = log_prob_entropy(agent, out, teacher)
+    with torch.no_grad():
+        heads = ("walk", "turn", "kick", "head")
+        same = torch.stack([getattr(out, h).argmax(-1) for h in heads], -1) == teacher
+        agreement = {"teacher_agreement": masked_mean(same.all(-1).float(), acting)}
+        agreement.update({f"teacher_agreement_{h}": masked_mean(same[..., i].float(), acting)
+                          for i, h in enumerate(heads)})
+    return -masked_mean(log_prob, acting), agreement

@@ -35,6 +35,7 @@ ALGORITHMS = ("a2c", "ppo")
 VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
 OPPONENTS = ("self", "snapshot", "scripted", "random")
 BACKENDS = ("auto", "inprocess", "subprocess")
+TEACHER_KINDS = ("chaser",)     # one shared network has no slot input, so it cannot imitate a keeper in one slot
 HEAD_MODES = ("discrete", "continuous")
 PERCEPTIONS = ("realistic", "dynenv", "none")        # the presets of dynenv_ros.perception (config/perception/)
 MAX_PLAYERS_PER_TEAM = 5
@@ -162,6 +163,17 @@ class TrainConfig:
     privileged_pose_seeding: bool = _f(False, "Re-seed the localization LSTM from the true pose every rollout, as "
                                               "the original code did (privileged information).")
 
+    # -- imitation (not in the paper) -------------------------------------------------------------------------
+    teacher: str | None = _f(None, "Scripted teacher whose actions label every learning robot's states for an "
+                                   "imitation loss (DAgger: the learner acts, the teacher labels): 'chaser' "
+                                   "(every robot a chaser: one shared network cannot tell a keeper slot from a "
+                                   "chaser slot); null = none (paper).")
+    imitation_coef: float = _f(0.0, "Weight of the imitation loss −log π(teacher's action | s) at the start of "
+                                    "training; needs a teacher.")
+    imitation_decay_env_steps: int = _f(0, "Env steps over which imitation_coef falls linearly to "
+                                           "imitation_final_coef; 0 = no decay.")
+    imitation_final_coef: float = _f(0.0, "Imitation weight after the decay.")
+
     # -- opponents ---------------------------------------------------------------------------------------------
     opponent: str = _f("self", "Team B: 'self' (both teams learn, shared weights), 'snapshot' (frozen past "
                                "copies), 'scripted', 'random'.")
@@ -201,6 +213,13 @@ class TrainConfig:
     def env_steps_per_update(self) -> int:
         return self.num_envs * self.rollout_length
 
+    def imitation_weight(self, env_steps: int) -> float:
+        """The imitation loss's weight after ``env_steps``: imitation_coef, linearly to imitation_final_coef."""
+        if self.imitation_decay_env_steps <= 0:
+            return self.imitation_coef
+        done = min(1.0, env_steps / self.imitation_decay_env_steps)
+        return self.imitation_coef + done * (self.imitation_final_coef - self.imitation_coef)
+
     # -- JSON --------------------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """Every field, JSON-ready (str, int, float, bool, None only)."""
@@ -231,6 +250,8 @@ class TrainConfig:
         _choice("variant", self.variant, VARIANTS)
         _choice("opponent", self.opponent, OPPONENTS)
         _choice("backend", self.backend, BACKENDS)
+        if self.teacher is not None:
+            _choice("teacher", self.teacher, TEACHER_KINDS)
         _choice("head_mode", self.head_mode, HEAD_MODES)
         if self.head_mode != "discrete":
             raise ConfigError("head_mode", "only 'discrete' can be trained so far: the rollout stores integer actions "
@@ -250,7 +271,8 @@ class TrainConfig:
             raise ConfigError("seed", f"must be >= 0, got {self.seed}")
         for key in ("gamma", "gae_lambda", "learning_rate", "adam_eps", "max_grad_norm", "value_coef",
                     "entropy_coef", "ppo_clip", "forward_coef", "inverse_coef", "ltp_coef", "self_supervised_coef",
-                    "intrinsic_reward_coef", "checkpoint_every_minutes", "max_minutes", "target_kl"):
+                    "intrinsic_reward_coef", "checkpoint_every_minutes", "max_minutes", "target_kl",
+                    "imitation_coef", "imitation_final_coef"):
             value = getattr(self, key)
             if value is not None and not math.isfinite(value):
                 raise ConfigError(key, f"must be finite, got {value}")
@@ -264,7 +286,7 @@ class TrainConfig:
             if value is not None and value <= 0.0:
                 raise ConfigError(key, f"must be > 0, got {value}")
         for key in ("value_coef", "entropy_coef", "forward_coef", "inverse_coef", "ltp_coef", "self_supervised_coef",
-                    "intrinsic_reward_coef"):
+                    "intrinsic_reward_coef", "imitation_coef", "imitation_final_coef"):
             if getattr(self, key) < 0.0:
                 raise ConfigError(key, f"must be >= 0 (a weight), got {getattr(self, key)}")
         losses = self.losses()
@@ -281,6 +303,10 @@ class TrainConfig:
                                                     "encoder; to train localization + reconstruction from scratch "
                                                     "use variant 'pred' with use_localization and "
                                                     "use_reconstruction true")
+        if self.imitation_decay_env_steps < 0:
+            raise ConfigError("imitation_decay_env_steps", f"must be >= 0, got {self.imitation_decay_env_steps}")
+        if (self.imitation_coef > 0.0 or self.imitation_final_coef > 0.0) and self.teacher is None:
+            raise ConfigError("imitation_coef", "an imitation loss needs a teacher (set teacher: chaser)")
         if self.intrinsic_reward_coef > 0.0 and not losses.forward:
             raise ConfigError("intrinsic_reward_coef", f"> 0 needs a forward model, which variant "
                                                        f"{self.variant!r} does not train")

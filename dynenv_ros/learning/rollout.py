@@ -15,6 +15,8 @@ by world, ``(E, A_learning) -> B``):
   with ``ball_known`` / ``robots_known``: seen at least once since the episode began (DynEnv wiped this memory
   every 6-step rollout, §12.18; here it lasts the episode).
 - ``initial_state``: the recurrent state before step 0, so the learner re-runs whole sequences from it.
+- ``teacher_actions`` (T, B, 4) int64 (``SoccerVectorEnv(teacher=...)`` only): the scripted teacher's action in
+  the state of observation t (``envs.teacher``), the imitation loss's label; the learner's own action is executed.
 
 Everything is numpy until ``as_tensors``; nothing per detection is ever a Python object.
 """
@@ -99,6 +101,7 @@ class Rollout:
     initial_state: State
     targets: dict[str, np.ndarray] = field(default_factory=dict)
     seed_pose: np.ndarray | None = None     # (B, 6) privileged seeding only: the noisy true pose at step 0
+    teacher_actions: np.ndarray | None = None   # (T, B, 4) teacher labels (SoccerVectorEnv(teacher=...)) or None
 
     @property
     def steps(self) -> int:
@@ -120,6 +123,8 @@ class Rollout:
             out[name] = tensor(getattr(self, name))
         if self.seed_pose is not None:
             out["seed_pose"] = tensor(self.seed_pose)
+        if self.teacher_actions is not None:
+            out["teacher_actions"] = tensor(self.teacher_actions)
         return out
 
 
@@ -156,6 +161,8 @@ class RolloutCollector:
             raise ValueError("privileged pose seeding needs the true pose: SoccerVectorEnv(targets=True)")
         self._obs = env.reset(seed=seed)
         self._targets = env.targets if self.with_targets else {}
+        self.with_teacher = getattr(env, "teacher", None) is not None
+        self._teacher = env.teacher_actions if self.with_teacher else None
         batch = env.num_envs * len(self.learning_robots)
         self.state: State = tuple(s.to(device_of(agent)) for s in agent.initial_state(batch))  # type: ignore
         self._starts = np.ones(batch, bool)
@@ -194,6 +201,7 @@ class RolloutCollector:
         episode_end, truncated = np.zeros((steps, B), bool), np.zeros((steps, B), bool)
         final_values = np.zeros((steps, B), np.float32)
         starts, acting = np.zeros((steps + 1, B), bool), np.zeros((steps + 1, B), bool)
+        teacher = np.zeros((steps, B, 4), np.int64) if self.with_teacher else None
         seed_pose = None
         if self.pose_seeder is not None:
             true_pose = flatten_robots(self._targets["pose"], self.learning_robots)
@@ -221,6 +229,8 @@ class RolloutCollector:
                 break
             sampled, log_prob = sample_actions(self.agent, step, self.generator)
             actions[t], log_probs[t] = sampled.numpy().astype(np.int64), log_prob.numpy()
+            if teacher is not None:
+                teacher[t] = flatten_robots(self._teacher, self.learning_robots)
             self.state = step.state
             full = np.zeros((E, self.env.config.n_robots, 4), np.int64)
             full[:, self.learning_robots] = actions[t].reshape(E, k, 4)
@@ -240,11 +250,13 @@ class RolloutCollector:
             self._obs = result.observations
             if self.with_targets:
                 self._targets = result.targets
+            if self.with_teacher:
+                self._teacher = result.teacher_actions
             self._starts = episode_end[t].copy()
             self._other_starts = np.repeat(ended[:, None], len(self.other_robots), axis=1)
             current = self._learning_obs(self._obs)
         return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
-                       starts, acting, initial_state, targets, seed_pose)
+                       starts, acting, initial_state, targets, seed_pose, teacher)
 
     def _final_values(self, result: Any, truncated: np.ndarray) -> np.ndarray:
         """V(final observation) for the robots of truncated worlds, from the state the episode left them in."""

@@ -50,7 +50,7 @@ def update_settings(cfg: TrainConfig) -> UpdateSettings:
         ltp_coef=cfg.ltp_coef, self_supervised_coef=cfg.self_supervised_coef,
         use_forward=losses.icm_forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
         use_localization=losses.localization, use_reconstruction=losses.reconstruction,
-        intrinsic_reward_coef=cfg.intrinsic_reward_coef)
+        intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0))
 
 
 class Trainer:
@@ -81,7 +81,8 @@ class Trainer:
             or cfg.privileged_pose_seeding
         self.env = SoccerVectorEnv(cfg.num_envs, backend=cfg.backend, config=soccer, observation="padded",
                                    perception=cfg.perception, targets=needs_targets,
-                                   scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None)
+                                   scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None,
+                                   teacher=cfg.teacher)
         n = cfg.players_per_team
         learning = np.arange(2 * n) if cfg.opponent == "self" else np.arange(n)
         self.opponent: Any = None
@@ -152,8 +153,11 @@ class Trainer:
                 rollout = self.collector.collect(cfg.rollout_length)
                 t1 = time.perf_counter()
                 self.learner.train()
+                self.settings.imitation_coef = cfg.imitation_weight(self.env_steps)
                 stats = update(self.learner, self.optimizer, rollout.as_tensors(self.device), self.settings,
                                self.generator)
+                if cfg.teacher is not None:
+                    stats["imitation_coef"] = self.settings.imitation_coef
                 t2 = time.perf_counter()
                 self.env_steps += per_update
                 self.updates += 1

@@ -1,0 +1,170 @@
+"""Imitation of a scripted teacher (DAgger): the worlds label every robot with the scripted team's action for the
+state its observation shows, the collector stores the labels beside the learner's own actions, the imitation loss
+reaches the actor (never the critic) and, on its own, makes the policy agree with the teacher."""
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.envs.teacher import action_indices
+from dynenv_ros.envs.vector import SoccerVectorEnv, _seeds
+from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, imitation_loss
+from dynenv_ros.learning.config import ConfigError, TrainConfig
+from dynenv_ros.learning.heads import Learner
+from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk, parse_action
+from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.soccer.scripted import act_all, team_policies
+from dynenv_ros.soccer.world import SoccerWorld
+
+HEAD_STEP = math.radians(12.5)     # MotionConfig: one discrete head unit
+HEAD_UNITS = 3                     # indices 0..6, 3 = no turn
+
+
+def test_action_indices_round_the_head_turn_to_the_nearest_step():
+    row = action_indices(SoccerAction(Walk.FORWARD, Turn.RIGHT, Kick.LEFT_FOOT, 2.2 * HEAD_STEP), HEAD_STEP, HEAD_UNITS)
+    assert row == (1, 2, 1, 3 + 2)
+    assert action_indices(SoccerAction(head_yaw_delta=-0.4 * HEAD_STEP), HEAD_STEP, HEAD_UNITS)[3] == 3
+    assert action_indices(SoccerAction(head_yaw_delta=-10 * HEAD_STEP), HEAD_STEP, HEAD_UNITS)[3] == 0
+    assert action_indices(SoccerAction(head_yaw_delta=10 * HEAD_STEP), HEAD_STEP, HEAD_UNITS)[3] == 6
+
+
+def test_following_the_labels_replays_the_scripted_team_and_backends_agree():
+    """Every robot plays its teacher label: the worlds then move exactly as worlds stepped directly by the chaser
+    team (its head turns rounded the same way), and the two backends give the same labels."""
+    config = SoccerConfig.from_mapping({"players_per_team": 1, "episode_seconds": 30.0})
+    worlds, periods, seed = 2, 40, 5
+    runs = []
+    for backend in ("inprocess", "subprocess"):
+        with SoccerVectorEnv(worlds, backend=backend, config=config, perception="none", teacher="chaser") as env:
+            env.reset(seed=seed)
+            labels, terms = [env.teacher_actions], []
+            for _ in range(periods):
+                step = env.step(labels[-1])
+                labels.append(step.teacher_actions)
+                terms.append(step.reward_terms)
+            runs.append((np.stack(labels), np.stack(terms)))
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])
+    labels, terms = runs[0]
+    assert labels.dtype == np.int64 and labels.shape == (periods + 1, worlds, 2, 4)
+    assert (labels[..., 0] == Walk.FORWARD).any() and (labels[..., 3] != HEAD_UNITS).any()   # it moves and looks
+
+    policies = team_policies(1, "chaser", field=config.field, motion=config.motion)
+    for e, world_seed in enumerate(_seeds(seed, worlds)):
+        world = SoccerWorld(config)
+        world.reset(seed=world_seed)
+        for t in range(periods):
+            expected = [action_indices(a, HEAD_STEP, HEAD_UNITS) for a in act_all(policies, world.snapshot())]
+            np.testing.assert_array_equal(labels[t, e], expected)
+            result = world.step([parse_action(f"robot {i}", np.array(row), head_mode="discrete",
+                                              head_step=HEAD_STEP, head_units=HEAD_UNITS)
+                                 for i, row in enumerate(expected)])
+            np.testing.assert_array_equal(terms[t, e, :3], np.asarray(result.rewards)[:3])
+
+
+def test_teacher_refusals():
+    with pytest.raises(ValueError, match="teacher"):
+        SoccerVectorEnv(1, backend="inprocess", teacher="random")
+    with pytest.raises(ValueError, match="discrete"):
+        SoccerVectorEnv(1, backend="inprocess", config={"head_mode": "continuous"}, teacher="chaser")
+    with SoccerVectorEnv(1, backend="inprocess") as env:
+        env.reset(seed=0)
+        with pytest.raises(RuntimeError, match="without a teacher"):
+            env.teacher_actions
+        assert env.step(np.zeros((1, 4, 4), np.int64) + [0, 0, 0, 3]).teacher_actions is None
+    with pytest.raises(ConfigError, match="imitation_coef.*teacher"):
+        TrainConfig(imitation_coef=1.0)
+    with pytest.raises(ConfigError, match="teacher"):
+        TrainConfig(teacher="keeper_and_chasers", imitation_coef=1.0)
+    with pytest.raises(ConfigError, match="imitation_decay_env_steps"):
+        TrainConfig(teacher="chaser", imitation_coef=1.0, imitation_decay_env_steps=-1)
+
+
+def test_imitation_weight_falls_linearly_to_its_final_value():
+    cfg = TrainConfig(teacher="chaser", imitation_coef=1.0, imitation_final_coef=0.2, imitation_decay_env_steps=1000)
+    assert cfg.imitation_weight(0) == 1.0
+    assert cfg.imitation_weight(500) == pytest.approx(0.6)
+    assert cfg.imitation_weight(1000) == pytest.approx(0.2)
+    assert cfg.imitation_weight(10**6) == pytest.approx(0.2)
+    assert TrainConfig(teacher="chaser", imitation_coef=0.5).imitation_weight(10**6) == 0.5
+
+
+@pytest.fixture(scope="module")
+def teacher_rollout():
+    torch.manual_seed(1)
+    env = SoccerVectorEnv(2, backend="inprocess", config={"players_per_team": 1, "episode_seconds": 3.0},
+                          teacher="chaser")
+    agent = DynEnvAgent()
+    learner = Learner(agent, horizon=3)
+    collector = RolloutCollector(env, agent, np.arange(2), None, torch.Generator().manual_seed(1), seed=1)
+    first_labels = env.teacher_actions
+    rollout = collector.collect(8)
+    yield learner, rollout, first_labels
+    env.close()
+
+
+def test_the_collector_stores_the_labels_of_each_acting_observation(teacher_rollout):
+    _, rollout, first_labels = teacher_rollout
+    assert rollout.teacher_actions.shape == (8, 4, 4)
+    np.testing.assert_array_equal(rollout.teacher_actions[0], first_labels.reshape(4, 4))
+    assert "teacher_actions" in rollout.as_tensors()
+
+
+def _settings(**on):
+    base = dict(policy_coef=0.0, value_coef=0.0, entropy_coef=0.0, use_forward=False, use_rcm=False,
+                use_inverse=False, use_ltp=False)
+    base.update(on)
+    return UpdateSettings(**base)
+
+
+def test_imitation_loss_reaches_the_actor_and_encoder_not_the_critic(teacher_rollout):
+    learner, rollout, _ = teacher_rollout
+    tensors = rollout.as_tensors()
+    T, B = rollout.steps, rollout.robots
+    zeros = torch.zeros(T, B)
+    learner.zero_grad(set_to_none=True)
+    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, _settings(imitation_coef=1.0),
+                              lambda *a: None)
+    loss.backward()
+    touched = {n for n, p in learner.named_parameters() if p.grad is not None and p.grad.abs().sum() > 0}
+    assert any(n.startswith("agent.walk") for n in touched), sorted(touched)[:5]
+    assert any(n.startswith("agent.objects") for n in touched)
+    assert not any(n.startswith("agent.critic") for n in touched)
+    learner.zero_grad(set_to_none=True)
+    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, _settings(imitation_coef=0.0),
+                              lambda *a: None)
+    assert float(loss.detach()) == 0.0          # every other term is off: no imitation without its weight
+
+
+def test_imitation_alone_makes_the_policy_agree_with_the_teacher(teacher_rollout):
+    learner, rollout, _ = teacher_rollout
+    tensors = rollout.as_tensors()
+    T, B = rollout.steps, rollout.robots
+    from dynenv_ros.learning.algorithms import run_sequence
+    from types import SimpleNamespace
+
+    def agreement():
+        with torch.no_grad():
+            out = run_sequence(learner.agent, tensors["obs"], tensors["initial_state"], tensors["starts"])
+            step = SimpleNamespace(walk=out.walk[:T], turn=out.turn[:T], kick=out.kick[:T], head=out.head[:T])
+            acting = torch.ones(T, B, dtype=torch.bool)
+            loss, agree = imitation_loss(learner.agent, step, tensors["teacher_actions"], acting)
+            assert float(agree["teacher_agreement"]) <= min(float(agree[f"teacher_agreement_{h}"])
+                                                             for h in ("walk", "turn", "kick", "head"))
+            return float(loss), float(agree["teacher_agreement"])
+
+    loss0, agree0 = agreement()
+    optimizer = torch.optim.Adam(learner.parameters(), lr=3e-3)
+    zeros = torch.zeros(T, B)
+    for _ in range(60):
+        loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, _settings(imitation_coef=1.0),
+                                  lambda *a: None)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    loss1, agree1 = agreement()
+    assert agree0 < 0.5 and loss0 > 2.0          # an untrained policy: ~ log(5·3·3·7) ≈ 5.75 nats
+    assert agree1 > 0.9 and loss1 < 0.5 * loss0
