@@ -32,6 +32,17 @@ def test_bad_config_is_refused_naming_the_key(tmp_path, capsys, override, key):
     assert not (tmp_path / "run").exists()          # refused before any work
 
 
+def test_help_lists_every_config_key_with_its_default(capsys):
+    import dataclasses
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    for field in dataclasses.fields(TrainConfig):
+        assert f"  {field.name} (default " in text, field.name
+    assert "teacher (default None)" in text and "learning_rate (default 0.0001)" in text
+
+
 def test_unknown_preset_and_cuda_without_gpu_are_refused(tmp_path, capsys):
     assert main(["--config", "no_such_preset", "--run-dir", str(tmp_path / "a")]) == 2
     assert "no config preset" in capsys.readouterr().err

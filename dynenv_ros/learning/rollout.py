@@ -188,8 +188,15 @@ class RolloutCollector:
                                                  robots)
         return dict(self._known)
 
-    @torch.no_grad()
     def collect(self, steps: int) -> Rollout:
+        """The next ``steps`` periods of every world. Acting runs under ``torch.inference_mode`` (cheaper than
+        no_grad); the start state the learner re-runs from is copied out of it into an ordinary tensor."""
+        with torch.inference_mode():
+            rollout = self._collect(steps)
+        rollout.initial_state = tuple(s.clone() for s in rollout.initial_state)   # type: ignore[assignment]
+        return rollout
+
+    def _collect(self, steps: int) -> Rollout:
         E, k = self.env.num_envs, len(self.learning_robots)
         B = E * k
         first = self._learning_obs(self._obs)

@@ -39,7 +39,12 @@ def preset_path(name: str) -> Path:
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="dynenv-train", description=__doc__.split("\n\n")[0])
+    from dynenv_ros.learning.config import TrainConfig, field_help
+    defaults = TrainConfig()
+    keys = "\n".join(f"  {key} (default {getattr(defaults, key)!r}): {text}" for key, text in field_help().items())
+    parser = argparse.ArgumentParser(prog="dynenv-train", description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=f"keys for --set (TrainConfig):\n{keys}")
     parser.add_argument("--config", default="paper_a2c", help="preset name in config/train/ or a YAML file")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override one config field (repeatable)")
