@@ -149,7 +149,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             backward_done = time.perf_counter()
-            norm = torch.nn.utils.clip_grad_norm_(learner.parameters(), s.max_grad_norm)
+            norm = torch.nn.utils.clip_grad_norm_(learner.parameters(), s.max_grad_norm, foreach=True)
             optimizer.step()
             timing["forward_backward"] += backward_done - started
             timing["optimizer"] += time.perf_counter() - backward_done
@@ -200,7 +200,8 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
                     ) -> tuple[Tensor, float]:
     agent = learner.agent
     T = rollout["actions"].shape[0]
-    obs = {k: v[:, rows] for k, v in rollout["obs"].items()}
+    every_row = len(rows) == rollout["actions"].shape[1] and bool((rows == torch.arange(len(rows))).all())
+    obs = rollout["obs"] if every_row else {k: v[:, rows] for k, v in rollout["obs"].items()}   # A2C: no copy
     out = run_sequence(agent, obs, _initial_state(learner, rollout, rows), rollout["starts"][:, rows])
     actions = rollout["actions"][:, rows]
     acting = rollout["can_act"][:T, rows]
