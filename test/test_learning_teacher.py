@@ -168,3 +168,45 @@ def test_imitation_alone_makes_the_policy_agree_with_the_teacher(teacher_rollout
     loss1, agree1 = agreement()
     assert agree0 < 0.5 and loss0 > 2.0          # an untrained policy: ~ log(5·3·3·7) ≈ 5.75 nats
     assert agree1 > 0.9 and loss1 < 0.5 * loss0
+
+
+def test_teacher_driven_worlds_execute_the_labels_and_give_the_rl_terms_nothing():
+    torch.manual_seed(2)
+    env = SoccerVectorEnv(2, backend="inprocess", config={"players_per_team": 1, "episode_seconds": 2.0},
+                          teacher="chaser")
+    agent = DynEnvAgent()
+    learner = Learner(agent, horizon=3)
+    collector = RolloutCollector(env, agent, np.arange(2), None, torch.Generator().manual_seed(2), seed=2)
+    with pytest.raises(ValueError, match="worlds must be in 0..2"):
+        collector.drive_with_teacher(3)
+    collector.drive_with_teacher(1)                 # world 0's two robots follow the teacher, world 1 is the learner's
+    rollout = collector.collect(10)                 # 2 s episodes = 4 periods: episodes end inside the rollout
+    env.close()
+    np.testing.assert_array_equal(rollout.teacher_driven, [True, True, False, False])
+    np.testing.assert_array_equal(rollout.actions[:, :2], rollout.teacher_actions[:, :2])
+    assert not (rollout.actions[:, 2:] == rollout.teacher_actions[:, 2:]).all()
+    assert np.isfinite(rollout.log_probs).all()
+    assert collector.finished and len(collector.finished) % 2 == 0
+    assert len(collector.finished) == 2 * int(rollout.episode_end[:, 2].sum())   # world 1's robots only
+
+    tensors = rollout.as_tensors()
+    tensors["teacher_driven"] = torch.ones(4, dtype=torch.bool)       # every row off-policy
+    T, B = rollout.steps, rollout.robots
+    ones = torch.ones(T, B)
+    rl_only = UpdateSettings(policy_coef=1.0, value_coef=1.0, entropy_coef=0.1, use_forward=False, use_rcm=False,
+                             use_inverse=False, use_ltp=False, imitation_coef=0.0)
+    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
+    assert float(loss.detach()) == 0.0
+    tensors["teacher_driven"] = torch.tensor([True, True, False, False])
+    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
+    assert float(loss.detach()) != 0.0
+
+
+def test_teacher_driven_config_refusals():
+    with pytest.raises(ConfigError, match="teacher_driven_worlds.*teacher"):
+        TrainConfig(teacher_driven_worlds=2)
+    with pytest.raises(ConfigError, match="teacher_driven_worlds"):
+        TrainConfig(teacher="chaser", imitation_coef=1.0, num_envs=4, teacher_driven_worlds=4)
+    with pytest.raises(ConfigError, match="teacher_driven_env_steps"):
+        TrainConfig(teacher="chaser", teacher_driven_worlds=1, teacher_driven_env_steps=-5)
+    TrainConfig(teacher="chaser", imitation_coef=1.0, num_envs=4, teacher_driven_worlds=3)

@@ -205,6 +205,12 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
     out = run_sequence(agent, obs, _initial_state(learner, rollout, rows), rollout["starts"][:, rows])
     actions = rollout["actions"][:, rows]
     acting = rollout["can_act"][:T, rows]
+    everywhere = torch.ones_like(acting)
+    if "teacher_driven" in rollout:       # rows that executed the teacher's actions: off-policy, no RL terms there
+        on_policy = ~rollout["teacher_driven"][rows].unsqueeze(0).expand_as(acting)
+        imitated, acting, everywhere = acting, acting & on_policy, on_policy
+    else:
+        imitated = acting
     step_out = SimpleNamespace(walk=out.walk[:T], turn=out.turn[:T], kick=out.kick[:T], head=out.head[:T])
     log_prob, entropy = log_prob_entropy(agent, step_out, actions)
     adv = advantages[:, rows]
@@ -226,7 +232,7 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
         old = rollout["values"][:T, rows]
         clipped = old + (value - old).clamp(-s.clip, s.clip)
         value_error = torch.maximum(value_error, (clipped - target) ** 2)
-    value_loss = value_error.mean()
+    value_loss = masked_mean(value_error, everywhere)
     entropy_mean = masked_mean(entropy, acting)
     loss = s.policy_coef * policy_loss + s.value_coef * value_loss - s.entropy_coef * entropy_mean
     if intrinsic_returns is not None:
@@ -245,7 +251,7 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
 
     curious = s.use_forward or s.use_inverse or s.use_ltp
     if curious:
-        transition = acting & ~rollout["episode_end"][:, rows]
+        transition = imitated & ~rollout["episode_end"][:, rows]     # every executed action, whoever chose it
         onehot = one_hot_actions(actions)
         heads = learner.curiosity
         phi = out.phi
@@ -275,7 +281,7 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
             for metres in (0.25, 0.5, 1.0):
                 log(f"localization_within_{int(metres * 100)}cm", (error < metres).float().mean())
     if s.imitation_coef > 0.0 and "teacher_actions" in rollout:
-        imitation, agreement = imitation_loss(agent, step_out, rollout["teacher_actions"][:, rows], acting)
+        imitation, agreement = imitation_loss(agent, step_out, rollout["teacher_actions"][:, rows], imitated)
         loss = loss + s.imitation_coef * imitation
         log("imitation_loss", imitation.detach())
         for name, value in agreement.items():

@@ -173,6 +173,11 @@ class TrainConfig:
     imitation_decay_env_steps: int = _f(0, "Env steps over which imitation_coef falls linearly to "
                                            "imitation_final_coef; 0 = no decay.")
     imitation_final_coef: float = _f(0.0, "Imitation weight after the decay.")
+    teacher_driven_worlds: int = _f(0, "Worlds (of num_envs) whose learning robots execute the teacher's actions "
+                                       "instead of their own (DAgger's β); their steps train only the imitation "
+                                       "and auxiliary losses. 0 = the learner acts everywhere.")
+    teacher_driven_env_steps: int = _f(0, "Env steps after which the teacher-driven worlds go back to the learner; "
+                                          "0 = never.")
 
     # -- opponents ---------------------------------------------------------------------------------------------
     opponent: str = _f("self", "Team B: 'self' (both teams learn, shared weights), 'snapshot' (frozen past "
@@ -307,6 +312,15 @@ class TrainConfig:
             raise ConfigError("imitation_decay_env_steps", f"must be >= 0, got {self.imitation_decay_env_steps}")
         if (self.imitation_coef > 0.0 or self.imitation_final_coef > 0.0) and self.teacher is None:
             raise ConfigError("imitation_coef", "an imitation loss needs a teacher (set teacher: chaser)")
+        if self.teacher_driven_env_steps < 0:
+            raise ConfigError("teacher_driven_env_steps", f"must be >= 0, got {self.teacher_driven_env_steps}")
+        if self.teacher_driven_worlds:
+            if self.teacher is None:
+                raise ConfigError("teacher_driven_worlds", "teacher-driven worlds need a teacher (set teacher: chaser)")
+            if not 0 < self.teacher_driven_worlds < self.num_envs:
+                raise ConfigError("teacher_driven_worlds", f"must be in 0..{self.num_envs - 1} (num_envs - 1: the "
+                                                           f"learner needs a world of its own), got "
+                                                           f"{self.teacher_driven_worlds}")
         if self.intrinsic_reward_coef > 0.0 and not losses.forward:
             raise ConfigError("intrinsic_reward_coef", f"> 0 needs a forward model, which variant "
                                                        f"{self.variant!r} does not train")

@@ -16,7 +16,11 @@ by world, ``(E, A_learning) -> B``):
   every 6-step rollout, §12.18; here it lasts the episode).
 - ``initial_state``: the recurrent state before step 0, so the learner re-runs whole sequences from it.
 - ``teacher_actions`` (T, B, 4) int64 (``SoccerVectorEnv(teacher=...)`` only): the scripted teacher's action in
-  the state of observation t (``envs.teacher``), the imitation loss's label; the learner's own action is executed.
+  the state of observation t (``envs.teacher``), the imitation loss's label; the learner's own action is executed
+  (except in teacher-driven worlds).
+- ``teacher_driven`` (B,) bool: the robot executed the teacher's actions in this rollout (DAgger's β share of the
+  worlds, ``drive_with_teacher``); its steps are off-policy, so the learner leaves them out of the policy, entropy
+  and value terms and learns from them only by imitation and the auxiliary losses.
 
 Everything is numpy until ``as_tensors``; nothing per detection is ever a Python object.
 """
@@ -84,6 +88,12 @@ def sample_actions(agent: DynEnvAgent, step: Any, generator: torch.Generator | N
     return actions, log_prob
 
 
+def action_log_prob(agent: DynEnvAgent, step: Any, actions: Tensor) -> Tensor:
+    """(B,) log-probability of given (B, 4) actions under an acting step's distributions, on the CPU."""
+    heads = SimpleNamespace(walk=step.walk.cpu(), turn=step.turn.cpu(), kick=step.kick.cpu(), head=step.head.cpu())
+    return sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
+
+
 @dataclass
 class Rollout:
     """One rollout's arrays (see the module docstring); ``robots_per_world`` learning robots in each world."""
@@ -102,6 +112,7 @@ class Rollout:
     targets: dict[str, np.ndarray] = field(default_factory=dict)
     seed_pose: np.ndarray | None = None     # (B, 6) privileged seeding only: the noisy true pose at step 0
     teacher_actions: np.ndarray | None = None   # (T, B, 4) teacher labels (SoccerVectorEnv(teacher=...)) or None
+    teacher_driven: np.ndarray | None = None    # (B,) bool: executed the teacher's actions (off-policy rows)
 
     @property
     def steps(self) -> int:
@@ -125,6 +136,8 @@ class Rollout:
             out["seed_pose"] = tensor(self.seed_pose)
         if self.teacher_actions is not None:
             out["teacher_actions"] = tensor(self.teacher_actions)
+        if self.teacher_driven is not None and self.teacher_driven.any():
+            out["teacher_driven"] = tensor(self.teacher_driven)
         return out
 
 
@@ -163,6 +176,7 @@ class RolloutCollector:
         self._targets = env.targets if self.with_targets else {}
         self.with_teacher = getattr(env, "teacher", None) is not None
         self._teacher = env.teacher_actions if self.with_teacher else None
+        self.teacher_driven = np.zeros(env.num_envs * len(self.learning_robots), bool)
         batch = env.num_envs * len(self.learning_robots)
         self.state: State = tuple(s.to(device_of(agent)) for s in agent.initial_state(batch))  # type: ignore
         self._starts = np.ones(batch, bool)
@@ -175,6 +189,15 @@ class RolloutCollector:
         self.episode_terms = np.zeros((batch, 4))
         self.episode_positive = np.zeros(batch)
         self.finished: list[dict[str, float]] = []     # finished episodes since the caller last cleared it
+
+    def drive_with_teacher(self, worlds: int) -> None:
+        """From the next step on, the learning robots of the first ``worlds`` worlds execute the teacher's actions
+        (DAgger's β = worlds / num_envs); 0 gives every world back to the learner."""
+        if worlds and not self.with_teacher:
+            raise ValueError("teacher-driven worlds need SoccerVectorEnv(teacher=...)")
+        if not 0 <= worlds <= self.env.num_envs:
+            raise ValueError(f"worlds must be in 0..{self.env.num_envs}, got {worlds}")
+        self.teacher_driven = np.repeat(np.arange(self.env.num_envs) < worlds, len(self.learning_robots))
 
     def _learning_obs(self, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         return {k: flatten_robots(v, self.learning_robots) for k, v in obs.items()}
@@ -238,6 +261,11 @@ class RolloutCollector:
             actions[t], log_probs[t] = sampled.numpy().astype(np.int64), log_prob.numpy()
             if teacher is not None:
                 teacher[t] = flatten_robots(self._teacher, self.learning_robots)
+                driven = self.teacher_driven
+                if driven.any():
+                    actions[t, driven] = teacher[t, driven]
+                    log_probs[t, driven] = action_log_prob(self.agent, step, torch.from_numpy(teacher[t]))[
+                        torch.from_numpy(driven)].numpy()
             self.state = step.state
             full = np.zeros((E, self.env.config.n_robots, 4), np.int64)
             full[:, self.learning_robots] = actions[t].reshape(E, k, 4)
@@ -263,7 +291,8 @@ class RolloutCollector:
             self._other_starts = np.repeat(ended[:, None], len(self.other_robots), axis=1)
             current = self._learning_obs(self._obs)
         return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
-                       starts, acting, initial_state, targets, seed_pose, teacher)
+                       starts, acting, initial_state, targets, seed_pose, teacher,
+                       self.teacher_driven.copy() if self.with_teacher else None)
 
     def _final_values(self, result: Any, truncated: np.ndarray) -> np.ndarray:
         """V(final observation) for the robots of truncated worlds, from the state the episode left them in."""
@@ -280,7 +309,7 @@ class RolloutCollector:
         self.episode_terms += terms
         self.episode_returns += terms.sum(-1)
         self.episode_positive += np.maximum(terms, 0.0).sum(-1)
-        for r in np.flatnonzero(ended):
+        for r in np.flatnonzero(ended & ~self.teacher_driven):     # the learner's own episodes only
             t = self.episode_terms[r]
             # the paper's metric (facts §6.1, §11): the positive parts of every term, per period, minus the
             # observation reward

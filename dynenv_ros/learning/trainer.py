@@ -152,6 +152,7 @@ class Trainer:
             while self.env_steps < cfg.total_env_steps and self._elapsed() < deadline:
                 t0 = time.perf_counter()
                 self.learner.eval()
+                self.collector.drive_with_teacher(self._teacher_driven_worlds())
                 rollout = self.collector.collect(cfg.rollout_length)
                 t1 = time.perf_counter()
                 self.learner.train()
@@ -187,6 +188,11 @@ class Trainer:
             if bar is not None:
                 bar.close()
         return self.finish()
+
+    def _teacher_driven_worlds(self) -> int:
+        cfg = self.cfg
+        done = cfg.teacher_driven_env_steps and self.env_steps >= cfg.teacher_driven_env_steps
+        return 0 if done else cfg.teacher_driven_worlds
 
     def _log(self, stats: dict[str, float], window: dict[str, float], returns: list[dict[str, float]],
              bar: Any, updates: int | None = None) -> None:
