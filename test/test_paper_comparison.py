@@ -116,7 +116,7 @@ def test_paper_comparison_on_fixture_runs(tool, tmp_path):
         total = np.mean([r["total"] for r in rows])
         assert float(row[8]) == pytest.approx(total / random_total, rel=5e-3)
     assert "| recon |" not in text.split("## (b)")[0]
-    assert "No finished runs for: recon." in text
+    assert "No finished runs for: recon, pred+teacher." in text
 
     # table (b): goals and W/D/L summed over seeds and episodes
     row = parse_row(text, "## (b)", "baseline")

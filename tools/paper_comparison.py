@@ -61,15 +61,16 @@ from dynenv_ros.learning.evaluation import FORMAT, RESULTS, SEED_METRICS, summar
 RANDOM = "random"
 OPPONENTS = ("random", "scripted")
 RANDOM_SEEDS = (0, 1, 2)
-GROUP_ORDER = ("random", "baseline", "pred", "recon")
+GROUP_ORDER = ("random", "baseline", "pred", "recon", "pred+teacher")   # "+teacher": imitation on (not in the paper)
 TERMS = ("primary", "rule", "auxiliary", "observation")
 # (baseline group, proposal group) on the total reward against random; goal difference against scripted.
-TOTAL_COMPARISONS = (("random", "baseline"), ("random", "pred"), ("baseline", "pred"), ("pred", "recon"))
-GOAL_COMPARISONS = (("baseline", "pred"),)
+TOTAL_COMPARISONS = (("random", "baseline"), ("random", "pred"), ("baseline", "pred"), ("pred", "recon"),
+                     ("pred", "pred+teacher"))
+GOAL_COMPARISONS = (("baseline", "pred"), ("pred", "pred+teacher"))
 CURVE_METRICS = (("episode/return", "episode return (per robot)"),
                  ("episode/paper_metric", "episode paper metric (per robot)"),
                  ("speed/env_steps_per_second", "env steps per second"))
-COLORS = {"baseline": "#4c72b0", "pred": "#dd8452", "recon": "#55a868"}
+COLORS = {"baseline": "#4c72b0", "pred": "#dd8452", "recon": "#55a868", "pred+teacher": "#c44e52"}
 RUN_NAME = re.compile(r"^(?P<algorithm>[a-z0-9]+)_(?P<variant>.+)_s(?P<seed>\d+)$")
 
 
@@ -135,6 +136,8 @@ def find_runs(runs_dir: Path, algorithm: str | None = None) -> tuple[list[Run], 
             continue
         match = RUN_NAME.match(path.name)
         variant = config.get("variant") or (match and match["variant"])
+        if variant and config.get("teacher"):      # imitation of a scripted teacher: a group of its own
+            variant = f"{variant}+teacher"
         seed = config.get("seed", match and int(match["seed"]))
         algo = config.get("algorithm") or (match and match["algorithm"]) or "?"
         if not variant or seed is None:
