@@ -92,14 +92,19 @@ def test_imitation_weight_falls_linearly_to_its_final_value():
     assert TrainConfig(teacher="chaser", imitation_coef=0.5).imitation_weight(10**6) == 0.5
 
 
-@pytest.fixture(scope="module")
-def teacher_rollout():
-    torch.manual_seed(1)
-    env = SoccerVectorEnv(2, backend="inprocess", config={"players_per_team": 1, "episode_seconds": 3.0},
+def _teacher_setup(seed, episode_seconds):
+    """Two 1v1 worlds labelled by the chaser, a fresh agent learning both robots of each world."""
+    torch.manual_seed(seed)
+    env = SoccerVectorEnv(2, backend="inprocess", config={"players_per_team": 1, "episode_seconds": episode_seconds},
                           teacher="chaser")
     agent = DynEnvAgent()
-    learner = Learner(agent, horizon=3)
-    collector = RolloutCollector(env, agent, np.arange(2), None, torch.Generator().manual_seed(1), seed=1)
+    collector = RolloutCollector(env, agent, np.arange(2), None, torch.Generator().manual_seed(seed), seed=seed)
+    return env, Learner(agent, horizon=3), collector
+
+
+@pytest.fixture(scope="module")
+def teacher_rollout():
+    env, learner, collector = _teacher_setup(1, 3.0)
     first_labels = env.teacher_actions
     rollout = collector.collect(8)
     yield learner, rollout, first_labels
@@ -171,12 +176,7 @@ def test_imitation_alone_makes_the_policy_agree_with_the_teacher(teacher_rollout
 
 
 def test_teacher_driven_worlds_execute_the_labels_and_give_the_rl_terms_nothing():
-    torch.manual_seed(2)
-    env = SoccerVectorEnv(2, backend="inprocess", config={"players_per_team": 1, "episode_seconds": 2.0},
-                          teacher="chaser")
-    agent = DynEnvAgent()
-    learner = Learner(agent, horizon=3)
-    collector = RolloutCollector(env, agent, np.arange(2), None, torch.Generator().manual_seed(2), seed=2)
+    env, learner, collector = _teacher_setup(2, 2.0)
     with pytest.raises(ValueError, match="worlds must be in 0..2"):
         collector.drive_with_teacher(3)
     collector.drive_with_teacher(1)                 # world 0's two robots follow the teacher, world 1 is the learner's
