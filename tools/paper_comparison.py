@@ -65,7 +65,7 @@ GROUP_ORDER = ("random", "baseline", "pred", "recon", "pred+teacher")   # "+teac
 TERMS = ("primary", "rule", "auxiliary", "observation")
 # (baseline group, proposal group) on the total reward against random; goal difference against scripted.
 TOTAL_COMPARISONS = (("random", "baseline"), ("random", "pred"), ("baseline", "pred"), ("pred", "recon"),
-                     ("pred", "pred+teacher"))
+                     ("random", "pred+teacher"), ("pred", "pred+teacher"))
 GOAL_COMPARISONS = (("baseline", "pred"), ("pred", "pred+teacher"))
 CURVE_METRICS = (("episode/return", "episode return (per robot)"),
                  ("episode/paper_metric", "episode paper metric (per robot)"),
