@@ -215,6 +215,24 @@ def test_recorder_process_finishes_the_bag_on_a_signal(stop, tmp_path, make_node
     assert {t["name"]: t["count"] for t in bag_info(bag)["topics"]} == counts_of(sent)
 
 
+def test_recorder_signalled_while_it_is_being_built_still_finishes_the_bag(tmp_path):
+    """A publisher can see the recorder's subscriptions, send, and signal before the recorder's constructor has
+    returned (the old handler then raised KeyboardInterrupt inside the constructor: exit 0, bag never finished).
+    Here the signal is sent from the constructor itself, after the subscriptions exist."""
+    bag = tmp_path / "early"
+    script = ("import os, signal\n"
+              "from dynenv_ros.nodes.recorder import Recorder, run_recorder\n"
+              "class Early(Recorder):\n"
+              "    def __init__(self, **kw):\n"
+              "        super().__init__(**kw)\n"
+              "        os.kill(os.getpid(), signal.SIGINT)\n"
+              f"raise SystemExit(run_recorder(Early, ['--ros-args', '-p', 'output:={bag}']))\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "finished" in done.stdout + done.stderr, done.stderr
+    assert bag_info(bag)["message_count"] == 0
+
+
 def test_recorder_cli_stops_after_duration_and_refuses_existing_output(tmp_path):
     bag = tmp_path / "empty"
     done = subprocess.run([sys.executable, "-c", "from dynenv_ros.nodes.recorder import cli_main; "

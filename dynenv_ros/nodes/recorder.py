@@ -237,14 +237,20 @@ def run_recorder(make_node: Callable[[], Recorder], args: Sequence[str] | None =
 
     def on_signal(signum: int, frame: Any) -> None:
         received.append(signum)
-        if not nodes or len(received) >= 3:
+        if len(received) >= 3:
             raise KeyboardInterrupt
-        nodes[0].request_stop(drain=len(received) == 1)
+        if nodes:
+            nodes[0].request_stop(drain=len(received) == 1)
+        # else the node is still being built (its subscriptions may already be matched, so a publisher can have
+        # sent and signalled already): make() passes the stop on once it exists, and the bag is still finished
 
     def make() -> Recorder:
         uninstall_signal_handlers()   # restores on_signal, which was installed before rclpy.init
-        nodes.append(make_node())
-        return nodes[0]
+        node = make_node()
+        nodes.append(node)
+        if received:
+            node.request_stop(drain=len(received) == 1)
+        return node
 
     stop_signals = (signal.SIGINT, signal.SIGTERM)
     previous = {s: signal.signal(s, on_signal) for s in stop_signals}
