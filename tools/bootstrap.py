@@ -21,7 +21,10 @@ VENV_PYTHON = VENV / "bin" / "python"
 STATE_FILE = VENV / "dynenv-bootstrap.json"
 LOCK = ROOT / "requirements.lock"
 MSG_SRC = ROOT / "msg_defs"
-MSG_BUILD = ROOT / "build" / "msg_defs"
+# Interface packages to build into the venv, dependencies first: upstream packages without a PyPI wheel (same
+# definitions, same type hashes; msg_defs/upstream/README.md), then dynenv_msgs.
+INTERFACE_PACKAGES = (MSG_SRC / "upstream" / "tf2_msgs", MSG_SRC / "upstream" / "vision_msgs", MSG_SRC)
+BUILD = ROOT / "build"
 REQUIRED_PYTHON = (3, 11)
 # Paths of the machine that built the ROS wheels, hard-coded in their exported CMake targets (a known defect).
 WHEEL_BUILD_PYTHON_INCLUDE = "/opt/python/cp311-cp311/include/python3.11"
@@ -167,14 +170,17 @@ def build_interfaces(state: dict[str, str]) -> None:
     if state.get("interfaces") == key:
         return
     changed = fix_cmake_exports()
-    log(f"building msg_defs into the venv (patched {changed} exported CMake files)")
+    log(f"building the interface packages into the venv (patched {changed} exported CMake files)")
     env = dict(os.environ, AMENT_PREFIX_PATH=str(VENV), CMAKE_PREFIX_PATH=str(VENV))
-    logs = ROOT / "build" / "logs"
-    shutil.rmtree(MSG_BUILD, ignore_errors=True)
-    run(["cmake", "-G", "Ninja", "-S", str(MSG_SRC), "-B", str(MSG_BUILD), f"-DPython3_EXECUTABLE={VENV_PYTHON}",
-         "-DBUILD_TESTING=OFF", f"-DCMAKE_INSTALL_PREFIX={VENV}"], env=env, quiet_log=logs / "msg-configure.log")
-    run(["cmake", "--build", str(MSG_BUILD)], env=env, quiet_log=logs / "msg-build.log")
-    run(["cmake", "--install", str(MSG_BUILD)], env=env, quiet_log=logs / "msg-install.log")
+    logs = BUILD / "logs"
+    for source in INTERFACE_PACKAGES:
+        name = "msg_defs" if source == MSG_SRC else source.name
+        build = BUILD / name
+        shutil.rmtree(build, ignore_errors=True)
+        run(["cmake", "-G", "Ninja", "-S", str(source), "-B", str(build), f"-DPython3_EXECUTABLE={VENV_PYTHON}",
+             "-DBUILD_TESTING=OFF", f"-DCMAKE_INSTALL_PREFIX={VENV}"], env=env, quiet_log=logs / f"{name}-configure.log")
+        run(["cmake", "--build", str(build)], env=env, quiet_log=logs / f"{name}-build.log")
+        run(["cmake", "--install", str(build)], env=env, quiet_log=logs / f"{name}-install.log")
     state["interfaces"] = key
     save_state(state)
 
