@@ -15,6 +15,7 @@ NODES = [
     "policy_node = policy_node.policy_node:main",
     "recorder = dynenv_ros.nodes.recorder:main",
     "bag_player = dynenv_ros.nodes.bag_player:main",
+    "vision_adapter = dynenv_ros.nodes.vision_adapter:main",
 ]
 TOOLS = [
     "dynenv-run = dynenv_ros.main_job:main",

@@ -1,0 +1,63 @@
+"""The vision adapter node: the simulator's detections come out as vision_msgs, and a robot's own vision_msgs
+detections come back as the DetectionArray the policy node reads, frames numbered from their stamps."""
+from __future__ import annotations
+
+from dynenv_msgs.msg import Detection, DetectionArray
+from geometry_msgs.msg import Point
+from rclpy.parameter import Parameter
+from vision_msgs.msg import Detection3DArray
+
+from dynenv_ros.nodes.sim_node import SimNode
+from dynenv_ros.nodes.vision_adapter import VisionAdapter
+from dynenv_ros.ros.vision_msgs_conversion import to_vision_msgs
+from dynenv_ros.perception.params import load_preset
+from ros_harness import spin_until
+
+
+def _params(**values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def test_forward_republishes_the_simulators_detections_with_covariances(make_node, executor):
+    sim = make_node(SimNode, parameter_overrides=_params(players_per_team=1, seed=2, mode="realtime",
+                                                        real_time_factor=10.0, publish_markers=False))
+    adapter = make_node(VisionAdapter, parameter_overrides=_params(players_per_team=1))
+    listener = make_node("listener")
+    got: list[Detection3DArray] = []
+    listener.create_subscription(Detection3DArray, "/team_a_0/detections_3d", got.append, 10)
+    for node in (sim, adapter, listener):
+        executor.add_node(node)
+    assert spin_until(executor, lambda: sum(len(m.detections) for m in got) >= 10, 20.0)
+    assert all(m.header.frame_id == "team_a_0/camera" for m in got)
+    det = next(d for m in got for d in m.detections)
+    assert det.results[0].hypothesis.class_id.split("/")[0] in {
+        "ball", "robot", "goalpost", "penalty_cross", "line_crossing", "field_line", "center_circle", "unknown"}
+    assert 0.0 <= det.results[0].hypothesis.score <= 1.0
+    assert any(m.detections and m.detections[0].results[0].pose.covariance[0] > 0 for m in got)
+
+
+def test_reverse_numbers_frames_from_stamps_and_drops_foreign_labels(make_node, executor):
+    adapter = make_node(VisionAdapter, parameter_overrides=_params(players_per_team=1, reverse=True,
+                                                                    vision_hz=10.0, frames_per_period=5))
+    talker = make_node("talker")
+    publisher = talker.create_publisher(Detection3DArray, "/team_b_0/detections_3d", 10)
+    got: list[DetectionArray] = []
+    talker.create_subscription(DetectionArray, "/team_b_0/detections", got.append, 10)
+    for node in (adapter, talker):
+        executor.add_node(node)
+    assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10.0)
+    source = DetectionArray(detections=[Detection(class_id=1, position=Point(x=1.0, y=0.2), confidence=0.9,
+                                                  size_x=0.1, size_y=0.1, yaw=float("nan"))])
+    message = to_vision_msgs(source, load_preset("realistic"))
+    message.header.stamp.sec, message.header.stamp.nanosec = 12, 300_000_000      # frame 123: period 24, index 3
+    message.header.frame_id = "team_b_0/camera"
+    foreign = to_vision_msgs(source, load_preset("realistic")).detections[0]
+    foreign.results[0].hypothesis.class_id = "person"
+    message.detections.append(foreign)
+    publisher.publish(message)
+    assert spin_until(executor, lambda: got, 10.0)
+    out = got[0]
+    assert (out.robot_id, out.motion_period, out.frame_index, out.frames_per_period) == (1, 24, 3, 5)
+    assert len(out.detections) == 1 and out.detections[0].class_id == 1
+    assert abs(out.detections[0].position.x - 1.0) < 1e-6
+    assert adapter.dropped == {"person": 1}
