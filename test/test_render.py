@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
-from dynenv_ros.render.topdown import (STRIP_HEIGHT, EpisodeRecorder, FieldView, as_array, render_snapshot,
+from dynenv_ros.render.topdown import (LEGEND_HEIGHT, STRIP_HEIGHT, EpisodeRecorder, FieldView, as_array, render_snapshot,
                                        save_png)
 from dynenv_ros.soccer.actions import SoccerAction
 from dynenv_ros.soccer.config import SoccerConfig
@@ -64,7 +64,7 @@ def test_size_and_array_format(world):
     g = world.config.field
     rgb = render(world)
     width = round(2 * (g.half_length + g.border) * PPM)
-    height = round(2 * (g.half_width + g.border) * PPM) + STRIP_HEIGHT
+    height = round(2 * (g.half_width + g.border) * PPM) + STRIP_HEIGHT + LEGEND_HEIGHT   # strip, carpet, legend
     assert rgb.shape == (height, width, 3) and rgb.dtype == np.uint8
     assert FieldView(g, PPM).size == (width, height)
     assert rgb.flags.writeable  # a copy, safe for the caller to draw on
@@ -91,9 +91,9 @@ def test_ball_robots_and_lines_land_on_their_pixels(world):
 def test_field_y_is_flipped_to_image_rows(world):
     world.place_ball(3.0, 2.0)
     rgb = render(world)
-    rows, _ = np.nonzero([[is_orange(p) for p in row] for row in rgb.astype(int)])
+    rows, _ = np.nonzero([[is_orange(p) for p in row] for row in rgb[:-LEGEND_HEIGHT].astype(int)])  # not the legend
     assert rows.size > 0
-    carpet_middle = STRIP_HEIGHT + (rgb.shape[0] - STRIP_HEIGHT) / 2
+    carpet_middle = STRIP_HEIGHT + (rgb.shape[0] - STRIP_HEIGHT - LEGEND_HEIGHT) / 2
     assert rows.max() < carpet_middle  # y = +2 (left) is up in the picture
 
 
@@ -205,3 +205,16 @@ def test_strip_shows_text(world):
     strip = rgb[:STRIP_HEIGHT].astype(int)
     assert (strip.min(axis=2) > 200).sum() > 50   # light text on the dark strip
     assert ObjectClass.BALL in {o.class_id for o in world.snapshot().objects}
+
+
+def test_robots_are_labelled_and_a_legend_names_the_marks(world):
+    """Each robot carries its short name (a0 = team_a_0) in light text beside it; the legend row below the carpet
+    shows both team colours and the ball's."""
+    world.place_robot(0, -2.0, 1.0, 0.0)
+    rgb = render(world)
+    col, row = (int(v) for v in FieldView(world.config.field, PPM).field_to_pixel(-2.0, 1.0))
+    near = rgb[max(0, row - 30):row, col:col + 40].astype(int)
+    assert np.sum(np.all(near > 200, axis=2)) > 5                       # label text up and right of the robot
+    legend = rgb[-LEGEND_HEIGHT:].astype(int)
+    assert any(is_blue(p) for p in legend.reshape(-1, 3)) and any(is_red(p) for p in legend.reshape(-1, 3))
+    assert any(is_orange(p) for p in legend.reshape(-1, 3))

@@ -15,7 +15,7 @@ from dynenv_ros.perception.detections import empty
 from dynenv_ros.perception.params import load_preset
 from dynenv_ros.render.detections import (BALL, ERROR, LINE_DETECTION, MISSED, camera_to_field, field_view,
                                           missed_positions, overlay_detections)
-from dynenv_ros.render.topdown import CARPET, as_array, save_png
+from dynenv_ros.render.topdown import CARPET, FOV, as_array, save_png
 from dynenv_ros.soccer.field import FieldGeometry
 
 PPM = 40
@@ -47,8 +47,12 @@ def colour_at(image: Image.Image, view, x: float, y: float) -> tuple[int, int, i
     return image.getpixel((int(col), int(row)))
 
 
-def count(image: Image.Image, colour) -> int:
-    return int(np.all(np.asarray(image) == np.array(colour, np.uint8), axis=2).sum())
+def count(image: Image.Image, colour, view=None) -> int:
+    """Pixels of ``colour``; with ``view``, on the carpet only (the legend below shows every colour once)."""
+    pixels = np.asarray(image)
+    if view is not None:
+        pixels = pixels[view.strip_height:pixels.shape[0] - view.legend_height]
+    return int(np.all(pixels == np.array(colour, np.uint8), axis=2).sum())
 
 
 @pytest.mark.parametrize("heading, expected", [(0.0, (2.0, 0.0)), (math.pi / 2, (0.0, 2.0))])
@@ -67,15 +71,15 @@ def test_camera_y_is_left_of_the_gaze(view):
 
 def test_false_positive_draws_red_and_a_true_detection_does_not(view):
     truthful = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), ball_at(2.0, 0.0))
-    assert count(truthful, ERROR) == 0
+    assert count(truthful, ERROR, view) == 0
     fp = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), ball_at(2.0, 0.0, true_id=-1, true_class=0))
-    assert count(fp, ERROR) > 10
+    assert count(fp, ERROR, view) > 10
 
 
 def test_confusion_is_ringed_in_red(view):
     confused = ball_at(2.0, 0.0, true_id=1102, true_class=ObjectClass.PENALTY_CROSS)
     image = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), confused)
-    assert count(image, ERROR) > 10
+    assert count(image, ERROR, view) > 10
     assert colour_at(image, view, 2.0, 0.0) == BALL
 
 
@@ -88,13 +92,26 @@ def test_line_detection_draws_cyan_along_its_segment(view):
     for x in (1.6, 2.5, 3.4):                          # field segment (1.5, -0.5) → (3.5, -0.5)
         assert colour_at(image, view, x, -0.5) == LINE_DETECTION
     assert colour_at(image, view, 2.5, 0.5) == CARPET
-    assert count(image, LINE_DETECTION) < 2.2 * PPM * 3     # a thin segment, nothing else
+    assert count(image, LINE_DETECTION, view) < 2.2 * PPM * 3     # a thin segment, nothing else
 
 
 def test_missed_objects_are_hollow_white_circles(view):
-    image = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), empty(0), truth=[(1.0, 1.0)])
+    image = overlay_detections(blank(view), view, (0.0, 0.0, 0.0), empty(0), truth=[(1.0, 1.0)],
+                               fov_half_angle=None)
     assert colour_at(image, view, 1.0, 1.0) == CARPET
-    assert count(image, MISSED) > 10
+    assert count(image, MISSED, view) > 10
+
+
+def test_the_observers_view_wedge_and_the_detection_legend_are_drawn(view):
+    """Edges at heading ± half angle from the observer; the second legend row names the detection marks."""
+    image = overlay_detections(blank(view), view, (-1.0, 0.0, 0.0), empty(0), fov_half_angle=math.pi / 4)
+    assert colour_at(image, view, 0.0, 1.0) == FOV and colour_at(image, view, 1.0, -2.0) == FOV
+    assert colour_at(image, view, 1.0, 0.0) == CARPET                   # inside the wedge: nothing drawn
+    legend = np.asarray(image)[image.size[1] - view.legend_height:]
+    for colour in (BALL, LINE_DETECTION, ERROR):
+        assert np.all(legend == np.array(colour, np.uint8), axis=2).any(), colour
+    bare = overlay_detections(blank(view), view, (-1.0, 0.0, 0.0), empty(0), fov_half_angle=None, legend=False)
+    assert count(bare, FOV) == 0 and count(bare, BALL) == 0
 
 
 def test_missed_positions_skip_objects_that_have_a_detection():

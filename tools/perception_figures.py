@@ -28,7 +28,7 @@ from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
 from dynenv_ros.perception.model import Perception  # noqa: E402
 from dynenv_ros.perception.params import PerceptionParams, load_preset  # noqa: E402
-from dynenv_ros.render.detections import (draw_legend, field_view, missed_positions,  # noqa: E402
+from dynenv_ros.render.detections import (field_view, missed_positions,  # noqa: E402
                                           overlay_detections)
 from dynenv_ros.render.topdown import STRIP, TEXT, render_snapshot, save_png  # noqa: E402
 from dynenv_ros.soccer.actions import IDLE  # noqa: E402
@@ -143,7 +143,8 @@ def draw_figure(figure: Figure, period: Period) -> Image.Image:
     team = world.robots[OBSERVER].team
     missed = list(dict.fromkeys(p for frame in period.missed for p in frame))   # an object missed in any frame
     for k, (pose, rows) in enumerate(zip(period.poses, period.detections)):
-        overlay_detections(image, view, pose, rows, truth=missed if k == 0 else None, observer_team=team)
+        overlay_detections(image, view, pose, rows, truth=missed if k == 0 else None, observer_team=team,
+                           fov_half_angle=None, legend=k == 0)      # the wedge: render_snapshot's, at frame 0
     n_missed, n_fp, n_confused = period.counts
     frames = len(period.detections)
     caption = (f"{figure.title} | robot {OBSERVER}, seed {period.seed}, {frames} frames: {n_missed} misses, "
@@ -152,10 +153,6 @@ def draw_figure(figure: Figure, period: Period) -> Image.Image:
     draw.rectangle((0, 0, view.size[0] - 1, view.strip_height - 1), fill=STRIP)
     font = ImageFont.load_default(size=max(8, view.strip_height - 7))
     draw.text((4, view.strip_height / 2), caption, fill=TEXT, font=font, anchor="lm")
-    legend_height = 14
-    bottom = view.field_to_pixel(0.0, -geometry.half_width)[1]
-    draw_legend(image, (4, bottom + (view.size[1] - bottom - legend_height) / 2), observer_team=team,
-                height=legend_height)
     return image
 
 

@@ -118,9 +118,10 @@ class _Watcher:
             x, y = self.vision.positions(k)
             image = render_snapshot(snapshot, geometry, pixels_per_metre=self.ppm,
                                     ball_radius=self.world.config.ball.radius,
-                                    fov=(self.robot, self.params.field_of_view / 2))
+                                    fov=(self.robot, self.params.field_of_view / 2))  # wedge + its legend entry
             missed = missed_positions(perception.visible[v], perception.of_view(v), self.vision.objects.object_id, x, y)
             overlay_detections(image, view, (me.x, me.y, me.yaw + me.head_yaw), perception.of_view(v), truth=missed,
+                               fov_half_angle=None,
                                observer_team=me.team)
             if recorder is not None:
                 recorder.frames.append(image)

@@ -17,7 +17,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.perception.model import missed_objects
-from dynenv_ros.render.topdown import BALL, TEAM_COLOURS, Colour, FieldView
+from dynenv_ros.render.topdown import BALL, FOV, LEGEND_ROW, TEAM_COLOURS, Colour, FieldView
 from dynenv_ros.soccer.field import FieldGeometry
 
 GOALPOST: Colour = (255, 220, 0)
@@ -61,13 +61,16 @@ def class_colour(class_id: int, team: int = 0, observer_team: int = 1) -> Colour
 
 def overlay_detections(image: Image.Image, view: FieldView, observer_pose: tuple[float, float, float],
                        detections: np.ndarray, *, truth: Iterable[tuple[float, float]] | None = None,
-                       observer_team: int = 1) -> Image.Image:
+                       observer_team: int = 1, fov_half_angle: float | None = math.pi / 4,
+                       legend: bool = True) -> Image.Image:
     """Draw ``detections`` (DETECTION_DTYPE rows of one observer) on ``image`` in place and return it.
 
     ``observer_pose`` = (x, y, camera heading) in the field frame, camera heading = body yaw + head yaw.
     ``truth``: field positions of objects that were visible but missed, drawn as hollow white circles.
     ``observer_team`` (+1 team A, -1 team B) turns the reported team relation into the colours of the picture.
     Misses are drawn first and false-positive crosses last, so errors stay on top of the detections they mark.
+    ``fov_half_angle`` draws the observer's field-of-view wedge (None: none; the default is the presets' 90° view);
+    ``legend`` names the detection marks in the view's second legend row.
     """
     if image.size != view.size:
         raise ValueError(f"image is {image.size} px but the view is {view.size} px: "
@@ -75,6 +78,17 @@ def overlay_detections(image: Image.Image, view: FieldView, observer_pose: tuple
     if observer_team not in (1, -1):
         raise ValueError(f"observer_team must be +1 or -1, got {observer_team!r}")
     draw = ImageDraw.Draw(image)
+    if fov_half_angle is not None:
+        if not (math.isfinite(fov_half_angle) and 0.0 < fov_half_angle < math.pi):
+            raise ValueError(f"fov_half_angle must be in (0, pi) rad, got {fov_half_angle!r}")
+        ox, oy = view.field_to_pixel(observer_pose[0], observer_pose[1])
+        reach = math.hypot(*view.size)          # past any image edge; Pillow clips
+        for side in (-1.0, 1.0):
+            angle = observer_pose[2] + side * fov_half_angle
+            draw.line((ox, oy, ox + reach * math.cos(angle), oy - reach * math.sin(angle)), fill=FOV, width=1)
+    if legend and view.legend_height >= 2 * LEGEND_ROW:
+        draw_legend(image, (4, view.legend_row(1) - LEGEND_ROW / 2), observer_team=observer_team,
+                    height=LEGEND_ROW)
     for x, y in truth or ():
         _ring(draw, *view.field_to_pixel(x, y), max(MIN_MARKER_PX + 4, view.length_to_pixels(MISSED_RADIUS)),
               MISSED, width=2)
@@ -131,7 +145,7 @@ def draw_legend(image: Image.Image, origin: tuple[float, float], *, observer_tea
                 height: int = 14) -> Image.Image:
     """One row of marker samples with names at ``origin`` (pixels), so a picture explains itself in the docs."""
     draw = ImageDraw.Draw(image)
-    font = ImageFont.load_default(size=max(8, height - 3))
+    font = ImageFont.load_default(size=max(8, height - 4))
     x, y = origin
     r = height / 2 - 2
     entries: Sequence[tuple[str, str, Colour]] = (
@@ -149,9 +163,9 @@ def draw_legend(image: Image.Image, origin: tuple[float, float], *, observer_tea
             _cross(draw, cx, cy, r)
         else:
             _ring(draw, cx, cy, r, colour, width=2)
-        x += 2 * r + 4
+        x += 2 * r + 3
         draw.text((x, cy), label, fill=MISSED, font=font, anchor="lm")
-        x += draw.textlength(label, font=font) + 8
+        x += draw.textlength(label, font=font) + 6
     return image
 
 

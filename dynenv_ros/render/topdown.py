@@ -23,6 +23,8 @@ from dynenv_ros.soccer.referee import Phase
 Colour = tuple[int, int, int]
 
 STRIP_HEIGHT = 20                      # px: score / clock / phase text above the carpet
+LEGEND_ROW = 16                        # px: one legend row below the carpet
+LEGEND_HEIGHT = 2 * LEGEND_ROW         # the world's legend, then (when overlaid) the detections' legend
 CARPET: Colour = (34, 120, 48)
 LINE: Colour = (255, 255, 255)
 STRIP: Colour = (30, 30, 30)
@@ -49,19 +51,26 @@ class FieldView:
     geometry: FieldGeometry
     pixels_per_metre: float = 60.0
     strip_height: int = STRIP_HEIGHT
+    legend_height: int = LEGEND_HEIGHT
 
     def __post_init__(self) -> None:
         _check_positive("pixels_per_metre", self.pixels_per_metre)
-        if isinstance(self.strip_height, bool) or not isinstance(self.strip_height, int) or self.strip_height < 0:
-            raise ValueError(f"strip_height must be a non-negative integer, got {self.strip_height!r}")
+        for name in ("strip_height", "legend_height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
 
     @property
     def size(self) -> tuple[int, int]:
-        """(width, height) in pixels: carpet (field + border) plus the text strip on top."""
+        """(width, height) in pixels: the text strip on top, the carpet (field + border), the legend below."""
         g, ppm = self.geometry, self.pixels_per_metre
         width = round(2 * (g.half_length + g.border) * ppm)
-        height = round(2 * (g.half_width + g.border) * ppm) + self.strip_height
+        height = round(2 * (g.half_width + g.border) * ppm) + self.strip_height + self.legend_height
         return max(1, width), max(1, height)
+
+    def legend_row(self, row: int) -> float:
+        """Pixel row of the centre of legend row ``row`` (0: the world's, 1: the detections')."""
+        return self.size[1] - self.legend_height + (row + 0.5) * LEGEND_ROW
 
     def field_to_pixel(self, x: float, y: float) -> tuple[float, float]:
         """Pixel (column, row) of field point (x, y); rows grow downward, so field y is flipped."""
@@ -84,7 +93,8 @@ def render_snapshot(snapshot: WorldSnapshot, geometry: FieldGeometry, *, pixels_
     """Draw one instant top-down as an RGB image.
 
     ``fov=(robot_id, half_angle_rad)`` adds that robot's field-of-view wedge (heading = yaw + head_yaw), so a
-    perception overlay can be checked against what the robot could see.
+    perception overlay can be checked against what the robot could see. Robots are labelled with their names
+    (``a0`` = team_a_0) and a legend row below the carpet names every mark.
     """
     view = FieldView(geometry, pixels_per_metre)
     ball_radius = _check_positive("ball_radius", ball_radius)
@@ -98,8 +108,59 @@ def render_snapshot(snapshot: WorldSnapshot, geometry: FieldGeometry, *, pixels_
         _draw_robot(draw, view, robot)
     for ball in snapshot.of_class(ObjectClass.BALL):
         _disc(draw, view, ball.x, ball.y, ball_radius, fill=BALL, min_px=2.0)
+    _draw_labels(draw, view, robots)
     _draw_strip(draw, view, snapshot)
+    _draw_world_legend(draw, view, with_fov=fov is not None)
     return image
+
+
+def robot_labels(robots: tuple[BodyState, ...]) -> dict[int, str]:
+    """Short names by body id: team letter and index within the team, as in team_a_0 → "a0"."""
+    labels: dict[int, str] = {}
+    for team, letter in ((1, "a"), (-1, "b")):
+        for k, robot in enumerate(sorted((r for r in robots if r.team == team), key=lambda r: r.id)):
+            labels[robot.id] = f"{letter}{k}"
+    return labels
+
+
+def legend_font(view: FieldView) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
+    return ImageFont.load_default(size=LEGEND_ROW - 4)
+
+
+def _draw_labels(draw: ImageDraw.ImageDraw, view: FieldView, robots: tuple[BodyState, ...]) -> None:
+    font = ImageFont.load_default(size=max(11, round(view.length_to_pixels(0.22))))
+    for robot in robots:
+        label = robot_labels(robots).get(robot.id)
+        if label is None:
+            continue
+        radius = robot.size_x / 2 if robot.size_x > 0 else DEFAULT_ROBOT_RADIUS
+        px, py = view.field_to_pixel(robot.x, robot.y)
+        offset = max(3.0, view.length_to_pixels(radius)) + 2
+        draw.text((px + offset, py - offset), label, fill=TEXT, font=font, anchor="ld", stroke_width=2,
+                  stroke_fill=STRIP)
+
+
+def _draw_world_legend(draw: ImageDraw.ImageDraw, view: FieldView, *, with_fov: bool) -> None:
+    if view.legend_height <= 0:
+        return
+    top = view.size[1] - view.legend_height
+    draw.rectangle((0, top, view.size[0] - 1, view.size[1] - 1), fill=STRIP)
+    font, y, x = legend_font(view), view.legend_row(0), 4.0
+    r = LEGEND_ROW / 2 - 3
+    entries: list[tuple[str, str, Colour]] = [("disc", "team A", TEAM_COLOURS[1]), ("disc", "team B", TEAM_COLOURS[-1]),
+                                              ("disc", "ball", BALL), ("line", "heading", HEADING),
+                                              ("line", "gaze", HEAD)]
+    if with_fov:
+        entries.append(("line", "view", FOV))
+    for kind, label, colour in entries:
+        draw.rectangle((x - 1, y - r - 1, x + 2 * r + 1, y + r + 1), fill=CARPET)   # the colour as on the field
+        if kind == "disc":
+            draw.ellipse((x, y - r, x + 2 * r, y + r), fill=colour)
+        else:
+            draw.line((x, y, x + 2 * r, y), fill=colour, width=3)
+        x += 2 * r + 4
+        draw.text((x, y), label, fill=TEXT, font=font, anchor="lm")
+        x += draw.textlength(label, font=font) + 10
 
 
 def _line_px(view: FieldView) -> int:
