@@ -78,3 +78,31 @@ def test_static_team_frames_turn_team_b_by_pi():
 def test_mismatched_names_and_poses_are_refused():
     with pytest.raises(ValueError, match="2 robot names but 1 poses"):
         robot_transforms(["a", "b"], [(0.0, 0.0, 0.0, 0.0)], Time())
+
+
+def test_the_simulator_publishes_the_tree_and_latches_the_team_frames(make_node, executor):
+    """Every robot's base_link and camera on /tf with each frame's stamp; a late subscriber still gets /tf_static."""
+    from rclpy.parameter import Parameter
+    from tf2_msgs.msg import TFMessage
+
+    from dynenv_ros.nodes.sim_node import SimNode
+    from dynenv_ros.ros.tf import tf_static_qos
+    from ros_harness import spin_until
+
+    sim = make_node(SimNode, parameter_overrides=[Parameter(k, value=v) for k, v in dict(
+        players_per_team=1, seed=2, mode="realtime", real_time_factor=10.0, publish_markers=False).items()])
+    listener = make_node("tf_listener")
+    dynamic: list[TFMessage] = []
+    listener.create_subscription(TFMessage, "/tf", dynamic.append, 100)
+    for node in (sim, listener):
+        executor.add_node(node)
+    assert spin_until(executor, lambda: len(dynamic) >= 3, 20.0)
+    static: list[TFMessage] = []
+    listener.create_subscription(TFMessage, "/tf_static", static.append, tf_static_qos())
+    assert spin_until(executor, lambda: static, 10.0)
+    children = {t.child_frame_id: t.header.frame_id for t in dynamic[-1].transforms}
+    assert children == {"team_a_0/base_link": "map", "team_a_0/camera": "team_a_0/base_link",
+                        "team_b_0/base_link": "map", "team_b_0/camera": "team_b_0/base_link"}
+    stamps = [(m.transforms[0].header.stamp.sec, m.transforms[0].header.stamp.nanosec) for m in dynamic]
+    assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)      # one tree per frame, in sim time
+    assert {t.child_frame_id for t in static[0].transforms} == {"team_a/field", "team_b/field"}

@@ -22,6 +22,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from dynenv_ros.envs.soccer_session import MISSING_ACTION_RULES, PeriodOutput, SoccerSession, kickoff_team
@@ -32,6 +33,7 @@ from dynenv_ros.ros.cdr import detection_array_cdr
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list)
 from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, robot_transforms, static_transforms, tf_qos, tf_static_qos
 from dynenv_ros.soccer.config import SoccerConfig, robot_names
 
 MODES_OF_RUNNING = ("stepped", "realtime")
@@ -116,6 +118,11 @@ class SimNode(Node):
         self.action_subs = [self.create_subscription(Action, topics.action(n), self._action_callback(i), qos)
                             for i, n in enumerate(names)]
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QoSProfile(depth=10))
+        # TF (ros/tf.py): the robots and their heads per frame; the team frames once, latched.
+        self.tf_pub = self.create_publisher(TFMessage, TF_TOPIC, tf_qos())
+        self.tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, tf_static_qos())
+        self.tf_static_pub.publish(static_transforms(cv.sim_time(0, config.rates.tick_seconds)))
+        self._last_tf_ns = -1
         self.truth_marker_pub = self.create_publisher(MarkerArray, topics.GROUND_TRUTH_MARKERS, QoSProfile(depth=5))
         self.detection_marker_pub = self.create_publisher(MarkerArray, topics.DETECTION_MARKERS,
                                                           QoSProfile(depth=5))
@@ -299,6 +306,12 @@ class SimNode(Node):
         stamp = cv.sim_time(self._tick_offset + frame.tick, self._tick_s)
         self._publish(self.clock_pub, ClockMsg(clock=stamp))
         self._publish(self.world_pub, cv.world_state(frame.snapshot, stamp))
+        tf_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        if tf_ns > self._last_tf_ns:          # period 0 repeats one instant: tf2 warns on repeated stamps
+            self._last_tf_ns = tf_ns
+            robots = frame.snapshot.objects[:len(self.names)]
+            self.tf_pub.publish(robot_transforms(self.names, [(o.x, o.y, o.yaw, o.head_yaw) for o in robots],
+                                                 stamp))
         frames_per_period = len(output.frames)
         for i, robot in enumerate(frame.robots):   # serialised from the numpy records directly (ros/cdr.py)
             self._publish(self.detection_pubs[i], detection_array_cdr(

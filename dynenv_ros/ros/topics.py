@@ -28,4 +28,5 @@ def feedback(robot: str) -> str:
 SIM_PUBLISHED_TYPES = {
     "rosgraph_msgs/msg/Clock", "dynenv_msgs/msg/WorldState", "dynenv_msgs/msg/DetectionArray",
     "dynenv_msgs/msg/StepFeedback", "diagnostic_msgs/msg/DiagnosticArray", "visualization_msgs/msg/MarkerArray",
+    "tf2_msgs/msg/TFMessage",
 }
