@@ -17,3 +17,19 @@ def spin_until(executor: Executor, condition: Callable[[], bool], timeout_s: flo
         if time.monotonic() >= deadline:
             return False
         executor.spin_once(timeout_sec=step_s)
+
+
+def call_idempotent(executor: Executor, client, request, timeout_s: float = 20.0, resend_after_s: float = 2.0):
+    """Call a service whose answer does not depend on how often it is asked, re-sending while no answer came.
+
+    ``service_is_ready()`` only says the server's request reader matched ours; its reply writer may not yet have
+    matched our reply reader, and DDS then drops the reply (a known ROS 2 discovery race across processes).
+    Returns the response, or None when none arrived within ``timeout_s``.
+    """
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        future = client.call_async(request)
+        if spin_until(executor, future.done, min(resend_after_s, max(0.0, deadline - time.monotonic()))):
+            return future.result()
+        client.remove_pending_request(future)
+    return None

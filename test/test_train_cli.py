@@ -86,8 +86,16 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
             assert torch.equal(value, model_state[name]), name
         assert trainer.env_steps == saved_steps and trainer.env_steps % 4 == 0 and trainer.env_steps > 0
         assert trainer.updates == trainer.env_steps // 4
-        adam_steps = {float(s["step"]) for s in trainer.optimizer.state.values()}
-        assert adam_steps == {float(trainer.updates)}
+        # the optimizer resumes with exactly the saved state; a parameter whose loss term had no gradient in
+        # some update (a class absent from that batch) has a smaller Adam step, which is why steps may differ
+        saved_optimizer, _ = checkpoints.read_safetensors((latest / "optimizer.safetensors").read_bytes())
+        resumed = trainer.optimizer.state_dict()["state"]
+        for key, value in saved_optimizer.items():
+            kind, index, field = key.split(".", 2)
+            if kind == "state":
+                assert torch.equal(torch.as_tensor(resumed[int(index)][field]), value), key
+        adam_steps = [float(s["step"]) for s in trainer.optimizer.state.values()]
+        assert max(adam_steps) == float(trainer.updates) and min(adam_steps) >= 1.0
     finally:
         trainer.env.close()
 
