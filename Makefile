@@ -2,7 +2,7 @@
 SHELL := /bin/bash
 VENV_PY := .venv/bin/python
 HOST_PY := $(shell command -v python3.11 || command -v python3)
-# Extra arguments: `make run ARGS="--duration 30"`, `make test PYTEST_ARGS="-k interfaces"`.
+# Extra arguments: `make run ARGS="--set duration_s=30"`, `make test PYTEST_ARGS="-k interfaces"`.
 ARGS ?=
 PYTEST_ARGS ?=
 

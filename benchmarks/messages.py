@@ -19,7 +19,7 @@ DETECTIONS_PER_FRAME = 12  # the original's mean at noise 1, 2v2 (facts sheet 4.
 
 def vision_frame():
     frame = DetectionArray(robot_id=3, frames_per_period=5)
-    frame.header.frame_id = "robot_3/camera"
+    frame.header.frame_id = "team_a_3/camera"
     for index in range(DETECTIONS_PER_FRAME):
         detection = Detection(class_id=Detection.CLASS_BALL, yaw=0.1 * index, size_x=0.1, size_y=0.1,
                               confidence=0.9, sighting=Detection.SIGHTING_PARTIAL)

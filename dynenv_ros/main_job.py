@@ -1,9 +1,10 @@
 """The main job (`make run`): runs the project's node graph end to end and prints a summary.
 
-Graphs: ``soccer`` (default) — the simulator node in stepped mode, a scripted policy node for every robot and the
-recorder, for ``duration_s`` of sim time; it prints achieved rates, message counts and the score, and leaves the
-bag and a GIF in the run directory. ``selfcheck`` — every dynenv_msgs interface across processes. The learned
-policy and the trainer join the soccer graph with the agent issue.
+Graphs: ``soccer`` (default) — the simulator node in stepped mode, team A played by a trained policy file (one
+policy node) or scripted, team B by one scripted policy node per robot, and the recorder, for ``duration_s`` of sim
+time; it prints achieved rates, message counts and the score, leaves the bag and a GIF in the run directory, and
+checks the bag holds every message the simulator published and every action it accepted. ``selfcheck`` — every
+dynenv_msgs interface across processes. ``--help`` lists the settings and the graphs that use them.
 """
 from __future__ import annotations
 
@@ -95,9 +96,46 @@ class MainJobConfig:
         if self.team_a != "scripted":
             path = team_a_policy(self.team_a)
             if path.suffix not in (".onnx", ".safetensors"):
-                raise ConfigError(f"team_a must be 'scripted' or a .onnx / .safetensors policy file, got {self.team_a!r}")
+                raise ConfigError(f"team_a must be 'scripted' or a .onnx / .safetensors policy file, "
+                                  f"got {self.team_a!r}")
             if not path.is_file():
                 raise ConfigError(f"team_a: policy file {path} does not exist")
+
+
+# What each setting means (listed by --help) and which graphs use it: a --set of a key the chosen graph does not use
+# is refused, because it would change nothing (the config file may hold every key).
+SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
+    "graph": ("soccer | selfcheck: what to run", ("soccer", "selfcheck")),
+    "seed": ("world seed (soccer) / sample seed (selfcheck), 0..2^31-1", ("soccer", "selfcheck")),
+    "timeout_s": ("wall-clock limit of the whole run, s", ("soccer", "selfcheck")),
+    "domain_id": ("ROS_DOMAIN_ID of the graph, 0..101; -1 picks one from the process id", ("soccer", "selfcheck")),
+    "duration_s": ("sim seconds to play, 0.5..3600", ("soccer",)),
+    "players_per_team": ("robots per team, 1..5", ("soccer",)),
+    "perception": ("perception preset: " + " | ".join(PERCEPTION_PRESETS), ("soccer",)),
+    "policy": ("scripted team(s): " + " | ".join(POLICIES), ("soccer",)),
+    "team_a": ("a trained policy file for team A (.onnx: onnxruntime, .safetensors: torch) or 'scripted'",
+               ("soccer",)),
+    "gif": ("render the recorded bag as game.gif (true | false)", ("soccer",)),
+    "samples_per_type": ("messages per type and calls per service that must arrive intact, 1..1000",
+                         ("selfcheck",)),
+}
+
+
+def check_overrides_apply(config: "MainJobConfig", overrides: dict[str, Any]) -> None:
+    """Refuse a --set the chosen graph ignores (e.g. samples_per_type for the soccer graph), with the reason."""
+    unused = sorted(k for k in overrides if config.graph not in SETTINGS_HELP.get(k, ("", config.graph))[1])
+    if unused:
+        used = sorted(k for k, (_, graphs) in SETTINGS_HELP.items() if config.graph in graphs)
+        raise ConfigError(f"--set {', '.join(unused)}: not used by graph '{config.graph}' (it uses {used})")
+
+
+def settings_epilog() -> str:
+    """The settings --set accepts, their defaults and the graphs that use them (dynenv-run --help)."""
+    defaults = MainJobConfig()
+    lines = ["settings (--set KEY=VALUE; the defaults shown are those of config/main_job.yaml):"]
+    for name, (text, graphs) in SETTINGS_HELP.items():
+        lines.append(f"  {name} (default {getattr(defaults, name)!r}; {', '.join(graphs)}): {text}")
+    return "\n".join(lines)
 
 
 def team_a_policy(value: str) -> Path:
@@ -120,7 +158,9 @@ def load_config(path: Path, overrides: dict[str, Any]) -> MainJobConfig:
     section = raw.get("main_job", raw)
     if not isinstance(section, dict):
         raise ConfigError(f"{path}: 'main_job' must be a mapping")
-    return MainJobConfig.from_mapping({**section, **overrides})
+    config = MainJobConfig.from_mapping({**section, **overrides})
+    check_overrides_apply(config, overrides)
+    return config
 
 
 def selfcheck_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
@@ -178,7 +218,8 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
 
 
 def missing_from_bag(report: dict[str, Any], info: dict[str, Any]) -> dict[str, tuple[int, int]]:
-    """Topics whose recorded count differs from what the simulator says it published: topic → (published, recorded)."""
+    """Topics whose recorded count differs from what the simulator says it published (or accepted, for actions):
+    topic → (published, recorded)."""
     published = report["published"]
     expected = {"/world_state": published["world_state"], "/clock": published["world_state"]}
     for name in report["robots"]:
@@ -186,6 +227,24 @@ def missing_from_bag(report: dict[str, Any], info: dict[str, Any]) -> dict[str, 
         expected[f"/{name}/feedback"] = published["feedback_per_robot"]
     counts = {t["name"]: t["count"] for t in info["topics"]}
     return {t: (n, counts.get(t, 0)) for t, n in expected.items() if counts.get(t, 0) != n}
+
+
+def actions_not_recorded(report: dict[str, Any], bag: Path) -> dict[str, tuple[int, int]]:
+    """Action topics whose recorded actions for the periods that ran differ in number from what the simulator
+    accepted: topic → (accepted, recorded). The answers to the last frames (a period that never ran) may or may
+    not be recorded before the graph stops, so they are not counted."""
+    from dynenv_ros.bags.inspect import BagError, echo
+    periods = int(report["diagnostics"]["periods_run"])
+    differences = {}
+    for name, accepted in report.get("accepted_actions", {}).items():
+        topic = f"/{name}/action"
+        try:
+            recorded = sum(1 for r in echo(bag, topic) if r["message"]["motion_period"] <= periods)
+        except BagError:                       # the topic is not in the bag at all
+            recorded = 0
+        if recorded != accepted:
+            differences[topic] = (accepted, recorded)
+    return differences
 
 
 def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
@@ -209,15 +268,15 @@ def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig
         print(f"  no bag was recorded in {bag}")
         return False
     info = bag_info(bag)
-    lost = missing_from_bag(report, info)
+    lost = {**missing_from_bag(report, info), **actions_not_recorded(report, bag)}
     counts = {t["name"]: t["count"] for t in info["topics"]}
     total = sum(counts.values())
     print(f"  bag {bag}: {total} messages on {len(counts)} topics, {info['duration_s']:.1f} s; "
-          + ("every published message recorded" if not lost else f"LOST (published, recorded): {lost}"))
+          + ("every published message recorded" if not lost else f"LOST (published or accepted, recorded): {lost}"))
     ok = ok and not lost
     if config.gif:
         target = run_dir / "game.gif"
-        frames = render(bag, target, robot="team_a_0", fps=10.0, pixels_per_metre=30.0)
+        frames = render(bag, target, robot="team_a_0", fps=10.0, pixels_per_metre=40.0)
         print(f"  replay: {target} ({frames} frames, robot team_a_0's detections overlaid)")
     return ok
 
@@ -233,12 +292,14 @@ GRAPHS: dict[str, Graph] = {"soccer": Graph(soccer_graph, summarise_soccer),
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="dynenv-run", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="dynenv-run", description=__doc__.splitlines()[0], epilog=settings_epilog(),
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", type=Path, default=None,
                         help=f"YAML settings (default: {REPO_CONFIG.relative_to(REPO_CONFIG.parents[1])})")
     parser.add_argument("--output-dir", type=Path, default=None, help="run directory (default: runs/<time>)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a setting, value in YAML syntax (repeatable)")
+                        help="override a setting, value in YAML syntax (repeatable); a key the chosen graph "
+                             "does not use is refused")
     return parser.parse_args(argv)
 
 

@@ -59,7 +59,7 @@ def _detection_array():
     """A DetectionArray with three detections, and an independent copy of it (through CDR)."""
     message = sample_message(DetectionArray, 1)
     message.robot_id, message.self_fallen = 5, True
-    message.header.stamp.sec, message.header.frame_id = 12, "robot_5/camera"
+    message.header.stamp.sec, message.header.frame_id = 12, "team_b_0/camera"
     message.detections = [sample_message(Detection, k) for k in range(3)]
     for k, detection in enumerate(message.detections):
         detection.confidence, detection.yaw = 0.5 + 0.125 * k, 0.25 * k
@@ -77,8 +77,8 @@ def test_comparator_reports_a_changed_scalar():
     copy.self_fallen = False
     assert field_differences(message, copy) == ["<msg>.self_fallen: True != False"]
     message, copy = _detection_array()
-    copy.header.frame_id = "robot_6/camera"
-    assert field_differences(message, copy) == ["<msg>.header.frame_id: 'robot_5/camera' != 'robot_6/camera'"]
+    copy.header.frame_id = "team_b_1/camera"
+    assert field_differences(message, copy) == ["<msg>.header.frame_id: 'team_b_0/camera' != 'team_b_1/camera'"]
 
 
 def test_comparator_reports_a_changed_nested_field():

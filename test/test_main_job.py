@@ -34,7 +34,8 @@ def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
 
 
 def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
-    """The README's run command: simulator, the shipped policy for team A, scripted team B, recorder; lossless bag, GIF."""
+    """The README's run command: simulator, the shipped policy for team A, scripted team B, recorder; lossless bag,
+    GIF."""
     output = _run_main(tmp_path, capsys, "duration_s=5", "players_per_team=1")
     report = json.loads((tmp_path / "sim_report.json").read_text())
     assert report["diagnostics"]["periods_run"] == "10" and report["diagnostics"]["missing"] == "0"
@@ -128,3 +129,52 @@ def test_node_refuses_bad_parameter_with_reason(value, reason):
                              f"samples_per_type:={value}"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert "parameter error" in result.stderr and reason in result.stderr
+
+
+def test_a_setting_the_chosen_graph_does_not_use_is_refused(tmp_path, capsys):
+    from dynenv_ros.main_job import REPO_CONFIG
+    with pytest.raises(ConfigError, match="samples_per_type: not used by graph 'soccer'"):
+        load_config(REPO_CONFIG, {"samples_per_type": 3})
+    with pytest.raises(ConfigError, match="duration_s, gif: not used by graph 'selfcheck'"):
+        load_config(REPO_CONFIG, {"graph": "selfcheck", "duration_s": 5.0, "gif": False})
+    assert load_config(REPO_CONFIG, {"graph": "selfcheck", "samples_per_type": 3}).samples_per_type == 3
+    assert main(["--set", "samples_per_type=3", "--output-dir", str(tmp_path)]) == 2
+    assert "not used by graph 'soccer'" in capsys.readouterr().err
+
+
+def test_help_lists_every_setting_with_its_default(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["--help"])
+    assert stop.value.code == 0
+    out = capsys.readouterr().out
+    for name, value in vars(MainJobConfig()).items():
+        assert f"  {name} (default {value!r};" in out, name
+
+
+def _bag_with_actions(path, counts: dict[str, list[int]]) -> None:
+    """A bag holding, per robot, actions for the given motion periods (episode 1)."""
+    from dynenv_msgs.msg import Action
+    from rclpy.serialization import serialize_message
+    from dynenv_ros.bags.typestore import dynenv_typestore
+    from dynenv_ros.bags.writer import BagWriter
+    bag = BagWriter(str(path), dynenv_typestore())
+    t = 1
+    for robot, periods in counts.items():
+        topic = f"/{robot}/action"
+        bag.add_topic(topic, "dynenv_msgs/msg/Action")
+        for period in periods:
+            bag.write(topic, t, serialize_message(Action(episode_id=1, motion_period=period)))
+            t += 1
+    bag.close()
+
+
+def test_the_recorded_actions_must_match_what_the_simulator_accepted(tmp_path):
+    """The recorder once lost a policy's first 12 actions while the simulator counted them accepted; the main job
+    now compares the two. An answer to the last frames (a period that never ran) does not count."""
+    from dynenv_ros.main_job import actions_not_recorded
+    report = {"diagnostics": {"periods_run": "4"}, "accepted_actions": {"team_a_0": 4, "team_b_0": 4}}
+    _bag_with_actions(tmp_path / "complete", {"team_a_0": [1, 2, 3, 4, 5], "team_b_0": [1, 2, 3, 4]})
+    assert actions_not_recorded(report, tmp_path / "complete") == {}
+    _bag_with_actions(tmp_path / "lossy", {"team_a_0": [3, 4, 5]})
+    assert actions_not_recorded(report, tmp_path / "lossy") == {"/team_a_0/action": (4, 2),
+                                                                "/team_b_0/action": (4, 0)}

@@ -78,3 +78,21 @@ def test_self_kicking_is_the_robots_own_kick_for_its_periods():
     for p, frames in enumerate(seen):
         for robots in frames:
             assert robots == (expected_robots if p < kick_periods else [False] * len(robots))
+
+
+def test_answers_after_the_end_of_an_episode_are_ignored_not_accepted():
+    """Only actions a period ran count as accepted (per robot too): that is what the main job expects the recorder
+    to hold. The answers to an episode's last frames arrive after it finished; no period will run them."""
+    config = SoccerConfig.from_mapping({"players_per_team": 1, "episode_seconds": 1.0})
+    session = SoccerSession(config, load_preset("none"), seed=0)
+    session.reset(seed=0)
+    for _ in range(2):
+        assert session.submit(0, session.episode_id, session.period, 0, 0, 0, 0.0)[0]
+        session.step()
+    assert session.finished
+    accepted, reason = session.submit(0, session.episode_id, session.period, 0, 0, 0, 0.0)
+    assert not accepted and reason.startswith("ignored")
+    assert session.counts["accepted"] == 2 and session.accepted_per_robot == {0: 2}
+    assert session.counts["ignored_after_episode_end"] == 1
+    accepted, reason = session.submit(0, session.episode_id, session.period + 3, 0, 0, 0, 0.0)
+    assert not accepted and reason.startswith("early")          # anything else is still refused for its reason

@@ -25,12 +25,14 @@ Stable-Baselines3's PPO does not accept; use the discrete head with such librari
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from pettingzoo import ParallelEnv
 
 from dynenv_ros.envs.soccer_observations import SoccerObservations
+from dynenv_ros.envs.soccer_session import checked_seed, kickoff_team
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder, action_space
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.config import SoccerConfig
@@ -73,16 +75,23 @@ class RoboCupParallelEnv(ParallelEnv):
         return agent
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        """``seed``: None or a whole number in [0, 2^64 - 1]; ``options``: None or a mapping, ``kickoff_team`` 'a' or
+        'b'. Ill-typed values raise ValueError with the reason; unknown options only warn, because PettingZoo's own
+        API test passes a dummy one."""
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"options must be a mapping (e.g. {{'kickoff_team': 'b'}}) or None, "
+                             f"got {type(options).__name__}")
         options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        seed = checked_seed(seed)
+        unknown = sorted(set(options) - set(RESET_OPTIONS), key=repr)
         if unknown:
             warnings.warn(f"robocup_v0.reset ignores unknown option(s) {unknown}; known: {list(RESET_OPTIONS)}",
                           stacklevel=2)
-        kickoff = options.get("kickoff_team", "a")
-        teams = {"a": TEAM_A, "b": TEAM_B, TEAM_A: TEAM_A, TEAM_B: TEAM_B}
-        if kickoff not in teams:
-            raise ValueError(f"options['kickoff_team'] must be 'a' or 'b', got {kickoff!r}")
-        self.world.reset(seed=seed, kickoff_team=teams[kickoff])
+        try:
+            kickoff = kickoff_team(options.get("kickoff_team", "a"))
+        except ValueError as error:
+            raise ValueError(f"options['kickoff_team']: {error}") from None
+        self.world.reset(seed=seed, kickoff_team=kickoff)
         self.observations.reset(self.world)
         self.agents = self.possible_agents[:]
         observations = self.observations.initial()

@@ -84,12 +84,16 @@ class SoccerSession:
         self.pending: dict[int, SoccerAction] = {}
         self.last: dict[int, SoccerAction] = {}
         self.counts: Counter[str] = Counter()
+        self.accepted_per_robot: Counter[int] = Counter()
         self.finished = False
         self._previous_episode, self._previous_final_period = -1, -1
         self.missed_for: int | None = None      # a robot whose misses each frame reports (visualisation)
 
     # -- episode -----------------------------------------------------------------------------------------------
     def reset(self, seed: int | None = None, kickoff_team: int = TEAM_A) -> int:
+        seed = checked_seed(seed)
+        if kickoff_team not in (TEAM_A, TEAM_B) or isinstance(kickoff_team, bool):
+            raise ValueError(f"kickoff_team must be {TEAM_A} (team A) or {TEAM_B} (team B), got {kickoff_team!r}")
         # Policies answer an episode's last frames before they see the next episode: expect those answers.
         self._previous_episode, self._previous_final_period = self.world.episode_id, self.world.period
         self.world.reset(seed=seed, kickoff_team=kickoff_team)
@@ -122,11 +126,15 @@ class SoccerSession:
             return False, reason
         self.pending[robot_id] = SoccerAction(Walk(walk), Turn(turn), Kick(kick), float(head_yaw_delta))
         self.counts["accepted"] += 1
+        self.accepted_per_robot[robot_id] += 1
         return True, "accepted"
 
     def _check(self, robot_id, episode_id, motion_period, walk, turn, kick, head) -> str:
         if not 0 <= robot_id < self.config.n_robots:
             return f"unknown_robot: robot {robot_id} does not exist"
+        if self.finished and episode_id == self.episode_id and motion_period == self.period:
+            # The answers to an episode's last frames: no period of this episode will run them.
+            return "ignored: the episode has finished"
         if episode_id != self.episode_id:
             if episode_id == self._previous_episode and motion_period == self._previous_final_period + 1:
                 return "ignored: an answer to the previous episode's last frames"
@@ -219,7 +227,26 @@ class SoccerSession:
 
 
 def kickoff_team(value: Any) -> int:
-    teams = {"a": TEAM_A, "b": TEAM_B, 1: TEAM_A, -1: TEAM_B}
-    if value not in teams:
-        raise ValueError(f"kickoff_team must be 'a' or 'b', got {value!r}")
-    return teams[value]
+    """'a' / 'b' (or the team signs 1 / -1) → the team sign; anything else is refused with the reason (a list or a
+    mapping used to reach a dict lookup and crash the caller with an unhashable-type TypeError)."""
+    if isinstance(value, str) and value in ("a", "b"):
+        return TEAM_A if value == "a" else TEAM_B
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool) and int(value) in (TEAM_A, TEAM_B):
+        return int(value)
+    raise ValueError(f"kickoff_team must be 'a' or 'b', got {value!r} ({type(value).__name__})")
+
+
+MAX_SEED = 2 ** 64 - 1      # the whole uint64 of ResetSimulation.seed and SeedSequence's child seeds
+
+
+def checked_seed(seed: Any) -> int | None:
+    """None, or a whole number in [0, 2^64 - 1]; floats, bools, strings and out-of-range numbers are refused with
+    the reason rather than failing inside numpy's generator."""
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise ValueError(f"seed must be a whole number in [0, 2**64 - 1] or None, got {seed!r} "
+                         f"({type(seed).__name__})")
+    if not 0 <= int(seed) <= MAX_SEED:
+        raise ValueError(f"seed must be in [0, 2**64 - 1], got {seed}")
+    return int(seed)

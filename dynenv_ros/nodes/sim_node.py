@@ -25,19 +25,23 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
-from dynenv_ros.envs.soccer_session import MISSING_ACTION_RULES, PeriodOutput, SoccerSession, kickoff_team
+from dynenv_ros.envs.soccer_session import (MISSING_ACTION_RULES, PeriodOutput, SoccerSession, checked_seed,
+                                            kickoff_team)
 from dynenv_ros.perception.params import MODES, PRESETS, load_preset
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import markers, topics
 from dynenv_ros.ros.cdr import detection_array_cdr
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list)
-from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.ros.qos import (REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, action_queue, latched,
+                                realtime_stream, sim_stream)
 from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, robot_transforms, static_transforms, tf_qos, tf_static_qos
 from dynenv_ros.soccer.config import SoccerConfig, robot_names
 
 MODES_OF_RUNNING = ("stepped", "realtime")
 RESET_OPTIONS = ("kickoff_team",)
+MAX_STEP_PERIODS = 100   # /sim/step: at most this many motion periods per call, so services stay answered
+MAX_OPTIONS_CHARS = 4096  # /sim/reset: options_yaml longer than this is refused before parsing
 
 
 class SimNode(Node):
@@ -80,7 +84,8 @@ class SimNode(Node):
             "until /world_state has this many subscribers (scripted policies read it).", **fixed)
         self.wait_for_recorder = declare_bool(
             self, "wait_for_recorder", False, "Stepped mode: also hold the first observation until /clock and every "
-            "feedback topic have a subscriber, so a recorder misses nothing.", **fixed)
+            "feedback topic have a subscriber, and every action topic one besides this node (a dynenv recorder: "
+            "that has matched every action publisher), so a recorder misses nothing.", **fixed)
         self.exit_when_finished = declare_bool(self, "exit_when_finished", False, "Exit (status 0) when an episode "
                                                "ends and auto_reset is off, after every subscriber has it.", **fixed)
         self.report_path = declare_str(self, "report_path", "", "Write a JSON summary here on exit.", **fixed)
@@ -110,14 +115,30 @@ class SimNode(Node):
         self.names = names
         self._seed = None if seed < 0 else seed
         self.session.missed_for = names.index(self.marker_robot) if self.marker_robot else None
-        qos = sim_stream()
-        self.clock_pub = self.create_publisher(ClockMsg, topics.CLOCK, qos)
-        self.world_pub = self.create_publisher(cv.WorldState, topics.WORLD_STATE, qos)
-        self.detection_pubs = [self.create_publisher(cv.DetectionArray, topics.detections(n), qos) for n in names]
-        self.feedback_pubs = [self.create_publisher(cv.StepFeedback, topics.feedback(n), qos) for n in names]
-        self.action_subs = [self.create_subscription(Action, topics.action(n), self._action_callback(i), qos)
-                            for i, n in enumerate(names)]
+        # Stepped mode is lossless (KEEP_ALL: a slow reader slows the simulation down); real time cannot wait, so
+        # its publishers keep a bounded history (docs/ros_graph.md, "Real time, QoS and security").
+        if self.mode == "stepped":
+            frame_qos = feedback_qos = sim_stream()
+        else:
+            frame_qos, feedback_qos = realtime_stream(REALTIME_FRAME_DEPTH), realtime_stream(REALTIME_FEEDBACK_DEPTH)
+        self.clock_pub = self.create_publisher(ClockMsg, topics.CLOCK, frame_qos)
+        self.world_pub = self.create_publisher(cv.WorldState, topics.WORLD_STATE, frame_qos)
+        self.detection_pubs = [self.create_publisher(cv.DetectionArray, topics.detections(n), frame_qos)
+                               for n in names]
+        self.feedback_pubs = [self.create_publisher(cv.StepFeedback, topics.feedback(n), feedback_qos)
+                              for n in names]
+        # Keep-last: a flood on one robot's topic queues at most ACTION_QUEUE_DEPTH messages in this node.
+        self.action_subs = [self.create_subscription(Action, topics.action(n), self._action_callback(i),
+                                                     action_queue()) for i, n in enumerate(names)]
+        self._refused_since_log: Counter[str] = Counter()   # refusals not yet summarised in the log
+        self._last_refusal = ""
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QoSProfile(depth=10))
+        # A recorder that stopped writing (disk full, I/O error) says so, latched; the simulator repeats it in its
+        # own diagnostics and log, where an operator watching the game looks.
+        self.recorder_error = ""
+        self.recorder_matched: dict[str, int] = {}      # topic -> publishers the recorder has matched
+        self.recorder_sub = self.create_subscription(DiagnosticArray, topics.RECORDER_DIAGNOSTICS,
+                                                     self._on_recorder_diagnostics, latched(1))
         # TF (ros/tf.py): the robots and their heads per frame; the team frames once, latched.
         self.tf_pub = self.create_publisher(TFMessage, TF_TOPIC, tf_qos())
         self.tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, tf_static_qos())
@@ -169,6 +190,14 @@ class SimNode(Node):
                               for i in self.session.controlled)
         if self.wait_for_recorder:
             ready = ready and all(p.get_subscription_count() >= 1 for p in self.feedback_pubs + [self.clock_pub])
+            # ... and every action topic has a reader besides this node (the recorder), or the first actions a
+            # policy sends are accepted here but never recorded.
+            ready = ready and all(self.count_subscribers(topics.action(n)) >= 2 for n in self.names)
+            # Seeing both the recorder's reader and a policy's writer does not mean they have matched each other;
+            # a dynenv recorder says which publishers it has matched (another recorder: the check above only).
+            if self.count_publishers(topics.RECORDER_DIAGNOSTICS) > 0:
+                ready = ready and all(self.recorder_matched.get(topics.action(n), 0)
+                                      >= self.count_publishers(topics.action(n)) for n in self.names)
         if ready:
             self.start_timer.cancel()
             self._start()
@@ -185,13 +214,21 @@ class SimNode(Node):
 
     def _on_reset(self, request: ResetSimulation.Request, response: ResetSimulation.Response):
         try:
-            options = yaml.safe_load(request.options_yaml) if request.options_yaml.strip() else {}
+            if len(request.options_yaml) > MAX_OPTIONS_CHARS:
+                raise ValueError(f"options_yaml is {len(request.options_yaml)} characters; at most "
+                                 f"{MAX_OPTIONS_CHARS}")
+            try:
+                options = yaml.safe_load(request.options_yaml) if request.options_yaml.strip() else {}
+            except RecursionError:              # "[[[[…" parses recursively: deep nesting exhausts the stack
+                raise ValueError("options_yaml is nested too deeply") from None
             if not isinstance(options, dict):
-                raise ValueError("options_yaml must be a mapping")
-            unknown = sorted(set(options) - set(RESET_OPTIONS))
+                raise ValueError(f"options_yaml must be a mapping such as {{kickoff_team: b}}, got "
+                                 f"{type(options).__name__}")
+            unknown = sorted(set(options) - set(RESET_OPTIONS), key=repr)
             if unknown:
                 raise ValueError(f"unknown reset option(s) {unknown}; known: {list(RESET_OPTIONS)}")
             kickoff = kickoff_team(options.get("kickoff_team", "a"))
+            seed = checked_seed(int(request.seed)) if request.use_seed else None
         except (ValueError, yaml.YAMLError) as error:
             response.success, response.message = False, f"reset refused: {error}"
             response.episode_id = self.session.episode_id
@@ -200,7 +237,7 @@ class SimNode(Node):
             self.start_timer.cancel()
             self.started = True
             self._started_wall = time.monotonic()
-        self._reset(int(request.seed) if request.use_seed else None, kickoff)
+        self._reset(seed, kickoff)
         response.success, response.episode_id = True, self.session.episode_id
         response.message = f"episode {self.session.episode_id} started"
         return response
@@ -215,6 +252,11 @@ class SimNode(Node):
         elif request.ticks % period_ticks:
             response.success = False
             response.message = f"ticks must be a multiple of the motion period ({period_ticks}), or 0 for one period"
+        elif request.ticks // period_ticks > MAX_STEP_PERIODS:
+            response.success = False
+            response.message = (f"ticks {request.ticks} is {request.ticks // period_ticks} periods; one call runs "
+                                f"at most {MAX_STEP_PERIODS} ({MAX_STEP_PERIODS * period_ticks} ticks): call again "
+                                "for more")
         else:
             for _ in range(max(1, request.ticks // period_ticks)):
                 if self.session.finished and not self.auto_reset:
@@ -230,16 +272,18 @@ class SimNode(Node):
     def _action_callback(self, robot: int):
         def receive(msg: Action) -> None:
             if msg.robot_id != robot:
-                accepted, reason = False, (f"unknown_robot: robot_id {msg.robot_id} on {topics.action(self.names[robot])}"
-                                           f" (expected {robot})")
+                accepted, reason = False, (f"unknown_robot: robot_id {msg.robot_id} on "
+                                           f"{topics.action(self.names[robot])} (expected {robot})")
                 self.session.counts["rejected_unknown_robot"] += 1
             else:
                 accepted, reason = self.session.submit(msg.robot_id, msg.episode_id, msg.motion_period, msg.walk,
                                                        msg.turn, msg.kick, float(msg.head_yaw_delta))
             if not accepted:
+                # Counted (diagnostics) and summarised in the log once per diagnostics period: logging each one
+                # cost ~30x the check itself, so a flood of bad actions starved the node's services.
                 if not reason.startswith("ignored"):
-                    self.get_logger().warning(f"action of {self.names[robot]} rejected: {reason}",
-                                              throttle_duration_sec=1.0)
+                    self._refused_since_log[reason.split(":")[0]] += 1
+                    self._last_refusal = f"{self.names[robot]}: {reason}"
                 return
             if self.mode == "stepped" and self.session.ready():
                 self._run_period()
@@ -288,15 +332,17 @@ class SimNode(Node):
 
     def _publish(self, publisher, message) -> None:
         """Publish on a KEEP_ALL topic: if a slow reader filled the queue, Fast DDS refuses after its blocking
-        time; try again for up to a second (the reader drains meanwhile) rather than lose the message."""
-        for attempt in range(100):
+        time; try again for up to a second (the reader drains meanwhile) rather than lose the message. In real
+        time one attempt only: a frame that cannot go out now is counted and dropped, the clock does not wait."""
+        for attempt in range(100 if self.mode == "stepped" else 1):
             try:
                 publisher.publish(message)
                 return
             except Exception as error:          # rclpy's RCLError: "cannot publish data"
                 if type(error).__name__ != "RCLError":
                     raise
-                time.sleep(0.01)
+                if self.mode == "stepped":
+                    time.sleep(0.01)
         self.session.counts["publish_failed"] += 1
         self.get_logger().error(f"could not publish on {publisher.topic_name}: its readers are stuck",
                                 throttle_duration_sec=1.0)
@@ -359,6 +405,8 @@ class SimNode(Node):
                   "published": {"world_state": self.frames_published,
                                 "detections_per_robot": self.frames_published,
                                 "feedback_per_robot": self.periods_run + self.episodes_started},
+                  # what a lossless recorder must hold on each /<robot>/action (the main job checks it)
+                  "accepted_actions": {n: self.session.accepted_per_robot[i] for i, n in enumerate(self.names)},
                   "robots": self.names}
         with open(self.report_path, "w") as handle:
             json.dump(report, handle, indent=2)
@@ -392,17 +440,28 @@ class SimNode(Node):
                 self.publish_markers = bool(p.value)
             elif p.name == "auto_reset":
                 self.auto_reset = bool(p.value)
-            elif p.name == "real_time_factor":
+            elif p.name == "real_time_factor" and float(p.value) != self.real_time_factor:
+                # Change the period in place: re-creating the timer restarted its period, so setting the factor
+                # faster than one vision period (even to the same value) starved the simulation.
                 self.real_time_factor = float(p.value)
                 if self.vision_timer is not None:
-                    self.destroy_timer(self.vision_timer)
-                    self.vision_timer = self._vision_timer()
+                    self._retime_vision_timer()
         return SetParametersResult(successful=True)
+
+    def _retime_vision_timer(self) -> None:
+        """The new period applies from the next frame on, which keeps its phase (the timer is not restarted); only
+        if that frame is further away than one new period is it brought forward to one new period from now."""
+        period_ns = self._vision_period_ns()
+        self.vision_timer.timer_period_ns = period_ns
+        if self.vision_timer.time_until_next_call() > period_ns:
+            self.vision_timer.reset()
+
+    def _vision_period_ns(self) -> int:
+        return round(self.config.rates.vision_period_ticks * self._tick_s / self.real_time_factor * 1e9)
 
     def _vision_timer(self):
         """Realtime mode: one frame per vision period of sim time, on the wall clock scaled by the factor."""
-        period = self.config.rates.vision_period_ticks * self._tick_s / self.real_time_factor
-        return self.create_timer(period, self._realtime_tick, clock=self.wall)
+        return self.create_timer(self._vision_period_ns() * 1e-9, self._realtime_tick, clock=self.wall)
 
     def diagnostics(self) -> dict[str, str]:
         """Achieved rates over the last diagnostics window and action counts, as strings (DiagnosticStatus)."""
@@ -421,22 +480,47 @@ class SimNode(Node):
                   "sim_time_s": f"{sim_now:.2f}", "real_time_factor": f"{(s1 - s0) / wall:.2f}",
                   "vision_frames_per_s": f"{(f1 - f0) / wall:.1f}", "periods_run": str(self.periods_run)}
         counts: Counter[str] = self.session.counts
-        for key in ("accepted", "missing", "ignored_after_episode_end", "publish_failed") + tuple(f"rejected_{r}" for r in
-                                                   ("malformed", "out_of_range", "unknown_robot", "wrong_episode",
-                                                    "late", "early", "duplicate")):
+        rejected = ("malformed", "out_of_range", "unknown_robot", "wrong_episode", "late", "early", "duplicate")
+        for key in ("accepted", "missing", "ignored_after_episode_end", "publish_failed") + tuple(
+                f"rejected_{r}" for r in rejected):
             values[key] = str(counts.get(key, 0))
+        if self.recorder_error:
+            values["recorder_error"] = self.recorder_error
         return values
+
+    def _on_recorder_diagnostics(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            for value in status.values:
+                if value.key.startswith(topics.MATCHED_PREFIX) and value.value.isdigit():
+                    self.recorder_matched[value.key[len(topics.MATCHED_PREFIX):]] = int(value.value)
+        errors = [s.message or "error" for s in msg.status if s.level == DiagnosticStatus.ERROR]
+        error = "; ".join(errors)
+        if error and error != self.recorder_error:
+            self.get_logger().error(f"recorder: {error}")
+        elif not error and self.recorder_error:
+            self.get_logger().info("recorder: recording again")
+        self.recorder_error = error
 
     def _publish_diagnostics(self) -> None:
         values = self.diagnostics()
         problems = sum(int(v) for k, v in values.items() if k.startswith("rejected_"))
-        status = DiagnosticStatus(level=DiagnosticStatus.WARN if problems else DiagnosticStatus.OK, name="dynenv_sim",
-                                  message=f"{problems} actions rejected" if problems else "ok",
-                                  hardware_id="simulation", values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        if self.recorder_error:
+            level, message = DiagnosticStatus.ERROR, f"recorder: {self.recorder_error}"
+        elif problems:
+            level, message = DiagnosticStatus.WARN, f"{problems} actions rejected"
+        else:
+            level, message = DiagnosticStatus.OK, "ok"
+        status = DiagnosticStatus(level=level, name="dynenv_sim", message=message, hardware_id="simulation",
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diagnostics_pub.publish(msg)
         self._diagnostics_sent += 1
+        if self._refused_since_log:
+            summary = ", ".join(f"{n} {k}" for k, n in sorted(self._refused_since_log.items()))
+            self.get_logger().warning(f"actions refused since the last report: {summary}; last: "
+                                      f"{self._last_refusal}")
+            self._refused_since_log.clear()
         line = " ".join(f"{k}={v}" for k, v in values.items() if v not in ("0", "0.00"))
         if problems or self._diagnostics_sent % 10 == 1:     # the log gets one line in ten, or any trouble
             self.get_logger().info(line)

@@ -1,9 +1,12 @@
 """The Jazzy main() idiom shared by every node: init, spin, clean shutdown on SIGINT/SIGTERM, exit status."""
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-
+import contextlib
+import os
 import sys
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -20,7 +23,11 @@ class NodeExit(Exception):
 
 
 def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -> int:
-    """Create the node, spin it until shutdown or NodeExit, and return the process exit status."""
+    """Create the node, spin it until shutdown or NodeExit, and return the process exit status. ``-h``/``--help``
+    (before any ``--ros-args``) prints the node's parameters instead and returns 0 without starting ROS."""
+    if wants_help(sys.argv[1:] if args is None else args):
+        print(parameter_help(make_node))
+        return 0
     rclpy.init(args=args)
     node = None
     status = 0
@@ -44,3 +51,114 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
             node.destroy_node()
         rclpy.try_shutdown()
     return status
+
+
+def wants_help(args: Sequence[str]) -> bool:
+    """``-h`` or ``--help`` among the node's own arguments (ROS arguments follow ``--ros-args``)."""
+    own = list(args)[:list(args).index("--ros-args")] if "--ros-args" in args else list(args)
+    return "-h" in own or "--help" in own
+
+
+class _DeclarationsDone(Exception):
+    """Raised by the stand-in Node at the node's first call that is not about parameters: declarations are over."""
+
+
+_PARAMETER_CALLS = ("declare_parameter", "declare_parameters", "get_parameter", "get_parameters", "has_parameter",
+                    "get_logger", "get_name", "get_namespace", "add_on_set_parameters_callback")
+
+
+@contextlib.contextmanager
+def _stand_in_node(found: list[tuple[str, Any, Any]]) -> Iterator[None]:
+    """Make rclpy's Node a recorder of parameter declarations (no context, no DDS), for the time of the block.
+
+    Each declaration is recorded as (name, default, descriptor) and answered with its default; any other Node
+    call (a publisher, a timer, a graph query) ends the collection with ``_DeclarationsDone``.
+    """
+    from rclpy.logging import get_logger
+    from rclpy.parameter import Parameter
+
+    values: dict[str, Any] = {"use_sim_time": False}
+
+    def init(self: Node, node_name: str, *_: Any, **__: Any) -> None:
+        self._parameter_overrides = {}
+        self._help_name = node_name
+
+    def declare_parameter(self: Node, name: str, value: Any = None, descriptor: Any = None,
+                          ignore_override: bool = False) -> Parameter:
+        found.append((name, value, descriptor))
+        values[name] = value
+        return Parameter(name, value=value)
+
+    def declare_parameters(self: Node, namespace: str, parameters: list, ignore_override: bool = False) -> list:
+        prefix = f"{namespace}." if namespace else ""
+        return [declare_parameter(self, prefix + p[0], *p[1:]) for p in parameters]
+
+    def get_parameter(self: Node, name: str) -> Parameter:
+        return Parameter(name, value=values.get(name))
+
+    def done(*_: Any, **__: Any) -> None:
+        raise _DeclarationsDone
+
+    replacements: dict[str, Any] = {
+        "__init__": init, "declare_parameter": declare_parameter, "declare_parameters": declare_parameters,
+        "get_parameter": get_parameter, "get_parameters": lambda self, names: [get_parameter(self, n) for n in names],
+        "has_parameter": lambda self, name: name in values, "get_logger": lambda self: get_logger(self._help_name),
+        "get_name": lambda self: self._help_name, "get_namespace": lambda self: "/",
+        "add_on_set_parameters_callback": lambda self, callback: None}
+    saved = dict(vars(Node))
+    for name, attribute in saved.items():
+        if name in replacements:
+            setattr(Node, name, replacements[name])
+        elif not name.startswith("__") and (callable(attribute) or isinstance(attribute, property)):
+            setattr(Node, name, property(done) if isinstance(attribute, property) else done)
+    try:
+        yield
+    finally:
+        for name in replacements:
+            setattr(Node, name, saved[name])
+        for name, attribute in saved.items():
+            if not name.startswith("__"):
+                setattr(Node, name, attribute)
+
+
+def parameter_help(make_node: Callable[[], Node]) -> str:
+    """The node's parameters (name, type, default, description, range or choices, read-only) as text.
+
+    The node's constructor runs against a stand-in Node until its first call that is not a parameter declaration;
+    it runs in a temporary working directory, so a default relative output path cannot leave anything behind.
+    """
+    found: list[tuple[str, Any, Any]] = []
+    with tempfile.TemporaryDirectory() as scratch, _stand_in_node(found):
+        cwd = os.getcwd()
+        os.chdir(scratch)
+        try:
+            make_node()
+        except _DeclarationsDone:
+            pass
+        except Exception as error:   # a constructor that needs more than its defaults: show what was declared
+            found.append(("(with every default the node stops here)", None, f"{type(error).__name__}: {error}"))
+        finally:
+            os.chdir(cwd)
+    lines = ["parameters (set with --ros-args -p NAME:=VALUE or --params-file FILE):"]
+    for name, default, descriptor in found:
+        if isinstance(descriptor, str):
+            lines.append(f"  {name}: {descriptor}")
+            continue
+        if isinstance(default, list) and all(v == "" for v in default):
+            default = []                 # declare_str_list declares [""] for an empty list (rclpy needs a type)
+        lines.append(f"  {name} (default {default!r}{_constraints(descriptor)}): "
+                     f"{getattr(descriptor, 'description', '') or 'no description'}")
+    return "\n".join(lines)
+
+
+def _constraints(descriptor: Any) -> str:
+    if descriptor is None:
+        return ""
+    parts = []
+    for bounds in list(descriptor.integer_range) + list(descriptor.floating_point_range):
+        parts.append(f"{bounds.from_value}..{bounds.to_value}")
+    if descriptor.additional_constraints:
+        parts.append(descriptor.additional_constraints)
+    if descriptor.read_only:
+        parts.append("read-only")
+    return "; " + "; ".join(parts) if parts else ""

@@ -1,7 +1,24 @@
-"""QoS profiles, named by what they are for, so publishers and subscribers always match."""
+"""QoS profiles, named by what they are for, so publishers and subscribers always match.
+
+A publisher's history (KEEP_ALL / KEEP_LAST and depth) is not part of QoS compatibility: a KEEP_ALL subscriber
+(the recorder) matches a KEEP_LAST publisher, it just cannot get more than the publisher still holds.
+Depths and why are documented in docs/ros_graph.md ("Real time, QoS and security").
+"""
 from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+# Real-time mode: how many messages a publisher keeps for a reader that has not acknowledged them yet. Five motion
+# periods of the topic's rate; a reader further behind loses the oldest (in real time the newest is what counts),
+# and the simulator's memory stays bounded however slow its readers are.
+REALTIME_FRAME_DEPTH = 25        # /clock, /world_state, /<robot>/detections: 5 frames per period x 5 periods
+REALTIME_FEEDBACK_DEPTH = 5      # /<robot>/feedback: one per period
+# The simulator's action subscriptions, in both modes: a policy sends one action per period, so ten is ample for a
+# legitimate publisher, and a flood can queue no more than this many messages per robot in front of it.
+ACTION_QUEUE_DEPTH = 10
+# Policies keep their last actions for readers that match late (transient local): a recorder that discovers a
+# policy's writer a few periods after the game started still gets its first actions.
+ACTION_HISTORY_DEPTH = 20
 
 
 def latched(depth: int) -> QoSProfile:
@@ -11,7 +28,41 @@ def latched(depth: int) -> QoSProfile:
 
 
 def sim_stream() -> QoSProfile:
-    """The simulator's data topics: reliable and KEEP_ALL, so a slow subscriber (a recorder) slows the publisher
-    down instead of losing messages; stepped mode then runs as fast as the slowest reader allows."""
+    """The simulator's data topics in stepped mode, and the readers that must lose nothing (recorder): reliable and
+    KEEP_ALL, so a slow subscriber slows the publisher down instead of losing messages; stepped mode then runs as
+    fast as the slowest reader allows."""
     return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
+
+
+def realtime_stream(depth: int) -> QoSProfile:
+    """The simulator's data topics in real-time mode: reliable but keep-last ``depth``, so readers slower than the
+    wall clock cannot make the publisher hold (or wait for) an unbounded backlog."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def action_queue() -> QoSProfile:
+    """The simulator's subscriptions to actions: reliable (matches every publisher), keep-last
+    ``ACTION_QUEUE_DEPTH``, so a flood on a robot's topic cannot pile up in the simulator."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ACTION_QUEUE_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+def action_stream() -> QoSProfile:
+    """The policies' action publishers: reliable, transient local, keep-last ``ACTION_HISTORY_DEPTH``. Discovery is
+    asymmetric: the simulator may see the recorder's reader before the policy's writer has matched it, and a short
+    stepped game can be over by then; the writer's history hands a late reader what it missed. Volatile readers
+    (the simulator) match it too and get only new actions."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ACTION_HISTORY_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def recording_qos(offered_durabilities: list[DurabilityPolicy]) -> QoSProfile:
+    """The recorder's subscription to a topic, adapted to its publishers as rosbag2 does: lossless (reliable,
+    KEEP_ALL), and transient local when every publisher offers it, so their kept history (latched /tf_static, the
+    policies' first actions) reaches it; volatile otherwise, which matches any publisher."""
+    profile = sim_stream()
+    if offered_durabilities and all(d == DurabilityPolicy.TRANSIENT_LOCAL for d in offered_durabilities):
+        profile.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    return profile

@@ -4,6 +4,8 @@ from __future__ import annotations
 CLOCK = "/clock"                                  # rosgraph_msgs/Clock, sim time, at vision rate
 WORLD_STATE = "/world_state"                      # dynenv_msgs/WorldState, ground truth, frame "map", vision rate
 DIAGNOSTICS = "/sim/diagnostics"                  # diagnostic_msgs/DiagnosticArray, about 1 Hz
+RECORDER_DIAGNOSTICS = "/recorder/diagnostics"    # diagnostic_msgs/DiagnosticArray, latched; ERROR when not recording
+MATCHED_PREFIX = "matched_publishers:"            # + topic: a recorder diagnostics value, publishers it has matched
 GROUND_TRUTH_MARKERS = "/sim/markers/ground_truth"  # visualization_msgs/MarkerArray, frame "map"
 DETECTION_MARKERS = "/sim/markers/detections"     # visualization_msgs/MarkerArray of one robot's detections
 RESET_SERVICE = "/sim/reset"                      # dynenv_msgs/srv/ResetSimulation

@@ -1,0 +1,307 @@
+"""One bad call must not take the simulator down: ill-typed reset options and seeds are refused with a reason (in
+the node, the session and the PettingZoo env alike), /sim/step runs a bounded amount per call, and re-setting a
+parameter never starves the real-time timer (docs/ros_graph.md)."""
+from __future__ import annotations
+
+import time
+
+import pytest
+from dynenv_msgs.srv import ResetSimulation, StepSimulation
+from rclpy.parameter import Parameter
+
+from dynenv_ros.envs.robocup_v0 import parallel_env
+from dynenv_ros.envs.soccer_session import SoccerSession
+from dynenv_ros.nodes.sim_node import SimNode
+from dynenv_ros.perception.params import load_preset
+from dynenv_ros.ros import topics
+from dynenv_ros.soccer.config import SoccerConfig
+from ros_harness import spin_until
+
+MAX_STEP_PERIODS = 100      # docs/ros_graph.md: /sim/step runs at most 100 motion periods per call
+
+BAD_OPTIONS = ["kickoff_team: [a]", "kickoff_team: {x: 1}", "kickoff_team: true", "kickoff_team: 2",
+               "kickoff_team: null", "[kickoff_team]", "just text", "kickoff_team: [a", "{1: a}", "{1: a, x: b}",
+               "[" * 2000 + "]" * 2000, "&a [*a]", "!!python/object/apply:os.system [ls]", "kickoff_team: .nan"]
+
+
+def _sim(make_node, executor, **params):
+    values = dict(players_per_team=1, seed=1, falls_enabled=False, publish_markers=False, wait_for_subscribers=0)
+    values.update(params)
+    sim = make_node(SimNode, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+    client = make_node("client")
+    for node in (sim, client):
+        executor.add_node(node)
+    return sim, client
+
+
+def _call(executor, cli, request):
+    assert cli.wait_for_service(timeout_sec=5.0)
+    future = cli.call_async(request)
+    assert spin_until(executor, future.done, 10.0)
+    return future.result()
+
+
+def test_ill_typed_reset_options_and_seeds_are_refused_and_the_node_lives_on(make_node, executor):
+    sim, client = _sim(make_node, executor)
+    reset = client.create_client(ResetSimulation, topics.RESET_SERVICE)
+    for options in BAD_OPTIONS:
+        reply = _call(executor, reset, ResetSimulation.Request(options_yaml=options))
+        assert not reply.success and reply.message.startswith("reset refused"), (options, reply.message)
+    episodes = sim.episodes_started
+    reply = _call(executor, reset, ResetSimulation.Request(use_seed=True, seed=5, options_yaml="{kickoff_team: b}"))
+    assert reply.success and sim.episodes_started == episodes + 1      # the .srv comment's example works
+
+
+def test_the_env_refuses_ill_typed_options_with_a_value_error():
+    env = parallel_env(players_per_team=1)
+    for options in ({"kickoff_team": ["a"]}, {"kickoff_team": {"x": 1}}, {"kickoff_team": True},
+                    {"kickoff_team": None}, {"kickoff_team": 0.5}, {"kickoff_team": "A"}, ["kickoff_team"], "a"):
+        with pytest.raises(ValueError, match="options|kickoff_team"):
+            env.reset(seed=0, options=options)
+    with pytest.warns(UserWarning, match="unknown option"):     # PettingZoo's API test passes a dummy option
+        env.reset(seed=0, options={"options": 1})
+    env.reset(seed=0, options={"kickoff_team": "b"})
+    assert env.world.state.kickoff_team == -1
+
+
+@pytest.mark.parametrize("seed", [1.5, True, "3", -1, 2 ** 64, [1]])
+def test_the_env_and_the_session_refuse_bad_seeds_with_a_value_error(seed):
+    with pytest.raises(ValueError, match="seed"):
+        parallel_env(players_per_team=1).reset(seed=seed)
+    session = SoccerSession(SoccerConfig.from_mapping({"players_per_team": 1}), load_preset("none"), seed=0)
+    with pytest.raises(ValueError, match="seed"):
+        session.reset(seed=seed)
+
+
+def test_a_huge_step_is_refused_and_a_bounded_one_runs(make_node, executor):
+    sim, client = _sim(make_node, executor)
+    step = client.create_client(StepSimulation, topics.STEP_SERVICE)
+    assert spin_until(executor, lambda: sim.started, 5.0)
+    reply = _call(executor, step, StepSimulation.Request(ticks=4_294_967_250 // 50 * 50))
+    assert not reply.success and f"at most {MAX_STEP_PERIODS}" in reply.message
+    assert sim.periods_run == 0                                   # refused before running anything
+    reply = _call(executor, step, StepSimulation.Request(ticks=(MAX_STEP_PERIODS + 1) * 50))
+    assert not reply.success
+    reply = _call(executor, step, StepSimulation.Request(ticks=3 * 50))
+    assert reply.success and sim.periods_run == 3
+
+
+def test_re_setting_the_real_time_factor_never_starves_the_timer(make_node, executor):
+    """Factor 1: a frame is due every 0.1 s. Setting the factor at 20 Hz — to the same value, then for real
+    (1.0 <-> 0.99) — restarted the timer each time, so it never fired. Then a speed-up from a 5 s frame period to
+    10 ms must not wait for the old period."""
+    sim, client = _sim(make_node, executor, mode="realtime", real_time_factor=1.0)
+    assert spin_until(executor, lambda: sim.frames_published > 0, 5.0)
+    for values in ((1.0, 1.0), (0.99, 1.0)):
+        before, deadline, k = sim.frames_published, time.monotonic() + 2.0, 0
+        while time.monotonic() < deadline:
+            assert sim.set_parameters([Parameter("real_time_factor", value=values[k % 2])])[0].successful
+            k += 1
+            end = time.monotonic() + 0.05
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.01)
+        assert sim.frames_published - before >= 10, (values, sim.frames_published - before)   # ~20 due
+    assert sim.set_parameters([Parameter("real_time_factor", value=0.02)])[0].successful
+    spin_until(executor, lambda: False, 0.2)
+    assert sim.set_parameters([Parameter("real_time_factor", value=10.0)])[0].successful
+    count = sim.frames_published
+    assert spin_until(executor, lambda: sim.frames_published >= count + 5, 2.0)
+
+
+def test_an_oversized_options_string_is_refused_before_parsing(make_node, executor):
+    sim, client = _sim(make_node, executor)
+    reset = client.create_client(ResetSimulation, topics.RESET_SERVICE)
+    huge = "{kickoff_team: a, " + "x" * 5000 + ": 1}"                 # docs: options_yaml is at most 4096 characters
+    reply = _call(executor, reset, ResetSimulation.Request(options_yaml=huge))
+    assert not reply.success and "at most 4096" in reply.message
+    for seed in (0, 2 ** 64 - 1):                     # the documented seed range (all of uint64), both ends
+        assert _call(executor, reset, ResetSimulation.Request(use_seed=True, seed=seed)).success
+
+
+def test_realtime_streams_are_bounded_and_stepped_streams_lossless(make_node, executor):
+    """docs/ros_graph.md: real time keeps the last 25 frames / 5 feedbacks per reader; stepped mode keeps all; the
+    action subscriptions keep the last 10 in both modes."""
+    from rclpy.qos import HistoryPolicy, ReliabilityPolicy
+    realtime, _ = _sim(make_node, executor, mode="realtime")
+    stepped = make_node(SimNode, parameter_overrides=[Parameter("players_per_team", value=1),
+                                                      Parameter("wait_for_subscribers", value=0)])
+    for sim, frame_depth, feedback_depth in ((realtime, 25, 5), (stepped, None, None)):
+        for publisher, depth in ([(p, frame_depth) for p in [sim.clock_pub, sim.world_pub] + sim.detection_pubs]
+                                 + [(p, feedback_depth) for p in sim.feedback_pubs]):
+            qos = publisher.qos_profile
+            assert qos.reliability == ReliabilityPolicy.RELIABLE
+            if depth is None:
+                assert qos.history == HistoryPolicy.KEEP_ALL
+            else:
+                assert qos.history == HistoryPolicy.KEEP_LAST and qos.depth == depth, publisher.topic_name
+        for subscription in sim.action_subs:
+            assert subscription.qos_profile.history == HistoryPolicy.KEEP_LAST
+            assert subscription.qos_profile.depth == 10
+
+
+class _RefusingPublisher:
+    """Stands in for a publisher whose DDS writer refuses every sample (a reader that stopped acknowledging)."""
+    topic_name = "/stuck"
+
+    def __init__(self) -> None:
+        self.attempts = 0
+
+    def publish(self, message) -> None:
+        from rclpy._rclpy_pybind11 import RCLError
+        self.attempts += 1
+        raise RCLError("cannot publish data")
+
+
+def test_a_refused_publish_costs_realtime_one_attempt_and_stepped_mode_retries(make_node, executor):
+    sim, _ = _sim(make_node, executor, mode="realtime")
+    stuck = _RefusingPublisher()
+    sim._publish(stuck, object())
+    assert stuck.attempts == 1                                    # no retry loop in real time
+    assert sim.session.counts["publish_failed"] == 1
+    stepped, _ = _sim(make_node, executor)               # stepped mode stays lossless: it retries for up to 1 s
+    stuck = _RefusingPublisher()
+    stepped._publish(stuck, object())
+    assert stuck.attempts == 100 and stepped.session.counts["publish_failed"] == 1
+
+
+def test_a_flood_of_refused_actions_is_counted_cheaply_and_logged_once_per_report(make_node, executor, capfd):
+    """Each refusal used to go through the logger (97 % of its cost); now it is a count, and the diagnostics
+    period logs one summary line."""
+    from dynenv_msgs.msg import Action
+    sim, _ = _sim(make_node, executor)
+    assert spin_until(executor, lambda: sim.started, 5.0)
+    receive = sim._action_callback(0)
+    bad = Action(robot_id=0, episode_id=1, motion_period=1, walk=99)
+    capfd.readouterr()
+    for _ in range(2001):
+        receive(bad)
+    assert sim.session.counts["rejected_out_of_range"] == 2001
+    assert capfd.readouterr().err == ""                           # no log line per refusal
+    sim._publish_diagnostics()
+    sim._publish_diagnostics()                                    # nothing new: no second summary
+    err = capfd.readouterr().err
+    assert err.count("actions refused since the last report: 2001 out_of_range") == 1, err
+    assert "walk=99" in err and err.count("rejected") <= 2        # the last reason; no line per refusal
+
+
+def test_a_burst_on_one_action_topic_queues_at_most_the_documented_depth(make_node, executor):
+    """200 actions sent while the simulator is not spinning: it takes at most 10 (+ what is in flight) of them."""
+    from dynenv_msgs.msg import Action
+    from dynenv_ros.ros.qos import sim_stream
+    sim, client = _sim(make_node, executor)
+    flooder = make_node("flooder")
+    pub = flooder.create_publisher(Action, topics.action("team_a_0"), sim_stream())
+    assert spin_until(executor, lambda: sim.started and pub.get_subscription_count() >= 1, 5.0)
+    for _ in range(200):
+        pub.publish(Action(robot_id=0, episode_id=1, motion_period=7))       # early: refused, counted
+    time.sleep(0.5)                                                           # all of it reaches the reader
+    spin_until(executor, lambda: False, 1.0)
+    assert 1 <= sim.session.counts["rejected_early"] <= 20, sim.session.counts
+
+
+def test_wait_for_recorder_also_waits_for_a_reader_of_every_action_topic(make_node, executor):
+    """The recorder lost a policy's first actions when the simulator started before it had subscribed to them."""
+    from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
+    from rosgraph_msgs.msg import Clock
+    from dynenv_ros.ros.qos import sim_stream
+    sim, client = _sim(make_node, executor, wait_for_subscribers=1, wait_for_recorder=True)
+    qos, names = sim_stream(), ("team_a_0", "team_b_0")
+    for name in names:             # policies (detections readers, action writers) and a recorder without actions
+        client.create_subscription(DetectionArray, topics.detections(name), lambda m: None, qos)
+        client.create_subscription(StepFeedback, topics.feedback(name), lambda m: None, qos)
+        client.create_publisher(Action, topics.action(name), qos)
+    client.create_subscription(Clock, topics.CLOCK, lambda m: None, qos)
+    assert spin_until(executor, lambda: all(sim.count_publishers(topics.action(n)) >= 1 for n in names), 5.0)
+    spin_until(executor, lambda: sim.started, 1.5)
+    assert not sim.started, "started although nobody records the actions"
+    recorder = make_node("recorder_stand_in")
+    for name in names:
+        recorder.create_subscription(Action, topics.action(name), lambda m: None, qos)
+    executor.add_node(recorder)
+    assert spin_until(executor, lambda: sim.started, 5.0)
+
+
+def test_wait_for_recorder_waits_until_a_dynenv_recorder_has_matched_every_action_publisher(make_node, executor):
+    """Both endpoints visible to the simulator did not mean the recorder had matched the policy's writer: under load
+    a 10-period game ended before it had, and all of one robot's actions went unrecorded."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
+    from rosgraph_msgs.msg import Clock
+    from dynenv_ros.ros.qos import latched, sim_stream
+    sim, client = _sim(make_node, executor, wait_for_subscribers=1, wait_for_recorder=True)
+    qos, names = sim_stream(), ("team_a_0", "team_b_0")
+    for name in names:
+        client.create_subscription(DetectionArray, topics.detections(name), lambda m: None, qos)
+        client.create_subscription(StepFeedback, topics.feedback(name), lambda m: None, qos)
+        client.create_publisher(Action, topics.action(name), qos)
+    recorder = make_node("recorder_stand_in")
+    recorder.create_subscription(Clock, topics.CLOCK, lambda m: None, qos)
+    for name in names:
+        recorder.create_subscription(Action, topics.action(name), lambda m: None, qos)
+    report = recorder.create_publisher(DiagnosticArray, "/recorder/diagnostics", latched(1))
+    executor.add_node(recorder)
+
+    def matched(counts):
+        report.publish(DiagnosticArray(status=[DiagnosticStatus(name="recorder", values=[
+            KeyValue(key=f"matched_publishers:{topics.action(n)}", value=str(c)) for n, c in zip(names, counts)])]))
+
+    matched((1, 0))                                  # the recorder has not matched team_b_0's policy yet
+    assert spin_until(executor, lambda: sim.recorder_matched.get(topics.action("team_b_0")) == 0, 5.0)
+    spin_until(executor, lambda: sim.started, 1.5)
+    assert not sim.started, "started before the recorder had matched team_b_0's action publisher"
+    matched((1, 1))
+    assert spin_until(executor, lambda: sim.started, 5.0)
+
+
+def test_sim_node_help_lists_its_parameters_and_exits_without_starting_ros():
+    import subprocess
+    import sys
+    result = subprocess.run([sys.executable, "-m", "dynenv_ros.nodes.sim_node", "--help"], capture_output=True,
+                            text=True, timeout=30)
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    assert "real_time_factor (default 1.0; 0.01..100.0): Realtime mode: sim seconds per wall second." in out
+    assert "mode (default 'stepped'; one of: stepped, realtime; read-only)" in out
+    assert "controlled_robots (default [];" in out
+    assert "perception" not in result.stderr and "sim_node" not in result.stderr   # the node never started
+
+
+@pytest.mark.parametrize("module", ["dynenv_ros.nodes.recorder", "dynenv_ros.nodes.bag_player",
+                                    "dynenv_ros.nodes.vision_adapter", "dynenv_ros.nodes.selfcheck_talker",
+                                    "dynenv_ros.nodes.selfcheck_listener", "policy_node.scripted_policy",
+                                    "policy_node.policy_node"])
+def test_every_node_run_through_the_node_runner_answers_help(module, tmp_path):
+    """docs/ros_graph.md: every node of ros/node_runner.py lists its parameters on --help and exits 0, without
+    starting (a recorder would have created its bag in the working directory)."""
+    import subprocess
+    import sys
+    result = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=60,
+                            cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("parameters") and "(default " in result.stdout
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_recorder_that_stops_writing_turns_the_simulator_diagnostics_to_error(make_node, executor, capfd):
+    """The recorder's latched ERROR (disk full) is repeated where an operator watching the game looks."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    from dynenv_ros.ros.qos import latched
+    sim, client = _sim(make_node, executor)
+    seen: list[DiagnosticStatus] = []
+    client.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: seen.extend(m.status), 10)
+    recorder = client.create_publisher(DiagnosticArray, "/recorder/diagnostics", latched(1))
+    recorder.publish(DiagnosticArray(status=[DiagnosticStatus(level=DiagnosticStatus.OK, name="recorder",
+                                                              message="recording 9 topics")]))
+    assert spin_until(executor, lambda: sim.recorder_sub.get_publisher_count() == 1, 5.0)
+    sim._publish_diagnostics()
+    assert spin_until(executor, lambda: len(seen) >= 1, 5.0)
+    assert seen[-1].level != DiagnosticStatus.ERROR and "recorder_error" not in sim.diagnostics()
+    recorder.publish(DiagnosticArray(status=[DiagnosticStatus(
+        level=DiagnosticStatus.ERROR, name="recorder", message="not recording: [Errno 28] No space left on device")]))
+    assert spin_until(executor, lambda: sim.recorder_error != "", 5.0)
+    sim._publish_diagnostics()
+    assert spin_until(executor, lambda: len(seen) >= 2, 5.0)
+    assert seen[-1].level == DiagnosticStatus.ERROR and "No space left" in seen[-1].message
+    assert {v.key: v.value for v in seen[-1].values}["recorder_error"].endswith("No space left on device")
+    assert capfd.readouterr().err.count("recorder: not recording") == 1
