@@ -1,39 +1,69 @@
 """The learned policy as a ROS 2 node (``ros2 run dynenv_ros policy_node``): detections in, one action per robot
 per motion period out.
 
-For each controlled robot (all, or one team — so two policies can play each other) it buffers the vision frames of
-the current period, and once every controlled robot has all of them it runs the network for all of them in one
-batch, keeps each robot's recurrent state and publishes each robot's action for the next period. State resets
-at episode boundaries. Weights come from a policy file (safetensors, no pickle: ``agent.checkpoint``) or an ONNX file, at start
-or through the LoadPolicy service, swapped between two decisions so no period is dropped.
+For each controlled robot (all, or one team — so two policies can play each other) it collects the vision frames
+of the newest motion period, and once every controlled robot has a complete one it runs the network for all of
+them in one batch, keeps each robot's recurrent state and publishes each robot's action for the next period.
+State resets at episode boundaries. Weights come from a policy file (safetensors, no pickle: ``agent.checkpoint``)
+or an ONNX file, at start or through the LoadPolicy service; either way the policy is checked first
+(``agent.export.check_policy``: bounded sizes, finite weights, a trial decision on the last frames received giving
+actions the simulator accepts) and a failing one is refused with the reason — at start a one-line error and exit
+status 2, at run time a refusal that keeps the current policy. Swaps happen between two decisions.
+
+Real time degrades gracefully (docs/deploy.md, "Slow policies"): the detection subscriptions keep the last
+``DETECTION_DEPTH`` messages per robot (bounded), and before each decision the node takes every frame already
+waiting, so it always acts on the newest complete period; older ones are dropped and counted, and the counts go to
+``~/diagnostics`` and, periodically, the log.
 """
 from __future__ import annotations
 
+import math
 import statistics
 import time
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import torch
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from dynenv_msgs.msg import Action, DetectionArray
 from dynenv_msgs.srv import LoadPolicy
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from dynenv_ros.envs.padded_layout import PaddedLayout, clamp_features, pack_frames
 from dynenv_ros.perception.detections import as_features, rows_from_messages
 from dynenv_ros.ros import topics
-from dynenv_ros.ros.node_runner import run_node
-from dynenv_ros.ros.parameters import declare_bool, declare_int, declare_str
-from dynenv_ros.ros.qos import sim_stream
-from dynenv_ros.soccer.config import robot_names
+from dynenv_ros.ros.node_runner import NodeExit, run_node
+from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str
+from dynenv_ros.ros.qos import action_stream
+from dynenv_ros.ros.tf import base_frame
+from dynenv_ros.soccer.config import MotionConfig, SoccerConfig, robot_names
 from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
-from dynenv_ros.agent.export import TorchPolicy
+from dynenv_ros.agent.export import MAX_FRAMES, MAX_SLOTS, TorchPolicy, check_policy, sample_actions
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.agent.network import DynEnvAgent
 
 RUNTIMES = ("torch", "onnxruntime")
+# The simulator refuses a head turn beyond this per period (docs/ros_graph.md): a policy must stay inside it.
+HEAD_BOUND = MotionConfig().head_max_delta
+DEFAULT_FRAMES = SoccerConfig().rates.frames_per_period      # the trial's frame count before any frame arrived
+# Keep-last depth of each robot's detection subscription: two periods of the largest frame count accepted. Stepped
+# mode publishes at most one period per robot and then waits for the actions — except at an episode's end, when
+# the last period and the next episode's first follow each other — so nothing a stepped game needs is ever
+# lost; in real time the queue is bounded whatever the policy's speed (a slow one finds at most this many frames,
+# takes them all and acts on the newest complete period).
+DETECTION_DEPTH = 2 * MAX_FRAMES
+STAND_STILL = (0, 0, 0, 0.0)       # the fallback action of a robot whose decision failed or was not finite
+
+
+def detection_qos() -> QoSProfile:
+    """Reliable (matches the simulator's writers), keep-last ``DETECTION_DEPTH``: bounded, lossless when stepped."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DETECTION_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
 
 
 class RobotMemory:
@@ -41,10 +71,14 @@ class RobotMemory:
 
     def __init__(self) -> None:
         self.episode: int | None = None
-        self.period: int | None = None
+        self.period: int | None = None                 # the period whose frames are being collected
         self.frames: dict[int, DetectionArray] = {}
+        self.ready: list[DetectionArray] | None = None  # the newest complete period, not acted on yet
+        self.decided: int | None = None                # the last period acted on
+        self.addressed: int | None = None              # the period its last action was sent for
+        self.last: list[DetectionArray] | None = None  # its frames (the trial decision of a new policy)
         self.state: tuple | None = None
-        self.previous = (0, 0, 0, 0.0)
+        self.previous = STAND_STILL
 
 
 class PolicyNode(Node):
@@ -55,46 +89,92 @@ class PolicyNode(Node):
                            choices=("", "a", "b"))
         self.runtime_name = declare_str(self, "runtime", "torch", "Inference runtime.", choices=RUNTIMES,
                                         read_only=True)
-        checkpoint = declare_str(self, "checkpoint", "", "Weights: a .safetensors policy file (torch) or .onnx file; empty: "
-                                 "untrained weights from 'seed' (smoke tests only).", read_only=True)
-        seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed of action sampling (and untrained weights).",
-                           read_only=True)
+        checkpoint = declare_str(self, "checkpoint", "", "Weights: a .safetensors policy file (torch) or .onnx "
+                                 "file; empty: untrained weights from 'seed' (smoke tests only).", read_only=True)
+        self.seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed of action sampling (and untrained weights).",
+                                read_only=True)
         self.greedy = declare_bool(self, "greedy", False, "Take the most likely action instead of sampling.")
+        diagnostics_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.",
+                                      read_only=True)
         everyone = robot_names(players)
         self.names = [name for name in everyone if team in ("", name[5])]
         self.ids = {name: everyone.index(name) for name in self.names}
-        self.generator = torch.Generator().manual_seed(seed)
+        self.memory = {name: RobotMemory() for name in self.names}
+        self.graph_frames: int | None = None           # frames per period of the detections arriving
+        self.counts: Counter[str] = Counter()
+        self.latencies_ms: list[float] = []
+        self.actions_sent = 0
+        self.dropped_detections = 0          # rows beyond the maxima, farthest first
         try:
             if checkpoint:
                 self.policy, self.checkpoint_sha256 = self._load(checkpoint, self.runtime_name)
             else:
-                torch.manual_seed(seed)
-                self.policy, self.checkpoint_sha256 = TorchPolicy(DynEnvAgent()), ""
+                torch.manual_seed(self.seed)
+                policy = TorchPolicy(DynEnvAgent())
+                self._validate(policy)
+                self.policy, self.checkpoint_sha256 = policy, ""
                 self.get_logger().warning("no checkpoint: acting with untrained weights")
         except ValueError as error:
             raise ParameterException(str(error), ["checkpoint"]) from None
-        self.memory = {name: RobotMemory() for name in self.names}
-        self.latencies_ms: list[float] = []
-        self.actions_sent = 0
-        self.dropped_detections = 0          # rows beyond a fixed-shape runtime's maxima, farthest first
-        qos = sim_stream()
-        self.action_pubs = {n: self.create_publisher(Action, topics.action(n), qos) for n in self.names}
-        self.detection_subs = [self.create_subscription(DetectionArray, topics.detections(n), self._receiver(n), qos)
-                               for n in self.names]
+        self.action_pubs = {n: self.create_publisher(Action, topics.action(n), action_stream()) for n in self.names}
+        self.detection_subs = {n: self.create_subscription(DetectionArray, topics.detections(n), self._receiver(n),
+                                                           detection_qos()) for n in self.names}
         self.load_srv = self.create_service(LoadPolicy, "~/load_policy", self._on_load)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "~/diagnostics", QoSProfile(depth=10))
+        self._diagnostics_sent = 0
+        self._reported: Counter[str] = Counter()
+        self._window_latencies: list[float] = []
+        self.diagnostics_timer = self.create_timer(diagnostics_s, self._publish_diagnostics,
+                                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"controlling {', '.join(self.names)} with {self.runtime_name}")
 
     # -- weights ---------------------------------------------------------------------------------------------------
     def _load(self, path: str, runtime: str):
+        """(policy, sha256) of a file that passed every check; ValueError with a one-line reason otherwise."""
         if runtime not in RUNTIMES:
             raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
-        if runtime == "torch":
-            return TorchPolicy(load_checkpoint(path)), sha256(path)
-        from dynenv_ros.agent.export import OnnxPolicy
+        suffix = path.lower().rsplit(".", 1)[-1] if "." in path else ""
+        if runtime == "torch" and suffix == "onnx":
+            raise ValueError(f"{path} is an ONNX file: load it with runtime onnxruntime (the torch runtime loads "
+                             f".safetensors policy files)")
+        if runtime == "onnxruntime" and suffix in ("safetensors", "pt", "pth"):
+            raise ValueError(f"{path} is a torch policy file: load it with runtime torch, or export it to ONNX "
+                             f"(dynenv_ros.agent.export.export_onnx)")
         try:
-            return OnnxPolicy(path), sha256(path)
-        except Exception as error:
-            raise ValueError(f"cannot load ONNX policy {path}: {error}") from None
+            if runtime == "torch":
+                policy = TorchPolicy(load_checkpoint(path))
+            else:
+                from dynenv_ros.agent.export import OnnxPolicy
+                policy = OnnxPolicy(path)
+            self._validate(policy)
+            digest = sha256(path)
+        except ValueError as error:
+            raise ValueError(_one_line(error)) from None
+        except Exception as error:           # anything else a hostile or broken file provokes: refused, not fatal
+            raise ValueError(f"cannot load {path}: {type(error).__name__}: {_one_line(error)}") from None
+        return policy, digest
+
+    def _validate(self, policy) -> None:
+        """``check_policy`` on the last frames each robot acted on (a synthetic period with no detections where
+        there are none yet), with the frame count the graph sends once known."""
+        try:
+            check_policy(policy, self._trial_inputs(policy), HEAD_BOUND, self.graph_frames)
+        except ValueError as error:
+            raise ValueError(f"policy refused: {_one_line(error)}") from None
+
+    def _trial_inputs(self, policy):
+        frames = self.graph_frames or getattr(policy, "frames", None) or DEFAULT_FRAMES
+        periods = [m.last if m.last is not None and len(m.last) == frames else _empty_period(frames)
+                   for m in self.memory.values()]
+        recorded = sum(m.last is not None and len(m.last) == frames for m in self.memory.values())
+        self._trial_note = (f"the last frames of {recorded} robot{'s' * (recorded != 1)}" if recorded
+                            else f"an empty period of {frames} frames (no frames received yet)")
+        head_max = float(policy.head_max)
+        if not math.isfinite(head_max) or head_max <= 0:
+            head_max = 1.0            # check_policy refuses it with the reason; the trial inputs must stay finite
+        observation, _ = pack_messages(periods, [m.previous for m in self.memory.values()],
+                                       getattr(policy, "max_landmarks", None), getattr(policy, "max_objects", None))
+        return (*streams_from_padded(observation), *side_inputs(observation, head_max))
 
     def _on_load(self, request: LoadPolicy.Request, response: LoadPolicy.Response):
         runtime = request.runtime or self.runtime_name
@@ -102,6 +182,7 @@ class PolicyNode(Node):
             policy, digest = self._load(request.checkpoint_path, runtime)
         except ValueError as error:
             response.success, response.message = False, f"kept the current policy: {error}"
+            self.get_logger().warning(f"LoadPolicy {request.checkpoint_path!r}: {response.message}")
             return response
         # Callbacks run one at a time: the swap happens between two decisions. The recurrent states carry over
         # when they fit the new network; a network of another size starts from fresh states.
@@ -109,103 +190,271 @@ class PolicyNode(Node):
             for memory in self.memory.values():
                 memory.state = None
         self.policy, self.runtime_name, self.checkpoint_sha256 = policy, runtime, digest
-        response.success, response.message, response.checkpoint_sha256 = True, f"loaded ({runtime})", digest
+        response.success, response.checkpoint_sha256 = True, digest
+        response.message = f"loaded ({runtime}); its trial decision on {self._trial_note} passed"
         self.get_logger().info(f"loaded {request.checkpoint_path} ({runtime}, sha256 {digest[:12]})")
         return response
 
-    # -- frames and decisions ----------------------------------------------------------------------------------------
+    # -- frames ----------------------------------------------------------------------------------------------------
     def _receiver(self, name: str):
         def receive(msg: DetectionArray) -> None:
-            memory = self.memory[name]
-            if memory.episode != msg.episode_id:                 # a new episode: forget everything
-                memory.episode, memory.state, memory.previous = msg.episode_id, None, (0, 0, 0, 0.0)
-                memory.period, memory.frames = None, {}
-            if memory.period != msg.motion_period:
-                memory.period, memory.frames = msg.motion_period, {}
-            memory.frames[msg.frame_index] = msg
+            self._store(name, msg)
+            self._drain()
             self._decide_if_ready()
         return receive
 
-    def _complete(self, memory: RobotMemory) -> bool:
-        frames = next(iter(memory.frames.values()), None)
-        return frames is not None and len(memory.frames) == frames.frames_per_period
+    def _drain(self) -> None:
+        """Take every detection message already waiting (at most the queue's depth per robot), so the decision
+        that follows acts on the newest complete period, not on one a slow decision left behind. Uses the
+        subscription handle's take, what rclpy's executor itself calls (there is no public take in rclpy)."""
+        for name, sub in self.detection_subs.items():
+            for _ in range(DETECTION_DEPTH):
+                try:
+                    with sub.handle:
+                        taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                except AttributeError:        # an rclpy without it: the bounded queue alone limits staleness
+                    return
+                if taken is None:
+                    break
+                self._store(name, taken[0])
 
-    def _decide_if_ready(self) -> None:
-        ready = [n for n in self.names if self._complete(self.memory[n])]
-        if len(ready) < len(self.names):
+    def _store(self, name: str, msg: DetectionArray) -> None:
+        """File one frame: a new episode resets the robot; frames of a period older than the one being collected
+        (or already complete or acted on) are stale; a complete period replaces an older one not yet acted on
+        (counted as dropped), and so does a newer period's first frame replace an incomplete one."""
+        memory = self.memory[name]
+        problem = _frame_problem(msg)
+        if not problem and memory.frames:
+            first = next(iter(memory.frames.values()))
+            if msg.motion_period == memory.period and msg.frames_per_period != first.frames_per_period:
+                problem = (f"frames_per_period {msg.frames_per_period} differs from the period's other frames "
+                           f"({first.frames_per_period})")
+        if problem:
+            self.counts["frames_malformed"] += 1
+            self.get_logger().warning(f"{topics.detections(name)}: frame refused: {problem}",
+                                      throttle_duration_sec=5.0)
             return
-        started = time.perf_counter()
-        memories = [self.memory[n] for n in ready]
-        observation = self._padded(memories)
-        landmarks, objects = streams_from_padded(observation)
-        previous, proprio = side_inputs(observation, float(self.policy.head_max))
-        states = [m.state or self.policy.initial_state(1) for m in memories]
-        state = tuple(torch.cat([s[i] for s in states]) for i in range(4))
-        step = self.policy(landmarks, objects, previous, proprio, state)
-        head_max = float(self.policy.head_max)
-        actions = _sample(step, self.policy.head_mode, self.generator, self.greedy, head_max)
-        units = (torch.as_tensor(step.head).shape[-1] - 1) // 2 if self.policy.head_mode == "discrete" else 0
-        last = [m.frames[max(m.frames)] for m in memories]
-        for b, (name, memory, frame) in enumerate(zip(ready, memories, last)):
-            walk, turn, kick, head = actions[b]
-            # The checkpoint's own head discretisation: index 0..2u ↦ (index − u)·head_max/u rad.
-            head_delta = ((int(head) - units) * head_max / units if self.policy.head_mode == "discrete"
-                          else float(head))
-            self.action_pubs[name].publish(Action(
-                robot_id=self.ids[name], episode_id=frame.episode_id, motion_period=frame.motion_period + 1,
-                walk=int(walk), turn=int(turn), kick=int(kick), head_yaw_delta=head_delta))
-            memory.state = tuple(s[b:b + 1] for s in step.state)
-            memory.previous = (int(walk), int(turn), int(kick), head_delta)
+        if memory.episode != msg.episode_id:                 # a new episode: forget everything
+            memory.__init__()
+            memory.episode = msg.episode_id
+        period = msg.motion_period
+        if ((memory.decided is not None and period <= memory.decided)
+                or (memory.ready is not None and period <= memory.ready[0].motion_period)
+                or (memory.frames and period < memory.period)):
+            self.counts["frames_stale"] += 1
+            return
+        if memory.period != msg.motion_period:
+            if memory.frames:
+                self.counts["periods_dropped"] += 1          # an incomplete period that a newer one replaces
+            memory.period, memory.frames = msg.motion_period, {}
+        memory.frames[msg.frame_index] = msg
+        if len(memory.frames) == msg.frames_per_period:
+            if memory.ready is not None:
+                self.counts["periods_dropped"] += 1          # complete but never acted on: stale now
+            memory.ready = [memory.frames[k] for k in sorted(memory.frames)]
             memory.frames = {}
-            self.actions_sent += 1
-        self.latencies_ms.append(1000 * (time.perf_counter() - started))
+
+    # -- decisions -------------------------------------------------------------------------------------------------
+    def _decide_if_ready(self) -> None:
+        memories = [self.memory[n] for n in self.names]
+        if any(m.ready is None for m in memories):
+            return
+        periods = [m.ready for m in memories]
+        frames = len(periods[0])
+        if any(len(p) != frames for p in periods):
+            self.get_logger().error(f"robots' periods have different frame counts {[len(p) for p in periods]}: "
+                                    "dropped", throttle_duration_sec=5.0)
+            for m in memories:
+                m.ready = None
+            self.counts["periods_dropped"] += len(memories)
+            return
+        self.graph_frames = frames
+        fixed = getattr(self.policy, "frames", None)
+        if fixed is not None and fixed != frames:
+            self.get_logger().error(f"the policy takes {fixed} vision frames per period, "
+                                    f"{topics.detections(self.names[0])} has {frames}: it cannot play this graph "
+                                    f"(export it with frames={frames})")
+            raise NodeExit(2)
+        started = time.perf_counter()
+        actions, finite, step = self._run(memories, periods)
+        for memory, period in zip(memories, periods):          # consumed: newer frames are no longer stale-checked
+            memory.decided, memory.ready = period[-1].motion_period, None
+        # Frames that arrived while deciding say which periods have started since; an action addressed to one of
+        # them would be refused as late, so it goes to the next period that has not started (docs/deploy.md).
+        self._drain()
+        for b, (name, memory, period) in enumerate(zip(self.names, memories, periods)):
+            frame = period[-1]
+            same_episode = memory.episode == frame.episode_id
+            started_since = max(frame.motion_period, memory.period) if same_episode else frame.motion_period
+            action = tuple(actions[b]) if finite[b] else STAND_STILL
+            target = started_since + 1
+            if same_episode and memory.addressed is not None and target <= memory.addressed:
+                # the previous, slower decision already answered that period (first action per period wins):
+                # this one only advances the recurrent state
+                self.counts["actions_superseded"] += 1
+            else:
+                if started_since > frame.motion_period:
+                    self.counts["actions_delayed"] += 1
+                msg = Action(robot_id=self.ids[name], episode_id=frame.episode_id, motion_period=target,
+                             walk=int(action[0]), turn=int(action[1]), kick=int(action[2]),
+                             head_yaw_delta=float(action[3]))
+                msg.header.stamp = frame.header.stamp          # the observation acted on (sim time in the sim)
+                msg.header.frame_id = base_frame(name)
+                self.action_pubs[name].publish(msg)
+                self.actions_sent += 1
+                if same_episode:
+                    memory.addressed = target
+                    memory.previous = (int(action[0]), int(action[1]), int(action[2]), float(action[3]))
+            if same_episode:                                   # (a new episode's first frames reset the robot)
+                memory.state = tuple(s[b:b + 1] for s in step.state) if finite[b] else None
+                memory.last = period
+            if not finite[b]:
+                self.counts["fallback_actions"] += 1
+        self.counts["decisions"] += 1
+        latency = 1000 * (time.perf_counter() - started)
+        self.latencies_ms.append(latency)
+        self._window_latencies.append(latency)
         if len(self.latencies_ms) % 100 == 0:
             recent = self.latencies_ms[-100:]
-            self.get_logger().info(f"decision latency for {len(ready)} robots: median "
+            self.latencies_ms = self.latencies_ms[-100:]
+            self.get_logger().info(f"decision latency for {len(self.names)} robots: median "
                                    f"{statistics.median(recent):.2f} ms, max {max(recent):.2f} ms")
 
+    def _run(self, memories: list[RobotMemory], periods: list[list[DetectionArray]]):
+        """(actions (B, 4), finite (B,), step) of one decision; a policy that raises gives every robot the
+        fallback (counted, logged): one bad decision must not stop the node or a stepped game."""
+        first = periods[0][-1]
+        generator = torch.Generator().manual_seed(_decision_seed(self.seed, first.episode_id, first.motion_period))
+        try:
+            observation = self._padded(memories, periods)
+            landmarks, objects = streams_from_padded(observation)
+            head_max = float(self.policy.head_max)
+            previous, proprio = side_inputs(observation, head_max)
+            states = [m.state or self.policy.initial_state(1) for m in memories]
+            state = tuple(torch.cat([s[i] for s in states]) for i in range(4))
+            step = self.policy(landmarks, objects, previous, proprio, state)
+            actions, finite = sample_actions(step, self.policy.head_mode, self.policy.head_units, head_max,
+                                             generator, self.greedy)
+        except Exception as error:
+            self.counts["failed_decisions"] += 1
+            self.get_logger().error(f"decision failed, robots stand still: {type(error).__name__}: "
+                                    f"{_one_line(error)}", throttle_duration_sec=5.0)
+            return np.zeros((len(memories), 4)), np.zeros(len(memories), bool), None
+        if not finite.all():
+            self.get_logger().error(f"non-finite outputs for {[n for n, f in zip(self.names, finite) if not f]}: "
+                                    "they stand still", throttle_duration_sec=5.0)
+        return actions, finite, step
 
-    def _padded(self, memories: list[RobotMemory]) -> dict[str, np.ndarray]:
-        observation, dropped = pack_messages([[m.frames[k] for k in sorted(m.frames)] for m in memories],
-                                             [m.previous for m in memories],
+    def _padded(self, memories: list[RobotMemory], periods: list[list[DetectionArray]]) -> dict[str, np.ndarray]:
+        stats: Counter[str] = Counter()
+        observation, dropped = pack_messages(periods, [m.previous for m in memories],
                                              getattr(self.policy, "max_landmarks", None),
-                                             getattr(self.policy, "max_objects", None))
+                                             getattr(self.policy, "max_objects", None), stats)
         self.dropped_detections += dropped
+        self.counts.update(stats)
         return observation
+
+    # -- diagnostics -----------------------------------------------------------------------------------------------
+    def diagnostics(self) -> dict[str, str]:
+        """Counts since start and the decision latency of the last window, as strings (DiagnosticStatus)."""
+        window, self._window_latencies = self._window_latencies, []
+        values = {"runtime": self.runtime_name, "checkpoint_sha256": self.checkpoint_sha256[:12],
+                  "robots": str(len(self.names)), "actions_sent": str(self.actions_sent),
+                  "detections_dropped": str(self.dropped_detections)}
+        for key in ("decisions", "periods_dropped", "actions_delayed", "actions_superseded", "frames_stale",
+                    "frames_malformed", "detections_malformed", "values_malformed", "fallback_actions",
+                    "failed_decisions"):
+            values[key] = str(self.counts.get(key, 0))
+        values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"
+        values["latency_max_ms"] = f"{max(window):.2f}" if window else "0.00"
+        return values
+
+    def _publish_diagnostics(self) -> None:
+        values = self.diagnostics()
+        watched = ("periods_dropped", "frames_malformed", "detections_malformed", "values_malformed",
+                   "fallback_actions", "failed_decisions")
+        new = {k: int(values[k]) - self._reported[k] for k in watched if int(values[k]) > self._reported[k]}
+        self._reported.update(new)
+        status = DiagnosticStatus(level=DiagnosticStatus.WARN if new else DiagnosticStatus.OK, name="dynenv_policy",
+                                  message=", ".join(f"{v} {k}" for k, v in new.items()) if new else "ok",
+                                  hardware_id=self.get_fully_qualified_name(),
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(msg)
+        self._diagnostics_sent += 1
+        if new or self._diagnostics_sent % 10 == 1:         # the log gets one line in ten, or any new trouble
+            self.get_logger().info(" ".join(f"{k}={v}" for k, v in values.items() if v not in ("0", "0.00", "")))
+
+
+def _one_line(error: BaseException) -> str:
+    text = str(error).strip()
+    return text.splitlines()[0] if text else type(error).__name__
+
+
+def _decision_seed(seed: int, episode: int, period: int) -> int:
+    """A sampling seed per (node seed, episode, period): which periods a slow node drops, or whether it answers
+    an episode's last period, cannot change the draws of any other decision, so stepped runs stay reproducible."""
+    return int(np.random.SeedSequence([seed, episode, period]).generate_state(1, np.uint64)[0] >> 1)
+
+
+def _frame_problem(msg: DetectionArray) -> str:
+    """Why a DetectionArray cannot be part of a period ('' if it can)."""
+    if not 1 <= msg.frames_per_period <= MAX_FRAMES:
+        return f"frames_per_period {msg.frames_per_period} outside 1..{MAX_FRAMES}"
+    if msg.frame_index >= msg.frames_per_period:
+        return f"frame_index {msg.frame_index} not below frames_per_period {msg.frames_per_period}"
+    return ""
+
+
+def _empty_period(frames: int) -> list[DetectionArray]:
+    return [DetectionArray(frame_index=k, frames_per_period=frames) for k in range(frames)]
+
+
+def _finite(value: float, stats: Counter | None) -> float:
+    value = float(value)
+    if math.isfinite(value):
+        return value
+    if stats is not None:
+        stats["values_malformed"] += 1
+    return 0.0
 
 
 def pack_messages(periods: list[list[DetectionArray]], previous: list[tuple], max_landmarks: int | None = None,
-                  max_objects: int | None = None) -> tuple[dict[str, np.ndarray], int]:
+                  max_objects: int | None = None, stats: Counter | None = None
+                  ) -> tuple[dict[str, np.ndarray], int]:
     """Each robot's DetectionArray messages of one period (frame order) and previous action → the one observation
     layout (``envs.padded_layout``): the same arrays the in-process env gives for the same detections. A
-    fixed-shape runtime (ONNX) sets the maxima, else the batch's own longest frame does. Returns the arrays and
-    the number of rows dropped (farthest first) beyond the maxima."""
-    frames = [[clamp_features(as_features(rows_from_messages(msg.detections))) for msg in period]
-              for period in periods]
-    observation, dropped = pack_frames(PaddedLayout.fitting(frames, max_landmarks, max_objects), frames)
+    fixed-shape runtime (ONNX) sets the maxima, else the batch's own longest frame does, up to ``MAX_SLOTS`` (a
+    flood of detections must not make a decision's cost explode). Returns the arrays and the number of rows
+    dropped (farthest first) beyond the maxima. What a robot's vision pipeline should never send is cleaned, and
+    counted in ``stats``: detections with a NaN or infinite value are left out (``detections_malformed``), NaN or
+    infinite self-state and GameController values read as 0 (``values_malformed``)."""
+    frames = []
+    for period in periods:
+        robot = []
+        for msg in period:
+            rows = as_features(rows_from_messages(msg.detections))
+            finite = np.isfinite(rows).all(axis=1)        # before clamping: an infinite size is no far detection
+            if not finite.all():
+                rows = rows[finite]
+                if stats is not None:
+                    stats["detections_malformed"] += int((~finite).sum())
+            robot.append(clamp_features(rows))
+        frames.append(robot)
+    layout = PaddedLayout.fitting(frames, max_landmarks, max_objects)
+    if layout.max_landmarks > MAX_SLOTS or layout.max_objects > MAX_SLOTS:
+        layout = PaddedLayout(layout.frames, min(layout.max_landmarks, MAX_SLOTS), min(layout.max_objects, MAX_SLOTS))
+    observation, dropped = pack_frames(layout, frames)
     for b, period in enumerate(periods):
         for k, msg in enumerate(period):
-            observation["proprioception"][b, k] = (msg.head_yaw, msg.self_fallen, msg.self_penalized,
-                                                   msg.self_kicking)
+            observation["proprioception"][b, k] = (_finite(msg.head_yaw, stats), msg.self_fallen,
+                                                   msg.self_penalized, msg.self_kicking)
         last = period[-1]
-        observation["game"][b] = (last.ball_owner, last.ball_owner_seconds, last.game_seconds_remaining)
+        observation["game"][b] = (last.ball_owner, _finite(last.ball_owner_seconds, stats),
+                                  _finite(last.game_seconds_remaining, stats))
         observation["previous_action"][b] = previous[b]
     return observation, int(dropped.sum())
-
-
-def _sample(step, head_mode: str, generator: torch.Generator, greedy: bool, head_max: float) -> np.ndarray:
-    """(B, 4) [walk, turn, kick, head] from the network's outputs (either runtime)."""
-    columns = []
-    for logits in (step.walk, step.turn, step.kick) + ((step.head,) if head_mode == "discrete" else ()):
-        logits = torch.as_tensor(logits)
-        probs = torch.softmax(logits, dim=-1)
-        columns.append(probs.argmax(-1) if greedy else torch.multinomial(probs, 1, generator=generator).squeeze(-1))
-    if head_mode != "discrete":
-        head = torch.as_tensor(step.head)
-        mean, std = head[:, 0], head[:, 1].exp()
-        value = mean if greedy else mean + std * torch.randn(mean.shape, generator=generator)
-        columns.append(value.clamp(-head_max, head_max))
-    return torch.stack([c.float() for c in columns], dim=-1).numpy()
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -2,7 +2,8 @@
 
 It acts once per motion period: when its robot's last detection frame of a period and the ground truth of the same
 instant have both arrived, it decides from the ground truth (the scripted policies of ``soccer/scripted.py``) and
-publishes the action for the next period. Waiting for both keeps stepped runs deterministic whatever the order in
+publishes the action for the next period, stamped with that frame's time and framed in ``<robot>/base_link``.
+Waiting for both keeps stepped runs deterministic whatever the order in
 which DDS delivers the two topics.
 """
 from __future__ import annotations
@@ -20,7 +21,8 @@ from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_int, declare_str
-from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.ros.qos import action_stream, sim_stream
+from dynenv_ros.ros.tf import base_frame
 from dynenv_ros.soccer.scripted import ChaserPolicy, GoalkeeperPolicy, RandomPolicy
 
 POLICIES = ("chaser", "keeper", "random")
@@ -43,7 +45,7 @@ class ScriptedPolicyNode(Node):
         self._waiting: dict[tuple[int, int], DetectionArray] = {}
         self.actions_sent = 0
         qos = sim_stream()
-        self.action_pub = self.create_publisher(Action, topics.action(self.robot), qos)
+        self.action_pub = self.create_publisher(Action, topics.action(self.robot), action_stream())
         self.create_subscription(WorldState, topics.WORLD_STATE, self._on_truth, qos)
         self.create_subscription(DetectionArray, topics.detections(self.robot), self._on_detections, qos)
 
@@ -76,8 +78,10 @@ class ScriptedPolicyNode(Node):
     def _act(self, frame: DetectionArray, truth: WorldState) -> None:
         self.robot_id = frame.robot_id
         action = self.policy.act(cv.snapshot_from_msg(truth), frame.robot_id)
-        self.action_pub.publish(cv.action_msg(action, robot_id=frame.robot_id, episode_id=frame.episode_id,
-                                              motion_period=frame.motion_period + 1, stamp=frame.header.stamp))
+        msg = cv.action_msg(action, robot_id=frame.robot_id, episode_id=frame.episode_id,
+                            motion_period=frame.motion_period + 1, stamp=frame.header.stamp)
+        msg.header.frame_id = base_frame(self.robot)      # stamped with the observation it answers (sim time)
+        self.action_pub.publish(msg)
         self.actions_sent += 1
 
 

@@ -224,3 +224,63 @@ def test_carried_mask_matches_torch(exported, periods):
     b = policy(*collate([moved], max_landmarks=MAX_LANDMARKS, max_objects=MAX_OBJECTS), previous[:1],
                proprio[:1], policy.initial_state(1))
     assert (a.pose - b.pose).abs().max() > 1e-4 and (a.state[2] - b.state[2]).abs().max() > 1e-4
+
+
+def _with_metadata(source, target, change):
+    import onnx
+
+    proto = onnx.load(str(source))
+    entry = next(p for p in proto.metadata_props if p.key == "dynenv.policy")
+    entry.value = change(entry.value)
+    onnx.save(proto, str(target))
+    return target
+
+
+@pytest.mark.parametrize("overrides,message", [
+    ({"frames": 3}, "does not match its own metadata: landmark_features"),
+    ({"max_landmarks": 40}, "does not match its own metadata: landmark_features"),
+    ({"max_objects": 5}, "does not match its own metadata: object_features"),
+    ({"feature_size": 16}, "does not match its own metadata: h_loc"),
+    ({"head_units": 2}, "does not match its own metadata: head"),
+    ({"head_mode": "continuous", "head_units": None}, "does not match its own metadata: head"),
+    ({"frames": 0}, "frames must be an integer in 1..64"),
+    ({"max_objects": 10**6}, "max_objects must be an integer in 1..256"),
+    ({"feature_size": True}, "feature_size must be an integer"),
+    ({"head_units": 0}, "head_units must be an integer in 1..64"),
+    ({"head_max": float("nan")}, "head_max must be a finite angle"),
+    ({"head_max": 1e6}, "head_max must be a finite angle"),
+])
+def test_metadata_that_disagrees_with_the_graph_or_its_bounds_is_refused_on_load(exported, tmp_path, overrides,
+                                                                                 message):
+    import json
+
+    _, path = exported
+    bad = _with_metadata(path, tmp_path / "bad.onnx", lambda raw: json.dumps({**json.loads(raw), **overrides}))
+    with pytest.raises(ValueError, match=message):
+        OnnxPolicy(bad)
+
+
+def test_unreadable_metadata_external_weights_and_nan_weights(exported, tmp_path):
+    import onnx
+    from onnx import numpy_helper
+
+    _, path = exported
+    with pytest.raises(ValueError, match="unreadable dynenv.policy metadata"):
+        OnnxPolicy(_with_metadata(path, tmp_path / "junk.onnx", lambda raw: raw[:-5]))
+    proto = onnx.load(str(path))
+    onnx.save_model(proto, str(tmp_path / "external.onnx"), save_as_external_data=True, location="weights.bin",
+                    size_threshold=0)
+    with pytest.raises(ValueError, match="keeps weights in external files"):
+        OnnxPolicy(tmp_path / "external.onnx")
+    proto = onnx.load(str(path))
+    tensor = next(t for t in proto.graph.initializer if numpy_helper.to_array(t).dtype == np.float32)
+    array = numpy_helper.to_array(tensor).copy()
+    array.flat[0] = np.nan
+    tensor.CopyFrom(numpy_helper.from_array(array, tensor.name))
+    onnx.save(proto, str(tmp_path / "nan.onnx"))
+    assert OnnxPolicy(tmp_path / "nan.onnx").non_finite_weights() == [tensor.name]
+    assert OnnxPolicy(path).non_finite_weights() == []       # the graph's own −inf mask constants are no fault
+    model = _model()
+    with torch.no_grad():
+        model.kick_head.weight[1, 2] = float("inf")
+    assert TorchPolicy(model).non_finite_weights() == ["kick_head.weight"]

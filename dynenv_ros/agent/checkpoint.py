@@ -10,6 +10,13 @@ Layout of a policy file (format ``dynenv_policy/1``):
   constructor arguments (feature_size, head_mode, head_units, head_max), ``meta`` = JSON of the caller's metadata,
   ``data_sha256`` = SHA-256 of the tensor data section (so a flipped byte in the weights is caught on load).
 
+Limits on what a file may ask for, checked before anything is allocated (a tiny file whose config asks for a huge
+network is refused, not built): at most ``MAX_POLICY_BYTES`` (256 MiB; a feature size of 1024, the largest
+allowed, makes a 163 MB file), ``feature_size`` 1..``MAX_FEATURE_SIZE`` (1024; the paper's is 64, 40.6 M weights at
+1024), ``head_units`` 1..``MAX_HEAD_UNITS`` (64), ``head_max`` finite in (0, π]. The weights' names and shapes are
+then checked against the network the config describes built on torch's ``meta`` device (no memory), so a config
+that the tensors do not match is refused before the real network is allocated.
+
 This module is the single implementation of the format; ``dynenv_ros.learning.checkpoints`` re-exports
 ``save_policy``/``load_policy`` and uses the helpers here (atomic writes, state-dict fitting) for the training
 checkpoints. ``save_checkpoint``/``load_checkpoint`` are the older names the policy node uses.
@@ -18,6 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import struct
 import tempfile
@@ -33,6 +41,10 @@ from dynenv_ros.agent.network import DynEnvAgent
 FORMAT = "dynenv_policy/1"
 POLICY_SUFFIX = ".safetensors"
 _HEADER_LIMIT = 100 * 1024 * 1024      # safetensors' own limit on the JSON header
+MAX_POLICY_BYTES = 256 * 1024 * 1024   # a policy file, safetensors or ONNX (D = 1024 is 163 MB)
+MAX_FEATURE_SIZE = 1024
+MAX_HEAD_UNITS = 64
+CONFIG_KEYS = ("feature_size", "head_mode", "head_units", "head_max")
 
 
 # -- generic helpers (also used by the training checkpoints) -------------------------------------------------------
@@ -150,6 +162,59 @@ def json_dumps(value: Any, what: str) -> str:
         raise ValueError(f"{what} is not JSON-serialisable: {error}") from None
 
 
+def check_file_size(path: Path, what: str) -> None:
+    """ValueError if ``path`` is not a regular file or is larger than ``MAX_POLICY_BYTES`` (read nothing)."""
+    if not path.exists():
+        raise ValueError(f"{what} {path} does not exist")
+    if not path.is_file():
+        raise ValueError(f"{what} {path} is not a regular file")
+    size = path.stat().st_size
+    if size > MAX_POLICY_BYTES:
+        raise ValueError(f"{what} {path} is {size / 2**20:.0f} MiB, more than the {MAX_POLICY_BYTES >> 20} MiB "
+                         f"a policy may have")
+
+
+def _bounded_int(config: Mapping[str, Any], key: str, low: int, high: int) -> int:
+    value = config.get(key)
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ValueError(f"{key} must be an integer in {low}..{high}, got {value!r}")
+    return value
+
+
+def check_head(head_mode: Any, head_units: Any, head_max: Any) -> None:
+    """ValueError unless the head settings describe a head a robot can use: a known mode, at least one unit per
+    side in discrete mode (the node divides by it), a finite positive ``head_max`` of at most π rad per period."""
+    if head_mode not in ("discrete", "continuous"):
+        raise ValueError(f"head_mode must be 'discrete' or 'continuous', got {head_mode!r}")
+    if head_mode == "discrete" and (isinstance(head_units, bool) or not isinstance(head_units, int)
+                                    or not 1 <= head_units <= MAX_HEAD_UNITS):
+        raise ValueError(f"head_units must be an integer in 1..{MAX_HEAD_UNITS}, got {head_units!r}")
+    if (isinstance(head_max, bool) or not isinstance(head_max, (int, float)) or not math.isfinite(head_max)
+            or not 0 < head_max <= math.pi):
+        raise ValueError(f"head_max must be a finite angle in (0, π] rad, got {head_max!r}")
+
+
+def check_agent_config(config: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``DynEnvAgent`` arguments of a file's config, bounded (module docstring); ValueError otherwise."""
+    unknown = sorted(set(config) - set(CONFIG_KEYS))
+    if unknown:
+        raise ValueError(f"unknown config keys {unknown}")
+    out = dict(config)
+    if "feature_size" in config:
+        _bounded_int(config, "feature_size", 1, MAX_FEATURE_SIZE)
+    check_head(config.get("head_mode", "discrete"), config.get("head_units", 3),
+               config.get("head_max", math.radians(37.5)))
+    if config.get("head_mode") == "continuous" and "head_units" in config:
+        _bounded_int(config, "head_units", 0, MAX_HEAD_UNITS)
+    return out
+
+
+def non_finite_tensors(tensors: Mapping[str, torch.Tensor]) -> list[str]:
+    """Names of the floating-point tensors holding a NaN or an infinity (a diverged run's weights)."""
+    return [name for name, tensor in tensors.items()
+            if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all())]
+
+
 # -- policy files --------------------------------------------------------------------------------------------------
 def agent_config(model: DynEnvAgent) -> dict[str, Any]:
     """The ``DynEnvAgent`` constructor arguments that rebuild ``model``'s architecture."""
@@ -196,8 +261,7 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[DynEnvAgent, dict[str, An
     checksum mismatch), a foreign one ("not a dynenv_policy/1 file") and one whose weights do not fit the agent
     its config describes ("does not fit")."""
     source = Path(path)
-    if not source.is_file():
-        raise ValueError(f"policy file {source} does not exist")
+    check_file_size(source, "policy file")
     data = source.read_bytes()
     try:
         tensors, metadata = read_safetensors(data)
@@ -216,10 +280,13 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[DynEnvAgent, dict[str, An
     if not isinstance(config, dict) or not isinstance(meta, dict):
         raise ValueError(f"policy file {source} cannot be read safely: config/meta are not JSON objects")
     try:
-        model = DynEnvAgent(**config)
+        config = check_agent_config(config)
+        with torch.device("meta"):          # shapes only: nothing is allocated until the tensors are known to fit
+            shape_model = DynEnvAgent(**config)
     except (TypeError, ValueError) as error:
         raise ValueError(f"policy file {source} does not fit the agent: config {config}: {error}") from None
-    check_state_dict_fits(model, tensors, f"policy file {source}")
+    check_state_dict_fits(shape_model, tensors, f"policy file {source}")
+    model = DynEnvAgent(**config)
     model.load_state_dict(tensors)
     return model.eval(), meta
 

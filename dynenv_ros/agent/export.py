@@ -28,7 +28,15 @@ Outputs: walk_logits (B, 5), turn_logits (B, 3), kick_logits (B, 3), head (B, 2�
 Masks are ONNX ``bool`` tensors (numpy ``bool_``), the same type ``collate`` produces, so nothing is converted.
 
 The model's configuration and the fixed shapes are stored as JSON under the metadata key ``dynenv.policy``, so the
-onnxruntime side needs no checkpoint to know its head mode or the shapes it accepts.
+onnxruntime side needs no checkpoint to know its head mode or the shapes it accepts. ``OnnxPolicy`` believes none of
+it blindly: the file must be at most ``checkpoint.MAX_POLICY_BYTES``, hold its weights inside (no external data: a
+file must not make the runtime read other files), have bounded metadata (``frames`` 1..``MAX_FRAMES``, maxima
+1..``MAX_SLOTS``, the agent bounds of ``checkpoint``) and declare inputs and outputs whose names, types and fixed
+sizes agree with that metadata — a file whose metadata lies is refused when loaded, not at its first decision.
+
+``check_policy`` is what a policy node runs before it lets a policy act: settings a robot can execute, finite
+weights, and a trial decision whose outputs are finite, of the right shapes, and give actions in the simulator's
+accepted ranges. ``sample_actions`` is the one way both runtimes' outputs become actions.
 
 The graph is the network's own forward pass, traced: it skips work on padded slots (trailing all-padded slots are
 cut, each detection is embedded by its own class's block only) and computes the RTA's single-head attention in its
@@ -40,6 +48,7 @@ from __future__ import annotations
 import copy
 import io
 import json
+import math
 import os
 import warnings
 from dataclasses import dataclass
@@ -50,6 +59,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, _bounded_int, check_file_size, check_head,
+                                         non_finite_tensors)
 from dynenv_ros.agent.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
 from dynenv_ros.agent.network import DynEnvAgent, State
 
@@ -59,6 +70,13 @@ OUTPUT_NAMES = ("walk_logits", "turn_logits", "kick_logits", "head", "value", "p
                 "h_loc_out", "c_loc_out", "h_obj_out", "c_obj_out")
 METADATA_KEY = "dynenv.policy"
 FORMAT = "dynenv_policy_onnx/1"
+# Bounds on an ONNX file's fixed shapes: 64 frames per period is a 30 Hz camera with a 2 s motion period (the
+# defaults give 5); 256 slots per frame is over 6x the padded layout's maxima (40 landmarks, 14 objects in 5v5),
+# which held every detection of 1,000 periods of random play. They bound the arrays a node allocates per decision
+# (10 robots x 64 frames x 256 slots x 19 floats: 12 MB per stream).
+MAX_FRAMES = 64
+MAX_SLOTS = 256
+WALK_CHOICES, TURN_CHOICES, KICK_CHOICES = 5, 3, 3
 
 
 @dataclass
@@ -168,16 +186,90 @@ def _numpy(tensor: torch.Tensor | np.ndarray, dtype: type) -> np.ndarray:
     return np.ascontiguousarray(array, dtype=dtype)
 
 
+def _first_line(error: BaseException) -> str:
+    return str(error).strip().splitlines()[0] if str(error).strip() else ""
+
+
+def check_onnx_config(config: dict[str, Any]) -> None:
+    """ValueError unless an ONNX file's metadata is within the bounds (module docstring)."""
+    _bounded_int(config, "feature_size", 1, MAX_FEATURE_SIZE)
+    _bounded_int(config, "frames", 1, MAX_FRAMES)
+    _bounded_int(config, "max_landmarks", 1, MAX_SLOTS)
+    _bounded_int(config, "max_objects", 1, MAX_SLOTS)
+    check_head(config.get("head_mode"), config.get("head_units"), config.get("head_max"))
+
+
+def _non_finite_initializers(proto: Any) -> list[str]:
+    """Initializers (the weights) with a NaN or an infinity, and Constant nodes with a NaN (the exported graph's
+    own constants hold −inf legitimately: the attention's mask value)."""
+    from onnx import numpy_helper
+
+    bad = []
+    for tensor in proto.graph.initializer:
+        array = numpy_helper.to_array(tensor)
+        if np.issubdtype(array.dtype, np.floating) and not np.isfinite(array).all():
+            bad.append(tensor.name)
+    for node in proto.graph.node:
+        for attribute in node.attribute:
+            if node.op_type == "Constant" and attribute.name == "value":
+                array = numpy_helper.to_array(attribute.t)
+                if np.issubdtype(array.dtype, np.floating) and np.isnan(array).any():
+                    bad.append(node.output[0])
+    return bad
+
+
+def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
+    """The first way the session's declared inputs/outputs disagree with the metadata ('' if none). Dimensions the
+    file leaves symbolic are not checked here (the robot axis always is); the node's trial decision runs them."""
+    F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size
+    head = 2 * policy.head_units + 1 if policy.head_mode == "discrete" else 2
+    inputs = {"landmark_features": ("float", (F, L, FEATURES)), "landmark_kind": ("int64", (F, L)),
+              "landmark_mask": ("bool", (F, L)), "object_features": ("float", (F, O, FEATURES)),
+              "object_kind": ("int64", (F, O)), "object_mask": ("bool", (F, O)),
+              "previous_action": ("float", (ACTION_ENCODING,)), "proprioception": ("float", (PROPRIOCEPTION,)),
+              **{name: ("float", (D,)) for name in INPUT_NAMES[8:]}}
+    outputs = {"walk_logits": (WALK_CHOICES,), "turn_logits": (TURN_CHOICES,), "kick_logits": (KICK_CHOICES,),
+               "head": (head,), "value": (), "pose": (6,), **{name: (D,) for name in OUTPUT_NAMES[6:]}}
+    declared_in, declared_out = session.get_inputs(), session.get_outputs()
+    if [i.name for i in declared_in] != list(INPUT_NAMES):
+        return f"inputs {[i.name for i in declared_in]}, expected {list(INPUT_NAMES)}"
+    if [o.name for o in declared_out] != list(OUTPUT_NAMES):
+        return f"outputs {[o.name for o in declared_out]}, expected {list(OUTPUT_NAMES)}"
+    checks = [(i, *inputs[i.name]) for i in declared_in] + [(o, "float", outputs[o.name]) for o in declared_out]
+    for arg, dtype, dims in checks:
+        if arg.type != f"tensor({dtype})":
+            return f"{arg.name} is {arg.type}, expected tensor({dtype})"
+        shape = arg.shape
+        if shape is None:
+            continue
+        if len(shape) != 1 + len(dims):
+            return f"{arg.name} has shape {shape}, expected (robots, {', '.join(map(str, dims))})"
+        for have, want in zip(shape[1:], dims):
+            if isinstance(have, int) and have != want:
+                return f"{arg.name} has shape {shape}, the metadata implies (robots, {', '.join(map(str, dims))})"
+    return ""
+
+
 class OnnxPolicy:
     """onnxruntime on the CPU, ``threads`` intra-op threads (1: one robot process per core, no thread pool
     contention). Called like ``DynEnvAgent``; returns a ``PolicyStep`` of torch tensors (sharing numpy memory)."""
 
     def __init__(self, path: str | os.PathLike[str], threads: int = 1) -> None:
+        import onnx
         import onnxruntime as ort
 
         source = Path(path)
-        if not source.is_file():
-            raise ValueError(f"ONNX policy {source} does not exist")
+        check_file_size(source, "ONNX policy")
+        try:
+            proto = onnx.load(str(source), load_external_data=False)
+        except Exception as error:    # protobuf's DecodeError, onnx's own errors
+            raise ValueError(f"ONNX policy {source} cannot be loaded: {type(error).__name__}: "
+                             f"{_first_line(error)}") from None
+        if any(onnx.external_data_helper.uses_external_data(t) for t in proto.graph.initializer):
+            raise ValueError(f"ONNX policy {source} keeps weights in external files; only self-contained files "
+                             f"(what export_onnx writes) are loaded")
+        self._non_finite = _non_finite_initializers(proto)
+        del proto
         options = ort.SessionOptions()
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
@@ -188,20 +280,33 @@ class OnnxPolicy:
                                                 providers=["CPUExecutionProvider"])
         except Exception as error:    # onnxruntime raises its own Fail/InvalidProtobuf/... types
             raise ValueError(f"ONNX policy {source} cannot be loaded: {type(error).__name__}: "
-                             f"{str(error).splitlines()[0] if str(error) else ''}") from None
+                             f"{_first_line(error)}") from None
         raw = self.session.get_modelmeta().custom_metadata_map.get(METADATA_KEY)
-        config = json.loads(raw) if raw else {}
-        if config.get("format") != FORMAT:
+        try:
+            config = json.loads(raw) if raw else {}
+        except json.JSONDecodeError as error:
+            raise ValueError(f"ONNX policy {source} has unreadable {METADATA_KEY} metadata: {error}") from None
+        if not isinstance(config, dict) or config.get("format") != FORMAT:
             raise ValueError(f"ONNX policy {source} is not a {FORMAT} file (no dynenv metadata)")
-        if [i.name for i in self.session.get_inputs()] != list(INPUT_NAMES):
-            raise ValueError(f"ONNX policy {source} has unexpected inputs")
+        try:
+            check_onnx_config(config)
+        except ValueError as error:
+            raise ValueError(f"ONNX policy {source} has bad {METADATA_KEY} metadata: {error}") from None
         self.config: dict[str, Any] = config
         self.feature_size: int = config["feature_size"]
         self.head_mode: str = config["head_mode"]
-        self.head_max: float = config["head_max"]
+        self.head_units: int | None = config["head_units"] if self.head_mode == "discrete" else None
+        self.head_max: float = float(config["head_max"])
         self.frames: int = config["frames"]
         self.max_landmarks: int = config["max_landmarks"]
         self.max_objects: int = config["max_objects"]
+        problem = _signature_problem(self.session, self)
+        if problem:
+            raise ValueError(f"ONNX policy {source} does not match its own metadata: {problem}")
+
+    def non_finite_weights(self) -> list[str]:
+        """Names of the initializers (and Constant nodes) holding a NaN or an infinity."""
+        return list(self._non_finite)
 
     def initial_state(self, batch: int) -> State:
         zeros = torch.zeros(batch, self.feature_size)
@@ -245,6 +350,12 @@ class TorchPolicy:
     def __init__(self, model: DynEnvAgent) -> None:
         self.model = model.eval()
         self.feature_size, self.head_mode, self.head_max = model.feature_size, model.head_mode, model.head_max
+        self.head_units: int | None = ((model.head_head.out_features - 1) // 2 if model.head_mode == "discrete"
+                                       else None)
+
+    def non_finite_weights(self) -> list[str]:
+        """Names of the weights holding a NaN or an infinity."""
+        return non_finite_tensors(self.model.state_dict())
 
     def initial_state(self, batch: int) -> State:
         return self.model.initial_state(batch)
@@ -254,3 +365,92 @@ class TorchPolicy:
         with torch.no_grad():
             step = self.model(landmarks, objects, previous_action, proprioception, state)
         return PolicyStep(step.walk, step.turn, step.kick, step.head, step.value, step.pose, step.state)
+
+
+# -- from outputs to actions, and the check before a policy may act ---------------------------------------------------
+def sample_actions(step: PolicyStep, head_mode: str, head_units: int | None, head_max: float,
+                   generator: torch.Generator, greedy: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(B, 4) [walk, turn, kick, head_yaw_delta in rad] from either runtime's outputs, and (B,) True where that
+    robot's outputs were all finite. A robot with a NaN or infinite output gets zero logits (so it cannot stop the
+    others' sampling: ``torch.multinomial`` refuses a batch with one bad row) and is reported, for the caller to
+    replace its action. The generator is drawn from in the same order whatever the values."""
+    logits = [torch.as_tensor(x) for x in (step.walk, step.turn, step.kick)]
+    head = torch.as_tensor(step.head)
+    state = [torch.as_tensor(x) for x in step.state]
+    finite = torch.ones(head.shape[0], dtype=torch.bool)
+    for tensor in logits + [head] + state:
+        finite &= torch.isfinite(tensor.reshape(tensor.shape[0], -1)).all(-1)
+    columns = []
+    categorical = logits + ([head] if head_mode == "discrete" else [])
+    for values in categorical:
+        values = torch.where(finite.unsqueeze(-1), values, torch.zeros_like(values))
+        probs = torch.softmax(values, dim=-1)
+        columns.append(probs.argmax(-1) if greedy else torch.multinomial(probs, 1, generator=generator).squeeze(-1))
+    if head_mode == "discrete":
+        units = int(head_units or 0)
+        columns[-1] = (columns[-1].double() - units) * (head_max / units)     # index 0..2u -> (i - u)·max/u rad
+    else:
+        values = torch.where(finite.unsqueeze(-1), head, torch.zeros_like(head))
+        mean, std = values[:, 0], values[:, 1].exp()
+        value = mean if greedy else mean + std * torch.randn(mean.shape, generator=generator)
+        columns.append(value.clamp(-head_max, head_max))
+    actions = torch.stack([c.double() for c in columns], dim=-1).numpy()
+    finite &= torch.from_numpy(np.isfinite(actions).all(-1))
+    return actions, finite.numpy()
+
+
+def action_problem(action: np.ndarray, head_bound: float) -> str:
+    """Why one [walk, turn, kick, head] action would be refused by the simulator ('' if it would not)."""
+    walk, turn, kick, head = (float(v) for v in action)
+    for name, value, count in (("walk", walk, WALK_CHOICES), ("turn", turn, TURN_CHOICES),
+                               ("kick", kick, KICK_CHOICES)):
+        if not (0 <= value < count and value == int(value)):
+            return f"{name}={value} outside 0..{count - 1}"
+    if not math.isfinite(head) or abs(head) > head_bound + 1e-6:
+        return f"head_yaw_delta={head} rad beyond ±{head_bound:.4f}"
+    return ""
+
+
+def check_policy(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tensor, torch.Tensor],
+                 head_bound: float, frames: int | None = None) -> None:
+    """ValueError with the first reason ``policy`` (``TorchPolicy`` or ``OnnxPolicy``) must not act: head settings a
+    robot cannot execute (``head_max`` beyond ``head_bound``, the simulator's largest head turn per period), a
+    fixed frame count other than the graph's ``frames`` (when known), non-finite weights, or a trial decision on
+    ``trial`` (landmarks, objects, previous action, self state of B robots) that fails, gives outputs of the
+    wrong shape or non-finite ones, or actions outside the accepted ranges (greedy and sampled)."""
+    check_head(policy.head_mode, policy.head_units, policy.head_max)
+    if policy.head_max > head_bound + 1e-6:
+        raise ValueError(f"head_max {policy.head_max:.6g} rad is beyond the ±{head_bound:.4f} rad per period the "
+                         f"simulator accepts")
+    fixed = getattr(policy, "frames", None)
+    if frames is not None and fixed is not None and fixed != frames:
+        raise ValueError(f"it takes {fixed} vision frames per period, the detections arriving have {frames}")
+    bad = policy.non_finite_weights()
+    if bad:
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise ValueError(f"weight {bad[0]!r}{more} holds NaN or infinite values")
+    landmarks, objects, previous, proprio = trial
+    B = previous.shape[0]
+    try:
+        step = policy(landmarks, objects, previous, proprio, policy.initial_state(B))
+    except Exception as error:
+        raise ValueError(f"its trial decision failed: {type(error).__name__}: {_first_line(error)}") from None
+    head = 2 * policy.head_units + 1 if policy.head_mode == "discrete" else 2
+    shapes = {"walk": (B, WALK_CHOICES), "turn": (B, TURN_CHOICES), "kick": (B, KICK_CHOICES), "head": (B, head)}
+    for name, shape in shapes.items():
+        have = tuple(torch.as_tensor(getattr(step, name)).shape)
+        if have != shape:
+            raise ValueError(f"its trial decision gave {name} of shape {have}, expected {shape}")
+    state = [tuple(torch.as_tensor(s).shape) for s in step.state]
+    if len(state) != 4 or any(s != (B, policy.feature_size) for s in state):
+        raise ValueError(f"its trial decision gave a recurrent state of shapes {state}, expected 4 x "
+                         f"{(B, policy.feature_size)}")
+    for greedy in (True, False):
+        actions, finite = sample_actions(step, policy.head_mode, policy.head_units, policy.head_max,
+                                         torch.Generator().manual_seed(0), greedy)
+        if not finite.all():
+            raise ValueError("its trial decision gave NaN or infinite outputs")
+        for action in actions:
+            problem = action_problem(action, head_bound)
+            if problem:
+                raise ValueError(f"its trial decision gave an action the simulator refuses: {problem}")
