@@ -32,3 +32,9 @@ def test_rebuilt_packages_import_as_ros_messages():
     from tf2_msgs.msg import TFMessage
     from vision_msgs.msg import Detection3DArray
     assert TFMessage.__module__.startswith("tf2_msgs") and Detection3DArray.__module__.startswith("vision_msgs")
+
+
+def test_the_bag_typestore_knows_vision_msgs_with_the_upstream_hash():
+    """So the recorder can record the vision adapter's /<robot>/detections_3d and the bag tools decode them."""
+    from dynenv_ros.bags.typestore import dynenv_typestore
+    assert dynenv_typestore().hash_rihs01("vision_msgs/msg/Detection3DArray") == UPSTREAM_DETECTION3DARRAY_HASH

@@ -7,21 +7,30 @@ Subcommands:
                                                       /world_state replayed top-down, optionally with one robot's
                                                       detections overlaid
   export BAG --out DIR [--format csv|npz]             one table per kind: world_state, detections, feedback, actions
+  reindex BAG                                         make an unfinished (killed, disk full) bag readable again
 
 Messages are decoded with the definitions embedded in the bag (so an old bag still decodes after a .msg changed),
-falling back to ``dynenv_typestore()`` for bags without them. A missing, unreadable or truncated bag is reported in
-one line with exit status 2, never a traceback.
+falling back to ``dynenv_typestore()`` for topics without them; a topic whose type cannot be decoded that way is
+skipped with a notice on stderr (``info`` still counts it). A missing or unreadable bag is reported in one line
+with exit status 2, never a traceback.
+
+Before reading, the bag's MCAP file is checked record by record (``dynenv_ros.bags.mcap.scan``: lengths, chunk
+CRCs, record framing, the index against the data). A damaged or unfinished bag is refused (exit 2) with what is
+wrong and how many messages are affected; with ``--ignore-damage`` the commands read the messages that check out
+(from a repaired copy in a temporary directory; the bag is not changed), after a notice naming what is skipped.
+``reindex`` repairs the bag itself (``dynenv_ros.bags.recovery``).
 """
 from __future__ import annotations
 
 import argparse
 import csv
+import tempfile
 import json
 import math
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -30,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from dynenv_ros.bags.messages import detection_rows, json_safe, snapshot_from_msg, stamp_ns, to_plain
+from dynenv_ros.bags.recovery import RecoveryError, bag_mcap, check, reindex, repaired_copy
 from dynenv_ros.bags.typestore import dynenv_typestore
 from dynenv_ros.core.object_classes import ObjectClass
 
@@ -39,31 +49,99 @@ STEP_FEEDBACK_TYPE = "dynenv_msgs/msg/StepFeedback"
 ACTION_TYPE = "dynenv_msgs/msg/Action"
 EXIT_BAG_ERROR = 2
 
+# render's limits. Frames are kept in memory until the GIF is written (RGB, 3 bytes a pixel), so the image and the
+# whole replay are bounded, not only the scale: 400 px/m is ~8x the default's detail; 4096 px a side is what GIF
+# viewers handle comfortably (the default field at 400 px/m is 4160 px wide, so this limit binds first); 1 GiB of
+# frames is ~250 s of a 10 Hz game at the default 40 px/m (longer bags: --stride). GIF delays are whole
+# centiseconds (fps 100 is the fastest a GIF can say; most viewers slow down anything above 50) and at most
+# 655.35 s (fps 0.01 would already be 100 s a frame; 0.1 is the slowest allowed).
+RENDER_PPM_RANGE = (1.0, 400.0)
+RENDER_FPS_RANGE = (0.1, 100.0)
+RENDER_MAX_SIDE_PX = 4096
+RENDER_MAX_FRAME_BYTES = 1 << 30
+
 
 class BagError(Exception):
     """A bag (or a request about it) that cannot be served; the CLI prints it in one line and exits 2."""
 
 
 def resolve_bag_path(path: str | os.PathLike[str]) -> Path:
-    """The bag directory; a path to the .mcap inside it is accepted too (people tab-complete to the file)."""
+    """The bag directory; a path to the .mcap inside it is accepted too (people tab-complete to the file). A
+    directory with one .mcap file and no metadata.yaml is an unfinished recording: accepted here, refused or
+    repaired by ``open_bag``."""
     bag = Path(path)
     if not bag.exists():
         raise BagError(f"no bag at {str(bag)!r}")
+    if bag.is_file() and bag.suffix == ".mcap":
+        return bag.parent
     if bag.is_file() and (bag.parent / "metadata.yaml").is_file():
         return bag.parent
-    if not (bag / "metadata.yaml").is_file():
-        raise BagError(f"{str(bag)!r} is not a rosbag2 bag (no metadata.yaml): was the recording finished?")
+    if not (bag / "metadata.yaml").is_file() and not (bag.is_dir() and len(list(bag.glob("*.mcap"))) == 1):
+        raise BagError(f"{str(bag)!r} is not a rosbag2 bag (no metadata.yaml)")
     return bag
 
 
-class BagReader:
-    """A rosbags AnyReader whose failures (corrupt MCAP, bad metadata.yaml, hash mismatch, a chunk that does not
-    decode) surface as BagError, while errors of the caller's own code pass through unchanged."""
+def _print_notice(text: str) -> None:
+    print(f"dynenv-bag: notice: {text}", file=sys.stderr, flush=True)
 
-    def __init__(self, reader: Any, path: Path) -> None:
+
+class BagReader:
+    """A rosbags reader whose failures (corrupt MCAP, bad metadata.yaml, a chunk that does not decode) surface as
+    BagError, while errors of the caller's own code pass through unchanged.
+
+    Types are resolved per topic, not for the whole bag (rosbags' AnyReader refuses a bag if one definition does
+    not parse or match its hash): ``connections`` are the topics that decode, ``unreadable`` maps the others'
+    topics to why, and a notice names each when the bag is opened.
+    """
+
+    def __init__(self, reader: Any, path: Path, notice: Callable[[str], None] = _print_notice) -> None:
+        from rosbags.typesys import Stores, get_typestore
+
         self._reader = reader
         self.path = path
-        self.connections: list[Any] = list(reader.connections)
+        self.typestore = get_typestore(Stores.EMPTY)
+        self.all_connections: list[Any] = list(reader.connections)
+        self.unreadable: dict[str, str] = {}
+        self.connections: list[Any] = []
+        decided: dict[tuple[str, str, str], str] = {}   # (type, definition, hash) → why not ("" = fine)
+        for connection in self.all_connections:
+            key = (connection.msgtype, connection.msgdef.data, connection.digest)
+            why = decided[key] if key in decided else decided.setdefault(key, self._register(connection))
+            if why:
+                if connection.topic not in self.unreadable:
+                    notice(f"skipping {connection.topic}: {why}")
+                self.unreadable[connection.topic] = why
+            else:
+                self.connections.append(connection)
+
+    def _register(self, connection: Any) -> str:
+        """Add the topic's type to the typestore; returns why it cannot be decoded, or ""."""
+        from rosbags.interfaces import MessageDefinitionFormat
+        from rosbags.typesys import get_types_from_idl, get_types_from_msg
+
+        msgtype, fmt, text = connection.msgtype, connection.msgdef.format, connection.msgdef.data
+        try:
+            if fmt == MessageDefinitionFormat.NONE or not text:
+                installed = dynenv_typestore()
+                if msgtype not in installed.types:
+                    return f"its type {msgtype} is unknown (the bag has no definition of it and it is not installed)"
+                if connection.digest.startswith("RIHS01_") and connection.digest != installed.hash_rihs01(msgtype):
+                    return f"the bag has no definition of {msgtype} and the installed one differs from its hash"
+                text, _ = installed.generate_msgdef(msgtype, ros_version=2)
+                fmt = MessageDefinitionFormat.MSG
+            if fmt == MessageDefinitionFormat.MSG:
+                types = get_types_from_msg(text, msgtype)
+            else:
+                separator = "=" * 80 + "\n"
+                types = {}
+                for part in (text.split(separator)[1:] if text.startswith(separator + "IDL: ") else [text]):
+                    types.update(get_types_from_idl(part.split("\n", 1)[1] if part.startswith("IDL: ") else part))
+            self.typestore.register(types)
+            if connection.digest.startswith("RIHS01_") and self.typestore.hash_rihs01(msgtype) != connection.digest:
+                return f"the bag's definition of {msgtype} does not match its type hash"
+        except Exception as error:   # a stranger's definition: any parse or registration failure skips the topic
+            return f"its definition of {msgtype} cannot be used ({type(error).__name__}: {error})"
+        return ""
 
     @property
     def storage(self) -> str:
@@ -79,9 +157,14 @@ class BagReader:
     def _failed(self, error: Exception) -> BagError:
         return BagError(f"cannot read bag {str(self.path)!r}: {type(error).__name__}: {error}")
 
-    def messages(self, connections: Sequence[Any] = ()) -> Iterator[tuple[Any, int, bytes]]:
-        """(connection, bag time ns, raw CDR) in time order; ``connections`` filters (empty: all)."""
-        iterator = self._reader.messages(connections=connections)
+    def messages(self, connections: Sequence[Any] = (), *, include_unreadable: bool = False
+                 ) -> Iterator[tuple[Any, int, bytes]]:
+        """(connection, bag time ns, raw CDR) in time order; ``connections`` filters (empty: every decodable topic,
+        or with ``include_unreadable`` every topic)."""
+        wanted = list(connections) or (self.all_connections if include_unreadable else self.connections)
+        if not wanted:
+            return
+        iterator = self._reader.messages(connections=wanted)
         while True:
             try:
                 item = next(iterator)
@@ -93,29 +176,65 @@ class BagReader:
 
     def deserialize(self, raw: bytes, msgtype: str) -> Any:
         try:
-            return self._reader.deserialize(raw, msgtype)
+            return self.typestore.deserialize_cdr(raw, msgtype)
         except Exception as error:
             raise self._failed(error) from error
 
 
-@contextmanager
-def open_bag(path: str | os.PathLike[str]) -> Iterator[BagReader]:
-    """Open a bag for reading with the definitions it embeds (``dynenv_typestore()`` for bags without them)."""
-    from rosbags.highlevel import AnyReader
-
+def damage_report(path: str | os.PathLike[str]) -> tuple[Path, Any]:
+    """(bag directory, scan of its MCAP file or None when the bag is not a checkable MCAP bag)."""
     bag = resolve_bag_path(path)
     try:
-        reader = AnyReader([bag], default_typestore=dynenv_typestore())
-        reader.open()
-    except Exception as error:   # truncated MCAP (no footer), bad metadata.yaml, ...: one message, no traceback
-        raise BagError(f"cannot read bag {str(bag)!r}: {error}") from error
-    try:
-        yield BagReader(reader, bag)
-    finally:
+        mcap = bag_mcap(bag)
+        return bag, (check(mcap) if mcap is not None and mcap.is_file() else None)
+    except RecoveryError as error:
+        raise BagError(str(error)) from None
+
+
+@contextmanager
+def open_bag(path: str | os.PathLike[str], *, ignore_damage: bool = False,
+             notice: Callable[[str], None] = _print_notice) -> Iterator[BagReader]:
+    """Open a bag for reading with the definitions it embeds, after checking its MCAP file: damage or an
+    unfinished recording is a BagError naming what is wrong, unless ``ignore_damage`` (then ``notice`` says what
+    is skipped and the messages that check out are read from a repaired temporary copy)."""
+    from rosbags.rosbag2 import Reader
+
+    bag, result = damage_report(path)
+    with ExitStack() as stack:
+        source = bag
+        finished = (bag / "metadata.yaml").is_file()
+        for note in result.notes() if result is not None else []:
+            notice(f"{bag}: {note}")
+        if result is not None and not (result.healthy and finished):
+            problems = result.problems() or ["no metadata.yaml"]
+            what = "; ".join(problems)
+            if not ignore_damage:
+                if not result.lost and not result.summary_problem:
+                    raise BagError(f"bag {str(bag)!r} was not finished (recorder killed, disk full?): {what}; "
+                                   f"`dynenv-bag reindex {bag}` recovers its {result.message_count} messages in "
+                                   "complete chunks (or pass --ignore-damage to read them without changing it)")
+                raise BagError(f"bag {str(bag)!r} is damaged: {what}; {result.message_count} messages check out: "
+                               "pass --ignore-damage to read them")
+            notice(f"{bag}: {what}; reading the {result.message_count} messages that check out")
+            tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="dynenv-bag-")))
+            try:
+                source = repaired_copy(result, tmp / bag.name)
+            except OSError as error:
+                raise BagError(f"cannot make a repaired copy of {str(bag)!r} in {tmp}: {error}") from None
         try:
-            reader.close()
-        except Exception:
-            pass
+            reader = Reader(source)
+            reader.open()
+        except Exception as error:   # bad metadata.yaml, unsupported storage, ...: one message, no traceback
+            raise BagError(f"cannot read bag {str(bag)!r}: {error}") from error
+        stack.callback(_close_quietly, reader)
+        yield BagReader(reader, bag, notice)
+
+
+def _close_quietly(reader: Any) -> None:
+    try:
+        reader.close()
+    except Exception:
+        pass
 
 
 # ---------------------------------------------------------------------------------------------------------------- info
@@ -128,15 +247,19 @@ def _seconds(ns: int) -> str:
     return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
 
 
-def bag_info(path: str | os.PathLike[str]) -> dict[str, Any]:
+def bag_info(path: str | os.PathLike[str], *, ignore_damage: bool = False,
+             notice: Callable[[str], None] = _print_notice) -> dict[str, Any]:
     """Summary of a bag; reads every message (without decoding) so that counts and times are what is really
-    there, and a damaged file is found now rather than half way through a replay."""
-    with open_bag(path) as reader:
+    there, and a damaged file is found now rather than half way through a replay. Topics whose type cannot be
+    decoded are listed and counted too, with ``unreadable`` saying why."""
+    with open_bag(path, ignore_damage=ignore_damage, notice=notice) as reader:
         topics: dict[str, dict[str, Any]] = {}
-        for connection in reader.connections:
+        for connection in reader.all_connections:
             topics.setdefault(connection.topic, {"name": connection.topic, "type": connection.msgtype, "count": 0,
                                                  "first_ns": None, "last_ns": None})
-        for connection, timestamp, _ in reader.messages():
+            if connection.topic in reader.unreadable:
+                topics[connection.topic]["unreadable"] = reader.unreadable[connection.topic]
+        for connection, timestamp, _ in reader.messages(include_unreadable=True):
             entry = topics[connection.topic]
             entry["count"] += 1
             entry["first_ns"] = timestamp if entry["first_ns"] is None else min(entry["first_ns"], timestamp)
@@ -166,24 +289,29 @@ def format_info(info: dict[str, Any]) -> str:
     type_width = max((len(t["type"]) for t in info["topics"]), default=0)
     for t in info["topics"]:
         rate = f"{t['rate_hz']:.2f} Hz" if t["rate_hz"] is not None else "-"
-        lines.append(f"  {t['name']:<{width}}  {t['type']:<{type_width}}  {t['count']:>8} msgs  {rate:>12}")
+        unreadable = "  (cannot be decoded)" if "unreadable" in t else ""
+        lines.append(f"  {t['name']:<{width}}  {t['type']:<{type_width}}  {t['count']:>8} msgs  {rate:>12}"
+                     f"{unreadable}")
     return "\n".join(lines)
 
 
 # ---------------------------------------------------------------------------------------------------------------- echo
 def _check_topic(reader: Any, topic: str) -> list[Any]:
+    if topic in reader.unreadable:
+        raise BagError(f"topic {topic!r} cannot be decoded: {reader.unreadable[topic]}")
     connections = [c for c in reader.connections if c.topic == topic]
     if not connections:
-        known = ", ".join(sorted({c.topic for c in reader.connections})) or "none"
+        known = ", ".join(sorted({c.topic for c in reader.all_connections})) or "none"
         raise BagError(f"topic {topic!r} is not in the bag (topics: {known})")
     return connections
 
 
-def echo(path: str | os.PathLike[str], topic: str, limit: int | None = None) -> Iterator[dict[str, Any]]:
+def echo(path: str | os.PathLike[str], topic: str, limit: int | None = None, *, ignore_damage: bool = False,
+         notice: Callable[[str], None] = _print_notice) -> Iterator[dict[str, Any]]:
     """Decoded messages of one topic in bag order: {"topic", "type", "timestamp_ns", "message": plain dict}."""
     if limit is not None and limit < 0:
         raise BagError(f"--limit must be >= 0, got {limit}")
-    with open_bag(path) as reader:
+    with open_bag(path, ignore_damage=ignore_damage, notice=notice) as reader:
         connections = _check_topic(reader, topic)
         if limit == 0:
             return
@@ -212,12 +340,14 @@ def _connections_of_type(reader: Any, msgtype: str) -> list[Any]:
 
 
 def render(path: str | os.PathLike[str], out: str | os.PathLike[str], *, robot: str | None = None,
-           fps: float = 10.0, pixels_per_metre: float = 40.0, stride: int = 1) -> int:
+           fps: float = 10.0, pixels_per_metre: float = 40.0, stride: int = 1, ignore_damage: bool = False,
+           notice: Callable[[str], None] = _print_notice) -> int:
     """Replay the bag's WorldState messages as a top-down GIF; with ``robot`` (a namespace such as "team_a_0"),
     overlay the detections that robot reported at the same sim time. Returns the number of frames rendered.
 
     Frames are kept in memory until the GIF is written; ``stride`` renders every k-th world state for long bags.
-    The field geometry is the default FieldGeometry (a bag does not carry it).
+    The options are bounded (RENDER_* above): the scale, the image's sides and the memory all frames take, checked
+    before anything is drawn. The field geometry is the default FieldGeometry (a bag does not carry it).
     """
     from dynenv_ros.render.detections import field_view, overlay_detections
     from dynenv_ros.render.topdown import EpisodeRecorder
@@ -225,17 +355,28 @@ def render(path: str | os.PathLike[str], out: str | os.PathLike[str], *, robot: 
 
     if stride < 1:
         raise BagError(f"--stride must be >= 1, got {stride}")
-    if not (math.isfinite(fps) and fps > 0):
-        raise BagError(f"--fps must be a positive number, got {fps}")
-    if not (math.isfinite(pixels_per_metre) and pixels_per_metre > 0):
-        raise BagError(f"--pixels-per-metre must be a positive number, got {pixels_per_metre}")
+    if not (math.isfinite(fps) and RENDER_FPS_RANGE[0] <= fps <= RENDER_FPS_RANGE[1]):
+        raise BagError(f"--fps must be between {RENDER_FPS_RANGE[0]:g} and {RENDER_FPS_RANGE[1]:g} (GIF frame "
+                       f"delays are whole centiseconds), got {fps:g}")
+    low, high = RENDER_PPM_RANGE
+    if not (math.isfinite(pixels_per_metre) and low <= pixels_per_metre <= high):
+        raise BagError(f"--pixels-per-metre must be between {low:g} and {high:g}, got {pixels_per_metre:g}")
     geometry = FieldGeometry()
-    recorder = EpisodeRecorder(geometry, pixels_per_metre=pixels_per_metre)
     view = field_view(geometry, pixels_per_metre)
-    with open_bag(path) as reader:
+    width, height = view.size
+    if max(width, height) > RENDER_MAX_SIDE_PX:
+        raise BagError(f"--pixels-per-metre {pixels_per_metre:g} makes {width}x{height} px frames; at most "
+                       f"{RENDER_MAX_SIDE_PX} px a side (lower --pixels-per-metre)")
+    recorder = EpisodeRecorder(geometry, pixels_per_metre=pixels_per_metre)
+    with open_bag(path, ignore_damage=ignore_damage, notice=notice) as reader:
         worlds = _connections_of_type(reader, WORLD_STATE_TYPE)
         if not worlds:
             raise BagError(f"the bag has no {WORLD_STATE_TYPE} messages to render")
+        frames = -(-sum(c.msgcount for c in worlds) // stride)
+        if frames * width * height * 3 > RENDER_MAX_FRAME_BYTES:
+            raise BagError(f"{frames} frames of {width}x{height} px would take "
+                           f"{frames * width * height * 3 / 2**30:.1f} GiB of memory (at most "
+                           f"{RENDER_MAX_FRAME_BYTES / 2**30:g} GiB): raise --stride or lower --pixels-per-metre")
         wanted = list(worlds)
         if robot is not None:
             topic = f"/{robot.strip('/')}/detections"
@@ -367,27 +508,47 @@ TABLES: dict[str, tuple[str, list[Column], Callable[[Any], Sequence[Any]]]] = {
 }
 
 
-def export(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], fmt: str = "csv") -> dict[str, int]:
+def _cell(column: Column, topic: str, timestamp: int, message: Any, item: Any) -> Any:
+    """A column's value, None when the bag's definition of the type lacks the field (the column is then left out)."""
+    try:
+        return column.get(topic, timestamp, message, item)
+    except AttributeError:
+        return None
+
+
+def export(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], fmt: str = "csv", *,
+           ignore_damage: bool = False, notice: Callable[[str], None] = _print_notice) -> dict[str, int]:
     """Write one table per message kind found in the bag (``<kind>.csv`` or ``<kind>.npz`` with one array per
-    column) and return {file name: rows}. Other types (clock, diagnostics, markers) are not exported.
+    column) and return {file name: rows}. Other types (clock, diagnostics, markers) are not exported, nor topics
+    whose type cannot be decoded (skipped with a notice).
 
     A DetectionArray with no detections gives no row; feedback's ``seen_object_ids`` is a space-separated string.
-    Columns of fields that a bag's (older) message definitions lack are left out of that table, never invented.
+    Columns of fields that a bag's (older or foreign) message definitions lack are left out of that table, never
+    invented.
     """
     if fmt not in ("csv", "npz"):
         raise BagError(f"--format must be csv or npz, got {fmt!r}")
     by_type = {msgtype: kind for kind, (msgtype, _, _) in TABLES.items()}
     rows: dict[str, dict[str, list[Any]]] = {}
-    with open_bag(path) as reader:
+    skipped: set[str] = set()
+    with open_bag(path, ignore_damage=ignore_damage, notice=notice) as reader:
         wanted = [c for c in reader.connections if c.msgtype in by_type]
         for connection, timestamp, raw in reader.messages(connections=wanted):
             kind = by_type[connection.msgtype]
             _, columns, items = TABLES[kind]
             table = rows.setdefault(kind, {c.name: [] for c in columns})
             message = reader.deserialize(raw, connection.msgtype)
-            for item in items(message):
+            try:
+                rows_of = items(message)
+            except AttributeError as error:   # a foreign definition under our type's name
+                if connection.topic not in skipped:
+                    skipped.add(connection.topic)
+                    notice(f"skipping {connection.topic} in export: its definition of {connection.msgtype} "
+                           f"lacks a field the table needs ({error})")
+                continue
+            for item in rows_of:
                 for column in columns:
-                    table[column.name].append(column.get(connection.topic, timestamp, message, item))
+                    table[column.name].append(_cell(column, connection.topic, timestamp, message, item))
         for connection in wanted:   # a topic with no rows still gets its (empty) table
             kind = by_type[connection.msgtype]
             rows.setdefault(kind, {c.name: [] for c in TABLES[kind][1]})
@@ -395,7 +556,7 @@ def export(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], fmt: s
     target.mkdir(parents=True, exist_ok=True)
     written: dict[str, int] = {}
     for kind, table in rows.items():
-        columns = [c for c in TABLES[kind][1] if not (c.optional and any(v is None for v in table[c.name]))]
+        columns = [c for c in TABLES[kind][1] if not any(v is None for v in table[c.name])]
         count = len(table[columns[0].name])
         name = f"{kind}.{fmt}"
         tmp = target / (name + ".tmp")
@@ -422,12 +583,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dynenv-bag", description="Inspect rosbag2 bags of the simulator "
                                      "(no ROS needed).")
     sub = parser.add_subparsers(dest="command", required=True)
+    damage_help = ("read a damaged or unfinished bag anyway: the messages that check out, after a notice naming what "
+                   "is skipped (default: refuse with exit status 2)")
     p = sub.add_parser("info", help="topics, types, counts, duration and rates")
     p.add_argument("bag")
+    p.add_argument("--ignore-damage", action="store_true", help=damage_help)
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p = sub.add_parser("echo", help="decoded messages of one topic")
     p.add_argument("bag")
     p.add_argument("--topic", required=True)
+    p.add_argument("--ignore-damage", action="store_true", help=damage_help)
     p.add_argument("--limit", type=int, default=None, help="at most this many messages")
     p.add_argument("--format", choices=("yaml", "json"), default="yaml",
                    help="yaml documents, or JSON Lines (NaN written as null)")
@@ -435,31 +600,47 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("bag")
     p.add_argument("--out", required=True, help="GIF file to write")
     p.add_argument("--robot", default=None, help="overlay this robot's detections (e.g. team_a_0)")
-    p.add_argument("--fps", type=float, default=10.0)
-    p.add_argument("--pixels-per-metre", type=float, default=40.0)
+    p.add_argument("--fps", type=float, default=10.0,
+                   help=f"frames per second, {RENDER_FPS_RANGE[0]:g} to {RENDER_FPS_RANGE[1]:g}")
+    p.add_argument("--pixels-per-metre", type=float, default=40.0,
+                   help=f"scale, {RENDER_PPM_RANGE[0]:g} to {RENDER_PPM_RANGE[1]:g}, frames at most "
+                        f"{RENDER_MAX_SIDE_PX} px a side and {RENDER_MAX_FRAME_BYTES >> 30} GiB in all")
     p.add_argument("--stride", type=int, default=1, help="render every k-th world state")
+    p.add_argument("--ignore-damage", action="store_true", help=damage_help)
     p = sub.add_parser("export", help="tables of world state, detections, feedback and actions")
     p.add_argument("bag")
     p.add_argument("--out", required=True, help="directory for the tables")
     p.add_argument("--format", choices=("csv", "npz"), default="csv")
+    p.add_argument("--ignore-damage", action="store_true", help=damage_help)
+    p = sub.add_parser("reindex", help="make an unfinished (killed, disk full) or damaged bag readable again: "
+                       "index its complete chunks and rewrite metadata.yaml")
+    p.add_argument("bag")
+    p.add_argument("--ignore-damage", action="store_true",
+                   help="also index a bag with damaged chunks in the middle, leaving them out (default: refuse)")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        damage = {"ignore_damage": args.ignore_damage}
         if args.command == "info":
-            info = bag_info(args.bag)
+            info = bag_info(args.bag, **damage)
             print(json.dumps(json_safe(info), indent=1) if args.json else format_info(info))
         elif args.command == "echo":
-            for record in echo(args.bag, args.topic, args.limit):
+            for record in echo(args.bag, args.topic, args.limit, **damage):
                 print(format_record(record, args.format), flush=False)
         elif args.command == "render":
             frames = render(args.bag, args.out, robot=args.robot, fps=args.fps,
-                            pixels_per_metre=args.pixels_per_metre, stride=args.stride)
+                            pixels_per_metre=args.pixels_per_metre, stride=args.stride, **damage)
             print(f"wrote {args.out}: {frames} frames")
+        elif args.command == "reindex":
+            try:
+                print(reindex(resolve_bag_path(args.bag), **damage).describe())
+            except RecoveryError as error:
+                raise BagError(str(error)) from None
         else:
-            for name, count in export(args.bag, args.out, args.format).items():
+            for name, count in export(args.bag, args.out, args.format, **damage).items():
                 print(f"wrote {os.path.join(args.out, name)}: {count} rows")
     except BrokenPipeError:   # `dynenv-bag echo ... | head`: stop quietly, and keep Python's exit flush quiet too
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -37,9 +37,24 @@ def interface_definitions(source: Path) -> dict[str, str]:
     return definitions
 
 
+UPSTREAM_PACKAGES = ("vision_msgs",)   # rebuilt from msg_defs/upstream and missing from rosbags' Jazzy store
+
+
+def upstream_definitions() -> dict[str, str]:
+    """``vision_msgs`` definitions (the subset msg_defs/upstream rebuilds), from the source tree or the venv."""
+    definitions: dict[str, str] = {}
+    for package in UPSTREAM_PACKAGES:
+        candidates = [Path(__file__).resolve().parents[2] / "msg_defs" / "upstream" / package,
+                      Path(sys.prefix) / "share" / package]
+        found = next((c / "msg" for c in candidates if (c / "msg").is_dir()), None)
+        for path in sorted(found.glob("*.msg")) if found else ():
+            definitions[f"{package}/msg/{path.stem}"] = path.read_text()
+    return definitions
+
+
 @lru_cache(maxsize=4)
 def dynenv_typestore(source: Path | None = None) -> Typestore:
-    """The ROS 2 Jazzy typestore plus every dynenv_msgs type."""
+    """The ROS 2 Jazzy typestore plus every dynenv_msgs type and the rebuilt upstream ones (vision_msgs)."""
     if source is None:
         sources = interface_source_dirs()
         if not sources:
@@ -47,7 +62,7 @@ def dynenv_typestore(source: Path | None = None) -> Typestore:
         source = sources[0]
     store = get_typestore(Stores.ROS2_JAZZY)
     types: dict = {}
-    for name, text in interface_definitions(source).items():
+    for name, text in {**upstream_definitions(), **interface_definitions(source)}.items():
         parsed = get_types_from_msg(text, name)
         # rosbags files a "pkg/srv/X_Request" definition as "pkg/srv/msg/X_Request"; keep rosidl's name.
         types.update({name if key.endswith("/" + name.rsplit("/", 1)[1]) else key: value

@@ -10,6 +10,11 @@ Parameters:
   wait_for_subscribers  before playing, wait until every played topic has at least this many subscribers
                         (0 = start at once, like ``ros2 bag play``; the simulator's topics are volatile, so
                         messages published before a subscriber matched are not delivered to it).
+  ignore_damage         play a damaged or unfinished bag anyway: the messages that check out (see
+                        ``dynenv-bag --ignore-damage``); default: refuse it (exit 2) with what is wrong.
+
+A topic whose type is not installed here (no generated Python class) or whose definition in the bag cannot be
+used is skipped with a warning naming it; the rest plays.
 
 Publishers use the simulator's reliable KEEP_ALL QoS. When not looping the node waits for every message to be
 acknowledged by the subscribers (at most ACK_TIMEOUT_S) and exits 0.
@@ -58,6 +63,9 @@ class BagPlayer(Node):
         requested = declare_str_list(self, "topics", [], "Topics to play; empty = all.")
         self.wait_for_subscribers = declare_int(self, "wait_for_subscribers", 0, 0, 10_000,
                                                 "Subscribers every topic must have before playing starts.")
+        self.ignore_damage = declare_bool(self, "ignore_damage", False,
+                                          "Play the messages of a damaged or unfinished bag that check out.")
+        self.skipped: dict[str, str] = {}             # topic → why it is not played
         self.exit_when_done = exit_when_done
         self._stack = ExitStack()
         try:
@@ -82,13 +90,28 @@ class BagPlayer(Node):
         try:
             if not self.bag_path:
                 raise BagError("no bag given (set the 'bag' parameter)")
-            self.reader: BagReader = self._stack.enter_context(open_bag(self.bag_path))
+            self.reader: BagReader = self._stack.enter_context(open_bag(
+                self.bag_path, ignore_damage=self.ignore_damage, notice=self.get_logger().warning))
         except BagError as error:
             raise ParameterException(str(error), ["bag"]) from None
         wanted = {self.resolve_topic_name(t) for t in requested}
-        self.connections = [c for c in self.reader.connections if not wanted or c.topic in wanted]
+        in_bag = sorted({c.topic for c in self.reader.all_connections})
+        self.skipped.update({t: why for t, why in self.reader.unreadable.items() if not wanted or t in wanted})
+        candidates = [c for c in self.reader.connections if not wanted or c.topic in wanted]
+        self.connections = []
+        for connection in candidates:
+            try:
+                message_class(connection.msgtype)
+            except (ImportError, ValueError) as error:
+                if connection.topic not in self.skipped:
+                    self.get_logger().warning(f"skipping {connection.topic}: {error}")
+                self.skipped[connection.topic] = str(error)
+                continue
+            self.connections.append(connection)
         if not self.connections:
-            in_bag = sorted({c.topic for c in self.reader.connections})
+            if not wanted or set(wanted) & set(in_bag):
+                raise ParameterException(f"nothing to play: every topic asked for is skipped ({self.skipped})",
+                                         ["bag"])
             raise ParameterException(f"nothing to play: topics {sorted(wanted)} not in the bag (it has {in_bag})",
                                      ["topics"])
         self.publishers_by_topic: dict[str, Any] = {}
@@ -96,12 +119,8 @@ class BagPlayer(Node):
         store = dynenv_typestore()
         for connection in self.connections:
             if connection.topic not in self.publishers_by_topic:
-                try:
-                    cls = message_class(connection.msgtype)
-                except (ImportError, ValueError) as error:
-                    raise ParameterException(f"cannot play {connection.topic}: {error}", ["bag"]) from None
-                self.publishers_by_topic[connection.topic] = self.create_publisher(cls, connection.topic,
-                                                                                   sim_stream())
+                self.publishers_by_topic[connection.topic] = self.create_publisher(
+                    message_class(connection.msgtype), connection.topic, sim_stream())
             digest = getattr(connection, "digest", "")
             if (connection.msgtype in store.fielddefs and digest.startswith("RIHS01_")
                     and digest != store.hash_rihs01(connection.msgtype)):

@@ -1,20 +1,30 @@
 """Recorder: subscribes (raw CDR, no deserialisation) to the simulator's topics and writes them to a rosbag2 MCAP
 bag, because there is no ``ros2 bag`` on PyPI.
 
-Parameters:
+Parameters (read-only: they are used once, when the bag is created, so a later change is refused rather than
+silently ignored):
   output    bag directory to create (default ``bags/recording_<UTC time>``); an existing path is refused.
   topics    topics to record; empty = every topic whose type the simulator publishes (``SIM_PUBLISHED_TYPES``)
-            plus policies' ``dynenv_msgs/msg/Action``. Either way topics are found by polling the ROS graph every
-            0.5 s, so a topic that appears later is recorded from then on.
+            plus policies' ``dynenv_msgs/msg/Action``, except the recorder's own diagnostics. Either way topics
+            are found by polling the ROS graph every 0.5 s, so a topic that appears later is recorded from then on.
   duration  seconds of wall time to record, 0 = until SIGINT/SIGTERM.
+
+Crash safety: the bag is written in chunks of at most 256 KiB / 0.5 s, each handed to the OS when it closes (and
+every FLUSH_PERIOD_S the open one if it is old enough), so after kill -9 ``dynenv-bag reindex`` recovers all but
+the last ~0.75 s. A bag that cannot be created (read-only or missing permissions, disk full) is one line of error
+and exit status 2. A write that fails while recording (disk full, I/O error) stops the recording: one error line,
+the messages that follow are counted as dropped, and /recorder/diagnostics (``DIAGNOSTICS_TOPIC``,
+diagnostic_msgs/DiagnosticArray, reliable + transient-local depth 1, about 1 Hz) says ERROR "not recording" so the
+simulator and the graph can see it; at the end the recorder reindexes what reached the disk and exits 1.
+While recording, the same topic says OK with the counts.
 
 Bag time of a message is its receive time in ns, like ``ros2 bag record``: wall time, or with ``use_sim_time:=true``
 (``--use-sim-time``) the latest /clock value recorded; the sim time
 stays in each message's header.stamp. Subscriptions use the simulator's reliable KEEP_ALL QoS, so a recorder that
 falls behind holds the publisher back instead of silently losing messages (once the writer's history is full, the
 publisher's publish() fails after Fast DDS's blocking time rather than dropping). The bag is finished (MCAP footer,
-metadata.yaml) on every exit path and a summary (messages per topic) is logged. SIGINT/SIGTERM first drain what is already on its
-way (until no message arrived for DRAIN_QUIET_S, at most DRAIN_MAX_S), then finish the bag and exit 0; a second
+metadata.yaml) on every exit path and a summary (messages per topic) is logged. SIGINT/SIGTERM first drain what is
+already on its way (until no message arrived for DRAIN_QUIET_S, at most DRAIN_MAX_S), then finish the bag and exit 0; a second
 signal finishes at once.
 
 ``dynenv-record --output DIR --topics T ... --duration S`` (``cli_main``) is the same node with argparse options.
@@ -22,6 +32,7 @@ signal finishes at once.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import signal
 import struct
@@ -34,22 +45,29 @@ from typing import Any
 from rclpy.exceptions import ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from dynenv_ros.bags.mcap import CHUNK_MAX_AGE_S, FLUSH_PERIOD_S
+from dynenv_ros.bags.recovery import RecoveryError, reindex
 from dynenv_ros.bags.typestore import dynenv_typestore
 from dynenv_ros.bags.writer import BagWriter
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_float, declare_str, declare_str_list
-from dynenv_ros.ros.qos import sim_stream
-from dynenv_ros.ros.topics import SIM_PUBLISHED_TYPES
+from dynenv_ros.ros.qos import recording_qos
+from dynenv_ros.ros.topics import MATCHED_PREFIX, RECORDER_DIAGNOSTICS, SIM_PUBLISHED_TYPES
 
 RCLError = _rclpy.RCLError
 
-RECORDED_TYPES = frozenset(SIM_PUBLISHED_TYPES | {"dynenv_msgs/msg/Action"})
+# The simulator's topics, the policies' actions and the vision adapter's standard detections.
+RECORDED_TYPES = frozenset(SIM_PUBLISHED_TYPES | {"dynenv_msgs/msg/Action", "vision_msgs/msg/Detection3DArray"})
 DISCOVERY_PERIOD_S = 0.5
 DRAIN_QUIET_S = 0.25      # after a stop request, finish once no message arrived for this long ...
 DRAIN_MAX_S = 2.0         # ... or after this long at most (a publisher that keeps publishing)
+DIAGNOSTICS_TOPIC = RECORDER_DIAGNOSTICS
+DIAGNOSTICS_PERIOD_S = 1.0
 
 
 def message_class(type_name: str) -> type:
@@ -76,29 +94,45 @@ class Recorder(Node):
         super().__init__("recorder", **node_options)
         # Timers run on the steady clock: with use_sim_time the node clock stands still until /clock arrives.
         self._wall = Clock(clock_type=ClockType.STEADY_TIME)
-        self.output = declare_str(self, "output", default_output(), "Bag directory to create (must not exist).")
-        requested = declare_str_list(self, "topics", [], "Topics to record; empty = every simulator topic.")
-        self.duration = declare_float(self, "duration", 0.0, 0.0, 1e9, "Wall seconds to record, 0 = until stopped.")
+        self.output = declare_str(self, "output", default_output(), "Bag directory to create (must not exist).",
+                                  read_only=True)
+        requested = declare_str_list(self, "topics", [], "Topics to record; empty = every simulator topic.",
+                                     read_only=True)
+        self.duration = declare_float(self, "duration", 0.0, 0.0, 1e9, "Wall seconds to record, 0 = until stopped.",
+                                      read_only=True)
         self.requested = {self.resolve_topic_name(t) for t in requested}
         self.exit_when_done = exit_when_done
+        self.failure = ""             # why nothing is being recorded any more ("" while recording)
+        self.dropped = 0              # messages received but not on disk because a write failed
+        self.recovered: int | None = None   # messages the reindex after a failure kept
+        self.finished = False
+        self._subscriptions: list[Any] = []
         try:
             self.bag = BagWriter(self.output, dynenv_typestore())
         except FileExistsError as error:
             raise ParameterException(str(error), ["output"]) from None
+        except OSError as error:   # read-only or foreign directory, disk full: one line, exit 2
+            print(f"recorder: error: cannot create bag {self.output!r}: {error.strerror or error}",
+                  file=sys.stderr, flush=True)
+            raise NodeExit(2) from None
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self._diagnostics = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         # With use_sim_time the bag time is the latest /clock value this node recorded (read from the raw bytes,
         # so it never depends on callback order between the clock and the data).
         self._use_sim_time = bool(self.get_parameter("use_sim_time").value)
         self._sim_ns = 0
         self.subscribed: dict[str, str] = {}          # topic → type
         self._ignored: set[tuple[str, tuple[str, ...]]] = set()   # warned about once
-        self._subscriptions: list[Any] = []
         self._started = time.monotonic()
         self._last_message = self._started
         self._stop_requested: float | None = None
-        self.finished = False
         self._discover()
         self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover, clock=self._wall)
         self._stop_timer = self.create_timer(0.05, self._check_stop, clock=self._wall)
+        self._flush_timer = self.create_timer(FLUSH_PERIOD_S, self._flush, clock=self._wall)
+        self._diagnostics_timer = self.create_timer(DIAGNOSTICS_PERIOD_S, self.publish_diagnostics, clock=self._wall)
         what = ", ".join(sorted(self.requested)) if self.requested else "all simulator topics"
         self.get_logger().info(f"recording {what} to {self.output}"
                                + (f" for {self.duration:g} s" if self.duration > 0 else " until stopped"))
@@ -111,23 +145,29 @@ class Recorder(Node):
     def _wanted(self, topic: str, types: list[str]) -> bool:
         if self.requested:
             return topic in self.requested
-        return any(t in RECORDED_TYPES for t in types)
+        return topic != DIAGNOSTICS_TOPIC and any(t in RECORDED_TYPES for t in types)
 
     def _discover(self) -> None:
-        if self.finished:
+        if self.finished or self.failure:
             return
         for topic, types in self.get_topic_names_and_types():
+            if self.failure:
+                return
             if topic in self.subscribed or not self._wanted(topic, types):
+                continue
+            # As rosbag2: a topic is subscribed once it has a publisher, with QoS adapted to what they offer.
+            offered = [info.qos_profile.durability for info in self.get_publishers_info_by_topic(topic)]
+            if not offered:
                 continue
             key = (topic, tuple(types))
             if key in self._ignored:
                 continue
-            reason = self._subscribe(topic, types)
+            reason = self._subscribe(topic, types, recording_qos(offered))
             if reason:
                 self._ignored.add(key)
                 self.get_logger().warning(f"not recording {topic}: {reason}")
 
-    def _subscribe(self, topic: str, types: list[str]) -> str:
+    def _subscribe(self, topic: str, types: list[str], qos: QoSProfile) -> str:
         """Start recording ``topic``; returns why not, or "" on success."""
         if len(types) != 1:
             return f"it has several types {types}"
@@ -137,8 +177,18 @@ class Recorder(Node):
             self.bag.add_topic(topic, msgtype)
         except (ImportError, ValueError, KeyError) as error:
             return str(error)
+        except OSError as error:   # its definition could not be written: the bag is full or broken
+            self._failed(error)
+            return self.failure
+        # A change in matched publishers is published at once: a stepped simulator waits for the recorder to have
+        # matched every action publisher before its first period (MATCHED_PREFIX values of the diagnostics).
         self._subscriptions.append(self.create_subscription(
-            cls, topic, lambda data, name=topic: self._on_message(name, data), sim_stream(), raw=True))
+            cls, topic, lambda data, name=topic: self._on_message(name, data), qos, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(
+                matched=lambda _info: self.publish_diagnostics(),
+                incompatible_qos=lambda _info, name=topic: self.get_logger().warning(
+                    f"{name}: a publisher's QoS does not match this recording's "
+                    f"({qos.durability.name.lower()}); its messages are not recorded", throttle_duration_sec=5.0))))
         self.subscribed[topic] = msgtype
         self.get_logger().info(f"recording {topic} [{msgtype}]")
         return ""
@@ -147,10 +197,61 @@ class Recorder(Node):
         if topic == "/clock" and len(data) >= 12:   # CDR: 4-byte header, int32 sec, uint32 nanosec
             sec, nanosec = struct.unpack_from("<iI", data, 4)
             self._sim_ns = sec * 1_000_000_000 + nanosec
-        if not self.bag.closed:
+        self._last_message = time.monotonic()
+        if self.failure:
+            self.dropped += 1
+        elif not self.bag.closed:
             stamp = self._sim_ns if self._use_sim_time else time.time_ns()
-            self.bag.write(topic, stamp, data)
-            self._last_message = time.monotonic()
+            try:
+                self.bag.write(topic, stamp, data)
+            except OSError as error:
+                self._failed(error, this_message=1)
+
+    def _flush(self) -> None:
+        """Hand a quiet topic's open chunk to the OS once it is CHUNK_MAX_AGE_S old (busy ones close by size)."""
+        if self.failure or self.bag.closed:
+            return
+        try:
+            self.bag.flush(max_age_s=CHUNK_MAX_AGE_S)
+        except OSError as error:
+            self._failed(error)
+
+    def _failed(self, error: OSError, this_message: int = 0) -> None:
+        """A write failed: stop recording (the file now ends in a partial record), say so once, tell the graph."""
+        reason = "disk full" if error.errno == errno.ENOSPC else (error.strerror or str(error))
+        self.failure = f"cannot write {self.output}: {reason}"
+        # accepted but not on disk (the chunk that failed and any still open), and the message being written
+        self.dropped += sum(self.bag.counts.values()) - self.bag.flushed_messages + this_message
+        self.get_logger().error(f"{self.failure}: nothing is being recorded any more; the "
+                                f"{self.bag.flushed_messages} messages already on disk are kept and the bag is "
+                                "reindexed when the recorder stops")
+        self.bag.abort()
+        self.publish_diagnostics()
+
+    def publish_diagnostics(self) -> None:
+        """OK with the counts while recording, ERROR "not recording: <why>" after a write failed."""
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+        if not self.context.ok():
+            return
+        written = self.bag.flushed_messages if self.failure else sum(self.bag.counts.values())
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.ERROR if self.failure else DiagnosticStatus.OK, name="recorder",
+            message=f"not recording: {self.failure}" if self.failure else f"recording {len(self.subscribed)} topics",
+            hardware_id=self.output,
+            values=[KeyValue(key="output", value=self.output), KeyValue(key="messages_written", value=str(written)),
+                    KeyValue(key="messages_dropped", value=str(self.dropped))]
+            + [KeyValue(key=MATCHED_PREFIX + s.topic_name, value=str(s.get_publisher_count()))
+               for s in self._subscriptions])
+        now = time.time_ns()
+        self._diagnostics.publish(DiagnosticArray(header=self._header(now), status=[status]))
+
+    @staticmethod
+    def _header(now_ns: int) -> Any:
+        from std_msgs.msg import Header
+        from builtin_interfaces.msg import Time
+
+        return Header(stamp=Time(sec=now_ns // 1_000_000_000, nanosec=now_ns % 1_000_000_000))
 
     def request_stop(self, drain: bool = True) -> None:
         """Stop soon (what SIGINT/SIGTERM do): with ``drain``, first keep taking the messages that are already on
@@ -172,7 +273,7 @@ class Recorder(Node):
             return
         self.finish()
         if self.exit_when_done:
-            raise NodeExit(0)
+            raise NodeExit(1 if self.failure else 0)
 
     def finish(self) -> None:
         """Stop recording, finish the bag so it is readable, and log what was recorded. Idempotent."""
@@ -182,15 +283,34 @@ class Recorder(Node):
         for subscription in self._subscriptions:
             self.destroy_subscription(subscription)
         self._subscriptions.clear()
-        self.bag.close()
-        counts = self.counts
-        lines = [f"  {topic}: {count}" for topic, count in sorted(counts.items())]
-        summary = (f"bag {self.output} finished: {sum(counts.values())} messages on {len(counts)} topics"
-                   + ("\n" + "\n".join(lines) if lines else ""))
+        if not self.failure:
+            try:
+                self.bag.close()
+            except OSError as error:   # the index did not fit: what is on disk is reindexed below
+                self.failure = f"cannot finish {self.output}: {error.strerror or error}"
+                self.bag.abort()
+        if self.failure:
+            summary = self._recover()
+        else:
+            counts = self.counts
+            lines = [f"  {topic}: {count}" for topic, count in sorted(counts.items())]
+            summary = (f"bag {self.output} finished: {sum(counts.values())} messages on {len(counts)} topics"
+                       + ("\n" + "\n".join(lines) if lines else ""))
         if self.context.ok():
-            self.get_logger().info(summary)
+            (self.get_logger().error if self.failure else self.get_logger().info)(summary)
         else:   # after SIGINT/SIGTERM the logger's /rosout publisher is gone and would complain
             print(f"[recorder] {summary}", file=sys.stderr, flush=True)
+
+    def _recover(self) -> str:
+        """After a write failure: index what reached the disk (truncating the partial record frees its space)."""
+        try:
+            report = reindex(self.output)
+        except (OSError, RecoveryError) as error:
+            return (f"bag {self.output} NOT finished ({self.failure}); recovering it failed too ({error}): run "
+                    f"`dynenv-bag reindex {self.output}` once there is space")
+        self.recovered = report.messages
+        return (f"bag {self.output} NOT complete ({self.failure}; {self.dropped} messages dropped): "
+                f"{report.describe()}")
 
     def destroy_node(self) -> None:
         if hasattr(self, "bag"):   # the constructor may have failed before the bag existed
