@@ -61,3 +61,37 @@ def test_reverse_numbers_frames_from_stamps_and_drops_foreign_labels(make_node, 
     assert len(out.detections) == 1 and out.detections[0].class_id == 1
     assert abs(out.detections[0].position.x - 1.0) < 1e-6
     assert adapter.dropped == {"person": 1}
+
+
+def test_a_vision_stack_publishing_vision_msgs_drives_the_policy_node_through_the_reverse_adapter(make_node,
+                                                                                                  executor):
+    """docs/deploy.md's route for a robot whose own vision publishes Detection3DArray: reverse adapter, then the
+    policy node, which answers the period with an action stamped like its last frame."""
+    from dynenv_msgs.msg import Action
+
+    from policy_node.policy_node import PolicyNode
+    adapter = make_node(VisionAdapter, parameter_overrides=_params(players_per_team=1, robots=["team_a_0"],
+                                                                    reverse=True, vision_hz=10.0,
+                                                                    frames_per_period=5))
+    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, team="a", seed=3))
+    robot_vision = make_node("robot_vision")
+    publisher = robot_vision.create_publisher(Detection3DArray, "/team_a_0/detections_3d", 10)
+    actions: list[Action] = []
+    robot_vision.create_subscription(Action, "/team_a_0/action", actions.append, 10)
+    for node in (adapter, policy, robot_vision):
+        executor.add_node(node)
+    assert spin_until(executor, lambda: publisher.get_subscription_count() > 0
+                      and robot_vision.count_publishers("/team_a_0/action") > 0, 10.0)
+    params = load_preset("realistic")
+    for frame in range(5, 10):                                   # frames 5..9 at 10 Hz: motion period 1, complete
+        ball = DetectionArray(detections=[Detection(class_id=1, position=Point(x=1.0 + 0.1 * frame, y=0.2),
+                                                    confidence=0.9, size_x=0.1, size_y=0.1, yaw=float("nan"))])
+        message = to_vision_msgs(ball, params)
+        message.header.stamp.sec, message.header.stamp.nanosec = 0, frame * 100_000_000
+        message.header.frame_id = "team_a_0/camera"
+        publisher.publish(message)
+    assert spin_until(executor, lambda: actions, 20.0)
+    action = actions[0]
+    assert action.robot_id == 0 and action.motion_period == 2
+    assert (action.header.stamp.sec, action.header.stamp.nanosec) == (0, 900_000_000)
+    assert action.header.frame_id == "team_a_0/base_link"
