@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
-          "policy": "policy", "train": "train"}
+          "policy": "policy", "train": "train", "soak": "soak"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -35,6 +35,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "train":   # declaring its options imports no torch
             from benchmarks.train import add_arguments as add_train_arguments
             add_train_arguments(sub)
+        if name == "soak":    # declaring its options starts nothing
+            from benchmarks.soak import add_arguments as add_soak_arguments
+            add_soak_arguments(sub)
         if name == "ros":
             sub.add_argument("--sim-seconds", type=float, default=60.0, help="sim seconds per stepped game")
             sub.add_argument("--wall-seconds", type=float, default=10.0, help="realtime CPU sampling window")
