@@ -8,7 +8,8 @@ decision on this machine, slower than the motion period), and the recorder, for 
 - simulator RSS growth after the warm-up (goal < 5 %), and the recorder's and policies' RSS;
 - vision frames per second (30 nominal): median and worst diagnostics window;
 - the share of (robot, period) slots with an accepted action, and the refusals by reason;
-- the policy nodes' decisions, periods dropped as stale, decision latency.
+- the policy nodes' decisions per second, actions sent to a later period than the one after the frames they answer
+  (``actions_delayed``), periods dropped as stale.
 """
 from __future__ import annotations
 
@@ -137,9 +138,11 @@ def soak(args: Any, work: Path) -> dict[str, Any]:
     robots = 2 * args.players
     periods = int(sim["periods_run"])
     refused = {k[len("rejected_"):]: int(v) for k, v in sim.items() if k.startswith("rejected_") and int(v)}
-    policies = {name: {k: final[f"/{name}/diagnostics"].get(k) for k in (
-        "decisions", "actions_sent", "periods_dropped", "fallback_actions", "latency_median_ms", "latency_max_ms")}
+    policies = {name: {k: int(final[f"/{name}/diagnostics"].get(k, 0)) for k in (
+        "decisions", "actions_sent", "periods_dropped", "actions_delayed", "actions_superseded", "fallback_actions")}
         for name in ("policy_team_a", "policy_team_b") if f"/{name}/diagnostics" in final}
+    for values in policies.values():
+        values["decisions_per_s"] = round(values["decisions"] / (60 * args.minutes), 2)
     recorder = final.get("/recorder/diagnostics", {})
     return {
         "players_per_team": args.players, "runtime": args.runtime, "minutes": args.minutes,
@@ -169,8 +172,8 @@ def run(args: Any) -> int:
     if args.json:
         print(json.dumps(result))
     else:
-        policies = "; ".join(f"{n}: {p['decisions']} decisions, {p['periods_dropped']} periods dropped, median "
-                             f"{p['latency_median_ms']} ms" for n, p in result["policies"].items())
+        policies = "; ".join(f"{n}: {p['decisions_per_s']} decisions/s, {p['actions_delayed']} actions delayed, "
+                             f"{p['periods_dropped']} periods dropped" for n, p in result["policies"].items())
         print_table(f"dynenv-bench soak ({result['players_per_team']}v{result['players_per_team']} real time, 30 Hz "
                     f"vision, {result['runtime']} policies, {result['minutes']:g} min)", [
             ("simulator RSS after warm-up → end", f"{result['sim_rss_mib_after_warmup']} → "

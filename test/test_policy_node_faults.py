@@ -268,14 +268,22 @@ def test_an_onnx_policy_for_another_frame_count_stops_the_node_clearly(make_node
 
 
 # -- real time: act on the newest complete period ------------------------------------------------------------------
-class _Slow:
-    """A policy that takes ``seconds`` per decision (a 5v5 torch policy on a slow core)."""
+class _Wrapped:
+    """A policy standing in for the node's own: everything but the call goes to the real one."""
 
-    def __init__(self, policy, seconds: float) -> None:
-        self.policy, self.seconds = policy, seconds
+    def __init__(self, policy) -> None:
+        self.policy = policy
 
     def __getattr__(self, name):
         return getattr(self.policy, name)
+
+
+class _Slow(_Wrapped):
+    """A policy that takes ``seconds`` per decision (a 5v5 torch policy on a slow core)."""
+
+    def __init__(self, policy, seconds: float) -> None:
+        super().__init__(policy)
+        self.seconds = seconds
 
     def __call__(self, *args):
         time.sleep(self.seconds)
@@ -419,14 +427,12 @@ def test_malformed_frames_and_values_are_refused_or_cleaned_and_counted(make_nod
     assert policy.dropped_detections > 0                       # the flood was cut at the layout's bound
 
 
-class _Broken:
+class _Broken(_Wrapped):
     """A policy whose outputs go NaN for robot 0 (``mode`` 'nan') or that raises (``mode`` 'raise')."""
 
     def __init__(self, policy, mode: str) -> None:
-        self.policy, self.mode = policy, mode
-
-    def __getattr__(self, name):
-        return getattr(self.policy, name)
+        super().__init__(policy)
+        self.mode = mode
 
     def __call__(self, *args):
         if self.mode == "raise":

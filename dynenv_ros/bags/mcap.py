@@ -123,14 +123,23 @@ class ChunkInfo:
     index: dict[int, list[tuple[int, int]]]
     index_offsets: dict[int, int] = field(default_factory=dict)   # MessageIndex record per channel, if intact
     index_length: int = 0
+    counts: dict[int, int] = field(default_factory=dict)   # messages per channel once ``index`` was let go
 
     @property
     def end(self) -> int:
         return self.start + self.length
 
+    def channel_counts(self) -> dict[int, int]:
+        return {k: len(v) for k, v in self.index.items()} if self.index else dict(self.counts)
+
+    def forget_messages(self) -> None:
+        """Keep only the counts: a writer must not hold every message's index entry until the bag is closed (a
+        10-minute recording grew the recorder by 40 MiB that way)."""
+        self.counts, self.index = self.channel_counts(), {}
+
     @property
     def message_count(self) -> int:
-        return sum(len(v) for v in self.index.values())
+        return sum(self.channel_counts().values())
 
 
 def message_index_records(chunk: ChunkInfo, at: int) -> tuple[bytes, dict[int, int]]:
@@ -182,8 +191,8 @@ def index_tail(at: int, schemas: list[Schema], channels: list[Channel], chunks: 
                               for o, n, name in metadata_at])
     counts: dict[int, int] = {c.id: 0 for c in channels}
     for chunk in chunks:
-        for channel_id, entries in chunk.index.items():
-            counts[channel_id] = counts.get(channel_id, 0) + len(entries)
+        for channel_id, count in chunk.channel_counts().items():
+            counts[channel_id] = counts.get(channel_id, 0) + count
     total = sum(counts.values())
     starts = [c.message_start for c in chunks if c.message_count]
     ends = [c.message_end for c in chunks if c.message_count]
@@ -297,6 +306,7 @@ class CrashSafeMcapStorage:
         count = chunk.message_count
         self._new_chunk()   # the messages are gone from memory either way: a failed write is not retried
         self._write_out(data + indexes)
+        chunk.forget_messages()
         self.chunks.append(chunk)
         self.flushed_messages += count
 

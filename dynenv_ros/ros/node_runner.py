@@ -6,6 +6,7 @@ import os
 import sys
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import rclpy
@@ -68,7 +69,7 @@ _PARAMETER_CALLS = ("declare_parameter", "declare_parameters", "get_parameter", 
 
 
 @contextlib.contextmanager
-def _stand_in_node(found: list[tuple[str, Any, Any]]) -> Iterator[None]:
+def _stand_in_node(found: list[tuple[str, Any, Any]], names: list[str]) -> Iterator[None]:
     """Make rclpy's Node a recorder of parameter declarations (no context, no DDS), for the time of the block.
 
     Each declaration is recorded as (name, default, descriptor) and answered with its default; any other Node
@@ -82,6 +83,7 @@ def _stand_in_node(found: list[tuple[str, Any, Any]]) -> Iterator[None]:
     def init(self: Node, node_name: str, *_: Any, **__: Any) -> None:
         self._parameter_overrides = {}
         self._help_name = node_name
+        names.append(node_name)
 
     def declare_parameter(self: Node, name: str, value: Any = None, descriptor: Any = None,
                           ignore_override: bool = False) -> Parameter:
@@ -121,24 +123,43 @@ def _stand_in_node(found: list[tuple[str, Any, Any]]) -> Iterator[None]:
                 setattr(Node, name, attribute)
 
 
-def parameter_help(make_node: Callable[[], Node]) -> str:
-    """The node's parameters (name, type, default, description, range or choices, read-only) as text.
+@dataclass
+class Declarations:
+    """What a node's constructor declares, collected without ROS (``collect_declarations``)."""
+    node_name: str | None
+    parameters: list[tuple[str, Any, Any]]      # (name, default, ParameterDescriptor or None)
+    stopped_by: str | None = None               # the error a constructor raised with every default, if any
 
-    The node's constructor runs against a stand-in Node until its first call that is not a parameter declaration;
-    it runs in a temporary working directory, so a default relative output path cannot leave anything behind.
+
+def collect_declarations(make_node: Callable[[], Node]) -> Declarations:
+    """Run the node's constructor against a stand-in Node until its first call that is not about parameters.
+
+    It runs in a temporary working directory, so a default relative output path cannot leave anything behind.
+    Used by ``--help`` and by the test that checks the parameters the docs show.
     """
     found: list[tuple[str, Any, Any]] = []
-    with tempfile.TemporaryDirectory() as scratch, _stand_in_node(found):
+    names: list[str] = []
+    stopped_by = None
+    with tempfile.TemporaryDirectory() as scratch, _stand_in_node(found, names):
         cwd = os.getcwd()
         os.chdir(scratch)
         try:
             make_node()
         except _DeclarationsDone:
             pass
-        except Exception as error:   # a constructor that needs more than its defaults: show what was declared
-            found.append(("(with every default the node stops here)", None, f"{type(error).__name__}: {error}"))
+        except Exception as error:   # a constructor that needs more than its defaults: what was declared counts
+            stopped_by = f"{type(error).__name__}: {error}"
         finally:
             os.chdir(cwd)
+    return Declarations(names[0] if names else None, found, stopped_by)
+
+
+def parameter_help(make_node: Callable[[], Node]) -> str:
+    """The node's parameters (name, type, default, description, range or choices, read-only) as text."""
+    declarations = collect_declarations(make_node)
+    found = list(declarations.parameters)
+    if declarations.stopped_by:
+        found.append(("(with every default the node stops here)", None, declarations.stopped_by))
     lines = ["parameters (set with --ros-args -p NAME:=VALUE or --params-file FILE):"]
     for name, default, descriptor in found:
         if isinstance(descriptor, str):
