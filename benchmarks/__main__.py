@@ -11,7 +11,8 @@ from collections.abc import Sequence
 
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
-          "policy": "policy", "train": "train", "soak": "soak"}
+          "policy": "policy", "train": "train", "soak": "soak",
+          "flood": "flood"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -38,6 +39,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "soak":    # declaring its options starts nothing
             from benchmarks.soak import add_arguments as add_soak_arguments
             add_soak_arguments(sub)
+        if name == "flood":
+            from benchmarks.flood import add_arguments as add_flood_arguments
+            add_flood_arguments(sub)
         if name == "ros":
             sub.add_argument("--sim-seconds", type=float, default=60.0, help="sim seconds per stepped game")
             sub.add_argument("--wall-seconds", type=float, default=10.0, help="realtime CPU sampling window")

@@ -134,9 +134,27 @@ def test_realtime_streams_are_bounded_and_stepped_streams_lossless(make_node, ex
                 assert qos.history == HistoryPolicy.KEEP_ALL
             else:
                 assert qos.history == HistoryPolicy.KEEP_LAST and qos.depth == depth, publisher.topic_name
-        for subscription in sim.action_subs:
+        # Actions: stepped mode reads reliably, keep-last 10; real time best effort, keep-last 100 (docs/ros_graph.md).
+        reliability, depth = ((ReliabilityPolicy.BEST_EFFORT, 100) if sim is realtime
+                              else (ReliabilityPolicy.RELIABLE, 10))
+        for subscription in sim.action_inbox.subscriptions:
             assert subscription.qos_profile.history == HistoryPolicy.KEEP_LAST
-            assert subscription.qos_profile.depth == 10
+            assert subscription.qos_profile.depth == depth
+            assert subscription.qos_profile.reliability == reliability
+
+
+def test_realtime_actions_are_read_on_a_participant_of_their_own(make_node, executor):
+    """docs/ros_graph.md: in real time the action readers live in their own context (DDS participant), a node named
+    <sim>_actions, so a flood on an action topic does not share the transport that carries the simulator's
+    services; in stepped mode they are the simulator node's own (a lost first action would stall the game)."""
+    sim, _ = _sim(make_node, executor, mode="realtime")
+    assert {s.topic_name for s in sim.action_inbox.subscriptions} == {"/team_a_0/action", "/team_b_0/action"}
+    assert sim.action_inbox._node.context is not sim.context
+    assert sim.action_inbox._node.get_name() == "sim_node_actions"
+    assert spin_until(executor, lambda: "sim_node_actions" in sim.get_node_names(), 5.0)
+    stepped = make_node(SimNode, parameter_overrides=[Parameter("players_per_team", value=1),
+                                                      Parameter("wait_for_subscribers", value=0)])
+    assert all(s in stepped.subscriptions for s in stepped.action_inbox.subscriptions)
 
 
 class _RefusingPublisher:
@@ -170,12 +188,12 @@ def test_a_flood_of_refused_actions_is_counted_cheaply_and_logged_once_per_repor
     from dynenv_msgs.msg import Action
     sim, _ = _sim(make_node, executor)
     assert spin_until(executor, lambda: sim.started, 5.0)
-    receive = sim._action_callback(0)
     bad = Action(robot_id=0, episode_id=1, motion_period=1, walk=99)
     capfd.readouterr()
     for _ in range(2001):
-        receive(bad)
-    assert sim.session.counts["rejected_out_of_range"] == 2001
+        sim.action_inbox.receive(0, bad)          # what the inbox's subscription callback does with each message
+    assert spin_until(executor, lambda: sim.session.counts["rejected_out_of_range"] == 2001, 5.0), \
+        sim.session.counts
     assert capfd.readouterr().err == ""                           # no log line per refusal
     sim._publish_diagnostics()
     sim._publish_diagnostics()                                    # nothing new: no second summary
@@ -184,21 +202,25 @@ def test_a_flood_of_refused_actions_is_counted_cheaply_and_logged_once_per_repor
     assert "walk=99" in err and err.count("rejected") <= 2        # the last reason; no line per refusal
 
 
-def test_a_burst_on_one_action_topic_queues_at_most_the_documented_depth(make_node, executor):
-    """200 actions sent while the simulator is not spinning: it takes at most 10 (+ what is in flight) of them."""
+def test_a_burst_of_plausible_actions_hands_at_most_the_documented_depth_to_the_game(make_node, executor):
+    """200 actions for the current period sent while the simulator's own thread is not spinning: the real-time
+    inbox thread reads them all but hands at most 10 to the game (ACTION_HANDOVER_DEPTH, docs/ros_graph.md); the
+    first wins. (Real time at 1 % speed, so no period ends meanwhile.)"""
     from dynenv_msgs.msg import Action
     from dynenv_ros.ros.qos import sim_stream
-    sim, client = _sim(make_node, executor)
+    sim, client = _sim(make_node, executor, mode="realtime", real_time_factor=0.01)
     flooder = make_node("flooder")
     pub = flooder.create_publisher(Action, topics.action("team_a_0"), sim_stream())
-    assert spin_until(executor, lambda: sim.started and pub.get_subscription_count() >= 1, 5.0)
-    for _ in range(200):
-        pub.publish(Action(robot_id=0, episode_id=1, motion_period=7))       # early: refused, counted
-    time.sleep(0.5)                                                           # all of it reaches the reader
+    assert spin_until(executor, lambda: sim.started and pub.get_subscription_count() >= 1
+                      and sim.action_inbox.subscriptions[0].get_publisher_count() >= 1, 5.0)   # matched both ways
+    period = sim.session.period
+    for walk in range(200):
+        pub.publish(Action(robot_id=0, episode_id=1, motion_period=period, walk=walk % 3))
+    time.sleep(1.0)                                                # the inbox thread screens all of it meanwhile
     spin_until(executor, lambda: False, 1.0)
-    assert 1 <= sim.session.counts["rejected_early"] <= 20, sim.session.counts
-
-
+    counts = sim.session.counts
+    assert counts["accepted"] == 1, counts
+    assert 1 <= counts["accepted"] + counts["rejected_duplicate"] <= 10, counts
 def test_wait_for_recorder_also_waits_for_a_reader_of_every_action_topic(make_node, executor):
     """The recorder lost a policy's first actions when the simulator started before it had subscribed to them."""
     from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
@@ -305,3 +327,13 @@ def test_a_recorder_that_stops_writing_turns_the_simulator_diagnostics_to_error(
     assert seen[-1].level == DiagnosticStatus.ERROR and "No space left" in seen[-1].message
     assert {v.key: v.value for v in seen[-1].values}["recorder_error"].endswith("No space left on device")
     assert capfd.readouterr().err.count("recorder: not recording") == 1
+
+
+def test_the_action_inbox_takes_only_the_enclave_from_the_command_line():
+    """docs/ros_graph.md: remappings and parameters stay the simulator's; the SROS2 enclave carries over."""
+    from dynenv_ros.ros.action_inbox import enclave_arguments
+    argv = ["sim_node", "--ros-args", "-r", "__node:=sim2", "-p", "seed:=3", "--enclave", "/dynenv/sim_node"]
+    assert enclave_arguments(argv) == ["--ros-args", "--enclave", "/dynenv/sim_node"]
+    assert enclave_arguments(["sim_node", "--ros-args", "-e", "/x"]) == ["--ros-args", "--enclave", "/x"]
+    assert enclave_arguments(["sim_node", "--ros-args", "-p", "seed:=3"]) == []
+    assert enclave_arguments(["sim_node", "--enclave", "/x"]) == []      # not a ROS argument

@@ -64,6 +64,11 @@ class PeriodOutput:
     events: list = field(default_factory=list)
 
 
+def refusal_key(reason: str) -> str:
+    """The counter a refusal reason is counted under: ``rejected_<kind>``, or ``ignored_after_episode_end``."""
+    return "ignored_after_episode_end" if reason.startswith("ignored") else "rejected_" + reason.split(":")[0]
+
+
 class SoccerSession:
     """One world, its perception, and a mailbox of actions per motion period."""
 
@@ -117,17 +122,20 @@ class SoccerSession:
     def submit(self, robot_id: int, episode_id: int, motion_period: int, walk: int, turn: int, kick: int,
                head_yaw_delta: float) -> tuple[bool, str]:
         """Accept one robot's action for the current period, or refuse it with a reason (counted)."""
-        reason = self._check(robot_id, episode_id, motion_period, walk, turn, kick, head_yaw_delta)
-        if reason.startswith("ignored"):
-            self.counts["ignored_after_episode_end"] += 1
-            return False, reason
+        reason = self.check(robot_id, episode_id, motion_period, walk, turn, kick, head_yaw_delta)
         if reason:
-            self.counts["rejected_" + reason.split(":")[0]] += 1
+            self.counts[refusal_key(reason)] += 1
             return False, reason
         self.pending[robot_id] = SoccerAction(Walk(walk), Turn(turn), Kick(kick), float(head_yaw_delta))
         self.counts["accepted"] += 1
         self.accepted_per_robot[robot_id] += 1
         return True, "accepted"
+
+    def check(self, robot_id: int, episode_id: int, motion_period: int, walk: int, turn: int, kick: int,
+              head_yaw_delta: float) -> str:
+        """Why this action would be refused now ("" if it would be accepted). Reads the state and changes nothing,
+        so another thread may screen actions with it (the ROS simulator's action inbox)."""
+        return self._check(robot_id, episode_id, motion_period, walk, turn, kick, head_yaw_delta)
 
     def _check(self, robot_id, episode_id, motion_period, walk, turn, kick, head) -> str:
         if not 0 <= robot_id < self.config.n_robots:

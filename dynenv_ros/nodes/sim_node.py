@@ -26,17 +26,22 @@ from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from dynenv_ros.envs.soccer_session import (MISSING_ACTION_RULES, PeriodOutput, SoccerSession, checked_seed,
-                                            kickoff_team)
+                                            kickoff_team, refusal_key)
 from dynenv_ros.perception.params import MODES, PRESETS, load_preset
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import markers, topics
 from dynenv_ros.ros.cdr import detection_array_cdr
+from dynenv_ros.ros.action_inbox import ActionInbox
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list)
 from dynenv_ros.ros.qos import (REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, action_queue, latched,
                                 realtime_stream, sim_stream)
 from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, robot_transforms, static_transforms, tf_qos, tf_static_qos
 from dynenv_ros.soccer.config import SoccerConfig, robot_names
+
+# Actions that passed the inbox's screen and wait for this node's thread, per robot: one legitimate action per
+# period needs one slot; a flood of plausible actions cannot queue more than this.
+ACTION_HANDOVER_DEPTH = 10
 
 MODES_OF_RUNNING = ("stepped", "realtime")
 RESET_OPTIONS = ("kickoff_team",)
@@ -127,9 +132,12 @@ class SimNode(Node):
                                for n in names]
         self.feedback_pubs = [self.create_publisher(cv.StepFeedback, topics.feedback(n), feedback_qos)
                               for n in names]
-        # Keep-last: a flood on one robot's topic queues at most ACTION_QUEUE_DEPTH messages in this node.
-        self.action_subs = [self.create_subscription(Action, topics.action(n), self._action_callback(i),
-                                                     action_queue()) for i, n in enumerate(names)]
+        # In real time, actions arrive on a participant and thread of their own (ros/action_inbox.py): a flood on
+        # one robot's topic cannot drop this node's service requests. Both modes queue a bounded number (qos.py).
+        realtime = self.mode == "realtime"
+        self.action_inbox = ActionInbox(self, Action, [topics.action(n) for n in names], action_queue(realtime),
+                                        ACTION_HANDOVER_DEPTH, self._screen_action, self._receive_action,
+                                        self._count_refusals, own_participant=realtime)
         self._refused_since_log: Counter[str] = Counter()   # refusals not yet summarised in the log
         self._last_refusal = ""
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QoSProfile(depth=10))
@@ -185,8 +193,10 @@ class SimNode(Node):
         wanted = self.wait_for_subscribers
         ready = all(p.get_subscription_count() >= wanted for p in self.detection_pubs)
         ready = ready and self.world_pub.get_subscription_count() >= self.wait_for_truth_readers
-        # ... and every controlled robot has someone to act for it, so no first action is sent into the void.
-        ready = ready and all(self.count_publishers(topics.action(self.names[i])) >= 1
+        # ... and every controlled robot has someone to act for it, matched by the action inbox's own participant
+        # (it discovers writers on its own schedule), so no first action is sent into the void.
+        ready = ready and all(self.action_inbox.subscriptions[i].get_publisher_count()
+                              >= max(1, self.count_publishers(topics.action(self.names[i])))
                               for i in self.session.controlled)
         if self.wait_for_recorder:
             ready = ready and all(p.get_subscription_count() >= 1 for p in self.feedback_pubs + [self.clock_pub])
@@ -269,25 +279,35 @@ class SimNode(Node):
         return response
 
     # -- actions ---------------------------------------------------------------------------------------------------
-    def _action_callback(self, robot: int):
-        def receive(msg: Action) -> None:
-            if msg.robot_id != robot:
-                accepted, reason = False, (f"unknown_robot: robot_id {msg.robot_id} on "
-                                           f"{topics.action(self.names[robot])} (expected {robot})")
-                self.session.counts["rejected_unknown_robot"] += 1
-            else:
-                accepted, reason = self.session.submit(msg.robot_id, msg.episode_id, msg.motion_period, msg.walk,
-                                                       msg.turn, msg.kick, float(msg.head_yaw_delta))
-            if not accepted:
-                # Counted (diagnostics) and summarised in the log once per diagnostics period: logging each one
-                # cost ~30x the check itself, so a flood of bad actions starved the node's services.
-                if not reason.startswith("ignored"):
-                    self._refused_since_log[reason.split(":")[0]] += 1
-                    self._last_refusal = f"{self.names[robot]}: {reason}"
-                return
-            if self.mode == "stepped" and self.session.ready():
-                self._run_period()
-        return receive
+    def _screen_action(self, robot: int, msg: Action) -> tuple[str, str]:
+        """On the inbox thread: ("", "") for an action the session may accept now, else its counter key and
+        reason. Reads the session only; the owner's thread submits (and re-checks) what passes."""
+        if msg.robot_id != robot:
+            return "rejected_unknown_robot", (f"unknown_robot: robot_id {msg.robot_id} on "
+                                              f"{topics.action(self.names[robot])} (expected {robot})")
+        reason = self.session.check(msg.robot_id, msg.episode_id, msg.motion_period, msg.walk, msg.turn, msg.kick,
+                                    float(msg.head_yaw_delta))
+        return (refusal_key(reason), f"{self.names[robot]}: {reason}") if reason else ("", "")
+
+    def _receive_action(self, robot: int, msg: Action) -> None:
+        """On this node's thread: an action that passed the screen; the period may have moved on since."""
+        accepted, reason = self.session.submit(msg.robot_id, msg.episode_id, msg.motion_period, msg.walk,
+                                               msg.turn, msg.kick, float(msg.head_yaw_delta))
+        if not accepted:
+            self._count_refusals(Counter({refusal_key(reason): 1}), f"{self.names[robot]}: {reason}", counted=True)
+            return
+        if self.mode == "stepped" and self.session.ready():
+            self._run_period()
+
+    def _count_refusals(self, refused: Counter[str], last: str, counted: bool = False) -> None:
+        # Counted (diagnostics) and summarised in the log once per diagnostics period: logging each one cost ~30x
+        # the check itself, so a flood of bad actions starved the node's services.
+        if not counted:
+            self.session.counts.update(refused)
+        for key, n in refused.items():
+            if key.startswith("rejected_"):
+                self._refused_since_log[key[len("rejected_"):]] += n
+                self._last_refusal = last
 
     # -- running ---------------------------------------------------------------------------------------------------
     def _run_period(self) -> None:
@@ -462,6 +482,12 @@ class SimNode(Node):
     def _vision_timer(self):
         """Realtime mode: one frame per vision period of sim time, on the wall clock scaled by the factor."""
         return self.create_timer(self._vision_period_ns() * 1e-9, self._realtime_tick, clock=self.wall)
+
+    def destroy_node(self) -> None:
+        inbox = getattr(self, "action_inbox", None)
+        if inbox is not None:
+            inbox.close()
+        super().destroy_node()
 
     def diagnostics(self) -> dict[str, str]:
         """Achieved rates over the last diagnostics window and action counts, as strings (DiagnosticStatus)."""

@@ -13,9 +13,11 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 # and the simulator's memory stays bounded however slow its readers are.
 REALTIME_FRAME_DEPTH = 25        # /clock, /world_state, /<robot>/detections: 5 frames per period x 5 periods
 REALTIME_FEEDBACK_DEPTH = 5      # /<robot>/feedback: one per period
-# The simulator's action subscriptions, in both modes: a policy sends one action per period, so ten is ample for a
-# legitimate publisher, and a flood can queue no more than this many messages per robot in front of it.
+# The simulator's action subscriptions. Stepped: a policy sends one action per period, so ten is ample. Real time:
+# deeper, because under a flood the legitimate action must survive in the queue until the simulator's next read
+# (it drains the queue in batches); a hundred small messages per robot is still a bounded few kB.
 ACTION_QUEUE_DEPTH = 10
+REALTIME_ACTION_QUEUE_DEPTH = 100
 # Policies keep their last actions for readers that match late (transient local): a recorder that discovers a
 # policy's writer a few periods after the game started still gets its first actions.
 ACTION_HISTORY_DEPTH = 20
@@ -42,9 +44,15 @@ def realtime_stream(depth: int) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-def action_queue() -> QoSProfile:
-    """The simulator's subscriptions to actions: reliable (matches every publisher), keep-last
-    ``ACTION_QUEUE_DEPTH``, so a flood on a robot's topic cannot pile up in the simulator."""
+def action_queue(realtime: bool) -> QoSProfile:
+    """The simulator's subscriptions to actions, keep-last so a flood on a robot's topic cannot pile up in the
+    simulator. Stepped mode reads reliably: a lost action would stall the game. Real time reads best effort: under
+    a flood of a few thousand messages/s, a reliable reader's repair traffic stalled delivery on the whole topic,
+    the legitimate policy's actions included, for as long as the flood lasted (measured, docs/benchmarks.md); best
+    effort keeps delivering, and a lost action in real time is one missing action, the same as a late one."""
+    if realtime:
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REALTIME_ACTION_QUEUE_DEPTH,
+                          reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ACTION_QUEUE_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 

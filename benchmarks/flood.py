@@ -1,0 +1,172 @@
+"""dynenv-bench flood: what two publishers flooding a robot's action topic do to a real-time game (issue 12).
+
+A real-time 1v1 game (10 Hz vision, 0.5 s motion period) with a scripted policy node per robot. After a calm
+phase, two extra processes publish refused actions (walk = 99) on /team_a_0/action as fast as they can; then they
+stop. In each phase the benchmark reports the share of (robot, period) slots with an accepted action — does the
+legitimate policy keep control? — the simulator's frame rate, and the round-trip time of a service of the
+simulator (its get_parameters) called every 0.2 s — are services delayed?
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import os as _os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from benchmarks.timing import print_table
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--calm-s", type=float, default=20.0, help="seconds before and after the flood")
+    parser.add_argument("--flood-s", type=float, default=30.0, help="seconds of flooding")
+    parser.add_argument("--flooders", type=int, default=2, help="flooding processes")
+    parser.add_argument("--keep", metavar="DIR", help="keep the nodes' logs in DIR (default: a temporary dir)")
+    parser.add_argument("--json", action="store_true")
+
+
+def flood(seconds: float) -> None:
+    """The flooding process: refused actions for team_a_0 at full speed; prints how many it sent."""
+    import rclpy
+    from dynenv_msgs.msg import Action
+
+    from dynenv_ros.ros.qos import sim_stream
+    rclpy.init()
+    node = rclpy.create_node(f"flooder_{os.getpid()}")
+    publisher = node.create_publisher(Action, "/team_a_0/action", sim_stream())
+    deadline = time.monotonic() + 2.0
+    while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    message, sent = Action(robot_id=0, episode_id=1, motion_period=1, walk=99), 0
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            publisher.publish(message)
+            sent += 1
+        except Exception:      # a writer that cannot keep up refuses: a flood does not care
+            pass
+    print(json.dumps({"sent": sent, "seconds": seconds}), flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+class _Probe:
+    """Calls the simulator's get_parameters service every 0.2 s and keeps its diagnostics."""
+
+    def __init__(self) -> None:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rcl_interfaces.srv import GetParameters
+        from rclpy.executors import SingleThreadedExecutor
+
+        rclpy.init()
+        self.rclpy, self.GetParameters = rclpy, GetParameters
+        self.node = rclpy.create_node("flood_probe")
+        self.client = self.node.create_client(GetParameters, _os.environ.get("XSRV", "/sim_node/get_parameters"))
+        self.diagnostics: list[tuple[float, dict[str, str]]] = []
+        self.node.create_subscription(DiagnosticArray, "/sim/diagnostics", lambda m: self.diagnostics.extend(
+            (time.monotonic(), {v.key: v.value for v in s.values}) for s in m.status), 10)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+
+    def spin(self, seconds: float, latencies: list[float]) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            sent = time.monotonic()
+            future = self.client.call_async(self.GetParameters.Request(names=["real_time_factor"]))
+            while not future.done() and time.monotonic() - sent < 5.0:
+                self.executor.spin_once(timeout_sec=0.01)
+            latencies.append(1000 * (time.monotonic() - sent) if future.done() else 5000.0)
+            pause = sent + 0.2 - time.monotonic()
+            while pause > 0:
+                self.executor.spin_once(timeout_sec=pause)
+                pause = sent + 0.2 - time.monotonic()
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown()
+
+
+def _phase(probe: _Probe, start: float, end: float, latencies: list[float]) -> dict[str, Any]:
+    window = [(t, d) for t, d in probe.diagnostics if start <= t <= end and "accepted" in d]
+    first, last = window[0][1], window[-1][1]
+    periods = int(last["periods_run"]) - int(first["periods_run"])
+    accepted = int(last["accepted"]) - int(first["accepted"])
+    refused = sum(int(last[k]) - int(first[k]) for k in last if k.startswith("rejected_"))
+    ordered = sorted(latencies)
+    return {"periods": periods, "accepted_share": round(accepted / max(1, 2 * periods), 3), "refused": refused,
+            "frames_per_s": statistics.median(float(d["vision_frames_per_s"]) for _, d in window),
+            "service_ms_median": round(statistics.median(ordered), 2),
+            "service_ms_p99": round(ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))], 2),
+            "service_ms_max": round(ordered[-1], 2)}
+
+
+def measure(args: Any, work: Path) -> dict[str, Any]:
+    from dynenv_ros.graph.process_graph import NodeLaunch, _stop_all, isolated_environment
+    domain = 70 + os.getpid() % 10
+    env = isolated_environment(domain)
+    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    nodes = [NodeLaunch("sim_node", "dynenv_ros.nodes.sim_node", {
+        "players_per_team": 1, "seed": 1, "mode": "realtime", "auto_reset": True, "publish_markers": False,
+        "missing_action": "none"})]
+    nodes += [NodeLaunch(f"policy_{r}", "policy_node.scripted_policy", {"robot": r, "policy": "chaser"})
+              for r in ("team_a_0", "team_b_0")]
+    processes = []
+    for node in nodes:
+        with (work / f"{node.name}.log").open("w") as log:
+            processes.append(subprocess.Popen(node.command(), env=env, stdout=log, stderr=subprocess.STDOUT))
+    probe = _Probe()
+    try:
+        probe.spin(5.0, [])                                   # start-up and discovery
+        phases = {}
+        latencies: list[float] = []
+        start = time.monotonic()
+        probe.spin(args.calm_s, latencies)
+        phases["before"] = _phase(probe, start, time.monotonic(), latencies)
+        flooders = [subprocess.Popen([sys.executable, "-m", "benchmarks.flood", "--flood-process",
+                                      str(args.flood_s)], env=env, stdout=subprocess.PIPE, text=True)
+                    for _ in range(args.flooders)]
+        latencies, start = [], time.monotonic()
+        probe.spin(args.flood_s, latencies)
+        phases["flood"] = _phase(probe, start, time.monotonic(), latencies)
+        sent = [json.loads(f.communicate(timeout=60)[0].strip().splitlines()[-1])["sent"] for f in flooders]
+        latencies, start = [], time.monotonic()
+        probe.spin(args.calm_s, latencies)
+        phases["after"] = _phase(probe, start, time.monotonic(), latencies)
+    finally:
+        probe.close()
+        _stop_all(processes)
+    return {"flooders": args.flooders, "flood_messages_per_s": round(sum(sent) / args.flood_s), **phases}
+
+
+def run(args: Any) -> int:
+    if args.keep:
+        Path(args.keep).mkdir(parents=True, exist_ok=True)
+        result = measure(args, Path(args.keep))
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            result = measure(args, Path(tmp))
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    rows = [("flood", f"{result['flooders']} processes, {result['flood_messages_per_s']} refused actions/s sent")]
+    for phase in ("before", "flood", "after"):
+        p = result[phase]
+        rows.append((f"{phase}: accepted slots, frames/s", f"{100 * p['accepted_share']:.1f} % of {p['periods']} "
+                     f"periods x 2, {p['frames_per_s']:.1f} frames/s, {p['refused']} refused"))
+        rows.append((f"{phase}: service round trip", f"median {p['service_ms_median']} ms, p99 "
+                     f"{p['service_ms_p99']} ms, max {p['service_ms_max']} ms"))
+    print_table("dynenv-bench flood (real-time 1v1, scripted policies)", rows)
+    return 0
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["--flood-process"]:
+        flood(float(sys.argv[2]))

@@ -1,0 +1,141 @@
+"""The simulator's action readers, on a DDS participant and a thread of their own, so a flood cannot starve it.
+
+Measured (``dynenv-bench flood``, docs/benchmarks.md): two processes publishing actions at full speed on one robot's
+topic overflow the receiving participant's transport, and what else arrives there is lost and repaired seconds later
+— the simulator's service requests too (get_parameters took up to 3 s). Reading actions on a second participant
+keeps that traffic apart: the simulator's own participant (services, parameters, diagnostics) is not the one being
+flooded. The inbox thread drains each queue in batches and screens every message against the game state (a cheap,
+read-only check); refusals are only counted, and what may be accepted now is handed to the owner's thread through a
+bounded queue and a guard condition, so the game state is only ever changed on the owner's thread.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+from collections import Counter, deque
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import ExternalShutdownException, ShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+from dynenv_ros.ros.drain import take
+
+# Messages read per callback beyond the one the executor handed in: the executor takes one per wake-up (a few
+# hundred a second), far below a flood's rate; a batch of this size costs ~10 ms of screening.
+DRAIN_LIMIT = 500
+
+# screen(robot index, message) -> "" when the message may be accepted now, else the counter key of its refusal
+# ("rejected_late", ...) and the reason, as (key, reason).
+Screen = Callable[[int, Any], tuple[str, str]]
+
+
+def enclave_arguments(argv: Sequence[str]) -> list[str]:
+    """``--ros-args --enclave <name>`` if ``argv``'s ROS arguments name an enclave, else nothing."""
+    if "--ros-args" not in argv:
+        return []
+    ros_args = list(argv[list(argv).index("--ros-args") + 1:])
+    for flag in ("--enclave", "-e"):
+        if flag in ros_args and ros_args.index(flag) + 1 < len(ros_args):
+            return ["--ros-args", "--enclave", ros_args[ros_args.index(flag) + 1]]
+    return []
+
+
+class ActionInbox:
+    """Subscribes to one action topic per robot and hands screened messages to ``deliver`` on the owner's thread.
+
+    With ``own_participant`` the readers live on a context (DDS participant) and thread of their own; without, on
+    the owner's node, screened in its callbacks. The simulator uses its own participant in real time only: a second
+    participant discovers a policy's writer on its own schedule, and in stepped mode an action sent before the
+    policy's writer had matched the inbox's reader was lost and stalled the game (the simulator had already seen
+    the writer from its own participant); real time shrugs off one lost action, stepped mode cannot.
+    """
+
+    def __init__(self, owner: Node, msg_type: type, topic_names: Sequence[str], qos: QoSProfile, depth: int,
+                 screen: Screen, deliver: Callable[[int, Any], None],
+                 refused: Callable[[Counter[str], str], None], own_participant: bool = True) -> None:
+        self._screen, self._deliver, self._report_refused = screen, deliver, refused
+        self._queues: list[deque[Any]] = [deque(maxlen=depth) for _ in topic_names]
+        self._lock = threading.Lock()
+        self._refused: Counter[str] = Counter()
+        self._last_reason = ""
+        self._context: Context | None = None
+        self._thread: threading.Thread | None = None
+        if not own_participant:
+            self._node = owner
+            self.subscriptions = [owner.create_subscription(msg_type, name, self._receiver(i), qos)
+                                  for i, name in enumerate(topic_names)]
+            return
+        # Remappings and the namespace are the owner's: resolve the names on the owner's node.
+        resolved = [owner.resolve_topic_name(t) for t in topic_names]
+        self._context = Context()
+        # Not the process's arguments (rclpy's default): their remappings and node name would apply twice. Only the
+        # SROS2 enclave carries over, so the inbox's participant joins a secured graph under the owner's identity.
+        rclpy.init(args=enclave_arguments(sys.argv), context=self._context,
+                   domain_id=owner.context.get_domain_id())
+        self._node = rclpy.create_node(f"{owner.get_name()}_actions", context=self._context, enable_rosout=False,
+                                       start_parameter_services=False)
+        self.subscriptions = [self._node.create_subscription(msg_type, name, self._receiver(i), qos)
+                              for i, name in enumerate(resolved)]
+        self._wake = owner.create_guard_condition(self._hand_over)
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self._node)
+        self._thread = threading.Thread(target=self._spin, name="action_inbox", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self._executor.spin()
+        except (ExternalShutdownException, ShutdownException):
+            pass
+
+    def _receiver(self, robot: int) -> Callable[[Any], None]:
+        return lambda msg: self.receive(robot, msg)
+
+    def receive(self, robot: int, msg: Any) -> None:
+        """In the subscription's callback: screen ``msg`` and everything queued behind it, in a
+        bounded batch, then wake the owner if there is anything to hand over or count."""
+        handed = self._screen_one(robot, msg)
+        subscription = self.subscriptions[robot]
+        for _ in range(DRAIN_LIMIT):
+            taken = take(subscription)
+            if taken is None:
+                break
+            handed = self._screen_one(robot, taken) or handed
+        if self._thread is None:
+            self._hand_over()               # already on the owner's thread
+        elif handed or self._refused:
+            self._wake.trigger()
+
+    def _screen_one(self, robot: int, msg: Any) -> bool:
+        key, reason = self._screen(robot, msg)
+        if key:
+            with self._lock:
+                self._refused[key] += 1
+                self._last_reason = reason
+            return False
+        self._queues[robot].append(msg)
+        return True
+
+    def _hand_over(self) -> None:
+        """On the owner's thread: every queued message to ``deliver`` (in order per robot), then the refusals
+        counted since the last hand-over to ``refused``."""
+        for robot, queue in enumerate(self._queues):
+            while queue:
+                self._deliver(robot, queue.popleft())
+        with self._lock:
+            refused, self._refused = self._refused, Counter()
+            last = self._last_reason
+        if refused:
+            self._report_refused(refused, last)
+
+    def close(self) -> None:
+        if self._context is None:
+            return                          # the owner's subscriptions go with the owner
+        self._executor.shutdown(timeout_sec=1.0)
+        self._context.try_shutdown()
+        self._thread.join(timeout=2.0)
+        self._node.destroy_node()
