@@ -301,18 +301,7 @@ def test_a_slow_policy_acts_on_the_newest_period_and_counts_what_it_drops(make_n
     feeder.node.create_subscription(DiagnosticArray, "/policy_node/diagnostics", diagnostics.append, 10)
     feeder.wait_for()
     periods = 30
-
-    def publish():                                                     # 10 Hz vision, 0.1 s periods, 3 s
-        for p in range(1, periods + 1):
-            for msg in _period(p):
-                feeder.pubs["team_a_0"].publish(msg)
-                time.sleep(0.02)
-
-    thread = threading.Thread(target=publish)
-    thread.start()
-    while thread.is_alive():
-        executor.spin_once(timeout_sec=0.02)
-    thread.join()
+    _feed_in_real_time(feeder, executor, periods)
     actions = feeder.actions["team_a_0"]
     # Within a decision or two of the last frame, it answers the last period — not a period seconds old.
     assert spin_until(executor, lambda: any(a.motion_period == periods + 1 for a in actions), 1.5), \
@@ -325,6 +314,24 @@ def test_a_slow_policy_acts_on_the_newest_period_and_counts_what_it_drops(make_n
         int({kv.key: kv.value for kv in d.status[0].values}["periods_dropped"]) > 0 for d in diagnostics), 3.0)
     warn = next(d.status[0] for d in diagnostics if "periods_dropped" in d.status[0].message)
     assert warn.level == warn.WARN and warn.name == "dynenv_policy"
+
+
+def _feed_in_real_time(feeder, executor, periods: int, started: list[int] | None = None) -> None:
+    """Publishes periods 1..periods to team_a_0 from a thread at 10 Hz vision (0.1 s periods) while spinning;
+    ``started[0]`` follows the newest period whose first frame has been sent."""
+    def publish():
+        for p in range(1, periods + 1):
+            for msg in _period(p):
+                if started is not None and msg.frame_index == 0:
+                    started[0] = p
+                feeder.pubs["team_a_0"].publish(msg)
+                time.sleep(0.02)
+
+    thread = threading.Thread(target=publish)
+    thread.start()
+    while thread.is_alive():
+        executor.spin_once(timeout_sec=0.02)
+    thread.join()
 
 
 class _SendLog:
@@ -349,20 +356,7 @@ def test_a_slow_policy_addresses_each_action_to_a_period_that_has_not_started(ma
     feeder = Feeder(make_node, executor)
     feeder.wait_for()
     periods = 30
-
-    def publish():                                       # 10 Hz vision: a period's first frame starts it
-        for p in range(1, periods + 1):
-            for msg in _period(p):
-                if msg.frame_index == 0:
-                    started[0] = p
-                feeder.pubs["team_a_0"].publish(msg)
-                time.sleep(0.02)
-
-    thread = threading.Thread(target=publish)
-    thread.start()
-    while thread.is_alive():
-        executor.spin_once(timeout_sec=0.02)
-    thread.join()
+    _feed_in_real_time(feeder, executor, periods, started)
     spin_until(executor, lambda: False, 0.6)             # the last decision
     targets = [target for target, _ in log.sent]
     assert len(log.sent) >= 5 and targets == sorted(set(targets)), log.sent
