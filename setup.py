@@ -16,6 +16,7 @@ NODES = [
     "recorder = dynenv_ros.nodes.recorder:main",
     "bag_player = dynenv_ros.nodes.bag_player:main",
     "vision_adapter = dynenv_ros.nodes.vision_adapter:main",
+    "trainer_node = dynenv_ros.nodes.trainer_node:main",
 ]
 TOOLS = [
     "dynenv-run = dynenv_ros.main_job:main",

@@ -17,6 +17,7 @@ waiting, so it always acts on the newest complete period; older ones are dropped
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import statistics
 import time
@@ -27,23 +28,23 @@ from typing import Any
 import numpy as np
 import torch
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from dynenv_msgs.msg import Action, DetectionArray
+from dynenv_msgs.msg import Action, DetectionArray, PolicyWeights
 from dynenv_msgs.srv import LoadPolicy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from dynenv_ros.envs.padded_layout import PaddedLayout, clamp_features, pack_frames
-from dynenv_ros.perception.detections import as_features, rows_from_messages
+from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str
-from dynenv_ros.ros.qos import action_stream
+from dynenv_ros.ros.qos import action_stream, latched
 from dynenv_ros.ros.tf import base_frame
 from dynenv_ros.soccer.config import MotionConfig, SoccerConfig, robot_names
-from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
-from dynenv_ros.agent.export import MAX_FRAMES, MAX_SLOTS, TorchPolicy, check_policy, sample_actions
+from dynenv_ros.agent.checkpoint import MAX_POLICY_BYTES, load_policy, policy_from_bytes, sha256
+from dynenv_ros.agent.export import (MAX_FRAMES, TorchPolicy, behaviour_log_probs, check_policy,
+                                     sample_actions)
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.agent.network import DynEnvAgent
 
@@ -96,6 +97,10 @@ class PolicyNode(Node):
         self.greedy = declare_bool(self, "greedy", False, "Take the most likely action instead of sampling.")
         diagnostics_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.",
                                       read_only=True)
+        weights_topic = declare_str(self, "weights_topic", topics.WEIGHTS, "PolicyWeights from a trainer node, "
+                                    "swapped in between two decisions (torch runtime); empty: never.", read_only=True)
+        self.weights_run = declare_str(self, "weights_run_id", "", "Take weights from this trainer run only "
+                                       "(PolicyWeights.run_id); empty: any run.", read_only=True)
         everyone = robot_names(players)
         self.names = [name for name in everyone if team in ("", name[5])]
         self.ids = {name: everyone.index(name) for name in self.names}
@@ -105,9 +110,15 @@ class PolicyNode(Node):
         self.latencies_ms: list[float] = []
         self.actions_sent = 0
         self.dropped_detections = 0          # rows beyond the maxima, farthest first
+        # Version of the weights acting (Action.policy_version): a trainer's PolicyWeights.version, else 1 + the
+        # update count a trained policy file records (1 if it records none); 0 for the untrained smoke-test
+        # weights, which no trainer should learn from (docs/interfaces.md).
+        self.policy_version = 0
+        self.weights_refusal = ""
+        self.weights_acting: tuple[str, int] | None = None     # (run_id, version) of the trainer's weights acting
         try:
             if checkpoint:
-                self.policy, self.checkpoint_sha256 = self._load(checkpoint, self.runtime_name)
+                self.policy, self.checkpoint_sha256, self.policy_version = self._load(checkpoint, self.runtime_name)
             else:
                 torch.manual_seed(self.seed)
                 policy = TorchPolicy(DynEnvAgent())
@@ -116,10 +127,14 @@ class PolicyNode(Node):
                 self.get_logger().warning("no checkpoint: acting with untrained weights")
         except ValueError as error:
             raise ParameterException(str(error), ["checkpoint"]) from None
-        self.action_pubs = {n: self.create_publisher(Action, topics.action(n), action_stream()) for n in self.names}
-        self.detection_subs = {n: self.create_subscription(DetectionArray, topics.detections(n), self._receiver(n),
+        self.action_pubs = {n: self.create_publisher(Action, topics.local(topics.action(n)), action_stream())
+                            for n in self.names}
+        self.detection_subs = {n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)),
+                                                           self._receiver(n),
                                                            detection_qos()) for n in self.names}
         self.load_srv = self.create_service(LoadPolicy, "~/load_policy", self._on_load)
+        self.weights_sub = (self.create_subscription(PolicyWeights, weights_topic, self._on_weights, latched(1))
+                            if weights_topic else None)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "~/diagnostics", QoSProfile(depth=10))
         self._diagnostics_sent = 0
         self._reported: Counter[str] = Counter()
@@ -130,7 +145,8 @@ class PolicyNode(Node):
 
     # -- weights ---------------------------------------------------------------------------------------------------
     def _load(self, path: str, runtime: str):
-        """(policy, sha256) of a file that passed every check; ValueError with a one-line reason otherwise."""
+        """(policy, sha256, version) of a file that passed every check; ValueError with a one-line reason
+        otherwise."""
         if runtime not in RUNTIMES:
             raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
         suffix = path.lower().rsplit(".", 1)[-1] if "." in path else ""
@@ -141,8 +157,10 @@ class PolicyNode(Node):
             raise ValueError(f"{path} is a torch policy file: load it with runtime torch, or export it to ONNX "
                              f"(dynenv_ros.agent.export.export_onnx)")
         try:
+            version = 1
             if runtime == "torch":
-                policy = TorchPolicy(load_checkpoint(path))
+                agent, meta = load_policy(path)
+                policy, version = TorchPolicy(agent), version_of(meta)
             else:
                 from dynenv_ros.agent.export import OnnxPolicy
                 policy = OnnxPolicy(path)
@@ -152,7 +170,7 @@ class PolicyNode(Node):
             raise ValueError(_one_line(error)) from None
         except Exception as error:           # anything else a hostile or broken file provokes: refused, not fatal
             raise ValueError(f"cannot load {path}: {type(error).__name__}: {_one_line(error)}") from None
-        return policy, digest
+        return policy, digest, version
 
     def _validate(self, policy) -> None:
         """``check_policy`` on the last frames each robot acted on (a synthetic period with no detections where
@@ -179,21 +197,72 @@ class PolicyNode(Node):
     def _on_load(self, request: LoadPolicy.Request, response: LoadPolicy.Response):
         runtime = request.runtime or self.runtime_name
         try:
-            policy, digest = self._load(request.checkpoint_path, runtime)
+            policy, digest, version = self._load(request.checkpoint_path, runtime)
         except ValueError as error:
             response.success, response.message = False, f"kept the current policy: {error}"
             self.get_logger().warning(f"LoadPolicy {request.checkpoint_path!r}: {response.message}")
             return response
-        # Callbacks run one at a time: the swap happens between two decisions. The recurrent states carry over
-        # when they fit the new network; a network of another size starts from fresh states.
-        if policy.feature_size != self.policy.feature_size:
-            for memory in self.memory.values():
-                memory.state = None
-        self.policy, self.runtime_name, self.checkpoint_sha256 = policy, runtime, digest
+        self._swap(policy, digest, version)
+        self.runtime_name, self.weights_acting = runtime, None
         response.success, response.checkpoint_sha256 = True, digest
         response.message = f"loaded ({runtime}); its trial decision on {self._trial_note} passed"
         self.get_logger().info(f"loaded {request.checkpoint_path} ({runtime}, sha256 {digest[:12]})")
         return response
+
+    def _swap(self, policy, digest: str, version: int) -> None:
+        """Callbacks run one at a time: the swap happens between two decisions. The recurrent states carry over
+        when they fit the new network; a network of another size starts from fresh states."""
+        if policy.feature_size != self.policy.feature_size:
+            for memory in self.memory.values():
+                memory.state = None
+        self.policy, self.checkpoint_sha256, self.policy_version = policy, digest, version
+
+    def _on_weights(self, msg: PolicyWeights) -> None:
+        """A trainer's new weights: checked like a file (and against the message's own checksum), swapped in, or
+        refused with the reason (counted, logged, in diagnostics) while the current weights keep playing."""
+        try:
+            policy, digest = self._weights_policy(msg)
+        except ValueError as error:
+            self.counts["weights_refused"] += 1
+            self.weights_refusal = f"version {msg.version}: {_one_line(error)}"
+            self.get_logger().warning(f"PolicyWeights refused, kept version {self.policy_version}: "
+                                      f"{self.weights_refusal}", throttle_duration_sec=5.0)
+            return
+        if policy is None:
+            return
+        self._swap(policy, digest, int(msg.version))
+        self.counts["weights_loaded"] += 1
+        self.get_logger().info(f"weights version {msg.version} of run {msg.run_id or '?'} (sha256 {digest[:12]})",
+                               throttle_duration_sec=10.0)
+
+    def _weights_policy(self, msg: PolicyWeights):
+        """(policy, sha256) of an acceptable message, (None, '') for one to ignore (another run's, or the weights
+        acting already: a duplicate); ValueError with the reason for one that cannot be used. A lower version of
+        the same run is taken: the trainer restarted from an earlier checkpoint, and the trainer decides."""
+        if self.weights_run and msg.run_id != self.weights_run:
+            self.counts["weights_other_run"] += 1
+            return None, ""
+        if (msg.run_id, msg.version) == self.weights_acting:
+            self.counts["weights_duplicate"] += 1
+            return None, ""
+        if self.runtime_name != "torch":
+            raise ValueError(f"weights need the torch runtime; this node runs {self.runtime_name}")
+        if not 1 <= len(msg.data) <= MAX_POLICY_BYTES:
+            raise ValueError(f"{len(msg.data)} bytes of data, expected 1..{MAX_POLICY_BYTES}")
+        data = bytes(msg.data)
+        digest = hashlib.sha256(data).hexdigest()
+        if msg.sha256 and msg.sha256.lower() != digest:
+            raise ValueError(f"data sha256 {digest[:12]} differs from the message's {msg.sha256[:12]} (damaged)")
+        try:
+            agent, _ = policy_from_bytes(data, "weights")
+            policy = TorchPolicy(agent)
+        except ValueError:
+            raise
+        except Exception as error:           # anything else hostile bytes provoke: refused, not fatal
+            raise ValueError(f"{type(error).__name__}: {_one_line(error)}") from None
+        self._validate(policy)
+        self.weights_acting = (msg.run_id, msg.version)
+        return policy, digest
 
     # -- frames ----------------------------------------------------------------------------------------------------
     def _receiver(self, name: str):
@@ -223,7 +292,7 @@ class PolicyNode(Node):
         (or already complete or acted on) are stale; a complete period replaces an older one not yet acted on
         (counted as dropped), and so does a newer period's first frame replace an incomplete one."""
         memory = self.memory[name]
-        problem = _frame_problem(msg)
+        problem = frame_problem(msg)
         if not problem and memory.frames:
             first = next(iter(memory.frames.values()))
             if msg.motion_period == memory.period and msg.frames_per_period != first.frames_per_period:
@@ -277,6 +346,7 @@ class PolicyNode(Node):
             raise NodeExit(2)
         started = time.perf_counter()
         actions, finite, step = self._run(memories, periods)
+        log_probs, values = self._behaviour(step, actions, finite)
         for memory, period in zip(memories, periods):          # consumed: newer frames are no longer stale-checked
             memory.decided, memory.ready = period[-1].motion_period, None
         # Frames that arrived while deciding say which periods have started since; an action addressed to one of
@@ -298,6 +368,9 @@ class PolicyNode(Node):
                 msg = Action(robot_id=self.ids[name], episode_id=frame.episode_id, motion_period=target,
                              walk=int(action[0]), turn=int(action[1]), kick=int(action[2]),
                              head_yaw_delta=float(action[3]))
+                if finite[b]:                              # the learning fields (docs/interfaces.md)
+                    msg.policy_version = self.policy_version
+                    msg.log_prob, msg.value = float(log_probs[b]), float(values[b])
                 msg.header.stamp = frame.header.stamp          # the observation acted on (sim time in the sim)
                 msg.header.frame_id = base_frame(name)
                 self.action_pubs[name].publish(msg)
@@ -345,6 +418,19 @@ class PolicyNode(Node):
                                     "they stand still", throttle_duration_sec=5.0)
         return actions, finite, step
 
+    def _behaviour(self, step: Any, actions: np.ndarray, finite: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each robot's action log-probability and value estimate, for the trainer (NaN where unknown: the
+        fallback action was not the policy's choice, and the learning fields stay 0)."""
+        n = len(actions)
+        if step is None or not finite.any():
+            return np.full(n, np.nan), np.full(n, np.nan)
+        log_probs = behaviour_log_probs(step, actions, self.policy.head_mode, self.policy.head_units,
+                                        float(self.policy.head_max))
+        values = np.asarray(torch.as_tensor(step.value), np.float64).reshape(n)
+        ok = finite & np.isfinite(log_probs) & np.isfinite(values)
+        finite &= ok
+        return log_probs, values
+
     def _padded(self, memories: list[RobotMemory], periods: list[list[DetectionArray]]) -> dict[str, np.ndarray]:
         stats: Counter[str] = Counter()
         observation, dropped = pack_messages(periods, [m.previous for m in memories],
@@ -359,11 +445,13 @@ class PolicyNode(Node):
         """Counts since start and the decision latency of the last window, as strings (DiagnosticStatus)."""
         window, self._window_latencies = self._window_latencies, []
         values = {"runtime": self.runtime_name, "checkpoint_sha256": self.checkpoint_sha256[:12],
+                  "policy_version": str(self.policy_version), "weights_refusal": self.weights_refusal,
                   "robots": str(len(self.names)), "actions_sent": str(self.actions_sent),
                   "detections_dropped": str(self.dropped_detections)}
         for key in ("decisions", "periods_dropped", "actions_delayed", "actions_superseded", "frames_stale",
                     "frames_malformed", "detections_malformed", "values_malformed", "fallback_actions",
-                    "failed_decisions"):
+                    "failed_decisions", "weights_loaded", "weights_refused", "weights_duplicate",
+                    "weights_other_run"):
             values[key] = str(self.counts.get(key, 0))
         values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"
         values["latency_max_ms"] = f"{max(window):.2f}" if window else "0.00"
@@ -372,7 +460,7 @@ class PolicyNode(Node):
     def _publish_diagnostics(self) -> None:
         values = self.diagnostics()
         watched = ("periods_dropped", "frames_malformed", "detections_malformed", "values_malformed",
-                   "fallback_actions", "failed_decisions")
+                   "fallback_actions", "failed_decisions", "weights_refused")
         new = {k: int(values[k]) - self._reported[k] for k in watched if int(values[k]) > self._reported[k]}
         self._reported.update(new)
         status = DiagnosticStatus(level=DiagnosticStatus.WARN if new else DiagnosticStatus.OK, name="dynenv_policy",
@@ -387,6 +475,14 @@ class PolicyNode(Node):
             self.get_logger().info(" ".join(f"{k}={v}" for k, v in values.items() if v not in ("0", "0.00", "")))
 
 
+def version_of(meta: dict[str, Any]) -> int:
+    """A policy file's version: 1 + the updates its training recorded (``meta["updates"]``), 1 if unknown."""
+    updates = meta.get("updates", 0)
+    if isinstance(updates, bool) or not isinstance(updates, int) or not 0 <= updates < 2**32 - 1:
+        return 1
+    return updates + 1
+
+
 def _one_line(error: BaseException) -> str:
     text = str(error).strip()
     return text.splitlines()[0] if text else type(error).__name__
@@ -398,63 +494,8 @@ def _decision_seed(seed: int, episode: int, period: int) -> int:
     return int(np.random.SeedSequence([seed, episode, period]).generate_state(1, np.uint64)[0] >> 1)
 
 
-def _frame_problem(msg: DetectionArray) -> str:
-    """Why a DetectionArray cannot be part of a period ('' if it can)."""
-    if not 1 <= msg.frames_per_period <= MAX_FRAMES:
-        return f"frames_per_period {msg.frames_per_period} outside 1..{MAX_FRAMES}"
-    if msg.frame_index >= msg.frames_per_period:
-        return f"frame_index {msg.frame_index} not below frames_per_period {msg.frames_per_period}"
-    return ""
-
-
 def _empty_period(frames: int) -> list[DetectionArray]:
     return [DetectionArray(frame_index=k, frames_per_period=frames) for k in range(frames)]
-
-
-def _finite(value: float, stats: Counter | None) -> float:
-    value = float(value)
-    if math.isfinite(value):
-        return value
-    if stats is not None:
-        stats["values_malformed"] += 1
-    return 0.0
-
-
-def pack_messages(periods: list[list[DetectionArray]], previous: list[tuple], max_landmarks: int | None = None,
-                  max_objects: int | None = None, stats: Counter | None = None
-                  ) -> tuple[dict[str, np.ndarray], int]:
-    """Each robot's DetectionArray messages of one period (frame order) and previous action → the one observation
-    layout (``envs.padded_layout``): the same arrays the in-process env gives for the same detections. A
-    fixed-shape runtime (ONNX) sets the maxima, else the batch's own longest frame does, up to ``MAX_SLOTS`` (a
-    flood of detections must not make a decision's cost explode). Returns the arrays and the number of rows
-    dropped (farthest first) beyond the maxima. What a robot's vision pipeline should never send is cleaned, and
-    counted in ``stats``: detections with a NaN or infinite value are left out (``detections_malformed``), NaN or
-    infinite self-state and GameController values read as 0 (``values_malformed``)."""
-    frames = []
-    for period in periods:
-        robot = []
-        for msg in period:
-            rows = as_features(rows_from_messages(msg.detections))
-            finite = np.isfinite(rows).all(axis=1)        # before clamping: an infinite size is no far detection
-            if not finite.all():
-                rows = rows[finite]
-                if stats is not None:
-                    stats["detections_malformed"] += int((~finite).sum())
-            robot.append(clamp_features(rows))
-        frames.append(robot)
-    layout = PaddedLayout.fitting(frames, max_landmarks, max_objects)
-    if layout.max_landmarks > MAX_SLOTS or layout.max_objects > MAX_SLOTS:
-        layout = PaddedLayout(layout.frames, min(layout.max_landmarks, MAX_SLOTS), min(layout.max_objects, MAX_SLOTS))
-    observation, dropped = pack_frames(layout, frames)
-    for b, period in enumerate(periods):
-        for k, msg in enumerate(period):
-            observation["proprioception"][b, k] = (_finite(msg.head_yaw, stats), msg.self_fallen,
-                                                   msg.self_penalized, msg.self_kicking)
-        last = period[-1]
-        observation["game"][b] = (last.ball_owner, _finite(last.ball_owner_seconds, stats),
-                                  _finite(last.game_seconds_remaining, stats))
-        observation["previous_action"][b] = previous[b]
-    return observation, int(dropped.sum())
 
 
 def main(args: Sequence[str] | None = None) -> int:

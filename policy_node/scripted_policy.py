@@ -45,9 +45,10 @@ class ScriptedPolicyNode(Node):
         self._waiting: dict[tuple[int, int], DetectionArray] = {}
         self.actions_sent = 0
         qos = sim_stream()
-        self.action_pub = self.create_publisher(Action, topics.action(self.robot), action_stream())
-        self.create_subscription(WorldState, topics.WORLD_STATE, self._on_truth, qos)
-        self.create_subscription(DetectionArray, topics.detections(self.robot), self._on_detections, qos)
+        self.action_pub = self.create_publisher(Action, topics.local(topics.action(self.robot)), action_stream())
+        self.create_subscription(WorldState, topics.local(topics.WORLD_STATE), self._on_truth, qos)
+        self.create_subscription(DetectionArray, topics.local(topics.detections(self.robot)), self._on_detections,
+                                 qos)
 
     @staticmethod
     def _key(episode: int, stamp) -> tuple[int, int, int]:

@@ -28,9 +28,9 @@ def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
     output = _run_main(tmp_path, capsys, "graph=selfcheck", "samples_per_type=3")
     report = json.loads((tmp_path / "selfcheck.json").read_text())
     assert report["ok"] and not report["hash_problems"]
-    assert len(report["interfaces"]) == 9
+    assert len(report["interfaces"]) == 10          # 7 messages (docs/interfaces.md) and 3 services
     assert all(entry["received"] == 3 for entry in report["interfaces"].values())
-    assert "interfaces verified: 9/9" in output and "dynenv-run: OK" in output
+    assert "interfaces verified: 10/10" in output and "dynenv-run: OK" in output
 
 
 def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
@@ -72,7 +72,7 @@ def test_graph_reports_a_listener_that_does_not_get_what_it_expects(tmp_path):
     report = json.loads((tmp_path / "report.json").read_text())
     # Different seeds: every message differs field by field (service answers depend on the request only).
     messages = {name: entry for name, entry in report["interfaces"].items() if "/msg/" in name}
-    assert len(messages) == 6
+    assert len(messages) == 7
     assert all(entry["problems"] and not entry["ok"] for entry in messages.values())
 
 

@@ -16,7 +16,7 @@ from dynenv_ros.ros.conversions import detection_array
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.world import SoccerWorld
 from dynenv_ros.agent.inputs import collate, side_inputs, streams_from_padded
-from policy_node.policy_node import pack_messages
+from dynenv_ros.envs.detection_messages import pack_messages
 
 HEAD_STEP = math.radians(12.5)          # docs/soccer.md: head index 0..6, 12.5° per unit, centred on 3
 LANDMARK_IDS, OBJECT_IDS = (3, 4, 5, 6, 7), (1, 2)

@@ -224,7 +224,8 @@ def agent_config(model: DynEnvAgent) -> dict[str, Any]:
             "head_max": float(model.head_max)}
 
 
-def _policy_bytes(model: DynEnvAgent, meta: Mapping[str, Any] | None) -> bytes:
+def policy_bytes(model: DynEnvAgent, meta: Mapping[str, Any] | None = None) -> bytes:
+    """A policy file's content (what ``save_policy`` writes; what the trainer node streams in PolicyWeights)."""
     tensors = tensors_for_saving(model.state_dict())
     metadata = {"format": FORMAT, "config": json_dumps(agent_config(model), "the agent's config"),
                 "meta": json_dumps(dict(meta or {}), "policy meta")}
@@ -242,7 +243,7 @@ def _write_policy(model: DynEnvAgent, path: str | os.PathLike[str], meta: Mappin
     target = Path(path)
     if not target.parent.is_dir():
         raise ValueError(f"cannot write policy {target}: folder {target.parent} does not exist")
-    data = _policy_bytes(model, meta)
+    data = policy_bytes(model, meta)
     atomic_write(target, data)
     return hashlib.sha256(data).hexdigest()
 
@@ -262,30 +263,34 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[DynEnvAgent, dict[str, An
     its config describes ("does not fit")."""
     source = Path(path)
     check_file_size(source, "policy file")
-    data = source.read_bytes()
+    return policy_from_bytes(source.read_bytes(), f"policy file {source}")
+
+
+def policy_from_bytes(data: bytes, source: str = "policy") -> tuple[DynEnvAgent, dict[str, Any]]:
+    """``load_policy`` on bytes (a PolicyWeights message's ``data``); ``source`` names them in the errors."""
     try:
         tensors, metadata = read_safetensors(data)
     except ValueError as error:
-        raise ValueError(f"policy file {source} cannot be read safely: {error}") from None
+        raise ValueError(f"{source} cannot be read safely: {error}") from None
     if metadata.get("format") != FORMAT:
-        raise ValueError(f"policy file {source} is not a {FORMAT} file (format {metadata.get('format')!r})")
+        raise ValueError(f"{source} is not a {FORMAT} file (format {metadata.get('format')!r})")
     _, start = safetensors_header(data)
     if hashlib.sha256(data[start:]).hexdigest() != metadata.get("data_sha256"):
-        raise ValueError(f"policy file {source} cannot be read safely: tensor data checksum mismatch (damaged)")
+        raise ValueError(f"{source} cannot be read safely: tensor data checksum mismatch (damaged)")
     try:
         config = json.loads(metadata["config"])
         meta = json.loads(metadata.get("meta", "{}"))
     except (KeyError, json.JSONDecodeError) as error:
-        raise ValueError(f"policy file {source} cannot be read safely: bad metadata ({error})") from None
+        raise ValueError(f"{source} cannot be read safely: bad metadata ({error})") from None
     if not isinstance(config, dict) or not isinstance(meta, dict):
-        raise ValueError(f"policy file {source} cannot be read safely: config/meta are not JSON objects")
+        raise ValueError(f"{source} cannot be read safely: config/meta are not JSON objects")
     try:
         config = check_agent_config(config)
         with torch.device("meta"):          # shapes only: nothing is allocated until the tensors are known to fit
             shape_model = DynEnvAgent(**config)
     except (TypeError, ValueError) as error:
-        raise ValueError(f"policy file {source} does not fit the agent: config {config}: {error}") from None
-    check_state_dict_fits(shape_model, tensors, f"policy file {source}")
+        raise ValueError(f"{source} does not fit the agent: config {config}: {error}") from None
+    check_state_dict_fits(shape_model, tensors, source)
     model = DynEnvAgent(**config)
     model.load_state_dict(tensors)
     return model.eval(), meta

@@ -63,6 +63,7 @@ from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, _bounded_int, check_f
                                          non_finite_tensors)
 from dynenv_ros.agent.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
 from dynenv_ros.agent.network import DynEnvAgent, State
+from dynenv_ros.envs.padded_layout import MAX_FRAMES, MAX_SLOTS
 
 INPUT_NAMES = ("landmark_features", "landmark_kind", "landmark_mask", "object_features", "object_kind",
                "object_mask", "previous_action", "proprioception", "h_loc", "c_loc", "h_obj", "c_obj")
@@ -70,12 +71,6 @@ OUTPUT_NAMES = ("walk_logits", "turn_logits", "kick_logits", "head", "value", "p
                 "h_loc_out", "c_loc_out", "h_obj_out", "c_obj_out")
 METADATA_KEY = "dynenv.policy"
 FORMAT = "dynenv_policy_onnx/1"
-# Bounds on an ONNX file's fixed shapes: 64 frames per period is a 30 Hz camera with a 2 s motion period (the
-# defaults give 5); 256 slots per frame is over 6x the padded layout's maxima (40 landmarks, 14 objects in 5v5),
-# which held every detection of 1,000 periods of random play. They bound the arrays a node allocates per decision
-# (10 robots x 64 frames x 256 slots x 19 floats: 12 MB per stream).
-MAX_FRAMES = 64
-MAX_SLOTS = 256
 WALK_CHOICES, TURN_CHOICES, KICK_CHOICES = 5, 3, 3
 
 
@@ -397,6 +392,29 @@ def sample_actions(step: PolicyStep, head_mode: str, head_units: int | None, hea
     actions = torch.stack([c.double() for c in columns], dim=-1).numpy()
     finite &= torch.from_numpy(np.isfinite(actions).all(-1))
     return actions, finite.numpy()
+
+
+def behaviour_log_probs(step: PolicyStep, actions: np.ndarray, head_mode: str, head_units: int | None,
+                        head_max: float) -> np.ndarray:
+    """(B,) log-probability of (B, 4) [walk, turn, kick, head rad] actions under either runtime's outputs — the sum
+    over the action heads, as the learner's ``DynEnvAgent.distributions`` scores them (a discrete head's radians
+    mapped back to its index; a continuous head's Gaussian at the executed, clipped value). Sent with each action
+    (``Action.log_prob``) for the trainer's off-policy correction; NaN where an output was not finite."""
+    actions = np.asarray(actions, np.float64)
+    total = np.zeros(actions.shape[0])
+    for column, values in enumerate((step.walk, step.turn, step.kick)):
+        logits = torch.as_tensor(values, dtype=torch.float64)
+        index = torch.as_tensor(actions[:, column]).long().clamp(0, logits.shape[-1] - 1)
+        total += torch.log_softmax(logits, -1).gather(-1, index[:, None])[:, 0].numpy()
+    head = torch.as_tensor(step.head, dtype=torch.float64)
+    if head_mode == "discrete":
+        units = int(head_units or 0)
+        index = torch.as_tensor(np.rint(actions[:, 3] / (head_max / units)) + units).long().clamp(0, 2 * units)
+        total += torch.log_softmax(head, -1).gather(-1, index[:, None])[:, 0].numpy()
+    else:
+        normal = torch.distributions.Normal(head[:, 0], head[:, 1].exp())
+        total += normal.log_prob(torch.as_tensor(actions[:, 3])).numpy()
+    return total
 
 
 def action_problem(action: np.ndarray, head_bound: float) -> str:

@@ -42,6 +42,12 @@ KEYS = ("landmarks", "landmark_mask", "objects", "object_mask", "proprioception"
 DEFAULT_MAX_LANDMARKS = 40
 EXTRA_OBJECT_SLOTS = 4       # room for false positives beyond the ball and the other robots
 GAME_BOUND = 1000.0          # s; longer than any configurable episode
+# Bounds on what any runtime packs (an ONNX file's fixed shapes, a message's frames): 64 frames per period is a
+# 30 Hz camera with a 2 s motion period (the defaults give 5); 256 slots per frame is over 6x the maxima above
+# (40 landmarks, 14 objects in 5v5), which held every detection of 1,000 periods of random play. They bound the
+# arrays a node allocates per decision (10 robots x 64 frames x 256 slots x 19 floats: 12 MB per stream).
+MAX_FRAMES = 64
+MAX_SLOTS = 256
 
 # Stream of each class id: 0 landmarks, 1 objects, -1 neither.
 STREAM_OF_CLASS = np.full(256, -1, np.int8)

@@ -57,7 +57,7 @@ from dynenv_ros.bags.writer import BagWriter
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_float, declare_str, declare_str_list
 from dynenv_ros.ros.qos import recording_qos
-from dynenv_ros.ros.topics import MATCHED_PREFIX, RECORDER_DIAGNOSTICS, SIM_PUBLISHED_TYPES
+from dynenv_ros.ros.topics import MATCHED_PREFIX, RECORDER_DIAGNOSTICS, SIM_PUBLISHED_TYPES, local
 
 RCLError = _rclpy.RCLError
 
@@ -117,7 +117,7 @@ class Recorder(Node):
             raise NodeExit(2) from None
         from diagnostic_msgs.msg import DiagnosticArray
 
-        self._diagnostics = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, QoSProfile(
+        self._diagnostics = self.create_publisher(DiagnosticArray, local(DIAGNOSTICS_TOPIC), QoSProfile(
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         # With use_sim_time the bag time is the latest /clock value this node recorded (read from the raw bytes,
         # so it never depends on callback order between the clock and the data).
@@ -145,7 +145,7 @@ class Recorder(Node):
     def _wanted(self, topic: str, types: list[str]) -> bool:
         if self.requested:
             return topic in self.requested
-        return topic != DIAGNOSTICS_TOPIC and any(t in RECORDED_TYPES for t in types)
+        return not topic.endswith(DIAGNOSTICS_TOPIC) and any(t in RECORDED_TYPES for t in types)
 
     def _discover(self) -> None:
         if self.finished or self.failure:

@@ -31,6 +31,7 @@ from dynenv_ros.perception.params import MODES, PRESETS, load_preset
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import markers, topics
 from dynenv_ros.ros.cdr import detection_array_cdr
+from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list)
@@ -126,37 +127,39 @@ class SimNode(Node):
             frame_qos = feedback_qos = sim_stream()
         else:
             frame_qos, feedback_qos = realtime_stream(REALTIME_FRAME_DEPTH), realtime_stream(REALTIME_FEEDBACK_DEPTH)
-        self.clock_pub = self.create_publisher(ClockMsg, topics.CLOCK, frame_qos)
-        self.world_pub = self.create_publisher(cv.WorldState, topics.WORLD_STATE, frame_qos)
-        self.detection_pubs = [self.create_publisher(cv.DetectionArray, topics.detections(n), frame_qos)
-                               for n in names]
-        self.feedback_pubs = [self.create_publisher(cv.StepFeedback, topics.feedback(n), feedback_qos)
+        self.clock_pub = self.create_publisher(ClockMsg, local(topics.CLOCK), frame_qos)
+        self.world_pub = self.create_publisher(cv.WorldState, local(topics.WORLD_STATE), frame_qos)
+        self.detection_pubs = [self.create_publisher(cv.DetectionArray, local(topics.detections(n)),
+                                                     frame_qos) for n in names]
+        self.feedback_pubs = [self.create_publisher(cv.StepFeedback, local(topics.feedback(n)), feedback_qos)
                               for n in names]
         # In real time, actions arrive on a participant and thread of their own (ros/action_inbox.py): a flood on
         # one robot's topic cannot drop this node's service requests. Both modes queue a bounded number (qos.py).
         realtime = self.mode == "realtime"
-        self.action_inbox = ActionInbox(self, Action, [topics.action(n) for n in names], action_queue(realtime),
-                                        ACTION_HANDOVER_DEPTH, self._screen_action, self._receive_action,
-                                        self._count_refusals, own_participant=realtime)
+        self.action_inbox = ActionInbox(self, Action, [local(topics.action(n)) for n in names],
+                                        action_queue(realtime), ACTION_HANDOVER_DEPTH, self._screen_action,
+                                        self._receive_action, self._count_refusals, own_participant=realtime)
         self._refused_since_log: Counter[str] = Counter()   # refusals not yet summarised in the log
         self._last_refusal = ""
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QoSProfile(depth=10))
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, local(topics.DIAGNOSTICS),
+                                                     QoSProfile(depth=10))
         # A recorder that stopped writing (disk full, I/O error) says so, latched; the simulator repeats it in its
         # own diagnostics and log, where an operator watching the game looks.
         self.recorder_error = ""
         self.recorder_matched: dict[str, int] = {}      # topic -> publishers the recorder has matched
-        self.recorder_sub = self.create_subscription(DiagnosticArray, topics.RECORDER_DIAGNOSTICS,
+        self.recorder_sub = self.create_subscription(DiagnosticArray, local(topics.RECORDER_DIAGNOSTICS),
                                                      self._on_recorder_diagnostics, latched(1))
         # TF (ros/tf.py): the robots and their heads per frame; the team frames once, latched.
-        self.tf_pub = self.create_publisher(TFMessage, TF_TOPIC, tf_qos())
-        self.tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, tf_static_qos())
+        self.tf_pub = self.create_publisher(TFMessage, local(TF_TOPIC), tf_qos())
+        self.tf_static_pub = self.create_publisher(TFMessage, local(TF_STATIC_TOPIC), tf_static_qos())
         self.tf_static_pub.publish(static_transforms(cv.sim_time(0, config.rates.tick_seconds)))
         self._last_tf_ns = -1
-        self.truth_marker_pub = self.create_publisher(MarkerArray, topics.GROUND_TRUTH_MARKERS, QoSProfile(depth=5))
-        self.detection_marker_pub = self.create_publisher(MarkerArray, topics.DETECTION_MARKERS,
+        self.truth_marker_pub = self.create_publisher(MarkerArray, local(topics.GROUND_TRUTH_MARKERS),
+                                                      QoSProfile(depth=5))
+        self.detection_marker_pub = self.create_publisher(MarkerArray, local(topics.DETECTION_MARKERS),
                                                           QoSProfile(depth=5))
-        self.reset_srv = self.create_service(ResetSimulation, topics.RESET_SERVICE, self._on_reset)
-        self.step_srv = self.create_service(StepSimulation, topics.STEP_SERVICE, self._on_step)
+        self.reset_srv = self.create_service(ResetSimulation, local(topics.RESET_SERVICE), self._on_reset)
+        self.step_srv = self.create_service(StepSimulation, local(topics.STEP_SERVICE), self._on_step)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.frames_published = 0
@@ -196,18 +199,19 @@ class SimNode(Node):
         # ... and every controlled robot has someone to act for it, matched by the action inbox's own participant
         # (it discovers writers on its own schedule), so no first action is sent into the void.
         ready = ready and all(self.action_inbox.subscriptions[i].get_publisher_count()
-                              >= max(1, self.count_publishers(topics.action(self.names[i])))
+                              >= max(1, self.count_publishers(local(topics.action(self.names[i]))))
                               for i in self.session.controlled)
         if self.wait_for_recorder:
             ready = ready and all(p.get_subscription_count() >= 1 for p in self.feedback_pubs + [self.clock_pub])
             # ... and every action topic has a reader besides this node (the recorder), or the first actions a
             # policy sends are accepted here but never recorded.
-            ready = ready and all(self.count_subscribers(topics.action(n)) >= 2 for n in self.names)
+            ready = ready and all(self.count_subscribers(local(topics.action(n))) >= 2 for n in self.names)
             # Seeing both the recorder's reader and a policy's writer does not mean they have matched each other;
             # a dynenv recorder says which publishers it has matched (another recorder: the check above only).
-            if self.count_publishers(topics.RECORDER_DIAGNOSTICS) > 0:
-                ready = ready and all(self.recorder_matched.get(topics.action(n), 0)
-                                      >= self.count_publishers(topics.action(n)) for n in self.names)
+            if self.count_publishers(local(topics.RECORDER_DIAGNOSTICS)) > 0:
+                actions = [local(topics.action(n)) for n in self.names]
+                ready = ready and all(self.recorder_matched.get(self.resolve_topic_name(a), 0)
+                                      >= self.count_publishers(a) for a in actions)
         if ready:
             self.start_timer.cancel()
             self._start()

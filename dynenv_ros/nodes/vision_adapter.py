@@ -34,7 +34,7 @@ QUEUE_DEPTH = 50      # per robot topic: ten periods of 5 frames; a stalled read
 
 
 def detections_3d(robot: str) -> str:
-    return f"/{robot}/detections_3d"
+    return f"{robot}/detections_3d"          # relative: in the node's namespace, like every graph topic
 
 
 class VisionAdapter(Node):
@@ -65,12 +65,13 @@ class VisionAdapter(Node):
         for i, name in enumerate(self.names):
             robot_id = names.index(name)
             if self.reverse:
-                publisher = self.create_publisher(DetectionArray, topics.detections(name), qos)
+                publisher = self.create_publisher(DetectionArray, topics.local(topics.detections(name)), qos)
                 self.create_subscription(Detection3DArray, detections_3d(name),
                                          self._reverse_callback(robot_id, publisher), qos)
             else:
                 publisher = self.create_publisher(Detection3DArray, detections_3d(name), qos)
-                self.create_subscription(DetectionArray, topics.detections(name), self._forward_callback(publisher),
+                self.create_subscription(DetectionArray, topics.local(topics.detections(name)),
+                                         self._forward_callback(publisher),
                                          qos)
             self.publishers_by_robot[name] = publisher
         self.get_logger().info(f"{'reverse' if self.reverse else 'forward'} for {', '.join(self.names)}")

@@ -22,7 +22,8 @@ from dynenv_msgs import msg as dynenv_msg
 from dynenv_msgs import srv as dynenv_srv
 
 PACKAGE = "dynenv_msgs"
-MESSAGE_NAMES = ("Detection", "DetectionArray", "ObjectState", "WorldState", "Action", "StepFeedback")
+MESSAGE_NAMES = ("Detection", "DetectionArray", "ObjectState", "WorldState", "Action", "StepFeedback",
+                 "PolicyWeights")
 SERVICE_NAMES = ("ResetSimulation", "StepSimulation", "LoadPolicy")
 # Sequences in samples get 0..MAX_SAMPLE_SEQUENCE elements, so empty and several-element lists are both covered.
 MAX_SAMPLE_SEQUENCE = 4

@@ -1,4 +1,10 @@
-"""Topic and service names of the simulator graph, in one place (docs/ros_graph.md describes each)."""
+"""Topic and service names of the simulator graph, in one place (docs/ros_graph.md describes each).
+
+The names below are those of a game in the root namespace (what a bag of it shows). Nodes create their endpoints
+with ``local(name)``, relative to their namespace, so several games share one ROS graph side by side:
+``sim_node --ros-args -r __ns:=/game_1`` publishes ``/game_1/world_state``, ``/game_1/team_a_0/detections`` …, and
+a policy node started in the same namespace plays that game only (docs/ros_graph.md, "Several games").
+"""
 from __future__ import annotations
 
 CLOCK = "/clock"                                  # rosgraph_msgs/Clock, sim time, at vision rate
@@ -10,6 +16,15 @@ GROUND_TRUTH_MARKERS = "/sim/markers/ground_truth"  # visualization_msgs/MarkerA
 DETECTION_MARKERS = "/sim/markers/detections"     # visualization_msgs/MarkerArray of one robot's detections
 RESET_SERVICE = "/sim/reset"                      # dynenv_msgs/srv/ResetSimulation
 STEP_SERVICE = "/sim/step"                        # dynenv_msgs/srv/StepSimulation
+# The training graph (docs/ros_graph.md, "Training over ROS"): absolute, one trainer serves every game's policies.
+WEIGHTS = "/trainer/weights"                      # dynenv_msgs/PolicyWeights, reliable, transient local, depth 1
+TRAINER_DIAGNOSTICS = "/trainer/diagnostics"      # diagnostic_msgs/DiagnosticArray, about 1 Hz
+
+
+def local(name: str) -> str:
+    """``name`` relative to the node's namespace ('/world_state' → 'world_state'): the same name in the root
+    namespace, the game's own in a namespaced one."""
+    return name.lstrip("/")
 
 
 def detections(robot: str) -> str:

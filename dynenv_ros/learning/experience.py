@@ -1,0 +1,435 @@
+"""Experience from messages: each robot's detections, actions, step feedback and (for the self-supervised losses)
+ground truth, assembled into fixed-length sequences the learner's ``update`` takes — with no ROS import (messages
+are read by attribute: rclpy's, rosbags' and plain objects alike). The trainer node feeds it from live topics,
+``dynenv-train --from-bag`` from recorded bags.
+
+The alignment (docs/ros_graph.md, "Training over ROS"). Per stream — one robot of one game (``source``, e.g. the
+game's namespace) — an *observation slot* (episode e, period p) gathers:
+
+- the frames of period p (``DetectionArray.motion_period == p``, frame indices 0..F-1): the observation;
+- the *answer*: the robot's ``Action`` addressed to period p + 1, with the behaviour policy's log-probability,
+  value and version (Action's learning fields);
+- the feedback of period p (``StepFeedback.motion_period == p``): the reward of running period p (the reward of
+  the *previous* slot's answer), terminated/truncated, and what the robot truly saw during p (the seen targets);
+- ground truth at the last frame of p (``WorldState`` with that frame's stamp), for the localization and
+  reconstruction targets.
+
+Step t of a sequence is slot (e, p): observation p, its answer, and the feedback of period p + 1 (reward, episode
+end). After an episode's end the next slot is the robot's next episode's period 0 (``starts``), as in the in-process
+rollouts (``learning.rollout``); a truncated episode is bootstrapped with the value the policy gave the episode's
+final observation (the answer it sent to it, which the simulator ignores). A sequence of T steps needs T + 1 slots:
+the last one is the next sequence's first (they overlap by one observation, like rollouts).
+
+Everything that can go wrong with messages is counted, never raised: ``late`` (for a slot already passed),
+``duplicate`` (a second frame index, answer or feedback for a slot: the first wins), ``out_of_order`` (arrived after a
+newer slot's messages; still used), ``malformed`` (fields out of range, non-finite learning fields), ``not_learning``
+(an answer without learning fields: a scripted or foreign policy — its steps cannot be corrected off-policy), and
+``missing``: a slot that never completes (a lost message, a killed node) once the stream has moved ``patience``
+periods past it. A missing slot *cuts* the sequence: the steps gathered since the last emitted sequence are
+discarded (``steps_discarded``) and the stream restarts at its next complete slot as if an episode started there
+(recurrent state zeroed: the learner cannot know the state the policy had).
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, Iterable
+
+import numpy as np
+
+from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
+from dynenv_ros.envs.learning_targets import LearningTargets, empty_targets
+from dynenv_ros.envs.padded_layout import PaddedLayout
+from dynenv_ros.learning.rollout import can_act
+
+STAND_STILL = (0.0, 0.0, 0.0, 0.0)
+STATUS_FALLEN = 1                 # ObjectState.STATUS_FALLEN
+WALKS, TURNS, KICKS = 5, 3, 3     # Action.msg's choices
+
+
+def stamp_ns(header: Any) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+@dataclass
+class Slot:
+    """What one observation slot (episode, period) of one stream has received."""
+    frames: dict[int, Any] = field(default_factory=dict)
+    frames_per_period: int = 0
+    answer: Any = None
+    feedback: Any = None
+
+    @property
+    def observed(self) -> bool:
+        return self.frames_per_period > 0 and len(self.frames) == self.frames_per_period
+
+    @property
+    def last_stamp(self) -> int | None:
+        last = self.frames.get(self.frames_per_period - 1)
+        return None if last is None else stamp_ns(last.header)
+
+
+@dataclass
+class Sequence:
+    """T steps of one stream, in the arrays of ``learning.rollout.Rollout`` for one robot (no robot axis):
+    obs (T+1, ...), actions (T, 4) int64 (head as its discrete index), log_probs (T,), values (T+1,), rewards (T,),
+    reward_terms (T, 4), episode_end, truncated, final_values (T,), starts, can_act (T+1,), targets (T+1, ...) or
+    empty, versions (T,) int64 (Action.policy_version of each step), ``continues``: it follows the stream's previous
+    sequence without a cut (the learner carries that sequence's final recurrent state into it)."""
+    stream: tuple[str, str]
+    obs: dict[str, np.ndarray]
+    actions: np.ndarray
+    log_probs: np.ndarray
+    values: np.ndarray
+    rewards: np.ndarray
+    reward_terms: np.ndarray
+    episode_end: np.ndarray
+    truncated: np.ndarray
+    final_values: np.ndarray
+    starts: np.ndarray
+    can_act: np.ndarray
+    targets: dict[str, np.ndarray]
+    versions: np.ndarray
+    continues: bool
+    index: int                    # 0, 1, 2 … per stream: the learner processes a stream's sequences in order
+    keys: list[tuple[int, int]]   # (episode, period) of each of the T + 1 observations
+
+
+@dataclass
+class _Stream:
+    slots: dict[tuple[int, int], Slot] = field(default_factory=dict)
+    cursor: tuple[int, int] | None = None       # the oldest slot not yet part of an emitted sequence's steps
+    chain: list[tuple[int, int]] = field(default_factory=list)   # slots of the sequence being gathered
+    chain_starts_episode: bool = True           # the chain's first slot starts an episode (or follows a cut)
+    continues: bool = False                     # the chain follows an emitted sequence without a cut
+    newest: tuple[int, int] = (-1, -1)
+    emitted: int = 0
+    restart_after: tuple[int, int] | None = None   # after a cut: restart at the first observed slot after this
+
+
+class ExperienceAssembler:
+    """Sequences of ``steps`` periods from the messages of any number of streams. ``players_per_team`` and
+    ``frames`` fix the observation layout (``PaddedLayout.for_players``); ``head_max``, ``head_units`` convert a
+    head turn (rad) to its discrete index; ``with_targets`` builds the self-supervised targets from ground truth.
+    ``learns(robot_name)`` picks which robots' experience is kept (all by default)."""
+
+    def __init__(self, steps: int, players_per_team: int, frames: int, head_max: float, head_units: int,
+                 with_targets: bool = False, patience: int = 8, learns=None, max_slots: int = 256) -> None:
+        if steps < 1:
+            raise ValueError(f"steps must be >= 1, got {steps}")
+        self.steps, self.players, self.frames = steps, players_per_team, frames
+        self.layout = PaddedLayout.for_players(players_per_team, frames)
+        self.head_step, self.head_units = head_max / head_units, head_units
+        self.head_bound = head_max + 1e-6
+        self.with_targets, self.patience, self.max_slots = with_targets, patience, max_slots
+        self.learns = learns or (lambda name: True)
+        self.streams: dict[tuple[str, str], _Stream] = {}
+        self.truth: dict[str, dict[tuple[int, int], Any]] = {}     # source -> (episode, stamp ns) -> WorldState
+        self.targets = LearningTargets(players_per_team)
+        self.names = [f"team_{t}_{i}" for t in "ab" for i in range(players_per_team)]
+        self.counts: Counter[str] = Counter()
+        self.ready: list[Sequence] = []
+        self._known: dict[tuple[str, str], tuple] = {}     # per stream: seen-since-episode-start, carried over
+
+    # -- messages in ------------------------------------------------------------------------------------------
+    def _stream(self, source: str, robot: str) -> _Stream | None:
+        if robot not in self.names:
+            self.counts["unknown_robot"] += 1
+            return None
+        if not self.learns(robot):
+            return None
+        return self.streams.setdefault((source, robot), _Stream())
+
+    def _slot(self, stream: _Stream, key: tuple[int, int]) -> Slot | None:
+        """The slot for ``key``, or None (counted late) when the stream has passed it."""
+        if stream.cursor is not None and key < stream.cursor:
+            self.counts["late"] += 1
+            return None
+        if key < stream.newest:
+            self.counts["out_of_order"] += 1
+        stream.newest = max(stream.newest, key)
+        slot = stream.slots.get(key)
+        if slot is None:
+            slot = stream.slots[key] = Slot()
+            if len(stream.slots) > self.max_slots:          # bounded: the oldest goes (counted missing)
+                oldest = min(stream.slots)
+                del stream.slots[oldest]
+                self.counts["missing"] += 1
+        return slot
+
+    def add_frame(self, source: str, robot: str, msg: Any) -> None:
+        stream = self._stream(source, robot)
+        if stream is None:
+            return
+        if frame_problem(msg) or msg.robot_id != self.names.index(robot) or msg.frames_per_period != self.frames:
+            self.counts["malformed"] += 1
+            return
+        slot = self._slot(stream, (int(msg.episode_id), int(msg.motion_period)))
+        if slot is None:
+            return
+        if slot.frames_per_period and msg.frame_index in slot.frames:
+            self.counts["duplicate"] += 1
+            return
+        slot.frames_per_period = int(msg.frames_per_period)
+        slot.frames[int(msg.frame_index)] = msg
+        self._advance(source, robot, stream)
+
+    def add_action(self, source: str, robot: str, msg: Any) -> None:
+        stream = self._stream(source, robot)
+        if stream is None:
+            return
+        if msg.motion_period == 0 or msg.robot_id != self.names.index(robot) or self._action_problem(msg):
+            self.counts["malformed"] += 1
+            return
+        slot = self._slot(stream, (int(msg.episode_id), int(msg.motion_period) - 1))
+        if slot is None:
+            return
+        if slot.answer is not None:
+            self.counts["duplicate"] += 1
+            return
+        slot.answer = msg
+        self._advance(source, robot, stream)
+
+    def add_feedback(self, source: str, robot: str, msg: Any) -> None:
+        stream = self._stream(source, robot)
+        if stream is None:
+            return
+        terms = (msg.reward_primary, msg.reward_rule, msg.reward_auxiliary, msg.reward_observation)
+        if msg.robot_id != self.names.index(robot) or not all(math.isfinite(v) for v in terms):
+            self.counts["malformed"] += 1
+            return
+        slot = self._slot(stream, (int(msg.episode_id), int(msg.motion_period)))
+        if slot is None:
+            return
+        if slot.feedback is not None:
+            self.counts["duplicate"] += 1
+            return
+        slot.feedback = msg
+        self._advance(source, robot, stream)
+
+    def add_world_state(self, source: str, msg: Any) -> None:
+        """Ground truth of one frame (kept only when targets are built, for ``patience`` periods' worth)."""
+        if not self.with_targets:
+            return
+        store = self.truth.setdefault(source, {})
+        store[(int(msg.episode_id), stamp_ns(msg.header))] = msg
+        keep = 4 * self.patience * self.frames * max(1, 2 * self.players)
+        while len(store) > keep:
+            del store[next(iter(store))]
+
+    def _action_problem(self, msg: Any) -> str:
+        if not (0 <= msg.walk < WALKS and 0 <= msg.turn < TURNS and 0 <= msg.kick < KICKS):
+            return "choice out of range"
+        if not math.isfinite(msg.head_yaw_delta) or abs(msg.head_yaw_delta) > self.head_bound:
+            return "head turn out of range"
+        if msg.policy_version and not (math.isfinite(msg.log_prob) and msg.log_prob <= 1e-4
+                                       and math.isfinite(msg.value)):
+            return "learning fields not finite"
+        return ""
+
+    # -- sequences out ----------------------------------------------------------------------------------------
+    def take(self) -> list[Sequence]:
+        """The sequences completed since the last call, oldest first."""
+        out, self.ready = self.ready, []
+        return out
+
+    def _next_key(self, stream: _Stream, key: tuple[int, int], ended: bool) -> tuple[int, int] | None:
+        if not ended:
+            return (key[0], key[1] + 1)
+        later = [k for k in stream.slots if k[0] > key[0] and k[1] == 0]
+        return min(later) if later else None
+
+    def _step_ready(self, stream: _Stream, key: tuple[int, int]) -> bool | None:
+        """True: slot ``key`` is a complete step; False: not yet; None: it cannot be learnt from (cut)."""
+        slot = stream.slots.get(key)
+        if slot is None or not slot.observed or slot.answer is None:
+            return False
+        if slot.answer.policy_version == 0:
+            return None
+        following = stream.slots.get((key[0], key[1] + 1))
+        return following is not None and following.feedback is not None
+
+    def _advance(self, source: str, robot: str, stream: _Stream) -> None:
+        if stream.cursor is None:
+            stream.cursor = min(stream.slots)
+        while True:
+            if stream.restart_after is not None:
+                after = [k for k, s in stream.slots.items() if k > stream.restart_after and s.observed]
+                if not after:
+                    return
+                stream.cursor, stream.restart_after = min(after), None
+            key = stream.chain[-1] if stream.chain else stream.cursor
+            if not stream.chain and self._final(stream, key):   # an episode's final observation: not a step
+                stream.restart_after = key
+                continue
+            if len(stream.chain) == self.steps:               # the chain has its T steps; key is slot T
+                slot = stream.slots.get(key)
+                if slot is not None and slot.observed and slot.answer is not None:
+                    self._emit(source, robot, stream)
+                    continue
+                if not self._give_up(stream, key):
+                    return
+                self._cut(stream, key)
+                continue
+            ready = self._step_ready(stream, key)
+            if ready:
+                ended = self._ended(stream, key)
+                following = self._next_key(stream, key, ended)
+                if following is None:                          # the next episode has not begun yet
+                    if not self._give_up(stream, key):
+                        return
+                    self._cut(stream, key)
+                    continue
+                stream.chain.append(following)
+                continue
+            if ready is None:
+                self.counts["not_learning"] += 1
+                self._cut(stream, key)
+                continue
+            if not self._give_up(stream, key):
+                return
+            self.counts["missing"] += 1
+            self._cut(stream, key)
+
+    def _final(self, stream: _Stream, key: tuple[int, int]) -> bool:
+        slot = stream.slots.get(key)
+        return slot is not None and slot.feedback is not None and bool(slot.feedback.terminated
+                                                                       or slot.feedback.truncated)
+
+    def _ended(self, stream: _Stream, key: tuple[int, int]) -> bool:
+        feedback = stream.slots[(key[0], key[1] + 1)].feedback
+        return bool(feedback.terminated or feedback.truncated)
+
+    def _give_up(self, stream: _Stream, key: tuple[int, int]) -> bool:
+        """The stream has moved ``patience`` periods past ``key`` (or into a later episode that far)."""
+        newest = stream.newest
+        if newest[0] > key[0]:
+            return newest[1] >= self.patience or any(k[0] > key[0] + 1 for k in stream.slots)
+        return newest[1] - key[1] > self.patience
+
+    def _cut(self, stream: _Stream, key: tuple[int, int]) -> None:
+        """Drop the chain gathered so far and restart at the first slot after ``key`` that has its frames."""
+        self.counts["steps_discarded"] += len(stream.chain)
+        self.counts["cuts"] += 1
+        for old in [k for k in stream.slots if k < (key[0], key[1] - 1)]:
+            del stream.slots[old]
+        stream.chain, stream.restart_after = [], key
+        stream.chain_starts_episode, stream.continues = True, False
+
+    def _emit(self, source: str, robot: str, stream: _Stream) -> None:
+        keys = [stream.cursor] + stream.chain            # T + 1 observation slots
+        slots = [stream.slots[k] for k in keys]
+        T = self.steps
+        previous, starts = [], np.zeros(T + 1, bool)
+        for t, (key, slot) in enumerate(zip(keys, slots)):
+            if key[1] == 0 or (t == 0 and stream.chain_starts_episode):
+                starts[t] = True
+            before = stream.slots.get((key[0], key[1] - 1))
+            answer = before.answer if before is not None and key[1] > 0 else None
+            previous.append(STAND_STILL if answer is None else self._action_row(answer, radians=True))
+        periods = [[s.frames[k] for k in range(s.frames_per_period)] for s in slots]
+        stats: Counter[str] = Counter()
+        obs, dropped = pack_messages(periods, previous, self.layout.max_landmarks, self.layout.max_objects, stats)
+        self.counts["detections_dropped"] += dropped
+        self.counts.update(stats)
+        actions = np.array([self._action_row(s.answer) for s in slots[:T]], np.int64)
+        log_probs = np.array([s.answer.log_prob for s in slots[:T]], np.float32)
+        values = np.array([s.answer.value for s in slots], np.float32)
+        versions = np.array([s.answer.policy_version for s in slots[:T]], np.int64)
+        feedback = [stream.slots[(k[0], k[1] + 1)].feedback for k in keys[:T]]
+        terms = np.array([(f.reward_primary, f.reward_rule, f.reward_auxiliary, f.reward_observation)
+                          for f in feedback], np.float32)
+        episode_end = np.array([f.terminated or f.truncated for f in feedback], bool)
+        truncated = np.array([f.truncated and not f.terminated for f in feedback], bool)
+        final_values = np.zeros(T, np.float32)
+        for t in np.flatnonzero(truncated):
+            final = stream.slots.get((keys[t][0], keys[t][1] + 1))
+            if final is not None and final.answer is not None and final.answer.policy_version:
+                final_values[t] = final.answer.value
+            else:
+                self.counts["bootstrap_missing"] += 1
+        targets = self._targets(source, robot, keys, slots) if self.with_targets else {}
+        sequence = Sequence((source, robot), obs, actions, log_probs, values, terms.sum(-1), terms, episode_end,
+                            truncated, final_values, starts, can_act(obs["proprioception"]), targets, versions,
+                            stream.continues, stream.emitted, keys)
+        self.ready.append(sequence)
+        stream.emitted += 1
+        self.counts["sequences"] += 1
+        self.counts["steps"] += T
+        # Slot T is the next sequence's slot 0; everything before it (and the final observations of episodes
+        # that ended inside this sequence) is done.
+        last = keys[-1]
+        for old in [k for k in stream.slots if k < (last[0], last[1] - 1)]:     # keep slot T's previous action
+            del stream.slots[old]
+        stream.cursor, stream.chain = last, []
+        stream.chain_starts_episode, stream.continues = bool(starts[-1]), True
+
+    def _action_row(self, msg: Any, radians: bool = False) -> tuple:
+        """[walk, turn, kick, head]: the head as rad (an observation's previous action) or as its index."""
+        if radians:
+            return (float(msg.walk), float(msg.turn), float(msg.kick), float(msg.head_yaw_delta))
+        index = int(np.clip(round(msg.head_yaw_delta / self.head_step) + self.head_units, 0, 2 * self.head_units))
+        return (int(msg.walk), int(msg.turn), int(msg.kick), index)
+
+    def _targets(self, source: str, robot: str, keys: list, slots: list[Slot]) -> dict[str, np.ndarray]:
+        """The self-supervised targets of each observation (``envs.learning_targets``), from the ground truth at
+        its last frame and what the robot truly saw during its period; unknown truth gives zeros (counted)."""
+        n = 2 * self.players
+        row = self.names.index(robot)
+        out = empty_targets(self.players, len(keys))
+        known = {"ball_known": np.zeros(len(keys), np.float32),
+                 "robots_known": np.zeros((len(keys), n - 1), np.float32)}
+        store = self.truth.get(source, {})
+        for t, (key, slot) in enumerate(zip(keys, slots)):
+            world = store.get((key[0], slot.last_stamp))
+            if world is None or slot.feedback is None:
+                self.counts["targets_missing"] += 1
+                continue
+            robots = {o.id: o for o in world.objects if o.id < n}
+            ball = next((o for o in world.objects if o.id == n), None)
+            if len(robots) != n or ball is None:
+                self.counts["targets_missing"] += 1
+                continue
+            ordered = [robots[i] for i in range(n)]
+            x = np.array([o.x for o in ordered] + [ball.x])
+            y = np.array([o.y for o in ordered] + [ball.y])
+            seen = np.zeros((n, n + 1), bool)
+            ids = [i for i in slot.feedback.seen_object_ids if i <= n]
+            seen[row, ids] = True
+            owner = np.zeros(n)
+            owner[row] = slot.frames[slot.frames_per_period - 1].ball_owner
+            one = self.targets.compute(x, y, np.array([o.yaw for o in ordered]),
+                                       np.array([o.head_yaw for o in ordered]),
+                                       np.array([bool(o.status & STATUS_FALLEN) for o in ordered]), owner, seen)
+            for name, value in one.items():
+                out[name][t] = value[row]
+        # Seen at least once since the episode began (the in-process collector's memory), within this sequence
+        # and carried over from the previous one of the stream.
+        carried = self._known.get((source, robot))
+        ball_known, robots_known = (carried if carried is not None
+                                    else (np.float32(0), np.zeros(n - 1, np.float32)))
+        starts_episode = [k[1] == 0 for k in keys]
+        for t in range(len(keys)):
+            if starts_episode[t]:
+                ball_known, robots_known = np.float32(0), np.zeros(n - 1, np.float32)
+            ball_known = max(ball_known, out["ball_seen"][t])
+            robots_known = np.maximum(robots_known, out["robots_seen"][t])
+            known["ball_known"][t], known["robots_known"][t] = ball_known, robots_known
+        self._known[(source, robot)] = (known["ball_known"][-2], known["robots_known"][-2]) if len(keys) > 1 \
+            else (ball_known, robots_known)
+        out.update(known)
+        return out
+
+
+def batch(sequences: Iterable[Sequence]) -> dict[str, Any]:
+    """Sequences of one length → ``Rollout``-shaped numpy arrays with a robot axis (T, B, ...), without the
+    recurrent state (the learner adds it)."""
+    sequences = list(sequences)
+    out: dict[str, Any] = {"obs": {k: np.stack([s.obs[k] for s in sequences], 1) for k in sequences[0].obs}}
+    for name in ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
+                 "final_values", "starts", "can_act", "versions"):
+        out[name] = np.stack([getattr(s, name) for s in sequences], 1)
+    out["targets"] = ({k: np.stack([s.targets[k] for s in sequences], 1) for k in sequences[0].targets}
+                      if sequences[0].targets else {})
+    return out

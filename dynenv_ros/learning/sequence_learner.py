@@ -1,0 +1,304 @@
+"""The learner fed by message-assembled experience (``learning.experience``): the in-process trainer's networks,
+losses (``algorithms.update``), run directory, logs and checkpoints, with no simulator of its own. The trainer node
+runs it in a background thread (``BackgroundLearner``), ``dynenv-train --from-bag`` directly.
+
+Off-policy correction (docs/decisions.md, "Learning from experience that lags"): PPO's clipped ratio against the
+behaviour log-probabilities the policy nodes sent (``Action.log_prob``), with a bound on staleness — a sequence any
+step of which was chosen more than ``max_policy_lag`` versions ago is dropped (counted). Advantages use the values
+the behaviour policy sent (``Action.value``), as PPO does with its rollout values.
+
+Recurrent state: a sequence that ``continues`` its stream's previous one starts from the state the learner's
+network reached at the end of that one (computed after each update, no gradient — R2D2's "stored state", stale
+by at most one update); a stream's first sequence, one after a cut, and one whose predecessor was dropped start from
+zeros with ``starts[0]`` set.
+"""
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections import Counter, deque
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import torch
+
+from dynenv_ros.agent.checkpoint import policy_bytes
+from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.algorithms import log_prob_entropy, run_sequence, update
+from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.experience import Sequence, batch
+from dynenv_ros.learning.heads import Learner
+from dynenv_ros.learning.run_log import RunLogger
+from dynenv_ros.learning.trainer import VERSION, update_settings
+from dynenv_ros.soccer.config import SoccerConfig
+
+MAX_QUEUE = 4096          # sequences waiting for the learner; beyond, the oldest are dropped (counted)
+
+
+class SequenceLearner:
+    """Updates on batches of ``batch_sequences`` sequences. ``version`` = 1 + updates: what the weights it hands
+    out are called (``PolicyWeights.version``, ``Action.policy_version``)."""
+
+    def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, batch_sequences: int = 8,
+                 max_policy_lag: int = 4, log: bool = True) -> None:
+        if cfg.algorithm != "ppo":
+            raise ValueError("algorithm: learning from message experience needs 'ppo' (its ratio corrects the "
+                             "policy lag; A2C is on-policy only)")
+        if cfg.head_mode != "discrete":
+            raise ValueError("head_mode: learning from message experience supports the discrete head only")
+        if batch_sequences < 1 or batch_sequences < cfg.ppo_minibatches:
+            raise ValueError(f"batch_sequences must be >= 1 and >= ppo_minibatches ({cfg.ppo_minibatches}), "
+                             f"got {batch_sequences}")
+        if max_policy_lag < 0:
+            raise ValueError(f"max_policy_lag must be >= 0, got {max_policy_lag}")
+        self.cfg, self.run_dir = cfg, Path(run_dir)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.batch_sequences, self.max_policy_lag = batch_sequences, max_policy_lag
+        torch.set_num_threads(cfg.torch_threads)
+        self.settings = update_settings(cfg)
+        soccer = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode})
+        self.soccer = soccer
+        seeds = np.random.SeedSequence(cfg.seed).spawn(4)
+        self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
+        agent = DynEnvAgent(cfg.feature_size, cfg.head_mode, soccer.motion.head_units, soccer.motion.head_max_delta)
+        torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only
+        self.learner = Learner(agent, cfg.ltp_horizon).eval()
+        self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
+        self.env_steps = self.updates = self.episodes = 0
+        self.wall_before = 0.0
+        self._started = time.perf_counter()
+        if resume:
+            meta, _ = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
+            self.env_steps, self.updates = int(meta["env_steps"]), int(meta["updates"])
+            self.episodes, self.wall_before = int(meta.get("episodes", 0)), float(meta.get("wall_seconds", 0.0))
+        (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
+        self.logger = RunLogger(self.run_dir) if log else None
+        self.states: dict[tuple[str, str], tuple[int, tuple[torch.Tensor, ...]]] = {}   # stream -> (index, state)
+        self.returns: dict[tuple[str, str], float] = {}      # running episode return per stream
+        self.finished: list[dict[str, float]] = []           # episodes finished: version, return
+        self.counts: Counter[str] = Counter()
+        self.published: dict[int, float] = {self.version: time.time()}   # version -> wall time handed out
+        self.last_stats: dict[str, float] = {}
+
+    @property
+    def version(self) -> int:
+        return self.updates + 1
+
+    @property
+    def agent(self) -> DynEnvAgent:
+        return self.learner.agent
+
+    def set_learning_rate(self, value: float) -> None:
+        for group in self.optimizer.param_groups:
+            group["lr"] = value
+
+    # -- one update ---------------------------------------------------------------------------------------------
+    def fresh(self, sequence: Sequence) -> bool:
+        """Within the staleness bound (else counted and dropped; its stream's stored state is forgotten)."""
+        lag = self.version - int(sequence.versions.min())
+        if lag > self.max_policy_lag:
+            self.counts["stale_sequences"] += 1
+            self.states.pop(sequence.stream, None)
+            return False
+        return True
+
+    def learn(self, sequences: list[Sequence]) -> dict[str, float]:
+        """One PPO update on these sequences (one per stream, each after its stream's previous one)."""
+        now = time.time()
+        arrays = batch(sequences)
+        B = len(sequences)
+        initial = [torch.zeros(B, s.shape[-1]) for s in self.agent.initial_state(1)]
+        known_state = np.zeros(B, bool)         # the learner starts from the state the policy had (up to lag)
+        for b, sequence in enumerate(sequences):
+            stored = self.states.get(sequence.stream)
+            if sequence.keys[0][1] == 0:                        # an episode's first observation: zero state
+                known_state[b] = True
+            elif sequence.continues and stored is not None and stored[0] == sequence.index - 1:
+                for part, value in zip(initial, stored[1]):
+                    part[b] = value
+                known_state[b] = True
+            else:                                               # after a cut or a dropped predecessor
+                arrays["starts"][0, b] = True
+                self.counts["state_restarts"] += 1
+        tensors = self._tensors(arrays, tuple(initial))
+        alignment = self._alignment(tensors, known_state)
+        self.learner.train()
+        stats = update(self.learner, self.optimizer, tensors, self.settings, self.generator)
+        self.learner.eval()
+        self._store_states(sequences, tensors)
+        versions = arrays["versions"]
+        lag = self.version - versions
+        stats["lag_versions_mean"] = float(lag.mean())
+        stats["lag_versions_max"] = float(lag.max())
+        stats["lag_seconds_mean"] = float(np.mean([now - self.published.get(int(v), now) for v in versions.ravel()]))
+        if alignment is not None:
+            stats["behaviour_log_prob_error"] = alignment
+        self._account(sequences)
+        T = arrays["actions"].shape[0]
+        self.env_steps += T * B
+        self.updates += 1
+        self.published[self.version] = time.time()
+        for old in [v for v in self.published if v < self.version - 4 * (self.max_policy_lag + 1)]:
+            del self.published[old]
+        self.last_stats = stats
+        return stats
+
+    def _tensors(self, arrays: dict[str, Any], initial: tuple[torch.Tensor, ...]) -> dict[str, Any]:
+        def tensor(x: np.ndarray) -> torch.Tensor:
+            return torch.from_numpy(np.ascontiguousarray(x))
+        out: dict[str, Any] = {"obs": {k: tensor(v) for k, v in arrays["obs"].items()},
+                               "targets": {k: tensor(v) for k, v in arrays["targets"].items()},
+                               "initial_state": initial}
+        for name in ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
+                     "final_values", "starts", "can_act"):
+            out[name] = tensor(arrays[name])
+        return out
+
+    @torch.no_grad()
+    def _alignment(self, tensors: dict[str, Any], known_state: np.ndarray) -> float | None:
+        """Mean |log π_learner(a|s) − Action.log_prob| before the update, over the sequences whose recurrent state
+        the learner knows: 0 (to float precision) when the learner's weights are those that acted, and the
+        observations, previous actions, recurrent state and action indices it rebuilt are the policy node's — the
+        check that experience from the wire means what the policy saw (docs/ros_graph.md)."""
+        rows = torch.from_numpy(np.flatnonzero(known_state))
+        if not len(rows):
+            return None
+        T = tensors["actions"].shape[0]
+        obs = {k: v[:T, rows] for k, v in tensors["obs"].items()}
+        state = tuple(s[rows] for s in tensors["initial_state"])
+        out = run_sequence(self.agent, obs, state, tensors["starts"][:T, rows])
+        log_prob, _ = log_prob_entropy(self.agent, out, tensors["actions"][:, rows])
+        return float((log_prob - tensors["log_probs"][:, rows]).abs().mean())
+
+    @torch.no_grad()
+    def _store_states(self, sequences: list[Sequence], tensors: dict[str, Any]) -> None:
+        """The state each stream's next sequence starts from: the updated network run over observations 0..T-1."""
+        T = tensors["actions"].shape[0]
+        obs = {k: v[:T] for k, v in tensors["obs"].items()}
+        out = run_sequence(self.agent, obs, tensors["initial_state"], tensors["starts"][:T])
+        for b, sequence in enumerate(sequences):
+            self.states[sequence.stream] = (sequence.index, tuple(s[b].clone() for s in out.state))
+
+    def _account(self, sequences: list[Sequence]) -> None:
+        for sequence in sequences:
+            total = self.returns.get(sequence.stream, 0.0)
+            for t in range(len(sequence.rewards)):
+                if sequence.starts[t] and t > 0:
+                    total = 0.0
+                total += float(sequence.rewards[t])
+                if sequence.episode_end[t]:
+                    self.finished.append({"version": float(sequence.versions[t]), "return": total})
+                    self.episodes += 1
+                    total = 0.0
+            self.returns[sequence.stream] = total
+
+    # -- weights, logs, checkpoints ---------------------------------------------------------------------------------
+    def meta(self) -> dict[str, Any]:
+        return {"version": VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
+                "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
+                "episodes": self.episodes, "wall_seconds": self.wall_before + time.perf_counter() - self._started,
+                "source": "messages", "code_revision": checkpoints.code_revision()}
+
+    def weights(self) -> bytes:
+        """The current policy as a policy file's bytes (``PolicyWeights.data``); its meta's updates give
+        ``version_of`` = ``self.version``."""
+        return policy_bytes(self.agent, {k: v for k, v in self.meta().items() if k != "config"})
+
+    def log(self, scalars: dict[str, float]) -> None:
+        if self.logger is not None:
+            self.logger.log(self.env_steps, self.updates, self.meta()["wall_seconds"], scalars)
+
+    def save_checkpoint(self) -> Path:
+        return checkpoints.save_training_checkpoint(self.run_dir, self.env_steps, self.learner, self.optimizer,
+                                                    self.meta(), {}, keep=self.cfg.keep_checkpoints)
+
+    def close(self) -> None:
+        if self.logger is not None:
+            self.logger.close()
+            self.logger = None
+
+
+class BackgroundLearner:
+    """``SequenceLearner`` in a thread of its own: ``put`` (from ROS callbacks) never waits for a gradient step.
+    Each batch takes the oldest waiting sequence of up to ``batch_sequences`` streams (a stream's next sequence
+    waits for the next batch: it needs the state this one ends in). ``on_update(learner, stats)`` runs in the
+    thread after each update (the node publishes the weights from it); checkpoints every
+    ``cfg.checkpoint_every_minutes``."""
+
+    def __init__(self, learner: SequenceLearner, on_update: Callable[[SequenceLearner, dict[str, float]], None]
+                 | None = None, max_queue: int = MAX_QUEUE) -> None:
+        self.learner, self.on_update = learner, on_update
+        self.queue: deque[Sequence] = deque()
+        self.max_queue = max_queue
+        self.lock = threading.Lock()
+        self.wake = threading.Condition(self.lock)
+        self.counts: Counter[str] = Counter()
+        self.error = ""
+        self._stop = threading.Event()
+        self._last_checkpoint = time.monotonic()
+        self.thread = threading.Thread(target=self._run, name="learner", daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def put(self, sequences: list[Sequence]) -> None:
+        with self.wake:
+            for sequence in sequences:
+                self.queue.append(sequence)
+                self.counts["received"] += 1
+                if len(self.queue) > self.max_queue:
+                    self.queue.popleft()
+                    self.counts["queue_dropped"] += 1
+            self.wake.notify()
+
+    def depth(self) -> int:
+        with self.lock:
+            return len(self.queue)
+
+    def _next_batch(self) -> list[Sequence] | None:
+        """Under the lock: a batch if enough streams have a fresh sequence waiting, else None."""
+        chosen: dict[tuple[str, str], Sequence] = {}
+        for sequence in list(self.queue):
+            if sequence.stream in chosen:
+                continue
+            if not self.learner.fresh(sequence):
+                self.queue.remove(sequence)
+                continue
+            chosen[sequence.stream] = sequence
+            if len(chosen) == self.learner.batch_sequences:
+                break
+        if len(chosen) < self.learner.batch_sequences:
+            return None
+        for sequence in chosen.values():
+            self.queue.remove(sequence)
+        return list(chosen.values())
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with self.wake:
+                sequences = self._next_batch()
+                if sequences is None:
+                    self.wake.wait(timeout=0.2)
+                    continue
+            try:
+                stats = self.learner.learn(sequences)
+                if self.on_update is not None:
+                    self.on_update(self.learner, stats)
+                every = self.learner.cfg.checkpoint_every_minutes * 60.0
+                if time.monotonic() - self._last_checkpoint > every:
+                    self.learner.save_checkpoint()
+                    self._last_checkpoint = time.monotonic()
+            except Exception as error:         # a learner that fails says so and stops learning; nothing crashes
+                self.error = f"{type(error).__name__}: {error}"
+                self.counts["failed_updates"] += 1
+                return
+
+    def stop(self, timeout: float = 30.0) -> None:
+        self._stop.set()
+        with self.wake:
+            self.wake.notify()
+        if self.thread.is_alive():
+            self.thread.join(timeout)

@@ -1,0 +1,306 @@
+"""The trainer node (``ros2 run dynenv_ros trainer_node``): learns from the experience of every simulator game and
+policy node it finds on the ROS graph, and streams new weights back to the policy nodes.
+
+- Experience: for each robot it discovers (``<game namespace>/<robot>/detections`` of type DetectionArray, e.g.
+  ``/game_1/team_a_0/detections``; the root namespace is a game too) it subscribes to the robot's detections,
+  actions (with the behaviour policy's learning fields) and step feedback, and to the game's ``world_state`` when
+  the variant learns localization or reconstruction. ``learning.experience`` assembles per-robot sequences aligned
+  by episode and motion period, counting what is late, duplicated, out of order, missing or malformed.
+- Learning: ``learning.sequence_learner`` in a thread of its own, so no callback waits for a gradient step; PPO
+  against the stored behaviour log-probabilities, sequences older than ``max_policy_lag`` versions dropped
+  (docs/decisions.md). Run directory, logs (CSV, TensorBoard) and checkpoints as ``dynenv-train`` writes them.
+- Weights: ``/trainer/weights`` (PolicyWeights, reliable, transient local), the initial ones at start and new ones
+  every ``publish_every_updates`` updates; policy nodes swap them in between two decisions.
+- ``/trainer/diagnostics``: experience rate, queue depth, updates/s, version, lag, losses, the counts.
+
+Parameters: ``--help``. docs/ros_graph.md, "Training over ROS", shows the graph and how to spread it over machines.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import statistics
+import time
+from collections import Counter, deque
+from collections.abc import Sequence as Args
+from pathlib import Path
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from dynenv_msgs.msg import Action, DetectionArray, PolicyWeights, StepFeedback, WorldState
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from dynenv_ros.learning.config import VARIANTS, ConfigError, TrainConfig
+from dynenv_ros.learning.experience import ExperienceAssembler
+from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
+from dynenv_ros.ros import topics
+from dynenv_ros.ros.drain import take
+from dynenv_ros.ros.node_runner import run_node
+from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str
+from dynenv_ros.ros.qos import latched
+from dynenv_ros.soccer.config import SoccerConfig
+
+DETECTIONS = re.compile(r"^(?P<source>(/[A-Za-z0-9_]+)*)/(?P<robot>team_[ab]_[0-9]+)/detections$")
+DETECTION_TYPE = "dynenv_msgs/msg/DetectionArray"
+# Keep-last depths of the experience readers: deep enough that a stepped game's burst (an episode's last period and
+# the next one's first) and a learner holding the GIL for a moment lose nothing; bounded so a trainer that cannot
+# keep up falls behind in its own memory, never the games' (a reliable keep-last reader never blocks a writer).
+FRAME_DEPTH, MESSAGE_DEPTH = 400, 100
+
+
+def experience_qos(depth: int) -> QoSProfile:
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+class TrainerNode(Node):
+    def __init__(self, **node_options: Any) -> None:
+        super().__init__("trainer_node", **node_options)
+        fixed = {"read_only": True}
+        players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team in the games.", **fixed)
+        variant = declare_str(self, "variant", "pred", "Paper row of losses (dynenv-train's variant; 'recon' needs "
+                              "pretrained_encoder, not available here).", choices=VARIANTS, **fixed)
+        learning_rate = declare_float(self, "learning_rate", 1e-4, 1e-7, 1.0, "Adam learning rate (settable).")
+        entropy = declare_float(self, "entropy_coef", 0.01, 0.0, 10.0, "Weight of the entropy bonus (settable).")
+        steps = declare_int(self, "sequence_length", 6, 1, 256, "Motion periods per sequence (T).", **fixed)
+        self.batch_sequences = declare_int(self, "batch_sequences", 8, 1, 4096, "Sequences per update (at most one "
+                                           "per robot stream).", **fixed)
+        epochs = declare_int(self, "ppo_epochs", 4, 1, 64, "PPO passes over each batch.", **fixed)
+        minibatches = declare_int(self, "ppo_minibatches", 2, 1, 4096, "PPO minibatches per pass (<= "
+                                  "batch_sequences).", **fixed)
+        self.max_lag = declare_int(self, "max_policy_lag", 4, 0, 10_000, "Drop sequences chosen more than this "
+                                   "many versions ago (settable).")
+        self.publish_every = declare_int(self, "publish_every_updates", 1, 1, 100_000, "Publish weights every this "
+                                         "many updates (settable).")
+        checkpoint_min = declare_float(self, "checkpoint_every_minutes", 2.0, 0.01, 1440.0, "Checkpoint period, "
+                                       "wall minutes.", **fixed)
+        keep = declare_int(self, "keep_checkpoints", 3, 1, 1000, "Training checkpoints kept.", **fixed)
+        run_dir = declare_str(self, "run_dir", "", "Run directory (config, metrics, checkpoints); empty: "
+                              "runs/trainer-<time>.", **fixed)
+        resume = declare_bool(self, "resume", False, "Resume from run_dir's latest checkpoint (dynenv-train "
+                              "--resume reads the same directory).", **fixed)
+        self.team = declare_str(self, "learning_team", "", "Robots whose experience is learnt: team 'a', 'b', or "
+                                "both ('': self-play with shared weights). Opponents are whoever controls the other "
+                                "team (a scripted node, a frozen policy node with weights_topic:='').",
+                                choices=("", "a", "b"), **fixed)
+        patience = declare_int(self, "patience", 8, 1, 1000, "Periods a stream moves on before an incomplete one "
+                               "counts as missing.", **fixed)
+        seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed of the initial weights and minibatch order.", **fixed)
+        threads = declare_int(self, "torch_threads", 1, 1, 256, "torch threads of the learner.", **fixed)
+        diagnostics_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.",
+                                      **fixed)
+        soccer = SoccerConfig.from_mapping({"players_per_team": players})
+        try:
+            self.cfg = TrainConfig(algorithm="ppo", variant=variant, players_per_team=players, rollout_length=steps,
+                                   ltp_horizon=min(6, steps), learning_rate=learning_rate, entropy_coef=entropy,
+                                   ppo_epochs=epochs, ppo_minibatches=minibatches, gae_lambda=0.95,
+                                   checkpoint_every_minutes=checkpoint_min, keep_checkpoints=keep, seed=seed,
+                                   torch_threads=threads, log_every_updates=1)
+        except ConfigError as error:
+            raise ParameterException(str(error), [error.key]) from None
+        self.run_dir = Path(run_dir or f"runs/trainer-{time.strftime('%Y%m%d-%H%M%S')}")
+        try:
+            self.learner = SequenceLearner(self.cfg, self.run_dir, resume=resume,
+                                           batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag)
+        except ValueError as error:
+            raise ParameterException(str(error), ["resume" if resume else "batch_sequences"]) from None
+        self.run_id = self.run_dir.resolve().name
+        motion = soccer.motion
+        self.assembler = ExperienceAssembler(steps, players, soccer.rates.frames_per_period, motion.head_max_delta,
+                                             motion.head_units, with_targets=self._needs_targets(),
+                                             patience=patience, learns=lambda name: self.team in ("", name[5]))
+        self.weights_pub = self.create_publisher(PolicyWeights, topics.WEIGHTS, latched(1))
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.TRAINER_DIAGNOSTICS,
+                                                     QoSProfile(depth=10))
+        self.received: Counter[str] = Counter()
+        self.robots: set[tuple[str, str]] = set()
+        self.games: set[str] = set()
+        self.experience_subs: list = []
+        self._steps_window: deque[tuple[float, int, int]] = deque(maxlen=2)   # (wall, steps, updates)
+        self.episodes: list[dict[str, float]] = []      # finished episodes: the version that ended it, return
+        self.weights_published = 0
+        self.finished = False
+        self.background = BackgroundLearner(self.learner, on_update=self._on_update)
+        self._publish_weights()
+        self.background.start()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        wall = Clock(clock_type=ClockType.STEADY_TIME)
+        self.discovery_timer = self.create_timer(0.5, self._discover, clock=wall)
+        self.diagnostics_timer = self.create_timer(diagnostics_s, self._publish_diagnostics, clock=wall)
+        self._discover()
+        self.get_logger().info(f"learning {variant} (PPO) from {'both teams' if not self.team else 'team ' + self.team}"
+                               f" into {self.run_dir}, version {self.learner.version}")
+
+    def _needs_targets(self) -> bool:
+        losses = self.cfg.losses()
+        return losses.localization or losses.reconstruction
+
+    # -- experience ---------------------------------------------------------------------------------------------
+    def _discover(self) -> None:
+        """Subscribe to every robot that has appeared (names and types from the graph, no configuration)."""
+        for name, types in self.get_topic_names_and_types():
+            match = DETECTIONS.match(name)
+            if match is None or DETECTION_TYPE not in types:
+                continue
+            source, robot = match["source"], match["robot"]
+            if (source, robot) in self.robots or robot not in self.assembler.names:
+                continue
+            self.robots.add((source, robot))
+            if not self.assembler.learns(robot):
+                continue
+            add = self.assembler
+            for msg_type, topic, method, kind, depth in (
+                    (DetectionArray, name, add.add_frame, "frames", FRAME_DEPTH),
+                    (Action, f"{source}/{robot}/action", add.add_action, "actions", MESSAGE_DEPTH),
+                    (StepFeedback, f"{source}/{robot}/feedback", add.add_feedback, "feedback", MESSAGE_DEPTH)):
+                handler = self._handler(method, source, robot, kind, depth)
+                handler.subscription = self.create_subscription(msg_type, topic, handler, experience_qos(depth))
+                self.experience_subs.append(handler.subscription)
+            if source not in self.games:
+                self.games.add(source)
+                if add.with_targets:
+                    self.experience_subs.append(self.create_subscription(
+                        WorldState, f"{source}/world_state", self._world_handler(source), experience_qos(FRAME_DEPTH)))
+            self.get_logger().info(f"learning from {source or '/'} {robot}")
+
+    def _handler(self, add, source: str, robot: str, kind: str, depth: int):
+        """The callback of one experience topic. It drains the topic's queue (``ros.drain``): the executor takes
+        one message per subscription per wake-up, so a robot's frames (five per period) would fall behind its
+        actions and feedback (one each) and miss their periods."""
+        def receive(msg) -> None:
+            for _ in range(depth):
+                self.received[kind] += 1
+                try:
+                    add(source, robot, msg)
+                except Exception as error:     # a message nothing foresaw: dropped and counted, never fatal
+                    self.received["errors"] += 1
+                    self.get_logger().error(f"{kind} of {source}/{robot} dropped: {type(error).__name__}: "
+                                            f"{error}", throttle_duration_sec=5.0)
+                msg = take(receive.subscription)
+                if msg is None:
+                    break
+            ready = self.assembler.take()
+            if ready:
+                self.background.put(ready)
+        receive.subscription = None
+        return receive
+
+    def _world_handler(self, source: str):
+        def receive(msg) -> None:
+            self.received["world_states"] += 1
+            self.assembler.add_world_state(source, msg)
+        return receive
+
+    # -- weights --------------------------------------------------------------------------------------------------
+    def _on_update(self, learner: SequenceLearner, stats: dict[str, float]) -> None:
+        """In the learner thread, after each update: log, and publish the weights at the cadence asked for."""
+        scalars = {f"train/{k}": v for k, v in stats.items()}
+        finished, learner.finished = learner.finished, []
+        if finished:
+            scalars["episode/return"] = statistics.fmean(e["return"] for e in finished)
+            self.episodes.extend(finished)
+        scalars["experience/queue_depth"] = float(self.background.depth())
+        learner.log(scalars)
+        if learner.updates % self.publish_every == 0:
+            self._publish_weights()
+
+    def _publish_weights(self) -> None:
+        data = self.learner.weights()
+        msg = PolicyWeights(version=self.learner.version, run_id=self.run_id, data=data,
+                            sha256=hashlib.sha256(data).hexdigest(),
+                            metadata_json=json.dumps({k: v for k, v in self.learner.meta().items()
+                                                      if k != "config"}))
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.weights_pub.publish(msg)
+        self.weights_published += 1
+
+    # -- parameters, diagnostics, shutdown ---------------------------------------------------------------------
+    def _on_set_parameters(self, parameters: list) -> SetParametersResult:
+        for p in parameters:
+            if p.name == "learning_rate":
+                self.learner.set_learning_rate(float(p.value))
+            elif p.name == "entropy_coef":
+                self.learner.settings.entropy_coef = float(p.value)
+            elif p.name == "max_policy_lag":
+                self.learner.max_policy_lag = int(p.value)
+            elif p.name == "publish_every_updates":
+                self.publish_every = int(p.value)
+        return SetParametersResult(successful=True)
+
+    def diagnostics(self) -> dict[str, str]:
+        now = time.monotonic()
+        counts = self.assembler.counts
+        self._steps_window.append((now, counts["steps"], self.learner.updates))
+        (t0, s0, u0), (t1, s1, u1) = self._steps_window[0], self._steps_window[-1]
+        span = max(t1 - t0, 1e-9)
+        stats = self.learner.last_stats
+        values = {"version": str(self.learner.version), "updates": str(self.learner.updates),
+                  "games": str(len(self.games)), "robots": str(len(self.robots)),
+                  "experience_steps_per_s": f"{(s1 - s0) / span:.1f}" if t1 > t0 else "0.0",
+                  "updates_per_s": f"{(u1 - u0) / span:.3f}" if t1 > t0 else "0.000",
+                  "queue_depth": str(self.background.depth()),
+                  "lag_versions_mean": f"{stats.get('lag_versions_mean', 0.0):.2f}",
+                  "lag_seconds_mean": f"{stats.get('lag_seconds_mean', 0.0):.2f}",
+                  "policy_loss": f"{stats.get('policy_loss', 0.0):.4f}",
+                  "value_loss": f"{stats.get('value_loss', 0.0):.4f}",
+                  "entropy": f"{stats.get('entropy', 0.0):.4f}",
+                  "learner_error": self.background.error}
+        for key in ("steps", "sequences", "late", "duplicate", "out_of_order", "missing", "malformed",
+                    "not_learning", "cuts", "steps_discarded", "unknown_robot", "targets_missing",
+                    "bootstrap_missing"):
+            values[key] = str(counts.get(key, 0))
+        for key, value in list(self.learner.counts.items()) + list(self.background.counts.items()):
+            values[key] = str(value)
+        for key, value in self.received.items():
+            values[f"received_{key}"] = str(value)
+        return values
+
+    def _publish_diagnostics(self) -> None:
+        values = self.diagnostics()
+        level = DiagnosticStatus.ERROR if self.background.error else DiagnosticStatus.OK
+        status = DiagnosticStatus(level=level, name="dynenv_trainer", hardware_id=self.get_fully_qualified_name(),
+                                  message=self.background.error or f"version {values['version']}",
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(msg)
+
+    def summary(self) -> dict[str, Any]:
+        """Mean episode return per policy version (of the episode's last step), and the counts."""
+        by_version: dict[int, list[float]] = {}
+        for episode in self.episodes:
+            by_version.setdefault(int(episode["version"]), []).append(episode["return"])
+        return {"version": self.learner.version, "updates": self.learner.updates,
+                "env_steps": self.learner.env_steps,
+                "returns_by_version": {v: {"episodes": len(r), "mean_return": statistics.fmean(r)}
+                                       for v, r in sorted(by_version.items())},
+                "diagnostics": self.diagnostics()}
+
+    def destroy_node(self) -> None:
+        """Stop learning, checkpoint, write the policy file and the summary (the run directory is complete)."""
+        if self.finished:
+            return
+        self.finished = True
+        self.background.stop()
+        try:
+            self.learner.save_checkpoint()
+            from dynenv_ros.agent.checkpoint import save_policy
+            save_policy(self.learner.agent, str(self.run_dir / "policy.safetensors"),
+                        {k: v for k, v in self.learner.meta().items() if k != "config"})
+            (self.run_dir / "summary.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
+        finally:
+            self.learner.close()
+            super().destroy_node()
+
+
+def main(args: Args[str] | None = None) -> int:
+    return run_node(TrainerNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,88 @@
+"""A short game played through ``SoccerSession`` (no ROS graph) with random actions carrying learning fields, as
+the messages a trainer would receive — and the record of what was sent and what the game answered, to check the
+experience assembled from those messages against."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from dynenv_msgs.msg import Action
+
+from dynenv_ros.envs.soccer_session import SoccerSession
+from dynenv_ros.perception.params import load_preset
+from dynenv_ros.ros.conversions import detection_array, sim_time, step_feedback, world_state
+from dynenv_ros.soccer.config import SoccerConfig
+
+HEAD_MAX = math.radians(37.5)      # the default head turn limit per period, 3 steps each way
+HEAD_UNITS = 3
+
+
+@dataclass
+class Game:
+    players: int
+    frames: int
+    messages: list[tuple[str, str, object]] = field(default_factory=list)   # (kind, robot, message)
+    actions: dict[tuple[str, int, int], Action] = field(default_factory=dict)   # (robot, episode, addressed period)
+    rewards: dict[tuple[str, int, int], float] = field(default_factory=dict)    # (robot, episode, period)
+    ends: dict[tuple[int, int], tuple[bool, bool]] = field(default_factory=dict)  # (episode, period) → term., trunc.
+    truth: dict[tuple[int, int], object] = field(default_factory=dict)          # (episode, period) → last WorldState
+
+
+def play(episodes: int = 3, players: int = 1, seed: int = 0, episode_seconds: float = 3.0,
+         version: int = 5) -> Game:
+    config = SoccerConfig.from_mapping({"players_per_team": players, "episode_seconds": episode_seconds})
+    session = SoccerSession(config, load_preset("realistic"), seed=seed)
+    rng = np.random.default_rng(seed + 1)
+    game = Game(players, config.rates.frames_per_period)
+    names = config.robot_names
+
+    def emit(output) -> None:
+        for frame in output.frames:
+            stamp = sim_time(frame.tick, frame.snapshot.tick_period)
+            game.messages.append(("world", "", world_state(frame.snapshot, stamp)))
+            for i, seen in enumerate(frame.robots):
+                game.messages.append(("frame", names[i], detection_array(
+                    seen.detections, robot_id=i, robot_name=names[i], episode_id=output.episode_id,
+                    motion_period=output.motion_period, frame_index=frame.frame_index,
+                    frames_per_period=len(output.frames), head_yaw=seen.head_yaw, fallen=seen.fallen,
+                    penalized=seen.penalized, kicking=seen.kicking, ball_owner=seen.ball_owner,
+                    ball_owner_seconds=seen.ball_owner_seconds, game_seconds_remaining=seen.game_seconds_remaining,
+                    stamp=stamp)))
+        game.truth[(output.episode_id, output.motion_period)] = game.messages[-1 - len(names)][2]
+        end = sim_time(output.frames[-1].tick, 0.01)
+        for i, feedback in enumerate(output.feedback):
+            game.messages.append(("feedback", names[i], step_feedback(
+                robot_id=i, episode_id=output.episode_id, motion_period=output.motion_period,
+                rewards=feedback.rewards, terminated=output.terminated, truncated=output.truncated,
+                seen_object_ids=feedback.seen_object_ids, landmarks_seen=feedback.landmarks_seen, stamp=end)))
+            game.rewards[(names[i], output.episode_id, output.motion_period)] = sum(feedback.rewards.values())
+        game.ends[(output.episode_id, output.motion_period)] = (output.terminated, output.truncated)
+
+    def answer(episode: int, period: int, submit: bool) -> None:
+        """Every robot's action for ``period`` with learning fields; submitted to the game unless it has ended."""
+        for i, name in enumerate(names):
+            head_index = int(rng.integers(0, 2 * HEAD_UNITS + 1))
+            msg = Action(robot_id=i, episode_id=episode, motion_period=period, walk=int(rng.integers(0, 5)),
+                         turn=int(rng.integers(0, 3)), kick=int(rng.integers(0, 3)),
+                         head_yaw_delta=float((head_index - HEAD_UNITS) * HEAD_MAX / HEAD_UNITS),
+                         policy_version=version, log_prob=float(-rng.uniform(0.5, 6.0)),
+                         value=float(rng.normal()))
+            game.actions[(name, episode, period)] = msg
+            game.messages.append(("action", name, msg))
+            if submit:
+                ok, reason = session.submit(i, episode, period, msg.walk, msg.turn, msg.kick, msg.head_yaw_delta)
+                assert ok, reason
+
+    for _ in range(episodes):
+        session.reset(seed=int(rng.integers(0, 2**31)))
+        output = session.initial()
+        emit(output)
+        while True:
+            answer(output.episode_id, output.motion_period + 1, submit=True)
+            output = session.step()
+            emit(output)
+            if output.terminated or output.truncated:
+                answer(output.episode_id, output.motion_period + 1, submit=False)    # the ignored final answer
+                break
+    return game

@@ -1,0 +1,111 @@
+"""The learner fed by message experience: updates and versions, weights a policy node can load, the staleness bound,
+the recurrent state carried from one sequence of a stream to the next, checkpoints it resumes from, and a learner
+thread that never blocks whoever feeds it."""
+from __future__ import annotations
+
+import time
+
+import pytest
+import torch
+
+from dynenv_ros.agent.checkpoint import policy_from_bytes
+from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.experience import ExperienceAssembler
+from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
+from experience_game import HEAD_MAX, HEAD_UNITS, play
+from policy_node.policy_node import version_of
+from test_experience import _feed
+
+T = 4
+
+
+@pytest.fixture(scope="module")
+def sequences():
+    game = play(episodes=3, players=1, seed=0, episode_seconds=3.0, version=1)
+    assembler = ExperienceAssembler(T, 1, game.frames, HEAD_MAX, HEAD_UNITS)
+    return _feed(assembler, game.messages)          # 4 sequences per robot, 2 robots
+
+
+def _config(**changes) -> TrainConfig:
+    values = dict(algorithm="ppo", variant="pred", players_per_team=1, rollout_length=T, ltp_horizon=T,
+                  ppo_epochs=2, ppo_minibatches=1, seed=3)
+    values.update(changes)
+    return TrainConfig(**values)
+
+
+def test_an_update_gives_a_new_version_whose_weights_a_policy_node_loads(sequences, tmp_path):
+    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=4)
+    assert learner.version == 1
+    before = {k: v.clone() for k, v in learner.agent.state_dict().items()}
+    first = [s for s in sequences if s.index == 0]
+    stats = learner.learn(first)
+    assert learner.version == 2 and learner.env_steps == 2 * T
+    assert any(not torch.equal(before[k], v) for k, v in learner.agent.state_dict().items())
+    for key in ("policy_loss", "value_loss", "entropy", "lag_versions_mean", "behaviour_log_prob_error"):
+        assert key in stats and stats[key] == stats[key], key          # present and not NaN
+    assert stats["lag_versions_mean"] == 0.0                          # acted with version 1, learnt at version 1
+    agent, meta = policy_from_bytes(learner.weights(), "weights")
+    assert version_of(meta) == learner.version
+    for (name, a), b in zip(agent.state_dict().items(), learner.agent.state_dict().values()):
+        assert torch.equal(a, b), name
+
+
+def test_each_streams_state_carries_over_and_stale_sequences_are_dropped(sequences, tmp_path):
+    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=1)
+    by_index = {i: [s for s in sequences if s.index == i] for i in range(4)}
+    learner.learn(by_index[0])
+    assert set(learner.states) == {s.stream for s in by_index[0]}
+    learner.learn(by_index[1])                       # continues both streams: no restart
+    assert learner.counts["state_restarts"] == 0 and learner.version == 3
+    # acted with version 1, now at 3: lag 2 > 1, dropped, and the stream's stored state is forgotten
+    assert all(not learner.fresh(s) for s in by_index[2])
+    assert learner.counts["stale_sequences"] == 2 and not learner.states
+    learner.max_policy_lag = 5
+    assert [s.keys[0][1] for s in by_index[3]] == [0, 0]      # index 3 starts an episode: nothing to carry
+    learner.learn(by_index[3])
+    assert learner.counts["state_restarts"] == 0
+
+
+def test_a_sequence_whose_predecessor_was_not_learnt_starts_afresh(sequences, tmp_path):
+    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=5)
+    by_index = {i: [s for s in sequences if s.index == i] for i in range(4)}
+    assert all(s.keys[0][1] > 0 for s in by_index[2])         # starts inside an episode
+    learner.learn(by_index[0])
+    learner.learn(by_index[2])                                # index 1 never learnt: no state to carry
+    assert learner.counts["state_restarts"] == 2
+
+
+def test_a_checkpoint_resumes_the_update_count_and_the_weights(sequences, tmp_path):
+    run = tmp_path / "run"
+    learner = SequenceLearner(_config(), run, batch_sequences=2)
+    learner.learn([s for s in sequences if s.index == 0])
+    learner.save_checkpoint()
+    learner.close()
+    again = SequenceLearner(_config(), run, resume=True, batch_sequences=2)
+    assert again.version == 2 and again.env_steps == 2 * T
+    for (name, a), b in zip(again.agent.state_dict().items(), learner.agent.state_dict().values()):
+        assert torch.equal(a, b), name
+
+
+def test_the_learner_thread_takes_one_sequence_per_stream_per_batch(sequences, tmp_path):
+    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=10, log=False)
+    updates = []
+    background = BackgroundLearner(learner, on_update=lambda lrn, stats: updates.append(lrn.version))
+    background.start()
+    started = time.perf_counter()
+    background.put(sequences)                        # 8 sequences of 2 streams, fed at once
+    assert time.perf_counter() - started < 0.5       # the feeder never waits for a gradient step
+    deadline = time.monotonic() + 60.0
+    while len(updates) < 4 and time.monotonic() < deadline and not background.error:
+        time.sleep(0.05)
+    background.stop()
+    assert not background.error, background.error
+    assert updates == [2, 3, 4, 5] and background.depth() == 0
+    assert learner.counts["state_restarts"] == 0     # every batch continued both streams in order
+
+
+def test_settings_that_cannot_learn_from_lagging_experience_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="needs 'ppo'"):
+        SequenceLearner(_config(algorithm="a2c"), tmp_path / "a")
+    with pytest.raises(ValueError, match="batch_sequences"):
+        SequenceLearner(_config(ppo_minibatches=4), tmp_path / "b", batch_sequences=2)

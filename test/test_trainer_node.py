@@ -1,0 +1,83 @@
+"""The trainer node over a live graph, launch-free: it finds the games' robots by name, learns from what the policy
+nodes did (and rebuilds exactly what they saw), streams weights the policy nodes swap in, and keeps several games
+apart."""
+from __future__ import annotations
+
+import json
+
+from rclpy.parameter import Parameter
+
+from dynenv_ros.nodes.sim_node import SimNode
+from dynenv_ros.nodes.trainer_node import TrainerNode
+from policy_node.policy_node import PolicyNode
+from ros_harness import spin_until
+
+
+def _params(**values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _game(make_node, executor, namespace=None, seed=3):
+    """A stepped 1v1 game whose policy node plays both robots; it starts once the policy node and the trainer
+    read every robot's detections, so the trainer sees each episode from its start."""
+    options = {"namespace": namespace} if namespace else {}
+    sim = make_node(SimNode, parameter_overrides=_params(players_per_team=1, seed=seed, falls_enabled=False,
+                                                         publish_markers=False, wait_for_subscribers=2), **options)
+    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=seed + 1), **options)
+    executor.add_node(sim)
+    executor.add_node(policy)
+    return sim, policy
+
+
+def _trainer(make_node, executor, run_dir, **values):
+    params = dict(players_per_team=1, sequence_length=4, batch_sequences=2, ppo_epochs=1, ppo_minibatches=1,
+                  run_dir=str(run_dir), variant="pred")
+    params.update(values)
+    trainer = make_node(TrainerNode, parameter_overrides=_params(**params))
+    executor.add_node(trainer)
+    return trainer
+
+
+def test_the_trainer_rebuilds_what_the_policy_saw_and_chose(make_node, executor, tmp_path):
+    """With learning rate 0 every version's weights are the first ones, so the learner's log-probability of each
+    action it rebuilt from the wire must equal the one the policy node sent (up to float precision): observations,
+    previous actions, recurrent state and action indices all mean what the policy saw."""
+    trainer = _trainer(make_node, executor, tmp_path / "run", learning_rate=1e-7)
+    for group in trainer.learner.optimizer.param_groups:
+        group["lr"] = 0.0
+    sim, policy = _game(make_node, executor)
+    assert spin_until(executor, lambda: trainer.learner.updates >= 3, 90.0), str(trainer.diagnostics())
+    stats = trainer.learner.last_stats
+    assert stats["behaviour_log_prob_error"] < 1e-3, stats
+    counts = trainer.assembler.counts
+    assert counts["missing"] == 0 and counts["malformed"] == 0 and counts["late"] == 0, counts
+    assert trainer.games == {""} and {r for _, r in trainer.robots} == {"team_a_0", "team_b_0"}
+
+
+def test_weights_flow_back_and_the_policy_acts_with_new_versions(make_node, executor, tmp_path):
+    trainer = _trainer(make_node, executor, tmp_path / "run", learning_rate=1e-3, max_policy_lag=2)
+    sim, policy = _game(make_node, executor)
+    assert spin_until(executor, lambda: trainer.learner.updates >= 4, 120.0), trainer.diagnostics()
+    assert spin_until(executor, lambda: policy.policy_version >= 3, 30.0), (policy.policy_version, policy.counts)
+    assert policy.weights_acting[0] == trainer.run_id and policy.counts["weights_refused"] == 0
+    stats = trainer.learner.last_stats
+    assert stats["lag_versions_max"] <= 2
+    values = trainer.diagnostics()
+    assert int(values["updates"]) >= 4 and float(values["lag_versions_mean"]) <= 2
+    trainer.destroy_node()                            # finishes the run directory
+    run = tmp_path / "run"
+    assert (run / "policy.safetensors").is_file() and (run / "checkpoints" / "latest").exists()
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["updates"] >= 4
+    assert (run / "metrics.csv").read_text().count("\n") >= 4
+
+
+def test_several_games_in_their_namespaces_feed_one_trainer(make_node, executor, tmp_path):
+    trainer = _trainer(make_node, executor, tmp_path / "run", batch_sequences=4)
+    _game(make_node, executor, "/game_1", seed=3)
+    _game(make_node, executor, "/game_2", seed=7)
+    assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
+    assert trainer.games == {"/game_1", "/game_2"}
+    assert {(g, r) for g, r in trainer.learner.states} == {(g, r) for g in ("/game_1", "/game_2")
+                                                           for r in ("team_a_0", "team_b_0")}
+    assert trainer.assembler.counts["missing"] == 0
