@@ -12,7 +12,7 @@ from collections.abc import Sequence
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
           "policy": "policy", "train": "train", "soak": "soak",
-          "flood": "flood"}
+          "flood": "flood", "ros-train": "ros_train"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -42,6 +42,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "flood":
             from benchmarks.flood import add_arguments as add_flood_arguments
             add_flood_arguments(sub)
+        if name == "ros-train":
+            from benchmarks.ros_train import add_arguments as add_ros_train_arguments
+            add_ros_train_arguments(sub)
         if name == "ros":
             sub.add_argument("--sim-seconds", type=float, default=60.0, help="sim seconds per stepped game")
             sub.add_argument("--wall-seconds", type=float, default=10.0, help="realtime CPU sampling window")

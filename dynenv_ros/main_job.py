@@ -1,6 +1,7 @@
 """The main job (`make run`): runs the project's node graph end to end and prints a summary.
 
-Graphs: ``soccer`` (default) — the simulator node in stepped mode, team A played by a trained policy file (one
+Graphs: ``train`` — live training over ROS: simulator games, their policy nodes, the trainer node and a recorder
+(``graph/train_graph.py``). ``soccer`` (default) — the simulator node in stepped mode, team A played by a trained policy file (one
 policy node) or scripted, team B by one scripted policy node per robot, and the recorder, for ``duration_s`` of sim
 time; it prints achieved rates, message counts and the score, leaves the bag and a GIF in the run directory, and
 checks the bag holds every message the simulator published and every action it accepted. ``selfcheck`` — every
@@ -21,6 +22,7 @@ from typing import Any
 import yaml
 
 from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch, run_graph
+from dynenv_ros.graph.train_graph import summarise_train, train_graph
 from dynenv_ros.ros.selfcheck import format_report
 from dynenv_ros.soccer.config import robot_names
 
@@ -55,6 +57,9 @@ class MainJobConfig:
     gif: bool = True
     timeout_s: float = 180.0
     domain_id: int = -1  # -1: pick one from the process id, so parallel runs do not meet
+    games: int = 2                   # train graph: simulator games feeding the trainer
+    train_minutes: float = 3.0       # train graph: the trainer's wall-time budget
+    episode_seconds: float = 10.0    # train graph: sim seconds per episode
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> "MainJobConfig":
@@ -91,6 +96,12 @@ class MainJobConfig:
             raise ConfigError(f"players_per_team must be in [1, 5], got {self.players_per_team}")
         if self.perception not in PERCEPTION_PRESETS:
             raise ConfigError(f"perception must be one of {PERCEPTION_PRESETS}, got {self.perception!r}")
+        if not 1 <= self.games <= 8:
+            raise ConfigError(f"games must be in [1, 8], got {self.games}")
+        if not 0.2 <= self.train_minutes <= 1440:
+            raise ConfigError(f"train_minutes must be in [0.2, 1440], got {self.train_minutes}")
+        if not 1.0 <= self.episode_seconds <= 600:
+            raise ConfigError(f"episode_seconds must be in [1, 600], got {self.episode_seconds}")
         if self.policy not in POLICIES:
             raise ConfigError(f"policy must be one of {POLICIES}, got {self.policy!r}")
         if self.team_a != "scripted":
@@ -105,13 +116,18 @@ class MainJobConfig:
 # What each setting means (listed by --help) and which graphs use it: a --set of a key the chosen graph does not use
 # is refused, because it would change nothing (the config file may hold every key).
 SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
-    "graph": ("soccer | selfcheck: what to run", ("soccer", "selfcheck")),
-    "seed": ("world seed (soccer) / sample seed (selfcheck), 0..2^31-1", ("soccer", "selfcheck")),
-    "timeout_s": ("wall-clock limit of the whole run, s", ("soccer", "selfcheck")),
-    "domain_id": ("ROS_DOMAIN_ID of the graph, 0..101; -1 picks one from the process id", ("soccer", "selfcheck")),
+    "graph": ("soccer | train | selfcheck: what to run", ("soccer", "train", "selfcheck")),
+    "seed": ("world seed (soccer, train) / sample seed (selfcheck), 0..2^31-1", ("soccer", "train", "selfcheck")),
+    "timeout_s": ("wall-clock limit of the whole run, s (train: beyond train_minutes)",
+                  ("soccer", "train", "selfcheck")),
+    "domain_id": ("ROS_DOMAIN_ID of the graph, 0..101; -1 picks one from the process id",
+                  ("soccer", "train", "selfcheck")),
     "duration_s": ("sim seconds to play, 0.5..3600", ("soccer",)),
-    "players_per_team": ("robots per team, 1..5", ("soccer",)),
-    "perception": ("perception preset: " + " | ".join(PERCEPTION_PRESETS), ("soccer",)),
+    "players_per_team": ("robots per team, 1..5", ("soccer", "train")),
+    "perception": ("perception preset: " + " | ".join(PERCEPTION_PRESETS), ("soccer", "train")),
+    "games": ("simulator games (each with its policy node) feeding the trainer, 1..8", ("train",)),
+    "train_minutes": ("the trainer's wall-time budget, minutes", ("train",)),
+    "episode_seconds": ("sim seconds per training episode, 1..600", ("train",)),
     "policy": ("scripted team(s): " + " | ".join(POLICIES), ("soccer",)),
     "team_a": ("a trained policy file for team A (.onnx: onnxruntime, .safetensors: torch) or 'scripted'",
                ("soccer",)),
@@ -288,6 +304,7 @@ class Graph:
 
 
 GRAPHS: dict[str, Graph] = {"soccer": Graph(soccer_graph, summarise_soccer),
+                            "train": Graph(train_graph, summarise_train),
                             "selfcheck": Graph(selfcheck_graph, summarise_selfcheck)}
 
 
@@ -324,7 +341,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     domain_id = config.domain_id if config.domain_id >= 0 else 1 + os.getpid() % 100
     graph = GRAPHS[config.graph]
     print(f"dynenv-run: graph '{config.graph}' on ROS domain {domain_id}; logs in {run_dir}")
-    outcome = run_graph(graph.build(config, run_dir), run_dir, domain_id, config.timeout_s)
+    timeout_s = config.timeout_s + (60.0 * config.train_minutes if config.graph == "train" else 0.0)
+    outcome = run_graph(graph.build(config, run_dir), run_dir, domain_id, timeout_s)
     for node in outcome.nodes:
         state = "stopped" if node.stopped_by_graph else f"exit {node.exit_code}"
         print(f"  node {node.name:<24} {state:<10} log {node.log_path}")

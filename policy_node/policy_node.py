@@ -269,7 +269,8 @@ class PolicyNode(Node):
         def receive(msg: DetectionArray) -> None:
             self._store(name, msg)
             self._drain()
-            self._decide_if_ready()
+            while self._decide_if_ready():     # frames taken during a decision may complete the next period
+                pass
         return receive
 
     def _drain(self) -> None:
@@ -324,10 +325,22 @@ class PolicyNode(Node):
             memory.frames = {}
 
     # -- decisions -------------------------------------------------------------------------------------------------
-    def _decide_if_ready(self) -> None:
+    def _decide_if_ready(self) -> bool:
+        """Decide if every robot has a complete period; True if it did (the drain after a decision may have made
+        the next one ready: nothing else would wake the node for frames already taken)."""
         memories = [self.memory[n] for n in self.names]
         if any(m.ready is None for m in memories):
-            return
+            return False
+        # A robot still holding the previous episode's last period while another has the new episode's first: that
+        # last period's answer would be ignored, and deciding both together would leave the new episode waiting
+        # for an answer never sent (a stepped game stalls). Drop the old period and wait for the new one.
+        newest = max(m.ready[0].episode_id for m in memories)
+        stale = [m for m in memories if m.ready[0].episode_id != newest]
+        if stale:
+            for m in stale:
+                m.ready = None
+            self.counts["periods_dropped"] += len(stale)
+            return False
         periods = [m.ready for m in memories]
         frames = len(periods[0])
         if any(len(p) != frames for p in periods):
@@ -336,7 +349,7 @@ class PolicyNode(Node):
             for m in memories:
                 m.ready = None
             self.counts["periods_dropped"] += len(memories)
-            return
+            return False
         self.graph_frames = frames
         fixed = getattr(self.policy, "frames", None)
         if fixed is not None and fixed != frames:
@@ -392,6 +405,7 @@ class PolicyNode(Node):
             self.latencies_ms = self.latencies_ms[-100:]
             self.get_logger().info(f"decision latency for {len(self.names)} robots: median "
                                    f"{statistics.median(recent):.2f} ms, max {max(recent):.2f} ms")
+        return True
 
     def _run(self, memories: list[RobotMemory], periods: list[list[DetectionArray]]):
         """(actions (B, 4), finite (B,), step) of one decision; a policy that raises gives every robot the

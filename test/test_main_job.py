@@ -178,3 +178,42 @@ def test_the_recorded_actions_must_match_what_the_simulator_accepted(tmp_path):
     _bag_with_actions(tmp_path / "lossy", {"team_a_0": [3, 4, 5]})
     assert actions_not_recorded(report, tmp_path / "lossy") == {"/team_a_0/action": (4, 2),
                                                                 "/team_b_0/action": (4, 0)}
+
+
+def test_the_train_graph_runs_games_policies_and_the_trainer_and_summarises(tmp_path, capsys):
+    """A short run: the machinery (games in their namespaces, experience reaching the trainer, weights back, the
+    run directory, the curve). Whether 20 s of training beat the start is up to chance, so the exit status is not
+    checked here; the comparison's rule is checked on fixed numbers below."""
+    arguments = ["--output-dir", str(tmp_path), "--set", f"domain_id={os.environ['ROS_DOMAIN_ID']}",
+                 "--set", "graph=train", "--set", "train_minutes=0.35", "--set", "games=2",
+                 "--set", "players_per_team=1", "--set", "episode_seconds=2"]
+    main(arguments)
+    output = capsys.readouterr().out
+    summary = json.loads((tmp_path / "trainer" / "summary.json").read_text())
+    assert summary["updates"] >= 2 and summary["diagnostics"]["games"] == "2", output
+    assert summary["diagnostics"]["malformed"] == "0" and not summary["diagnostics"]["learner_error"]
+    assert (tmp_path / "trainer" / "policy.safetensors").is_file() and (tmp_path / "bag").is_dir()
+    assert "robot-periods learnt" in output and "reward learnt (auxiliary term) per episode" in output, output
+    assert "last third of the episodes" in output
+
+
+def _summary_with(tmp_path, returns):
+    (tmp_path / "trainer").mkdir(parents=True)
+    diagnostics = {k: "0" for k in ("games", "robots", "sequences", "late", "duplicate", "missing", "malformed",
+                                    "cuts", "lag_versions_mean", "lag_seconds_mean")}
+    diagnostics["learner_error"] = ""
+    (tmp_path / "trainer" / "summary.json").write_text(json.dumps({
+        "version": 31, "updates": 30, "env_steps": 600, "wall_seconds": 60.0, "diagnostics": diagnostics,
+        "episodes": [[1 + i, r] for i, r in enumerate(returns)]}))
+
+
+def test_the_train_summary_says_the_last_third_is_above_only_beyond_two_standard_errors(tmp_path, capsys):
+    from dynenv_ros.graph.train_graph import summarise_train
+    # first third 0.0 ± 0.1-ish, last third 1.0: difference 1.0, far beyond 2 standard errors
+    _summary_with(tmp_path / "up", [0.0, 0.2, -0.2, 0.1, -0.1, 0.0, 0.5, 0.5, 0.5, 1.0, 1.2, 0.8, 1.1, 0.9, 1.0])
+    assert summarise_train(None, tmp_path / "up", None)
+    assert "last third of the episodes above the first: +1.000 vs +0.000" in capsys.readouterr().out
+    # the same numbers in the other order: below
+    _summary_with(tmp_path / "down", [1.0, 1.2, 0.8, 1.1, 0.9, 0.5, 0.5, 0.5, 0.0, 0.2, -0.2, 0.1, -0.1, 0.0, 1.0])
+    assert not summarise_train(None, tmp_path / "down", None)
+    assert "NOT clearly above" in capsys.readouterr().out

@@ -454,3 +454,49 @@ def test_a_decision_that_fails_at_run_time_makes_the_robots_stand_still(make_nod
     assert policy.counts["fallback_actions"] == 3 and policy.counts["failed_decisions"] == 1
     policy.policy = healthy
     assert all(_valid(a) for a in feeder.act(3).values())
+
+
+def test_an_episode_change_seen_by_one_robot_first_does_not_stall_a_stepped_game(make_node, executor):
+    """Team-mates see a new episode at slightly different times: one robot may already hold the new episode's first
+    period while another still holds the old one's last. The old period is dropped (its answer would be ignored),
+    and every robot answers the new episode's first period — else the stepped game waits forever."""
+    policy = _policy_node(make_node, executor, team="")
+    feeder = Feeder(make_node, executor, robots=("team_a_0", "team_b_0"))
+    feeder.wait_for()
+    feeder.act(0)
+    feeder.send("team_a_0", _period(0, robot_id=0, episode=2))
+    assert spin_until(executor, lambda: policy.memory["team_a_0"].ready is not None, 5.0)
+    feeder.send("team_b_0", _period(1, robot_id=1, episode=1))             # the old episode's last period
+    assert spin_until(executor, lambda: policy.counts["periods_dropped"] >= 1, 5.0), policy.counts
+    feeder.send("team_b_0", _period(0, robot_id=1, episode=2))
+    assert spin_until(executor, lambda: all(any((a.episode_id, a.motion_period) == (2, 1) for a in feeder.actions[r])
+                                            for r in feeder.actions), 10.0), \
+        {r: [(a.episode_id, a.motion_period) for a in acts] for r, acts in feeder.actions.items()}
+    assert not any(a.episode_id == 1 and a.motion_period == 2 for a in feeder.actions["team_b_0"])
+
+
+class _PublishesDuring(_Wrapped):
+    """A decision during which the simulator's next period arrives (a stepped game whose other robots' actions
+    completed the period while this node was still computing)."""
+
+    def __init__(self, policy, feeder) -> None:
+        super().__init__(policy)
+        self.feeder, self.done = feeder, False
+
+    def __call__(self, *args):
+        if not self.done:
+            self.done = True
+            self.feeder.send("team_a_0", _period(1))
+            time.sleep(0.3)                   # delivered into the node's queue before the decision ends
+        return self.policy(*args)
+
+
+def test_a_period_completed_by_frames_taken_after_a_decision_is_acted_on(make_node, executor):
+    """The frames drained after a decision can complete the next period; no callback will come for them, so the
+    node must decide again at once — else a stepped game waits forever for its answer."""
+    policy = _policy_node(make_node, executor)
+    feeder = Feeder(make_node, executor)
+    feeder.wait_for()
+    policy.policy = _PublishesDuring(policy.policy, feeder)
+    feeder.send("team_a_0", _period(0))
+    assert spin_until(executor, lambda: policy.counts["decisions"] == 2, 5.0), policy.counts    # periods 0 and 1

@@ -24,9 +24,12 @@ class NodeLaunch:
     module: str
     parameters: dict[str, Any] = field(default_factory=dict)
     ends_run: bool = False  # the run is over when every node with ends_run has exited
+    namespace: str = ""     # e.g. "/game_1": the node's topics are the game's (ros/topics.py)
 
     def command(self) -> list[str]:
         args = [sys.executable, "-m", self.module, "--ros-args", "-r", f"__node:={self.name}"]
+        if self.namespace:
+            args += ["-r", f"__ns:={self.namespace}"]
         for key, value in self.parameters.items():
             args += ["-p", f"{key}:={_parameter_literal(value)}"]
         return args

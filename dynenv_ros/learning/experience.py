@@ -17,7 +17,9 @@ game's namespace) — an *observation slot* (episode e, period p) gathers:
 Step t of a sequence is slot (e, p): observation p, its answer, and the feedback of period p + 1 (reward, episode
 end). After an episode's end the next slot is the robot's next episode's period 0 (``starts``), as in the in-process
 rollouts (``learning.rollout``); a truncated episode is bootstrapped with the value the policy gave the episode's
-final observation (the answer it sent to it, which the simulator ignores). A sequence of T steps needs T + 1 slots:
+final observation (the answer it sent to it, which the simulator ignores) or, when it sent none (a stepped policy
+node that already sees the next episode skips it), with the value of the last observation acted on
+(``bootstrap_estimated``). A sequence of T steps needs T + 1 slots:
 the last one is the next sequence's first (they overlap by one observation, like rollouts).
 
 Everything that can go wrong with messages is counted, never raised: ``late`` (for a slot already passed),
@@ -347,8 +349,9 @@ class ExperienceAssembler:
             final = stream.slots.get((keys[t][0], keys[t][1] + 1))
             if final is not None and final.answer is not None and final.answer.policy_version:
                 final_values[t] = final.answer.value
-            else:
-                self.counts["bootstrap_missing"] += 1
+            else:       # a stepped policy node often skips the final observation (the next episode is already
+                final_values[t] = values[t]     # there): V(s) of the last step stands in, counted
+                self.counts["bootstrap_estimated"] += 1
         targets = self._targets(source, robot, keys, slots) if self.with_targets else {}
         sequence = Sequence((source, robot), obs, actions, log_probs, values, terms.sum(-1), terms, episode_end,
                             truncated, final_values, starts, can_act(obs["proprioception"]), targets, versions,

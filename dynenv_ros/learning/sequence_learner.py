@@ -43,7 +43,7 @@ class SequenceLearner:
     out are called (``PolicyWeights.version``, ``Action.policy_version``)."""
 
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, batch_sequences: int = 8,
-                 max_policy_lag: int = 4, log: bool = True) -> None:
+                 max_policy_lag: int = 4, log: bool = True, reward_weights=(1.0, 1.0, 1.0, 1.0)) -> None:
         if cfg.algorithm != "ppo":
             raise ValueError("algorithm: learning from message experience needs 'ppo' (its ratio corrects the "
                              "policy lag; A2C is on-policy only)")
@@ -57,6 +57,11 @@ class SequenceLearner:
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.batch_sequences, self.max_policy_lag = batch_sequences, max_policy_lag
+        # The reward learnt: a weighted sum of the four terms of StepFeedback (primary, rule, auxiliary,
+        # observation); all ones is the simulator's total.
+        self.reward_weights = np.asarray(reward_weights, np.float32)
+        if self.reward_weights.shape != (4,) or not np.isfinite(self.reward_weights).all():
+            raise ValueError(f"reward_weights must be 4 finite numbers, got {list(reward_weights)}")
         torch.set_num_threads(cfg.torch_threads)
         self.settings = update_settings(cfg)
         soccer = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode})
@@ -102,6 +107,7 @@ class SequenceLearner:
         if lag > self.max_policy_lag:
             self.counts["stale_sequences"] += 1
             self.states.pop(sequence.stream, None)
+            self.returns[sequence.stream] = float("nan")           # that episode's return is incomplete now
             return False
         return True
 
@@ -109,6 +115,7 @@ class SequenceLearner:
         """One PPO update on these sequences (one per stream, each after its stream's previous one)."""
         now = time.time()
         arrays = batch(sequences)
+        arrays["rewards"] = arrays["reward_terms"] @ self.reward_weights
         B = len(sequences)
         initial = [torch.zeros(B, s.shape[-1]) for s in self.agent.initial_state(1)]
         known_state = np.zeros(B, bool)         # the learner starts from the state the policy had (up to lag)
@@ -136,7 +143,7 @@ class SequenceLearner:
         stats["lag_seconds_mean"] = float(np.mean([now - self.published.get(int(v), now) for v in versions.ravel()]))
         if alignment is not None:
             stats["behaviour_log_prob_error"] = alignment
-        self._account(sequences)
+        self._account(sequences, arrays["rewards"])
         T = arrays["actions"].shape[0]
         self.env_steps += T * B
         self.updates += 1
@@ -182,16 +189,21 @@ class SequenceLearner:
         for b, sequence in enumerate(sequences):
             self.states[sequence.stream] = (sequence.index, tuple(s[b].clone() for s in out.state))
 
-    def _account(self, sequences: list[Sequence]) -> None:
-        for sequence in sequences:
+    def _account(self, sequences: list[Sequence], rewards: np.ndarray) -> None:
+        """Episode returns of the reward learnt; an episode counts once its end is learnt from, under the
+        version that chose its last action."""
+        for b, sequence in enumerate(sequences):
             total = self.returns.get(sequence.stream, 0.0)
+            if sequence.starts[0]:      # an episode's start, or a cut (its beginning unknown: not counted)
+                total = 0.0 if sequence.keys[0][1] == 0 else float("nan")
             for t in range(len(sequence.rewards)):
                 if sequence.starts[t] and t > 0:
                     total = 0.0
-                total += float(sequence.rewards[t])
+                total += float(rewards[t, b])
                 if sequence.episode_end[t]:
-                    self.finished.append({"version": float(sequence.versions[t]), "return": total})
-                    self.episodes += 1
+                    if total == total:                            # whole episodes only
+                        self.finished.append({"version": float(sequence.versions[t]), "return": total})
+                        self.episodes += 1
                     total = 0.0
             self.returns[sequence.stream] = total
 

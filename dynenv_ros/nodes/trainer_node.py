@@ -29,7 +29,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from dynenv_msgs.msg import Action, DetectionArray, PolicyWeights, StepFeedback, WorldState
-from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
@@ -40,7 +40,7 @@ from dynenv_ros.learning.experience import ExperienceAssembler
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.drain import take
-from dynenv_ros.ros.node_runner import run_node
+from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str
 from dynenv_ros.ros.qos import latched
 from dynenv_ros.soccer.config import SoccerConfig
@@ -68,6 +68,15 @@ class TrainerNode(Node):
         learning_rate = declare_float(self, "learning_rate", 1e-4, 1e-7, 1.0, "Adam learning rate (settable).")
         entropy = declare_float(self, "entropy_coef", 0.01, 0.0, 10.0, "Weight of the entropy bonus (settable).")
         steps = declare_int(self, "sequence_length", 6, 1, 256, "Motion periods per sequence (T).", **fixed)
+        feature_size = declare_int(self, "feature_size", 64, 1, 1024, "Width D of the network (paper: 64).", **fixed)
+        gamma = declare_float(self, "gamma", 0.99, 0.0, 1.0, "Discount per motion period.", **fixed)
+        normalize = declare_bool(self, "normalize_advantages", False, "Normalise advantages per minibatch.",
+                                 **fixed)
+        weights = self.declare_parameter("reward_weights", [1.0, 1.0, 1.0, 1.0], ParameterDescriptor(
+            description="Reward learnt: weights of StepFeedback's primary, rule, auxiliary and observation terms "
+                        "(all ones: the simulator's total).", read_only=True)).value
+        max_minutes = declare_float(self, "max_minutes", 0.0, 0.0, 1e6, "Stop (checkpoint, policy file, summary) "
+                                    "after this many wall minutes; 0 = until stopped.", **fixed)
         self.batch_sequences = declare_int(self, "batch_sequences", 8, 1, 4096, "Sequences per update (at most one "
                                            "per robot stream).", **fixed)
         epochs = declare_int(self, "ppo_epochs", 4, 1, 64, "PPO passes over each batch.", **fixed)
@@ -88,7 +97,7 @@ class TrainerNode(Node):
                                 "both ('': self-play with shared weights). Opponents are whoever controls the other "
                                 "team (a scripted node, a frozen policy node with weights_topic:='').",
                                 choices=("", "a", "b"), **fixed)
-        patience = declare_int(self, "patience", 8, 1, 1000, "Periods a stream moves on before an incomplete one "
+        patience = declare_int(self, "patience", 32, 1, 1000, "Periods a stream moves on before an incomplete one "
                                "counts as missing.", **fixed)
         seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed of the initial weights and minibatch order.", **fixed)
         threads = declare_int(self, "torch_threads", 1, 1, 256, "torch threads of the learner.", **fixed)
@@ -98,6 +107,7 @@ class TrainerNode(Node):
         try:
             self.cfg = TrainConfig(algorithm="ppo", variant=variant, players_per_team=players, rollout_length=steps,
                                    ltp_horizon=min(6, steps), learning_rate=learning_rate, entropy_coef=entropy,
+                                   feature_size=feature_size, gamma=gamma, normalize_advantages=normalize,
                                    ppo_epochs=epochs, ppo_minibatches=minibatches, gae_lambda=0.95,
                                    checkpoint_every_minutes=checkpoint_min, keep_checkpoints=keep, seed=seed,
                                    torch_threads=threads, log_every_updates=1)
@@ -106,9 +116,11 @@ class TrainerNode(Node):
         self.run_dir = Path(run_dir or f"runs/trainer-{time.strftime('%Y%m%d-%H%M%S')}")
         try:
             self.learner = SequenceLearner(self.cfg, self.run_dir, resume=resume,
-                                           batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag)
+                                           batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag,
+                                           reward_weights=list(weights))
         except ValueError as error:
-            raise ParameterException(str(error), ["resume" if resume else "batch_sequences"]) from None
+            key = "reward_weights" if "reward_weights" in str(error) else "resume" if resume else "batch_sequences"
+            raise ParameterException(str(error), [key]) from None
         self.run_id = self.run_dir.resolve().name
         motion = soccer.motion
         self.assembler = ExperienceAssembler(steps, players, soccer.rates.frames_per_period, motion.head_max_delta,
@@ -132,6 +144,9 @@ class TrainerNode(Node):
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.discovery_timer = self.create_timer(0.5, self._discover, clock=wall)
         self.diagnostics_timer = self.create_timer(diagnostics_s, self._publish_diagnostics, clock=wall)
+        self.deadline = time.monotonic() + 60.0 * max_minutes if max_minutes > 0 else None
+        if self.deadline is not None:
+            self.budget_timer = self.create_timer(1.0, self._check_budget, clock=wall)
         self._discover()
         self.get_logger().info(f"learning {variant} (PPO) from {'both teams' if not self.team else 'team ' + self.team}"
                                f" into {self.run_dir}, version {self.learner.version}")
@@ -139,6 +154,12 @@ class TrainerNode(Node):
     def _needs_targets(self) -> bool:
         losses = self.cfg.losses()
         return losses.localization or losses.reconstruction
+
+    def _check_budget(self) -> None:
+        if time.monotonic() >= self.deadline:
+            self.get_logger().info(f"time budget spent: version {self.learner.version}, "
+                                   f"{self.learner.updates} updates, {self.learner.env_steps} steps learnt")
+            raise NodeExit(0)
 
     # -- experience ---------------------------------------------------------------------------------------------
     def _discover(self) -> None:
@@ -252,7 +273,7 @@ class TrainerNode(Node):
                   "learner_error": self.background.error}
         for key in ("steps", "sequences", "late", "duplicate", "out_of_order", "missing", "malformed",
                     "not_learning", "cuts", "steps_discarded", "unknown_robot", "targets_missing",
-                    "bootstrap_missing"):
+                    "bootstrap_estimated"):
             values[key] = str(counts.get(key, 0))
         for key, value in list(self.learner.counts.items()) + list(self.background.counts.items()):
             values[key] = str(value)
@@ -276,7 +297,9 @@ class TrainerNode(Node):
         for episode in self.episodes:
             by_version.setdefault(int(episode["version"]), []).append(episode["return"])
         return {"version": self.learner.version, "updates": self.learner.updates,
-                "env_steps": self.learner.env_steps,
+                "env_steps": self.learner.env_steps, "wall_seconds": self.learner.meta()["wall_seconds"],
+                "reward_weights": self.learner.reward_weights.tolist(),
+                "episodes": [[int(e["version"]), e["return"]] for e in self.episodes],
                 "returns_by_version": {v: {"episodes": len(r), "mean_return": statistics.fmean(r)}
                                        for v, r in sorted(by_version.items())},
                 "diagnostics": self.diagnostics()}

@@ -1,0 +1,97 @@
+"""The main job's ``train`` graph: live training over ROS 2 (``make run ARGS="--set graph=train"``).
+
+``games`` simulator games in stepped mode, each in its own namespace (``/game_1`` …) with one policy node playing
+both teams with the trainer's weights; one trainer node learning from all of them for ``train_minutes``; a
+recorder of the experience topics (actions, feedback) and the trainer's diagnostics. The summary prints the reward
+curve per policy version, the experience rate and the lag, and compares the first third of the episodes with the
+last third.
+
+The task learnt is the one a few minutes of two CPU cores can show (docs/ros_graph.md, "The train graph"): the
+auxiliary reward alone (walking to the ball and moving it towards the opponent goal, ``reward_weights
+[0, 0, 1, 0]``), a small network (D = 32) and short episodes — the graph demonstrates the machinery, it does not
+train a team.
+"""
+from __future__ import annotations
+
+import json
+import math
+import statistics
+from pathlib import Path
+from typing import Any
+
+from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch
+
+# The trainer's settings for the demonstration (the node's defaults are the paper's).
+TRAINER_SETTINGS = {"variant": "baseline", "feature_size": 32, "learning_rate": 3e-3, "gamma": 0.9,
+                    "normalize_advantages": True, "entropy_coef": 0.0, "sequence_length": 5, "ppo_epochs": 4,
+                    "ppo_minibatches": 1, "max_policy_lag": 3, "reward_weights": [0.0, 0.0, 1.0, 0.0],
+                    "checkpoint_every_minutes": 1.0}
+
+
+def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
+    players = config.players_per_team
+    trainer = NodeLaunch("trainer", "dynenv_ros.nodes.trainer_node", {
+        **TRAINER_SETTINGS, "players_per_team": players, "run_dir": str(run_dir / "trainer"), "seed": config.seed,
+        "batch_sequences": config.games * 2 * players, "max_minutes": config.train_minutes}, ends_run=True)
+    nodes: list[NodeLaunch] = []
+    topics = ["/trainer/diagnostics"]
+    for game in range(1, config.games + 1):
+        namespace = f"/game_{game}"
+        nodes.append(NodeLaunch(f"sim_game_{game}", "dynenv_ros.nodes.sim_node", {
+            "players_per_team": players, "seed": config.seed + game, "perception_preset": config.perception,
+            "mode": "stepped", "episode_seconds": config.episode_seconds, "auto_reset": True,
+            "publish_markers": False, "wait_for_subscribers": 2}, namespace=namespace))
+        nodes.append(NodeLaunch(f"policy_game_{game}", "policy_node.policy_node", {
+            "players_per_team": players, "seed": config.seed + 100 + game}, namespace=namespace))
+        for team in "ab":
+            for slot in range(players):
+                topics += [f"{namespace}/team_{team}_{slot}/action", f"{namespace}/team_{team}_{slot}/feedback"]
+    recorder = NodeLaunch("recorder", "dynenv_ros.nodes.recorder", {"output": str(run_dir / "bag"),
+                                                                     "topics": topics})
+    return [recorder, trainer, *nodes]
+
+
+def _mean_se(values: list[float]) -> tuple[float, float]:
+    mean = statistics.fmean(values)
+    se = statistics.stdev(values) / math.sqrt(len(values)) if len(values) > 1 else float("inf")
+    return mean, se
+
+
+def summarise_train(outcome: GraphOutcome, run_dir: Path, config: Any) -> bool:
+    path = run_dir / "trainer" / "summary.json"
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        print(f"  no trainer summary ({path}: {error})")
+        return False
+    diag = summary["diagnostics"]
+    wall = max(float(summary.get("wall_seconds", 0.0)), 1e-9)
+    print(f"  trainer: {summary['updates']} updates to version {summary['version']}, {summary['env_steps']} "
+          f"robot-periods learnt in {wall:.0f} s ({summary['env_steps'] / wall:.1f}/s) from "
+          f"{diag['games']} games, {diag['robots']} robots")
+    print(f"  experience: {diag['sequences']} sequences; late {diag['late']}, duplicate {diag['duplicate']}, "
+          f"missing {diag['missing']}, malformed {diag['malformed']}, cut {diag['cuts']}, stale "
+          f"{diag.get('stale_sequences', '0')}, queue dropped {diag.get('queue_dropped', '0')}")
+    print(f"  policy lag at the last update: {diag['lag_versions_mean']} versions, {diag['lag_seconds_mean']} s")
+    episodes = summary["episodes"]
+    if len(episodes) < 6:
+        print(f"  only {len(episodes)} whole episodes learnt from: too few for a curve")
+        return False
+    episodes.sort(key=lambda e: e[0])
+    buckets = 6
+    print("  reward learnt (auxiliary term) per episode, by the policy version that ended it:")
+    size = len(episodes) / buckets
+    for k in range(buckets):
+        chunk = episodes[round(k * size):round((k + 1) * size)]
+        mean, se = _mean_se([r for _, r in chunk])
+        print(f"    versions {int(chunk[0][0]):>4}..{int(chunk[-1][0]):<4} {len(chunk):>4} episodes  "
+              f"mean {mean:+.3f} ± {se:.3f}")
+    third = len(episodes) // 3
+    first, first_se = _mean_se([r for _, r in episodes[:third]])
+    last, last_se = _mean_se([r for _, r in episodes[-third:]])
+    difference, se = last - first, math.hypot(first_se, last_se)
+    verdict = "above" if difference > 2 * se else "NOT clearly above"
+    print(f"  last third of the episodes {verdict} the first: {last:+.3f} vs {first:+.3f} "
+          f"({difference:+.3f} ± {se:.3f}, {third} episodes each)")
+    return (not diag["learner_error"] and int(summary["updates"]) > 0 and int(diag["malformed"]) == 0
+            and difference > 2 * se)

@@ -1,0 +1,112 @@
+"""The training graph under faults, launch-free: a trainer killed with SIGKILL leaves the policy nodes playing on
+their last weights and a restarted one resumes from its last checkpoint; a killed simulator leaves the trainer
+learning from the other games; hostile experience messages are dropped and counted."""
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import warnings
+
+from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
+from rclpy.parameter import Parameter
+
+from dynenv_ros.learning import checkpoints
+from dynenv_ros.nodes.sim_node import SimNode
+from dynenv_ros.nodes.trainer_node import TrainerNode
+from dynenv_ros.ros.qos import sim_stream
+from policy_node.policy_node import PolicyNode
+from ros_harness import spin_until
+from test_trainer_node import _game, _params, _trainer
+
+TRAINER = dict(players_per_team=1, sequence_length=4, batch_sequences=2, ppo_epochs=1, ppo_minibatches=1,
+               variant="baseline", feature_size=16, checkpoint_every_minutes=0.01)
+
+
+def _trainer_process(run_dir, resume=False) -> subprocess.Popen:
+    args = [sys.executable, "-m", "dynenv_ros.nodes.trainer_node", "--ros-args"]
+    for key, value in {**TRAINER, "run_dir": str(run_dir), "resume": resume}.items():
+        literal = ("true" if value else "false") if isinstance(value, bool) else value
+        args += ["-p", f"{key}:={literal}"]
+    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def test_a_killed_trainer_leaves_the_robots_playing_and_a_restarted_one_resumes(make_node, executor, tmp_path):
+    run = tmp_path / "run"
+    trainer = _trainer_process(run)
+    try:
+        sim, policy = _game(make_node, executor)
+        assert spin_until(executor, lambda: policy.policy_version >= 4 and checkpoints.list_checkpoints(run),
+                          120.0), (policy.policy_version, policy.counts)
+        trainer.send_signal(signal.SIGKILL)
+        trainer.wait(10)
+        version, periods = policy.policy_version, sim.periods_run
+        assert spin_until(executor, lambda: sim.periods_run >= periods + 20, 60.0)       # still playing
+        assert policy.policy_version == version and policy.counts["fallback_actions"] == 0
+        with warnings.catch_warnings():     # the kill may land while `latest` is replaced: the newest valid one
+            warnings.simplefilter("ignore", checkpoints.CheckpointWarning)
+            saved = checkpoints.read_checkpoint_meta(run)["updates"]
+        loaded = policy.counts["weights_loaded"]
+        trainer = _trainer_process(run, resume=True)
+        # the restarted trainer hands out its checkpoint's weights at once (version 1 + its updates), then learns on
+        assert spin_until(executor, lambda: policy.counts["weights_loaded"] > loaded, 60.0)
+        assert policy.weights_acting[1] >= saved + 1
+        assert spin_until(executor, lambda: policy.policy_version > saved + 2, 120.0), policy.policy_version
+    finally:
+        trainer.kill()
+        output = trainer.communicate(timeout=10)[0]
+    assert f"version {saved + 1}" in output, output[-2000:]
+
+
+def test_a_killed_simulator_leaves_the_trainer_learning_from_the_other_games(make_node, executor, tmp_path):
+    trainer = _trainer(make_node, executor, tmp_path / "run", batch_sequences=2, variant="baseline", feature_size=16)
+    _game(make_node, executor, "/game_2", seed=7)
+    sim_1 = subprocess.Popen([sys.executable, "-m", "dynenv_ros.nodes.sim_node", "--ros-args", "-r", "__ns:=/game_1",
+                              "-p", "players_per_team:=1", "-p", "wait_for_subscribers:=2", "-p",
+                              "publish_markers:=false"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    policy_1 = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=9), namespace="/game_1")
+    executor.add_node(policy_1)
+    try:
+        assert spin_until(executor, lambda: {s for s, _ in trainer.learner.states} == {"/game_1", "/game_2"},
+                          120.0), trainer.diagnostics()
+        sim_1.send_signal(signal.SIGKILL)
+        sim_1.wait(10)
+        updates = trainer.learner.updates
+        assert spin_until(executor, lambda: trainer.learner.updates >= updates + 4, 120.0), trainer.diagnostics()
+        learnt = {stream: entry[0] for stream, entry in trainer.learner.states.items()}   # game 1's last ones learnt
+        assert spin_until(executor, lambda: trainer.learner.updates >= updates + 8, 120.0), trainer.diagnostics()
+        assert not trainer.background.error
+        after = {stream: entry[0] for stream, entry in trainer.learner.states.items()}
+        assert all(after[s] > learnt[s] for s in after if s[0] == "/game_2")           # game 2 goes on
+        assert all(after[s] == learnt[s] for s in after if s[0] == "/game_1")          # game 1 is gone
+    finally:
+        sim_1.kill()
+
+
+def test_hostile_experience_is_dropped_and_counted(make_node, executor, tmp_path):
+    trainer = _trainer(make_node, executor, tmp_path / "run", variant="baseline", feature_size=16)
+    hostile = make_node("hostile")
+    detections = hostile.create_publisher(DetectionArray, "/team_a_0/detections", sim_stream())
+    actions = hostile.create_publisher(Action, "/team_a_0/action", sim_stream())
+    feedback = hostile.create_publisher(StepFeedback, "/team_a_0/feedback", sim_stream())
+    executor.add_node(hostile)
+    assert spin_until(executor, lambda: ("", "team_a_0") in trainer.robots and actions.get_subscription_count() >= 1
+                      and feedback.get_subscription_count() >= 1, 20.0)
+    bad = [(detections, DetectionArray(robot_id=0, episode_id=1, motion_period=0, frame_index=7, frames_per_period=5)),
+           (detections, DetectionArray(robot_id=0, episode_id=1, motion_period=0, frame_index=0, frames_per_period=0)),
+           (detections, DetectionArray(robot_id=3, episode_id=1, motion_period=0, frame_index=0, frames_per_period=5)),
+           (actions, Action(robot_id=0, episode_id=1, motion_period=1, walk=200, policy_version=1)),
+           (actions, Action(robot_id=0, episode_id=1, motion_period=1, policy_version=1, log_prob=math.nan)),
+           (actions, Action(robot_id=0, episode_id=1, motion_period=1, head_yaw_delta=math.inf)),
+           (actions, Action(robot_id=0, episode_id=1, motion_period=0)),
+           (feedback, StepFeedback(robot_id=0, episode_id=1, motion_period=1, reward_rule=math.nan)),
+           (feedback, StepFeedback(robot_id=5, episode_id=1, motion_period=1))]
+    for publisher, msg in bad:
+        publisher.publish(msg)
+    assert spin_until(executor, lambda: trainer.assembler.counts["malformed"] == len(bad), 10.0), \
+        trainer.assembler.counts
+    assert trainer.received["errors"] == 0 and not trainer.background.error
+    # and the graph still trains: a real game after the attack
+    sim, policy = _game(make_node, executor, seed=5)
+    assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
