@@ -3,6 +3,7 @@ the recurrent state carried from one sequence of a stream to the next, checkpoin
 thread that never blocks whoever feeds it."""
 from __future__ import annotations
 
+import json
 import time
 
 import pytest
@@ -109,3 +110,48 @@ def test_settings_that_cannot_learn_from_lagging_experience_are_refused(tmp_path
         SequenceLearner(_config(algorithm="a2c"), tmp_path / "a")
     with pytest.raises(ValueError, match="batch_sequences"):
         SequenceLearner(_config(ppo_minibatches=4), tmp_path / "b", batch_sequences=2)
+
+
+def test_a_warm_start_from_a_policy_file_and_a_file_that_does_not_fit(tmp_path):
+    from dynenv_ros.agent.checkpoint import save_policy
+    from dynenv_ros.agent.network import DynEnvAgent
+    torch.manual_seed(5)
+    warm = DynEnvAgent(feature_size=64)
+    save_policy(warm, tmp_path / "warm.safetensors")
+    learner = SequenceLearner(_config(), tmp_path / "run", initial_policy=tmp_path / "warm.safetensors")
+    for (name, a), b in zip(learner.agent.state_dict().items(), warm.state_dict().values()):
+        assert torch.equal(a, b), name
+    save_policy(DynEnvAgent(feature_size=16), tmp_path / "small.safetensors")
+    with pytest.raises(ValueError, match="does not fit the learner"):
+        SequenceLearner(_config(), tmp_path / "run2", initial_policy=tmp_path / "small.safetensors")
+
+
+def test_dynenv_train_resumes_a_run_directory_the_trainer_node_wrote(sequences, tmp_path):
+    from dynenv_ros.learning.train_cli import main as train_main
+    run = tmp_path / "run"
+    learner = SequenceLearner(_config(num_envs=1, backend="inprocess", total_env_steps=8 + 4), run,
+                              batch_sequences=2)
+    learner.learn([s for s in sequences if s.index == 0])           # 2 sequences x 4 steps = 8 env steps
+    learner.save_checkpoint()
+    learner.close()
+    assert train_main(["--resume", str(run), "--no-progress"]) == 0     # one more in-process update: 12 steps
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["updates"] == 2 and summary["env_steps"] == 12
+
+
+def test_the_learner_thread_takes_sequences_from_anywhere_in_its_queue(sequences, tmp_path):
+    """A stream that produced two sequences before another produced one: the batch takes the first of each, from
+    the middle of the queue too (a queue used to compare sequences by their arrays there, and the thread died)."""
+    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=10, log=False)
+    a = sorted((s for s in sequences if s.stream[1] == "team_a_0"), key=lambda s: s.index)
+    b = sorted((s for s in sequences if s.stream[1] == "team_b_0"), key=lambda s: s.index)
+    updates = []
+    background = BackgroundLearner(learner, on_update=lambda lrn, stats: updates.append(lrn.version))
+    background.put([a[0], a[1], b[0], b[1]])
+    background.start()
+    deadline = time.monotonic() + 60.0
+    while len(updates) < 2 and time.monotonic() < deadline and not background.error:
+        time.sleep(0.05)
+    background.stop()
+    assert not background.error, background.error
+    assert updates == [2, 3] and background.depth() == 0 and learner.counts["state_restarts"] == 0

@@ -41,6 +41,7 @@ def test_a_killed_trainer_leaves_the_robots_playing_and_a_restarted_one_resumes(
                           120.0), (policy.policy_version, policy.counts)
         trainer.send_signal(signal.SIGKILL)
         trainer.wait(10)
+        spin_until(executor, lambda: False, 1.0)         # weights already on their way when it died may land
         version, periods = policy.policy_version, sim.periods_run
         assert spin_until(executor, lambda: sim.periods_run >= periods + 20, 60.0)       # still playing
         assert policy.policy_version == version and policy.counts["fallback_actions"] == 0

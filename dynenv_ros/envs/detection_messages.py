@@ -61,9 +61,11 @@ def pack_messages(periods: list[list[Any]], previous: list[tuple], max_landmarks
     for b, period in enumerate(periods):
         for k, msg in enumerate(period):
             observation["proprioception"][b, k] = (_finite(msg.head_yaw, stats), msg.self_fallen,
-                                                   msg.self_penalized, msg.self_kicking)
+                                                   msg.self_penalized, getattr(msg, "self_kicking", False))
         last = period[-1]
-        observation["game"][b] = (last.ball_owner, _finite(last.ball_owner_seconds, stats),
-                                  _finite(last.game_seconds_remaining, stats))
+        # Fields a bag recorded before they existed (rosbags reads its own definition) read as 0.
+        observation["game"][b] = (getattr(last, "ball_owner", 0),
+                                  _finite(getattr(last, "ball_owner_seconds", 0.0), stats),
+                                  _finite(getattr(last, "game_seconds_remaining", 0.0), stats))
         observation["previous_action"][b] = previous[b]
     return observation, int(dropped.sum())

@@ -43,11 +43,16 @@ import numpy as np
 from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.envs.learning_targets import LearningTargets, empty_targets
 from dynenv_ros.envs.padded_layout import PaddedLayout
-from dynenv_ros.learning.rollout import can_act
+from dynenv_ros.learning.rollout import STEP_ARRAYS, StepArrays, can_act
 
 STAND_STILL = (0.0, 0.0, 0.0, 0.0)
 STATUS_FALLEN = 1                 # ObjectState.STATUS_FALLEN
 WALKS, TURNS, KICKS = 5, 3, 3     # Action.msg's choices
+
+
+def version(action: Any) -> int:
+    """Action.policy_version; 0 for an Action recorded before the learning fields existed."""
+    return int(getattr(action, "policy_version", 0))
 
 
 def stamp_ns(header: Any) -> int:
@@ -72,25 +77,14 @@ class Slot:
         return None if last is None else stamp_ns(last.header)
 
 
-@dataclass
-class Sequence:
+@dataclass(eq=False)
+class Sequence(StepArrays):
     """T steps of one stream, in the arrays of ``learning.rollout.Rollout`` for one robot (no robot axis):
     obs (T+1, ...), actions (T, 4) int64 (head as its discrete index), log_probs (T,), values (T+1,), rewards (T,),
     reward_terms (T, 4), episode_end, truncated, final_values (T,), starts, can_act (T+1,), targets (T+1, ...) or
     empty, versions (T,) int64 (Action.policy_version of each step), ``continues``: it follows the stream's previous
     sequence without a cut (the learner carries that sequence's final recurrent state into it)."""
     stream: tuple[str, str]
-    obs: dict[str, np.ndarray]
-    actions: np.ndarray
-    log_probs: np.ndarray
-    values: np.ndarray
-    rewards: np.ndarray
-    reward_terms: np.ndarray
-    episode_end: np.ndarray
-    truncated: np.ndarray
-    final_values: np.ndarray
-    starts: np.ndarray
-    can_act: np.ndarray
     targets: dict[str, np.ndarray]
     versions: np.ndarray
     continues: bool
@@ -117,7 +111,8 @@ class ExperienceAssembler:
     ``learns(robot_name)`` picks which robots' experience is kept (all by default)."""
 
     def __init__(self, steps: int, players_per_team: int, frames: int, head_max: float, head_units: int,
-                 with_targets: bool = False, patience: int = 8, learns=None, max_slots: int = 256) -> None:
+                 with_targets: bool = False, patience: int = 8, learns=None, max_slots: int = 256,
+                 require_learning_fields: bool = True) -> None:
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
         self.steps, self.players, self.frames = steps, players_per_team, frames
@@ -126,6 +121,9 @@ class ExperienceAssembler:
         self.head_bound = head_max + 1e-6
         self.with_targets, self.patience, self.max_slots = with_targets, patience, max_slots
         self.learns = learns or (lambda name: True)
+        # False: every answer is a step, whoever chose it (behaviour cloning from bags; an Action recorded before
+        # the learning fields existed reads as version 0)
+        self.require_learning_fields = require_learning_fields
         self.streams: dict[tuple[str, str], _Stream] = {}
         self.truth: dict[str, dict[tuple[int, int], Any]] = {}     # source -> (episode, stamp ns) -> WorldState
         self.targets = LearningTargets(players_per_team)
@@ -184,14 +182,7 @@ class ExperienceAssembler:
         if msg.motion_period == 0 or msg.robot_id != self.names.index(robot) or self._action_problem(msg):
             self.counts["malformed"] += 1
             return
-        slot = self._slot(stream, (int(msg.episode_id), int(msg.motion_period) - 1))
-        if slot is None:
-            return
-        if slot.answer is not None:
-            self.counts["duplicate"] += 1
-            return
-        slot.answer = msg
-        self._advance(source, robot, stream)
+        self._file(source, robot, stream, (int(msg.episode_id), int(msg.motion_period) - 1), "answer", msg)
 
     def add_feedback(self, source: str, robot: str, msg: Any) -> None:
         stream = self._stream(source, robot)
@@ -201,13 +192,18 @@ class ExperienceAssembler:
         if msg.robot_id != self.names.index(robot) or not all(math.isfinite(v) for v in terms):
             self.counts["malformed"] += 1
             return
-        slot = self._slot(stream, (int(msg.episode_id), int(msg.motion_period)))
+        self._file(source, robot, stream, (int(msg.episode_id), int(msg.motion_period)), "feedback", msg)
+
+    def _file(self, source: str, robot: str, stream: _Stream, key: tuple[int, int], field_name: str,
+              msg: Any) -> None:
+        """An answer or feedback into its slot (the first one wins; a second is a duplicate)."""
+        slot = self._slot(stream, key)
         if slot is None:
             return
-        if slot.feedback is not None:
+        if getattr(slot, field_name) is not None:
             self.counts["duplicate"] += 1
             return
-        slot.feedback = msg
+        setattr(slot, field_name, msg)
         self._advance(source, robot, stream)
 
     def add_world_state(self, source: str, msg: Any) -> None:
@@ -225,12 +221,21 @@ class ExperienceAssembler:
             return "choice out of range"
         if not math.isfinite(msg.head_yaw_delta) or abs(msg.head_yaw_delta) > self.head_bound:
             return "head turn out of range"
-        if msg.policy_version and not (math.isfinite(msg.log_prob) and msg.log_prob <= 1e-4
-                                       and math.isfinite(msg.value)):
+        if version(msg) and not (math.isfinite(msg.log_prob) and msg.log_prob <= 1e-4 and math.isfinite(msg.value)):
             return "learning fields not finite"
         return ""
 
     # -- sequences out ----------------------------------------------------------------------------------------
+    @property
+    def pending_steps(self) -> int:
+        """Steps gathered but not yet in a whole sequence (at a bag's end: the steps it cannot use)."""
+        pending = 0
+        for stream in self.streams.values():
+            key = stream.chain[-1] if stream.chain else stream.cursor
+            waiting = key is not None and len(stream.chain) < self.steps and bool(self._step_ready(stream, key))
+            pending += len(stream.chain) + waiting       # + a step whose successor (a next episode) never came
+        return pending
+
     def take(self) -> list[Sequence]:
         """The sequences completed since the last call, oldest first."""
         out, self.ready = self.ready, []
@@ -247,7 +252,7 @@ class ExperienceAssembler:
         slot = stream.slots.get(key)
         if slot is None or not slot.observed or slot.answer is None:
             return False
-        if slot.answer.policy_version == 0:
+        if self.require_learning_fields and version(slot.answer) == 0:
             return None
         following = stream.slots.get((key[0], key[1] + 1))
         return following is not None and following.feedback is not None
@@ -304,11 +309,9 @@ class ExperienceAssembler:
         return bool(feedback.terminated or feedback.truncated)
 
     def _give_up(self, stream: _Stream, key: tuple[int, int]) -> bool:
-        """The stream has moved ``patience`` periods past ``key`` (or into a later episode that far)."""
-        newest = stream.newest
-        if newest[0] > key[0]:
-            return newest[1] >= self.patience or any(k[0] > key[0] + 1 for k in stream.slots)
-        return newest[1] - key[1] > self.patience
+        """The stream has moved ``patience`` periods past ``key``: that many later slots have messages (counted
+        across episode boundaries, however short the episodes)."""
+        return sum(1 for k in stream.slots if k > key) > self.patience
 
     def _cut(self, stream: _Stream, key: tuple[int, int]) -> None:
         """Drop the chain gathered so far and restart at the first slot after ``key`` that has its frames."""
@@ -336,9 +339,9 @@ class ExperienceAssembler:
         self.counts["detections_dropped"] += dropped
         self.counts.update(stats)
         actions = np.array([self._action_row(s.answer) for s in slots[:T]], np.int64)
-        log_probs = np.array([s.answer.log_prob for s in slots[:T]], np.float32)
-        values = np.array([s.answer.value for s in slots], np.float32)
-        versions = np.array([s.answer.policy_version for s in slots[:T]], np.int64)
+        log_probs = np.array([getattr(s.answer, "log_prob", 0.0) for s in slots[:T]], np.float32)
+        values = np.array([getattr(s.answer, "value", 0.0) for s in slots], np.float32)
+        versions = np.array([version(s.answer) for s in slots[:T]], np.int64)
         feedback = [stream.slots[(k[0], k[1] + 1)].feedback for k in keys[:T]]
         terms = np.array([(f.reward_primary, f.reward_rule, f.reward_auxiliary, f.reward_observation)
                           for f in feedback], np.float32)
@@ -347,15 +350,17 @@ class ExperienceAssembler:
         final_values = np.zeros(T, np.float32)
         for t in np.flatnonzero(truncated):
             final = stream.slots.get((keys[t][0], keys[t][1] + 1))
-            if final is not None and final.answer is not None and final.answer.policy_version:
+            if final is not None and final.answer is not None and version(final.answer):
                 final_values[t] = final.answer.value
             else:       # a stepped policy node often skips the final observation (the next episode is already
                 final_values[t] = values[t]     # there): V(s) of the last step stands in, counted
                 self.counts["bootstrap_estimated"] += 1
         targets = self._targets(source, robot, keys, slots) if self.with_targets else {}
-        sequence = Sequence((source, robot), obs, actions, log_probs, values, terms.sum(-1), terms, episode_end,
-                            truncated, final_values, starts, can_act(obs["proprioception"]), targets, versions,
-                            stream.continues, stream.emitted, keys)
+        sequence = Sequence(obs=obs, actions=actions, log_probs=log_probs, values=values, rewards=terms.sum(-1),
+                            reward_terms=terms, episode_end=episode_end, truncated=truncated,
+                            final_values=final_values, starts=starts, can_act=can_act(obs["proprioception"]),
+                            stream=(source, robot), targets=targets, versions=versions, continues=stream.continues,
+                            index=stream.emitted, keys=keys)
         self.ready.append(sequence)
         stream.emitted += 1
         self.counts["sequences"] += 1
@@ -401,7 +406,7 @@ class ExperienceAssembler:
             ids = [i for i in slot.feedback.seen_object_ids if i <= n]
             seen[row, ids] = True
             owner = np.zeros(n)
-            owner[row] = slot.frames[slot.frames_per_period - 1].ball_owner
+            owner[row] = getattr(slot.frames[slot.frames_per_period - 1], "ball_owner", 0)
             one = self.targets.compute(x, y, np.array([o.yaw for o in ordered]),
                                        np.array([o.head_yaw for o in ordered]),
                                        np.array([bool(o.status & STATUS_FALLEN) for o in ordered]), owner, seen)
@@ -430,8 +435,7 @@ def batch(sequences: Iterable[Sequence]) -> dict[str, Any]:
     recurrent state (the learner adds it)."""
     sequences = list(sequences)
     out: dict[str, Any] = {"obs": {k: np.stack([s.obs[k] for s in sequences], 1) for k in sequences[0].obs}}
-    for name in ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
-                 "final_values", "starts", "can_act", "versions"):
+    for name in (*STEP_ARRAYS, "versions"):
         out[name] = np.stack([getattr(s, name) for s in sequences], 1)
     out["targets"] = ({k: np.stack([s.targets[k] for s in sequences], 1) for k in sequences[0].targets}
                       if sequences[0].targets else {})

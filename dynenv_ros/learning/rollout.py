@@ -94,9 +94,10 @@ def action_log_prob(agent: DynEnvAgent, step: Any, actions: Tensor) -> Tensor:
     return sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
 
 
-@dataclass
-class Rollout:
-    """One rollout's arrays (see the module docstring); ``robots_per_world`` learning robots in each world."""
+@dataclass(eq=False)      # identity: arrays have no truth value (a queue's remove compares its elements)
+class StepArrays:
+    """The arrays every learner input has, per step (see the module docstring): a rollout of the vectorised batch
+    (robot axis B) or one robot's sequence assembled from messages (``learning.experience``, no robot axis)."""
     obs: dict[str, np.ndarray]
     actions: np.ndarray
     log_probs: np.ndarray
@@ -108,6 +109,11 @@ class Rollout:
     final_values: np.ndarray
     starts: np.ndarray
     can_act: np.ndarray
+
+
+@dataclass(eq=False)
+class Rollout(StepArrays):
+    """One rollout's arrays (see the module docstring); ``robots_per_world`` learning robots in each world."""
     initial_state: State
     targets: dict[str, np.ndarray] = field(default_factory=dict)
     seed_pose: np.ndarray | None = None     # (B, 6) privileged seeding only: the noisy true pose at step 0
@@ -124,21 +130,33 @@ class Rollout:
 
     def as_tensors(self, device: torch.device | str = "cpu") -> dict[str, Any]:
         """Every array as a tensor on ``device`` (observation and target dicts stay dicts)."""
-        def tensor(x: np.ndarray) -> Tensor:
-            return torch.from_numpy(np.ascontiguousarray(x)).to(device)
-        out: dict[str, Any] = {"obs": {k: tensor(v) for k, v in self.obs.items()},
-                               "targets": {k: tensor(v) for k, v in self.targets.items()},
-                               "initial_state": tuple(s.to(device) for s in self.initial_state)}
-        for name in ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
-                     "final_values", "starts", "can_act"):
-            out[name] = tensor(getattr(self, name))
+        extra = {}
         if self.seed_pose is not None:
-            out["seed_pose"] = tensor(self.seed_pose)
+            extra["seed_pose"] = self.seed_pose
         if self.teacher_actions is not None:
-            out["teacher_actions"] = tensor(self.teacher_actions)
+            extra["teacher_actions"] = self.teacher_actions
         if self.teacher_driven is not None and self.teacher_driven.any():
-            out["teacher_driven"] = tensor(self.teacher_driven)
-        return out
+            extra["teacher_driven"] = self.teacher_driven
+        arrays = {name: getattr(self, name) for name in STEP_ARRAYS}
+        return arrays_as_tensors({**arrays, **extra, "obs": self.obs, "targets": self.targets},
+                                 self.initial_state, device)
+
+
+# The per-step arrays of a rollout (see the module docstring), in the form ``algorithms.update`` takes.
+STEP_ARRAYS = ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
+               "final_values", "starts", "can_act")
+
+
+def arrays_as_tensors(arrays: Mapping[str, Any], initial_state: State, device: torch.device | str = "cpu"
+                      ) -> dict[str, Any]:
+    """A rollout's numpy arrays (``STEP_ARRAYS``, ``obs`` and ``targets`` dicts, optional extras such as
+    ``teacher_actions``) → the tensors ``algorithms.update`` takes, with ``initial_state``."""
+    def tensor(x: np.ndarray) -> Tensor:
+        return torch.from_numpy(np.ascontiguousarray(x)).to(device)
+    out: dict[str, Any] = {key: (tensor(value) if not isinstance(value, Mapping)
+                                 else {k: tensor(v) for k, v in value.items()}) for key, value in arrays.items()}
+    out["initial_state"] = tuple(s.to(device) for s in initial_state)
+    return out
 
 
 class Opponent:

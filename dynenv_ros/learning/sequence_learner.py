@@ -31,6 +31,7 @@ from dynenv_ros.learning.algorithms import log_prob_entropy, run_sequence, updat
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.experience import Sequence, batch
 from dynenv_ros.learning.heads import Learner
+from dynenv_ros.learning.rollout import arrays_as_tensors
 from dynenv_ros.learning.run_log import RunLogger
 from dynenv_ros.learning.trainer import VERSION, update_settings
 from dynenv_ros.soccer.config import SoccerConfig
@@ -43,7 +44,8 @@ class SequenceLearner:
     out are called (``PolicyWeights.version``, ``Action.policy_version``)."""
 
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, batch_sequences: int = 8,
-                 max_policy_lag: int = 4, log: bool = True, reward_weights=(1.0, 1.0, 1.0, 1.0)) -> None:
+                 max_policy_lag: int = 4, log: bool = True, reward_weights=(1.0, 1.0, 1.0, 1.0),
+                 initial_policy: str | Path | None = None) -> None:
         if cfg.algorithm != "ppo":
             raise ValueError("algorithm: learning from message experience needs 'ppo' (its ratio corrects the "
                              "policy lag; A2C is on-policy only)")
@@ -75,6 +77,8 @@ class SequenceLearner:
         self.env_steps = self.updates = self.episodes = 0
         self.wall_before = 0.0
         self._started = time.perf_counter()
+        if initial_policy and not resume:      # a warm start: a policy file (e.g. dynenv-train --from-bag's)
+            self._load_initial(Path(initial_policy))
         if resume:
             meta, _ = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
             self.env_steps, self.updates = int(meta["env_steps"]), int(meta["updates"])
@@ -87,6 +91,14 @@ class SequenceLearner:
         self.counts: Counter[str] = Counter()
         self.published: dict[int, float] = {self.version: time.time()}   # version -> wall time handed out
         self.last_stats: dict[str, float] = {}
+
+    def _load_initial(self, path: Path) -> None:
+        from dynenv_ros.agent.checkpoint import agent_config, load_policy
+        loaded, _ = load_policy(path)
+        if agent_config(loaded) != agent_config(self.agent):
+            raise ValueError(f"initial_policy {path} does not fit the learner: its network is {agent_config(loaded)}, "
+                             f"the learner's {agent_config(self.agent)} (set feature_size to match)")
+        self.agent.load_state_dict(loaded.state_dict())
 
     @property
     def version(self) -> int:
@@ -130,7 +142,7 @@ class SequenceLearner:
             else:                                               # after a cut or a dropped predecessor
                 arrays["starts"][0, b] = True
                 self.counts["state_restarts"] += 1
-        tensors = self._tensors(arrays, tuple(initial))
+        tensors = arrays_as_tensors({k: v for k, v in arrays.items() if k != "versions"}, tuple(initial))
         alignment = self._alignment(tensors, known_state)
         self.learner.train()
         stats = update(self.learner, self.optimizer, tensors, self.settings, self.generator)
@@ -152,17 +164,6 @@ class SequenceLearner:
             del self.published[old]
         self.last_stats = stats
         return stats
-
-    def _tensors(self, arrays: dict[str, Any], initial: tuple[torch.Tensor, ...]) -> dict[str, Any]:
-        def tensor(x: np.ndarray) -> torch.Tensor:
-            return torch.from_numpy(np.ascontiguousarray(x))
-        out: dict[str, Any] = {"obs": {k: tensor(v) for k, v in arrays["obs"].items()},
-                               "targets": {k: tensor(v) for k, v in arrays["targets"].items()},
-                               "initial_state": initial}
-        for name in ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
-                     "final_values", "starts", "can_act"):
-            out[name] = tensor(arrays[name])
-        return out
 
     @torch.no_grad()
     def _alignment(self, tensors: dict[str, Any], known_state: np.ndarray) -> float | None:
@@ -212,12 +213,14 @@ class SequenceLearner:
         return {"version": VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
                 "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
                 "episodes": self.episodes, "wall_seconds": self.wall_before + time.perf_counter() - self._started,
-                "source": "messages", "code_revision": checkpoints.code_revision()}
+                "source": "messages", "code_revision": checkpoints.code_revision(),
+                # what dynenv-train --resume restores (its worlds' generator): the same run directory serves both
+                "numpy_rng": np.random.default_rng(self.cfg.seed + self.updates).bit_generator.state}
 
     def weights(self) -> bytes:
         """The current policy as a policy file's bytes (``PolicyWeights.data``); its meta's updates give
         ``version_of`` = ``self.version``."""
-        return policy_bytes(self.agent, {k: v for k, v in self.meta().items() if k != "config"})
+        return policy_bytes(self.agent, {k: v for k, v in self.meta().items() if k not in ("config", "numpy_rng")})
 
     def log(self, scalars: dict[str, float]) -> None:
         if self.logger is not None:
@@ -290,12 +293,12 @@ class BackgroundLearner:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            with self.wake:
-                sequences = self._next_batch()
-                if sequences is None:
-                    self.wake.wait(timeout=0.2)
-                    continue
             try:
+                with self.wake:
+                    sequences = self._next_batch()
+                    if sequences is None:
+                        self.wake.wait(timeout=0.2)
+                        continue
                 stats = self.learner.learn(sequences)
                 if self.on_update is not None:
                     self.on_update(self.learner, stats)

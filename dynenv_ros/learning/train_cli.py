@@ -3,6 +3,7 @@
     dynenv-train --config paper_a2c --run-dir runs/pred_s0 --seed 0
     dynenv-train --config quick --set num_envs=2 --set variant=baseline
     dynenv-train --resume runs/pred_s0
+    dynenv-train --from-bag bags/sample_2v2_realistic_30s --run-dir runs/bc_sample --epochs 5
 
 ``--config`` takes a preset name from config/train/ or a YAML path; ``--set key=value`` overrides any field of
 ``TrainConfig`` (values in YAML syntax). Bad configs are refused with the key and the reason before any work.
@@ -53,12 +54,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--run-dir", help="where the run writes (default runs/<algorithm>_<variant>_s<seed>)")
     parser.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its last checkpoint")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (logs still written)")
+    parser.add_argument("--from-bag", nargs="+", metavar="BAG", help="learn offline from recorded bags: behaviour "
+                        "cloning of the recorded actions and the localization/reconstruction heads "
+                        "(learning/from_bag.py); rollout_length sets the sequence length")
+    parser.add_argument("--epochs", type=int, default=10, help="--from-bag: passes over the sequences")
+    parser.add_argument("--batch-sequences", type=int, default=16, help="--from-bag: sequences per update")
+    parser.add_argument("--team", choices=("a", "b"), help="--from-bag: clone this team's robots only")
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
+    if args.from_bag:
+        return _from_bags(args)
     try:
         if args.resume:
             run_dir = Path(args.resume)
@@ -86,6 +95,31 @@ def main(argv: list[str] | None = None) -> int:
     summary = trainer.run()
     print(f"dynenv-train: {summary['env_steps']} env steps, {summary['updates']} updates, "
           f"{summary['episodes']} episodes in {summary['wall_seconds']:.0f} s -> {run_dir}")
+    return 0
+
+
+def _from_bags(args: argparse.Namespace) -> int:
+    from dynenv_ros.bags.inspect import BagError
+    from dynenv_ros.learning.config import ConfigError, load_config
+    from dynenv_ros.learning.from_bag import train_from_bags
+    try:
+        if args.resume:
+            raise ValueError("--from-bag starts a new run; --resume continues an in-process one")
+        cfg = load_config(preset_path(args.config), _overrides(args))
+        run_dir = Path(args.run_dir or f"runs/from_bag_s{cfg.seed}")
+        if (run_dir / "checkpoints").exists():
+            raise ValueError(f"{run_dir} already holds a run; choose another --run-dir")
+        learns = (lambda name: name[5] == args.team) if args.team else None
+        summary = train_from_bags(cfg, args.from_bag, run_dir, epochs=args.epochs,
+                                  batch_sequences=args.batch_sequences, learns=learns)
+    except (ConfigError, ValueError, BagError) as error:
+        print(f"dynenv-train: {error}", file=sys.stderr)
+        return 2
+    first, last = summary["first_epoch"], summary["last_epoch"]
+    print(f"dynenv-train: {summary['sequences']} sequences ({summary['robot_periods']} robot-periods) from "
+          f"{len(args.from_bag)} bag(s), {summary['epochs']} epochs, {summary['updates']} updates -> {run_dir}")
+    for key in first:
+        print(f"  {key}: {first[key]:.4f} (first epoch) -> {last[key]:.4f} (last)")
     return 0
 
 

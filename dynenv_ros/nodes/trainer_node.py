@@ -91,6 +91,8 @@ class TrainerNode(Node):
         keep = declare_int(self, "keep_checkpoints", 3, 1, 1000, "Training checkpoints kept.", **fixed)
         run_dir = declare_str(self, "run_dir", "", "Run directory (config, metrics, checkpoints); empty: "
                               "runs/trainer-<time>.", **fixed)
+        initial = declare_str(self, "initial_policy", "", "A policy file to start from (a warm start, e.g. dynenv-train "
+                              "--from-bag's policy.safetensors); ignored when resuming.", **fixed)
         resume = declare_bool(self, "resume", False, "Resume from run_dir's latest checkpoint (dynenv-train "
                               "--resume reads the same directory).", **fixed)
         self.team = declare_str(self, "learning_team", "", "Robots whose experience is learnt: team 'a', 'b', or "
@@ -117,9 +119,10 @@ class TrainerNode(Node):
         try:
             self.learner = SequenceLearner(self.cfg, self.run_dir, resume=resume,
                                            batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag,
-                                           reward_weights=list(weights))
+                                           reward_weights=list(weights), initial_policy=initial or None)
         except ValueError as error:
-            key = "reward_weights" if "reward_weights" in str(error) else "resume" if resume else "batch_sequences"
+            key = next((k for k in ("reward_weights", "initial_policy") if k in str(error)),
+                       "resume" if resume else "batch_sequences")
             raise ParameterException(str(error), [key]) from None
         self.run_id = self.run_dir.resolve().name
         motion = soccer.motion
@@ -235,7 +238,7 @@ class TrainerNode(Node):
         msg = PolicyWeights(version=self.learner.version, run_id=self.run_id, data=data,
                             sha256=hashlib.sha256(data).hexdigest(),
                             metadata_json=json.dumps({k: v for k, v in self.learner.meta().items()
-                                                      if k != "config"}))
+                                                      if k not in ("config", "numpy_rng")}))
         msg.header.stamp = self.get_clock().now().to_msg()
         self.weights_pub.publish(msg)
         self.weights_published += 1
@@ -314,7 +317,7 @@ class TrainerNode(Node):
             self.learner.save_checkpoint()
             from dynenv_ros.agent.checkpoint import save_policy
             save_policy(self.learner.agent, str(self.run_dir / "policy.safetensors"),
-                        {k: v for k, v in self.learner.meta().items() if k != "config"})
+                        {k: v for k, v in self.learner.meta().items() if k not in ("config", "numpy_rng")})
             (self.run_dir / "summary.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
         finally:
             self.learner.close()

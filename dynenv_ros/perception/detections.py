@@ -45,7 +45,7 @@ def rows_from_messages(detections, true_id: int = -2) -> np.ndarray:
     for i, d in enumerate(detections):
         rows[i] = (d.class_id, d.position.x, d.position.y, d.yaw, d.size_x, d.size_y, d.confidence, d.team,
                    d.subtype, d.fallen, d.penalized, d.line_start.x, d.line_start.y, d.line_end.x, d.line_end.y,
-                   d.sighting, true_id, 0)
+                   getattr(d, "sighting", 0), true_id, 0)      # (a bag older than the sighting bits: 0)
     return rows
 
 

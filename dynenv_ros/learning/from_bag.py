@@ -1,0 +1,171 @@
+"""Learning from recorded bags (``dynenv-train --from-bag BAG …``): the recorder's MCAP bags give the same per-robot
+sequences as the live trainer node (``learning.experience``, fed from the bag in time order), and the learner trains
+offline on them:
+
+- **behaviour cloning** of whoever chose the recorded actions (a scripted team, a robot's own stack): the
+  imitation loss −log π(recorded action | observation) (``algorithms.imitation_loss``), a warm start;
+- **the self-supervised heads**: localization (pose) and reconstruction (ball, robots) from the ground truth the
+  bag holds (``/world_state`` and the feedback's seen objects) — the paper's pretraining, from real recordings.
+
+No reward term is learnt (the recorded actions are not the learner's: no importance ratio applies). Sequences
+start from a zero recurrent state (``starts[0]``): offline, nothing is known of the state the recording policy had.
+A recorded head turn is mapped to the nearest of the discrete head's steps.
+
+The run directory holds what ``dynenv-train`` writes: ``config.json``, ``metrics.csv``, ``tensorboard/``, a
+training checkpoint, ``policy.safetensors`` (a policy file for the policy node, ``pretrained_encoder`` of
+``dynenv-train``, or the trainer node's ``initial_policy``) and ``summary.json``.
+"""
+from __future__ import annotations
+
+import json
+import re
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any, Sequence as Seq
+
+import numpy as np
+import torch
+
+from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.algorithms import UpdateSettings, update
+from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.experience import ExperienceAssembler, Sequence, batch
+from dynenv_ros.learning.heads import Learner
+from dynenv_ros.learning.rollout import arrays_as_tensors
+from dynenv_ros.learning.run_log import RunLogger
+from dynenv_ros.learning.trainer import VERSION
+from dynenv_ros.soccer.config import SoccerConfig
+
+ROBOT_TOPIC = re.compile(r"^(?P<source>(/[A-Za-z0-9_]+)*)/(?P<robot>team_[ab]_(?P<slot>[0-9]+))/"
+                         r"(?P<kind>detections|action|feedback)$")
+WORLD_TOPIC = re.compile(r"^(?P<source>(/[A-Za-z0-9_]+)*)/world_state$")
+
+
+def bag_layout(paths: Seq[str | Path]) -> tuple[int, int]:
+    """(players per team, frames per period) of the games in the bags: the robots' names and the detections."""
+    from dynenv_ros.bags.inspect import open_bag
+    players, frames = 0, 0
+    for path in paths:
+        with open_bag(path) as bag:
+            for connection in bag.connections:
+                match = ROBOT_TOPIC.match(connection.topic)
+                if match:
+                    players = max(players, int(match["slot"]) + 1)
+            first = [c for c in bag.connections if ROBOT_TOPIC.match(c.topic) and c.topic.endswith("/detections")]
+            for connection, _, raw in bag.messages(first[:1]):
+                frames = max(frames, int(bag.deserialize(raw, connection.msgtype).frames_per_period))
+                break
+    if not players or not frames:
+        raise ValueError(f"no robot detections in {', '.join(map(str, paths))}: not a recording of a game")
+    return players, frames
+
+
+def bag_sequences(paths: Seq[str | Path], steps: int, players: int, frames: int, with_targets: bool,
+                  learns=None) -> tuple[list[Sequence], Counter[str]]:
+    """Every sequence of ``steps`` periods in the bags (each bag's games kept apart), and the assembler's counts."""
+    from dynenv_ros.bags.inspect import open_bag
+    motion = SoccerConfig.from_mapping({"players_per_team": players}).motion
+    assembler = ExperienceAssembler(steps, players, frames, motion.head_max_delta, motion.head_units,
+                                    with_targets=with_targets, learns=learns, require_learning_fields=False)
+    out: list[Sequence] = []
+    for index, path in enumerate(paths):
+        with open_bag(path) as bag:
+            for connection, _, raw in bag.messages():
+                robot = ROBOT_TOPIC.match(connection.topic)
+                world = WORLD_TOPIC.match(connection.topic)
+                if robot is None and (world is None or not with_targets):
+                    continue
+                msg = bag.deserialize(raw, connection.msgtype)
+                if robot is None:
+                    assembler.add_world_state(f"{index}:{world['source']}", msg)
+                    continue
+                source = f"{index}:{robot['source']}"
+                {"detections": assembler.add_frame, "action": assembler.add_action,
+                 "feedback": assembler.add_feedback}[robot["kind"]](source, robot["robot"], msg)
+            out += assembler.take()
+    # the last episode's final steps short of a whole sequence (it needs the observation after them)
+    assembler.counts["steps_unused"] = assembler.pending_steps
+    return out, assembler.counts
+
+
+def clone_settings(cfg: TrainConfig, with_targets: bool) -> UpdateSettings:
+    """Imitation and the self-supervised losses only (no policy-gradient, value or curiosity terms)."""
+    return UpdateSettings(algorithm="a2c", policy_coef=0.0, value_coef=0.0, entropy_coef=0.0,
+                          max_grad_norm=cfg.max_grad_norm, use_forward=False, use_rcm=False, use_inverse=False,
+                          use_ltp=False, use_localization=with_targets, use_reconstruction=with_targets,
+                          self_supervised_coef=cfg.self_supervised_coef, imitation_coef=1.0)
+
+
+def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Path, epochs: int = 10,
+                    batch_sequences: int = 16, with_targets: bool = True, learns=None,
+                    log: bool = True) -> dict[str, Any]:
+    """Train a fresh agent on the bags' sequences for ``epochs`` passes; returns the summary (also written)."""
+    if epochs < 1 or batch_sequences < 1:
+        raise ValueError(f"epochs and batch_sequences must be >= 1, got {epochs}, {batch_sequences}")
+    run = Path(run_dir)
+    run.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    players, frames = bag_layout(paths)
+    if cfg.head_mode != "discrete":
+        raise ValueError("head_mode: learning from bags supports the discrete head only")
+    cfg = cfg.replace(players_per_team=players)
+    sequences, counts = bag_sequences(paths, cfg.rollout_length, players, frames, with_targets, learns)
+    if not sequences:
+        raise ValueError(f"no whole sequence of {cfg.rollout_length} periods in the bags ({dict(counts)})")
+    torch.set_num_threads(cfg.torch_threads)
+    seeds = np.random.SeedSequence(cfg.seed).spawn(2)
+    generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
+    motion = SoccerConfig.from_mapping({"players_per_team": players}).motion
+    torch.manual_seed(int(seeds[1].generate_state(1)[0]))          # parameter init only
+    agent = DynEnvAgent(cfg.feature_size, "discrete", motion.head_units, motion.head_max_delta)
+    learner = Learner(agent, cfg.ltp_horizon)
+    optimizer = torch.optim.Adam(learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
+    settings = clone_settings(cfg, with_targets)
+    (run / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
+    logger = RunLogger(run) if log else None
+    history: list[dict[str, float]] = []
+    updates = env_steps = 0
+    for epoch in range(epochs):
+        order = torch.randperm(len(sequences), generator=generator).tolist()
+        epoch_stats: dict[str, list[float]] = {}
+        for start in range(0, len(order), batch_sequences):
+            chosen = [sequences[i] for i in order[start:start + batch_sequences]]
+            stats = update(learner, optimizer, _tensors(chosen, agent), settings, generator)
+            updates += 1
+            env_steps += cfg.rollout_length * len(chosen)
+            for key, value in stats.items():
+                epoch_stats.setdefault(key, []).append(value)
+        means = {k: float(np.mean(v)) for k, v in epoch_stats.items()}
+        history.append(means)
+        if logger is not None:
+            logger.log(env_steps, updates, time.perf_counter() - started,
+                       {f"bc/{k}": v for k, v in means.items()} | {"bc/epoch": float(epoch)})
+    learner.eval()
+    meta = {"version": VERSION, "source": "bags", "bags": [str(p) for p in paths], "updates": updates,
+            "env_steps": env_steps, "episodes": 0, "wall_seconds": time.perf_counter() - started,
+            "config": cfg.to_dict(), "code_revision": checkpoints.code_revision()}
+    checkpoints.save_training_checkpoint(run, env_steps, learner, optimizer, meta, {}, keep=cfg.keep_checkpoints)
+    from dynenv_ros.agent.checkpoint import save_policy
+    save_policy(agent, str(run / "policy.safetensors"), {k: v for k, v in meta.items() if k != "config"})
+    if logger is not None:
+        logger.close()
+    keys = ("imitation_loss", "teacher_agreement", "localization_loss", "reconstruction_loss",
+            "localization_within_50cm")
+    summary = {"sequences": len(sequences), "robot_periods": len(sequences) * cfg.rollout_length,
+               "players_per_team": players, "frames_per_period": frames, "epochs": epochs, "updates": updates,
+               "counts": dict(counts), "first_epoch": {k: history[0][k] for k in keys if k in history[0]},
+               "last_epoch": {k: history[-1][k] for k in keys if k in history[-1]},
+               "wall_seconds": time.perf_counter() - started}
+    (run / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def _tensors(sequences: list[Sequence], agent: DynEnvAgent) -> dict[str, Any]:
+    arrays = batch(sequences)
+    arrays["starts"][0] = True              # offline: the recording policy's state is unknown
+    arrays["teacher_actions"] = arrays["actions"]
+    del arrays["versions"]
+    B = len(sequences)
+    return arrays_as_tensors(arrays, tuple(s.expand(B, -1).clone() for s in agent.initial_state(1)))
