@@ -88,8 +88,11 @@ def test_a_checkpoint_resumes_the_update_count_and_the_weights(sequences, tmp_pa
         assert torch.equal(a, b), name
 
 
-def test_the_learner_thread_takes_one_sequence_per_stream_per_batch(sequences, tmp_path):
-    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=10, log=False)
+def test_the_learner_thread_takes_each_streams_waiting_sequences_in_order(sequences, tmp_path):
+    """8 sequences of 2 streams waiting at once, at most 6 per batch: the first batch takes 3 of each stream in
+    order (chained states), the second the last one of each."""
+    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=10, log=False,
+                              max_batch_sequences=6)
     updates = []
     background = BackgroundLearner(learner, on_update=lambda lrn, stats: updates.append(lrn.version))
     background.start()
@@ -97,12 +100,14 @@ def test_the_learner_thread_takes_one_sequence_per_stream_per_batch(sequences, t
     background.put(sequences)                        # 8 sequences of 2 streams, fed at once
     assert time.perf_counter() - started < 0.5       # the feeder never waits for a gradient step
     deadline = time.monotonic() + 60.0
-    while len(updates) < 4 and time.monotonic() < deadline and not background.error:
+    while len(updates) < 2 and time.monotonic() < deadline and not background.error:
         time.sleep(0.05)
     background.stop()
     assert not background.error, background.error
-    assert updates == [2, 3, 4, 5] and background.depth() == 0
+    assert updates == [2, 3] and background.depth() == 0 and learner.env_steps == 8 * T
     assert learner.counts["state_restarts"] == 0     # every batch continued both streams in order
+    assert {stream: entry[0] for stream, entry in learner.states.items()} == {("game", "team_a_0"): 3,
+                                                                               ("game", "team_b_0"): 3}
 
 
 def test_settings_that_cannot_learn_from_lagging_experience_are_refused(tmp_path):
@@ -142,7 +147,8 @@ def test_dynenv_train_resumes_a_run_directory_the_trainer_node_wrote(sequences, 
 def test_the_learner_thread_takes_sequences_from_anywhere_in_its_queue(sequences, tmp_path):
     """A stream that produced two sequences before another produced one: the batch takes the first of each, from
     the middle of the queue too (a queue used to compare sequences by their arrays there, and the thread died)."""
-    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=10, log=False)
+    learner = SequenceLearner(_config(), tmp_path / "run", batch_sequences=2, max_policy_lag=10, log=False,
+                              max_batch_sequences=2)
     a = sorted((s for s in sequences if s.stream[1] == "team_a_0"), key=lambda s: s.index)
     b = sorted((s for s in sequences if s.stream[1] == "team_b_0"), key=lambda s: s.index)
     updates = []

@@ -81,3 +81,32 @@ def test_several_games_in_their_namespaces_feed_one_trainer(make_node, executor,
     assert {(g, r) for g, r in trainer.learner.states} == {(g, r) for g in ("/game_1", "/game_2")
                                                            for r in ("team_a_0", "team_b_0")}
     assert trainer.assembler.counts["missing"] == 0
+
+
+def test_parameters_are_checked_on_set_and_reach_the_learner(make_node, executor, tmp_path):
+    from rcl_interfaces.srv import SetParameters
+    trainer = _trainer(make_node, executor, tmp_path / "run", learning_team="a")
+    client = trainer.create_client(SetParameters, "/trainer_node/set_parameters")
+    assert client.wait_for_service(timeout_sec=5.0)
+
+    def set_one(name, value):
+        future = client.call_async(SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()]))
+        assert spin_until(executor, future.done, 10.0)
+        return future.result().results[0]
+
+    assert not set_one("learning_rate", -1.0).successful                   # below the declared range
+    assert not set_one("max_policy_lag", 1.5).successful                   # wrong type
+    assert not set_one("batch_sequences", 3).successful                    # read-only
+    assert set_one("learning_rate", 5e-4).successful
+    assert trainer.learner.optimizer.param_groups[0]["lr"] == 5e-4
+    assert set_one("max_policy_lag", 7).successful and trainer.learner.max_policy_lag == 7
+    assert set_one("entropy_coef", 0.05).successful and trainer.learner.settings.entropy_coef == 0.05
+    # learning_team "a": both robots are discovered, only team A's experience is learnt (the trainer reads team B's
+    # detections not at all, so this game starts with one reader per robot)
+    sim = make_node(SimNode, parameter_overrides=_params(players_per_team=1, seed=3, publish_markers=False))
+    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=4))
+    executor.add_node(sim)
+    executor.add_node(policy)
+    assert spin_until(executor, lambda: trainer.assembler.counts["sequences"] >= 2, 60.0), trainer.diagnostics()
+    assert {robot for _, robot in trainer.robots} == {"team_a_0", "team_b_0"}
+    assert {robot for _, robot in trainer.assembler.streams} == {"team_a_0"}

@@ -45,7 +45,7 @@ class SequenceLearner:
 
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, batch_sequences: int = 8,
                  max_policy_lag: int = 4, log: bool = True, reward_weights=(1.0, 1.0, 1.0, 1.0),
-                 initial_policy: str | Path | None = None) -> None:
+                 initial_policy: str | Path | None = None, max_batch_sequences: int | None = None) -> None:
         if cfg.algorithm != "ppo":
             raise ValueError("algorithm: learning from message experience needs 'ppo' (its ratio corrects the "
                              "policy lag; A2C is on-policy only)")
@@ -59,6 +59,7 @@ class SequenceLearner:
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.batch_sequences, self.max_policy_lag = batch_sequences, max_policy_lag
+        self.max_batch_sequences = max(batch_sequences, max_batch_sequences or 4 * batch_sequences)
         # The reward learnt: a weighted sum of the four terms of StepFeedback (primary, rule, auxiliary,
         # observation); all ones is the simulator's total.
         self.reward_weights = np.asarray(reward_weights, np.float32)
@@ -124,17 +125,25 @@ class SequenceLearner:
         return True
 
     def learn(self, sequences: list[Sequence]) -> dict[str, float]:
-        """One PPO update on these sequences (one per stream, each after its stream's previous one)."""
+        """One PPO update on these sequences. A stream may bring several, consecutive ones (a learner that fell
+        behind takes what waits rather than letting it go stale): the first starts from the stream's stored state,
+        each next one from the state the current network reaches at the end of the one before (no gradient)."""
         now = time.time()
+        sequences = sorted(sequences, key=lambda q: (q.stream, q.index))
         arrays = batch(sequences)
         arrays["rewards"] = arrays["reward_terms"] @ self.reward_weights
         B = len(sequences)
         initial = [torch.zeros(B, s.shape[-1]) for s in self.agent.initial_state(1)]
         known_state = np.zeros(B, bool)         # the learner starts from the state the policy had (up to lag)
+        follows = np.full(B, -1)                # the row this one continues within the batch
         for b, sequence in enumerate(sequences):
+            before = sequences[b - 1] if b else None
             stored = self.states.get(sequence.stream)
             if sequence.keys[0][1] == 0:                        # an episode's first observation: zero state
                 known_state[b] = True
+            elif (sequence.continues and before is not None and before.stream == sequence.stream
+                  and before.index == sequence.index - 1):
+                follows[b], known_state[b] = b - 1, known_state[b - 1]
             elif sequence.continues and stored is not None and stored[0] == sequence.index - 1:
                 for part, value in zip(initial, stored[1]):
                     part[b] = value
@@ -143,6 +152,7 @@ class SequenceLearner:
                 arrays["starts"][0, b] = True
                 self.counts["state_restarts"] += 1
         tensors = arrays_as_tensors({k: v for k, v in arrays.items() if k != "versions"}, tuple(initial))
+        self._chain_states(tensors, follows)
         alignment = self._alignment(tensors, known_state)
         self.learner.train()
         stats = update(self.learner, self.optimizer, tensors, self.settings, self.generator)
@@ -181,14 +191,34 @@ class SequenceLearner:
         log_prob, _ = log_prob_entropy(self.agent, out, tensors["actions"][:, rows])
         return float((log_prob - tensors["log_probs"][:, rows]).abs().mean())
 
-    @torch.no_grad()
-    def _store_states(self, sequences: list[Sequence], tensors: dict[str, Any]) -> None:
-        """The state each stream's next sequence starts from: the updated network run over observations 0..T-1."""
+    def _end_states(self, tensors: dict[str, Any], rows: list[int]) -> tuple[torch.Tensor, ...]:
+        """The state after observations 0..T-1 of these rows (the next sequence's start), no gradient."""
         T = tensors["actions"].shape[0]
-        obs = {k: v[:T] for k, v in tensors["obs"].items()}
-        out = run_sequence(self.agent, obs, tensors["initial_state"], tensors["starts"][:T])
-        for b, sequence in enumerate(sequences):
-            self.states[sequence.stream] = (sequence.index, tuple(s[b].clone() for s in out.state))
+        index = torch.as_tensor(rows)
+        obs = {k: v[:T, index] for k, v in tensors["obs"].items()}
+        state = tuple(s[index] for s in tensors["initial_state"])
+        with torch.no_grad():
+            return run_sequence(self.agent, obs, state, tensors["starts"][:T, index]).state
+
+    def _chain_states(self, tensors: dict[str, Any], follows: np.ndarray) -> None:
+        """Initial states of rows that continue another row of the batch, level by level (a stream's 2nd sequences
+        from its 1st ones' end states in one forward, then its 3rd ones …)."""
+        done = follows < 0
+        while not done.all():
+            level = [b for b in np.flatnonzero(~done) if done[follows[b]]]
+            ends = self._end_states(tensors, [int(follows[b]) for b in level])
+            for i, b in enumerate(level):
+                for part, end in zip(tensors["initial_state"], ends):
+                    part[b] = end[i]
+                done[b] = True
+
+    def _store_states(self, sequences: list[Sequence], tensors: dict[str, Any]) -> None:
+        """The state each stream's next sequence starts from: the updated network run over its last row."""
+        last = {sequence.stream: b for b, sequence in enumerate(sequences)}      # sorted: the last one wins
+        rows = list(last.values())
+        ends = self._end_states(tensors, rows)
+        for i, b in enumerate(rows):
+            self.states[sequences[b].stream] = (sequences[b].index, tuple(s[i].clone() for s in ends))
 
     def _account(self, sequences: list[Sequence], rewards: np.ndarray) -> None:
         """Episode returns of the reward learnt; an episode counts once its end is learnt from, under the
@@ -274,22 +304,26 @@ class BackgroundLearner:
             return len(self.queue)
 
     def _next_batch(self) -> list[Sequence] | None:
-        """Under the lock: a batch if enough streams have a fresh sequence waiting, else None."""
-        chosen: dict[tuple[str, str], Sequence] = {}
-        for sequence in list(self.queue):
-            if sequence.stream in chosen:
-                continue
-            if not self.learner.fresh(sequence):
-                self.queue.remove(sequence)
-                continue
-            chosen[sequence.stream] = sequence
-            if len(chosen) == self.learner.batch_sequences:
-                break
-        if len(chosen) < self.learner.batch_sequences:
-            return None
-        for sequence in chosen.values():
+        """Under the lock: a batch once ``batch_sequences`` streams have a fresh sequence waiting — with every
+        waiting sequence of those streams that continues the one before it, up to ``max_batch_sequences``."""
+        learner = self.learner
+        for sequence in [q for q in self.queue if not learner.fresh(q)]:
             self.queue.remove(sequence)
-        return list(chosen.values())
+        by_stream: dict[tuple[str, str], list[Sequence]] = {}
+        for sequence in self.queue:
+            chain = by_stream.setdefault(sequence.stream, [])
+            if not chain or (sequence.index == chain[-1].index + 1 and sequence.continues):
+                chain.append(sequence)
+        if len(by_stream) < learner.batch_sequences:
+            return None
+        chosen = [chain[0] for chain in by_stream.values()]
+        for depth in range(1, max(len(c) for c in by_stream.values())):
+            for chain in by_stream.values():
+                if depth < len(chain) and len(chosen) < learner.max_batch_sequences:
+                    chosen.append(chain[depth])
+        taken = {id(q) for q in chosen}
+        self.queue = deque(q for q in self.queue if id(q) not in taken)
+        return chosen
 
     def _run(self) -> None:
         while not self._stop.is_set():

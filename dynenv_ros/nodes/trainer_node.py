@@ -79,6 +79,8 @@ class TrainerNode(Node):
                                     "after this many wall minutes; 0 = until stopped.", **fixed)
         self.batch_sequences = declare_int(self, "batch_sequences", 8, 1, 4096, "Sequences per update (at most one "
                                            "per robot stream).", **fixed)
+        max_batch = declare_int(self, "max_batch_sequences", 0, 0, 65536, "Most sequences per update: a learner "
+                                "behind takes each robot's waiting ones in order (0: 4 x batch_sequences).", **fixed)
         epochs = declare_int(self, "ppo_epochs", 4, 1, 64, "PPO passes over each batch.", **fixed)
         minibatches = declare_int(self, "ppo_minibatches", 2, 1, 4096, "PPO minibatches per pass (<= "
                                   "batch_sequences).", **fixed)
@@ -119,7 +121,8 @@ class TrainerNode(Node):
         try:
             self.learner = SequenceLearner(self.cfg, self.run_dir, resume=resume,
                                            batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag,
-                                           reward_weights=list(weights), initial_policy=initial or None)
+                                           reward_weights=list(weights), initial_policy=initial or None,
+                                           max_batch_sequences=max_batch or None)
         except ValueError as error:
             key = next((k for k in ("reward_weights", "initial_policy") if k in str(error)),
                        "resume" if resume else "batch_sequences")
