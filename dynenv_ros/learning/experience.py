@@ -131,6 +131,7 @@ class ExperienceAssembler:
         self.counts: Counter[str] = Counter()
         self.ready: list[Sequence] = []
         self._known: dict[tuple[str, str], tuple] = {}     # per stream: seen-since-episode-start, carried over
+        self.last_missing = ""          # the last step given up as missing, and what it lacked
 
     # -- messages in ------------------------------------------------------------------------------------------
     def _stream(self, source: str, robot: str) -> _Stream | None:
@@ -297,7 +298,17 @@ class ExperienceAssembler:
             if not self._give_up(stream, key):
                 return
             self.counts["missing"] += 1
+            self.last_missing = f"{source or '/'} {robot} episode {key[0]} period {key[1]}: {self._lacks(stream, key)}"
             self._cut(stream, key)
+
+    def _lacks(self, stream: _Stream, key: tuple[int, int]) -> str:
+        """What a step still lacks (diagnostics: ``last_missing``)."""
+        slot = stream.slots.get(key, Slot())
+        following = stream.slots.get((key[0], key[1] + 1))
+        lacking = [f"frames {sorted(slot.frames)}" if not slot.observed else "",
+                   "answer" if slot.answer is None else "",
+                   "next period's feedback" if following is None or following.feedback is None else ""]
+        return ", ".join(x for x in lacking if x)
 
     def _final(self, stream: _Stream, key: tuple[int, int]) -> bool:
         slot = stream.slots.get(key)

@@ -276,7 +276,7 @@ class TrainerNode(Node):
                   "policy_loss": f"{stats.get('policy_loss', 0.0):.4f}",
                   "value_loss": f"{stats.get('value_loss', 0.0):.4f}",
                   "entropy": f"{stats.get('entropy', 0.0):.4f}",
-                  "learner_error": self.background.error}
+                  "learner_error": self.background.error, "last_missing": self.assembler.last_missing}
         for key in ("steps", "sequences", "late", "duplicate", "out_of_order", "missing", "malformed",
                     "not_learning", "cuts", "steps_discarded", "unknown_robot", "targets_missing",
                     "bootstrap_estimated"):
