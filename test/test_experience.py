@@ -192,3 +192,15 @@ def test_several_games_are_kept_apart(game):
     out = _feed(assembler, game.messages, source="/game_1") + _feed(assembler, game.messages, source="/game_2")
     assert sorted({s.stream for s in out}) == [(g, r) for g in ("/game_1", "/game_2") for r in ("team_a_0", "team_b_0")]
     assert assembler.counts["late"] == 0 and assembler.counts["duplicate"] == 0
+
+
+def test_a_writers_history_older_than_the_first_frames_is_not_counted_missing(game):
+    """A trainer that joins late receives each policy's last actions (transient local) before any frame: they are
+    dropped as ``before_start``, and the stream starts at its first observed period."""
+    start = next(i for i, (kind, _, msg) in enumerate(game.messages) if kind == "frame" and msg.episode_id == 2)
+    history = [m for m in game.messages[:start] if m[0] == "action" and m[1] == "team_a_0"][-3:]
+    assembler = _assembler(game)
+    out = _feed(assembler, history + game.messages[start:])
+    assert assembler.counts["missing"] == 0 and assembler.counts["before_start"] == 3
+    # episodes 2 and 3: 12 steps; the third sequence would need the observation after the last one (no episode 4)
+    assert len([s for s in out if s.stream == ("game", "team_a_0")]) == 2

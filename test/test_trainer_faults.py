@@ -15,7 +15,7 @@ from rclpy.parameter import Parameter
 from dynenv_ros.learning import checkpoints
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.nodes.trainer_node import TrainerNode
-from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.ros.qos import action_stream, sim_stream
 from policy_node.policy_node import PolicyNode
 from ros_harness import spin_until
 from test_trainer_node import _game, _params, _trainer
@@ -89,7 +89,7 @@ def test_hostile_experience_is_dropped_and_counted(make_node, executor, tmp_path
     trainer = _trainer(make_node, executor, tmp_path / "run", variant="baseline", feature_size=16)
     hostile = make_node("hostile")
     detections = hostile.create_publisher(DetectionArray, "/team_a_0/detections", sim_stream())
-    actions = hostile.create_publisher(Action, "/team_a_0/action", sim_stream())
+    actions = hostile.create_publisher(Action, "/team_a_0/action", action_stream())     # posing as a policy
     feedback = hostile.create_publisher(StepFeedback, "/team_a_0/feedback", sim_stream())
     executor.add_node(hostile)
     assert spin_until(executor, lambda: ("", "team_a_0") in trainer.robots and actions.get_subscription_count() >= 1

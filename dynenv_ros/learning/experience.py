@@ -259,8 +259,14 @@ class ExperienceAssembler:
         return following is not None and following.feedback is not None
 
     def _advance(self, source: str, robot: str, stream: _Stream) -> None:
-        if stream.cursor is None:
-            stream.cursor = min(stream.slots)
+        if stream.cursor is None:         # the stream starts at its first observed slot; answers and feedback of
+            observed = [k for k, slot in stream.slots.items() if slot.observed]    # older ones (a writer's
+            if not observed:                                                     # history) are not experience
+                return
+            stream.cursor = min(observed)
+            for old in [k for k in stream.slots if k < (stream.cursor[0], stream.cursor[1] - 1)]:
+                del stream.slots[old]
+                self.counts["before_start"] += 1
         while True:
             if stream.restart_after is not None:
                 after = [k for k, s in stream.slots.items() if k > stream.restart_after and s.observed]

@@ -53,9 +53,13 @@ DETECTION_TYPE = "dynenv_msgs/msg/DetectionArray"
 FRAME_DEPTH, MESSAGE_DEPTH = 400, 100
 
 
-def experience_qos(depth: int) -> QoSProfile:
+def experience_qos(depth: int, latched: bool = False) -> QoSProfile:
+    """Reliable keep-last. Actions are read transient local: a policy node keeps its last 20 (``qos.action_stream``),
+    so the first answers of a game are not lost while the trainer's reader is still matching the policy's writer (a
+    stepped game starts once the trainer reads the detections, not once it has matched every policy). A publisher
+    offering only volatile durability does not match such a reader — its actions carry no learning fields anyway."""
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE)
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
 
 class TrainerNode(Node):
@@ -181,12 +185,13 @@ class TrainerNode(Node):
             if not self.assembler.learns(robot):
                 continue
             add = self.assembler
-            for msg_type, topic, method, kind, depth in (
-                    (DetectionArray, name, add.add_frame, "frames", FRAME_DEPTH),
-                    (Action, f"{source}/{robot}/action", add.add_action, "actions", MESSAGE_DEPTH),
-                    (StepFeedback, f"{source}/{robot}/feedback", add.add_feedback, "feedback", MESSAGE_DEPTH)):
+            for msg_type, topic, method, kind, depth, latched in (
+                    (DetectionArray, name, add.add_frame, "frames", FRAME_DEPTH, False),
+                    (Action, f"{source}/{robot}/action", add.add_action, "actions", MESSAGE_DEPTH, True),
+                    (StepFeedback, f"{source}/{robot}/feedback", add.add_feedback, "feedback", MESSAGE_DEPTH, False)):
                 handler = self._handler(method, source, robot, kind, depth)
-                handler.subscription = self.create_subscription(msg_type, topic, handler, experience_qos(depth))
+                handler.subscription = self.create_subscription(msg_type, topic, handler,
+                                                                experience_qos(depth, latched))
                 self.experience_subs.append(handler.subscription)
             if source not in self.games:
                 self.games.add(source)
