@@ -161,3 +161,18 @@ def test_the_learner_thread_takes_sequences_from_anywhere_in_its_queue(sequences
     background.stop()
     assert not background.error, background.error
     assert updates == [2, 3] and background.depth() == 0 and learner.counts["state_restarts"] == 0
+
+
+def test_the_learner_resumes_a_run_directory_dynenv_train_wrote(tmp_path):
+    from dynenv_ros.learning.train_cli import main as train_main
+    run = tmp_path / "run"
+    assert train_main(["--config", "quick", "--run-dir", str(run), "--no-progress", "--set", "num_envs=1",
+                       "--set", "backend=inprocess", "--set", "algorithm=ppo", "--set", "ppo_minibatches=1",
+                       "--set", "players_per_team=1", "--set", "rollout_length=4", "--set", "ltp_horizon=4",
+                       "--set", "total_env_steps=8"]) == 0
+    cfg = TrainConfig.from_dict(json.loads((run / "config.json").read_text()))
+    learner = SequenceLearner(cfg, run, resume=True, batch_sequences=1, log=False)
+    assert learner.updates == json.loads((run / "summary.json").read_text())["updates"] and learner.version >= 2
+    agent, _ = policy_from_bytes((run / "policy.safetensors").read_bytes(), "the run's policy")
+    for (name, a), b in zip(agent.state_dict().items(), learner.agent.state_dict().values()):
+        assert torch.equal(a, b), name
