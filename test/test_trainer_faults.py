@@ -111,3 +111,22 @@ def test_hostile_experience_is_dropped_and_counted(make_node, executor, tmp_path
     # and the graph still trains: a real game after the attack
     sim, policy = _game(make_node, executor, seed=5)
     assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
+
+
+def test_bad_settings_and_files_at_start_are_refused_with_the_reason(make_node, tmp_path):
+    """A trainer that cannot start says which parameter and why (the node runner turns it into exit status 2)."""
+    from rclpy.exceptions import ParameterException
+    (tmp_path / "bad.safetensors").write_bytes(b"not a policy")
+    (tmp_path / "empty").mkdir()
+    cases = {"reward_weights": dict(reward_weights=[1.0, 2.0]),
+             "initial_policy": dict(initial_policy=str(tmp_path / "bad.safetensors")),
+             "resume": dict(resume=True, run_dir=str(tmp_path / "empty")),
+             "batch_sequences": dict(batch_sequences=2, ppo_minibatches=4)}
+    for key, values in cases.items():
+        params = {**TRAINER, "run_dir": str(tmp_path / key), **values}
+        try:
+            make_node(TrainerNode, parameter_overrides=_params(**params))
+        except ParameterException as error:
+            assert str(error).startswith(f"{key}: ") and str(error).endswith(f"['{key}']"), (key, str(error))
+        else:
+            raise AssertionError(f"{key}: the trainer started")

@@ -28,7 +28,7 @@ from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.learning import checkpoints
 from dynenv_ros.learning.algorithms import log_prob_entropy, run_sequence, update
-from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.experience import Sequence, batch
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import arrays_as_tensors
@@ -47,15 +47,15 @@ class SequenceLearner:
                  max_policy_lag: int = 4, log: bool = True, reward_weights=(1.0, 1.0, 1.0, 1.0),
                  initial_policy: str | Path | None = None, max_batch_sequences: int | None = None) -> None:
         if cfg.algorithm != "ppo":
-            raise ValueError("algorithm: learning from message experience needs 'ppo' (its ratio corrects the "
+            raise ConfigError("algorithm", "learning from message experience needs 'ppo' (its ratio corrects the "
                              "policy lag; A2C is on-policy only)")
         if cfg.head_mode != "discrete":
-            raise ValueError("head_mode: learning from message experience supports the discrete head only")
+            raise ConfigError("head_mode", "learning from message experience supports the discrete head only")
         if batch_sequences < 1 or batch_sequences < cfg.ppo_minibatches:
-            raise ValueError(f"batch_sequences must be >= 1 and >= ppo_minibatches ({cfg.ppo_minibatches}), "
+            raise ConfigError("batch_sequences", f"must be >= 1 and >= ppo_minibatches ({cfg.ppo_minibatches}), "
                              f"got {batch_sequences}")
         if max_policy_lag < 0:
-            raise ValueError(f"max_policy_lag must be >= 0, got {max_policy_lag}")
+            raise ConfigError("max_policy_lag", f"must be >= 0, got {max_policy_lag}")
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.batch_sequences, self.max_policy_lag = batch_sequences, max_policy_lag
@@ -64,7 +64,7 @@ class SequenceLearner:
         # observation); all ones is the simulator's total.
         self.reward_weights = np.asarray(reward_weights, np.float32)
         if self.reward_weights.shape != (4,) or not np.isfinite(self.reward_weights).all():
-            raise ValueError(f"reward_weights must be 4 finite numbers, got {list(reward_weights)}")
+            raise ConfigError("reward_weights", f"must be 4 finite numbers, got {list(reward_weights)}")
         torch.set_num_threads(cfg.torch_threads)
         self.settings = update_settings(cfg)
         soccer = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode})
@@ -79,9 +79,15 @@ class SequenceLearner:
         self.wall_before = 0.0
         self._started = time.perf_counter()
         if initial_policy and not resume:      # a warm start: a policy file (e.g. dynenv-train --from-bag's)
-            self._load_initial(Path(initial_policy))
+            try:
+                self._load_initial(Path(initial_policy))
+            except ValueError as error:
+                raise ConfigError("initial_policy", str(error)) from None
         if resume:
-            meta, _ = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
+            try:
+                meta, _ = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
+            except ValueError as error:
+                raise ConfigError("resume", str(error)) from None
             self.env_steps, self.updates = int(meta["env_steps"]), int(meta["updates"])
             self.episodes, self.wall_before = int(meta.get("episodes", 0)), float(meta.get("wall_seconds", 0.0))
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
@@ -250,7 +256,11 @@ class SequenceLearner:
     def weights(self) -> bytes:
         """The current policy as a policy file's bytes (``PolicyWeights.data``); its meta's updates give
         ``version_of`` = ``self.version``."""
-        return policy_bytes(self.agent, {k: v for k, v in self.meta().items() if k not in ("config", "numpy_rng")})
+        return policy_bytes(self.agent, self.policy_meta())
+
+    def policy_meta(self) -> dict[str, Any]:
+        """What a policy file or PolicyWeights carries of the run (no config, no generator state)."""
+        return {k: v for k, v in self.meta().items() if k not in ("config", "numpy_rng")}
 
     def log(self, scalars: dict[str, float]) -> None:
         if self.logger is not None:

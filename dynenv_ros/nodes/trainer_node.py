@@ -127,10 +127,8 @@ class TrainerNode(Node):
                                            batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag,
                                            reward_weights=list(weights), initial_policy=initial or None,
                                            max_batch_sequences=max_batch or None)
-        except ValueError as error:
-            key = next((k for k in ("reward_weights", "initial_policy") if k in str(error)),
-                       "resume" if resume else "batch_sequences")
-            raise ParameterException(str(error), [key]) from None
+        except ConfigError as error:            # every refusal names its parameter
+            raise ParameterException(str(error), [error.key]) from None
         self.run_id = self.run_dir.resolve().name
         motion = soccer.motion
         self.assembler = ExperienceAssembler(steps, players, soccer.rates.frames_per_period, motion.head_max_delta,
@@ -245,8 +243,7 @@ class TrainerNode(Node):
         data = self.learner.weights()
         msg = PolicyWeights(version=self.learner.version, run_id=self.run_id, data=data,
                             sha256=hashlib.sha256(data).hexdigest(),
-                            metadata_json=json.dumps({k: v for k, v in self.learner.meta().items()
-                                                      if k not in ("config", "numpy_rng")}))
+                            metadata_json=json.dumps(self.learner.policy_meta()))
         msg.header.stamp = self.get_clock().now().to_msg()
         self.weights_pub.publish(msg)
         self.weights_published += 1
@@ -325,7 +322,7 @@ class TrainerNode(Node):
             self.learner.save_checkpoint()
             from dynenv_ros.agent.checkpoint import save_policy
             save_policy(self.learner.agent, str(self.run_dir / "policy.safetensors"),
-                        {k: v for k, v in self.learner.meta().items() if k not in ("config", "numpy_rng")})
+                        self.learner.policy_meta())
             (self.run_dir / "summary.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
         finally:
             self.learner.close()
