@@ -80,6 +80,13 @@ class Perceiver:
         self.dynamic_index = np.flatnonzero(objects.dynamic)
         line = table[ObjectClass.FIELD_LINE]
         self.line_near, self.line_max, self.line_scale = line.near_range, line.max_range, line.miss_scale
+        lines = np.asarray(objects.lines, float)
+        self._line_count = len(lines)
+        # Endpoints as (2 coordinates, 2L): first endpoints of all lines, then their second endpoints.
+        self._line_points = np.stack((np.concatenate((lines[:, 0], lines[:, 2])),
+                                      np.concatenate((lines[:, 1], lines[:, 3]))))
+        half = params.field_of_view / 2
+        self._half_sin, self._half_cos = math.sin(half), math.cos(half)
         # A circle (soccer's centre circle) is a point object whose visibility is decided by its rim.
         circles = np.flatnonzero(cls == ObjectClass.CENTER_CIRCLE)
         self.circle_index = int(circles[0]) if len(circles) else None
@@ -107,47 +114,88 @@ class Perceiver:
                 self._class_subtype[c] = subtypes[0]
         # Confusion rules as arrays: source class, target class, probability, distant only.
         self.confusions = [(int(c.source), int(c.target), c.probability, c.distant_only) for c in params.confusions]
+        # Rules with distinct sources as tables: probability·ρ per reported class (+256: when DISTANT), target.
+        self._confusion_rate: np.ndarray | None = None
+        if len({source for source, *_ in self.confusions}) == len(self.confusions):
+            self._confusion_rate, self._confusion_target = np.zeros(512), np.arange(256, dtype=np.uint8)
+            for source, target, probability, distant_only in self.confusions:
+                rate = probability * params.rho
+                self._confusion_rate[source + 256], self._confusion_target[source] = rate, target
+                if not distant_only:
+                    self._confusion_rate[source] = rate
+        # The miss multiplier's sighting factor per sighting bits: PARTIAL, else DISTANT, else NEARBY.
+        miss = params.miss
+        self._sighting_factor = np.array([miss.partial_factor if b & _PARTIAL else miss.distant_factor
+                                          if b & _DISTANT else miss.nearby_factor if b & _NEARBY else 1.0
+                                          for b in range(8)])
+        self._point_class = np.ones(256, bool)          # reports that get their sighting bits from themselves
+        self._point_class[[_FIELD_LINE, _CENTER_CIRCLE]] = False
+        self._dynamic_class = np.zeros(256, bool)       # reports that make their neighbours NEARBY
+        self._dynamic_class[[_BALL, _ROBOT]] = True
+        fp = params.false_positives
+        self._fp_probability = min(1.0, fp.probability * params.noise_magnitude)
+        self._fp_none = bool((self._fp_classes == _UNKNOWN).any())
+        self._fp_range = np.minimum(fp.max_distance, self.class_max)      # per class
+        self._fp_floor = np.maximum(2 * self.class_reach_radius, _EPS)
+        self._n = len(cls)
+        self._layouts: dict[tuple[bytes, bytes], _Layout] = {}
 
     # ------------------------------------------------------------------------------------------------------------
     def perceive(self, frames: SceneFrames, views: Views, rng: np.random.Generator,
                  observer_team: np.ndarray) -> Perception:
-        """Detections for every view. ``observer_team`` (V,) is each observer's absolute team."""
+        """Detections for every view. ``observer_team`` (V,) is each observer's absolute team.
+
+        Every (view, object) pair is one entry of flat arrays (pair v·N + j, see ``_Layout``): the arrays are small,
+        so numpy's cost is per call and per inner loop, and long contiguous arrays keep both few."""
         p = self.params
-        V, N = len(views), len(self.objects.class_id)
-        f, o = views.frame, views.observer
-        X, Y = frames.x[f], frames.y[f]                                   # (V, N)
-        ox, oy = X[np.arange(V), o][:, None], Y[np.arange(V), o][:, None]
-        heading = frames.yaw[f, o] + views.head_yaw                       # camera heading (V,)
-        ch, sh = np.cos(heading)[:, None], np.sin(heading)[:, None]
-        dx, dy = X - ox, Y - oy
-        cx, cy = ch * dx + sh * dy, -sh * dx + ch * dy                    # camera frame
+        lay = self._layout(views)
+        V, N = len(lay.observer_source), self._n
+        fx, fy = frames.x.ravel(), frames.y.ravel()
+        src, pv = lay.pair_source, lay.pair_view
+        dx = fx[src] - fx[lay.observer_of_pair]                            # world offsets from the observer
+        dy = fy[src] - fy[lay.observer_of_pair]
+        heading = frames.yaw.ravel()[lay.observer_source] + views.head_yaw  # camera heading (V,)
+        ch, sh = np.cos(heading), np.sin(heading)
+        c, s = ch[pv], sh[pv]
+        cx = c * dx + s * dy                                               # camera frame
+        cy = c * dy - s * dx                                               # (= −s·dx + c·dy, exactly)
         d = np.hypot(cx, cy)
         bearing = np.arctan2(cy, cx)
-        half = p.field_of_view / 2
-        reach = np.arcsin(clamp(self.visibility_radius / np.maximum(d, _EPS), 0.0, 1.0))
         off_axis = np.abs(bearing)
-        in_view = (off_axis <= half + reach) & (d <= self.max_range)
+        half = p.field_of_view / 2
+        # (the radius over the distance is never negative: no lower clamp)
+        reach = np.arcsin(np.minimum(lay.visibility_radius / np.maximum(d, _EPS), 1.0))
+        in_view = (off_axis <= half + reach) & (d <= lay.max_range)
         partial = off_axis > half - reach
-        in_view[np.arange(V), o] = False
+        in_view[lay.own_pair] = False
         if self.circle_index is not None:                  # the circle: seen when enough of its rim is in view
-            rim_count = self._circle_rim_in_view(X[:, self.circle_index], Y[:, self.circle_index], ox[:, 0],
-                                                 oy[:, 0], ch[:, 0], sh[:, 0])
-            in_view[:, self.circle_index] = rim_count >= 3
-            partial[:, self.circle_index] = rim_count < CIRCLE_SAMPLES
-        hidden = self._hidden(cx, cy, d, bearing, o, in_view) if p.occlusion.enabled else np.zeros((V, N), bool)
-        nearby = self._nearby(frames, f, o)
-        if self.circle_index is not None:                  # painted on the floor: never hidden, never crowded
-            hidden[:, self.circle_index] = nearby[:, self.circle_index] = False
-        visible = in_view & ~hidden
-        # From here on, only the visible (view, object) pairs: 1-D arrays of K candidates.
-        v, j = np.nonzero(visible)
-        dk, ck = d[v, j], self.objects.class_id[j]
-        partial_k, distant_k, nearby_k = partial[v, j], dk > self.near[j], nearby[v, j]
-        xk, yk = cx[v, j], cy[v, j]
-        K = len(v)
-        reported = ck.copy()
+            circle = lay.circle_pair
+            rim_count = self._circle_rim_in_view(fx[src[circle]], fy[src[circle]], fx[lay.observer_source],
+                                                 fy[lay.observer_source], ch, sh)
+            in_view[circle] = rim_count >= 3
+            partial[circle] = rim_count < CIRCLE_SAMPLES
+        # From here on, only the pairs in view: 1-D arrays of candidates, then of the K visible pairs.
+        at = in_view.nonzero()[0]
+        j = lay.pair_object[at]
+        if p.occlusion.enabled and len(self.occluder_index):
+            hidden = self._hidden(lay, at, j, cx, cy, d, bearing, in_view)
+            if self.circle_index is not None:              # painted on the floor: never hidden
+                hidden &= j != self.circle_index
+            shown = (~hidden).nonzero()[0]
+            at, j = at[shown], j[shown]
+        v = pv[at]
+        visible = np.zeros(V * N, bool)
+        visible[at] = True
+        K = len(at)
+        dk, ck = d[at], self.objects.class_id[j]
+        near = self.near[j]
+        distant_k = dk > near
+        partial_k = partial[at]
+        bits = partial_k * _PARTIAL                         # the sighting bits the report gets from geometry
+        bits += distant_k
+        xk, yk = cx[at], cy[at]
+        reported = ck
         confused = np.zeros(K, bool)
-        p_miss = np.zeros(K)
         size_factor = np.ones(K)
         yaw_noise = np.zeros(K)
         keep = np.ones(K, bool)
@@ -155,92 +203,124 @@ class Perceiver:
         if p.mode != "none" and p.noise_magnitude > 0.0:
             m, rho = p.noise_magnitude, p.rho
             if p.mode == "realistic":
-                mult = (p.miss.range_offset + p.miss.range_slope * (dk / self.near[j]) ** 2) * np.where(
-                    partial_k, p.miss.partial_factor, np.where(distant_k, p.miss.distant_factor,
-                                                               np.where(nearby_k, p.miss.nearby_factor, 1.0)))
+                nearby_k = self._nearby(frames, lay, at)
+                if self.circle_index is not None:          # painted on the floor: never crowded
+                    nearby_k &= j != self.circle_index
+                factor = self._sighting_factor[bits + nearby_k * _NEARBY]   # partial, else distant, else nearby
+                mult = (p.miss.range_offset + p.miss.range_slope * (dk / near) ** 2) * factor
             else:
                 mult = np.ones(K)
             u = rng.random((4, K))
             p_miss = np.minimum(1.0, rho * self.miss_scale[j] * mult)
             keep = u[0] >= p_miss
-            if p.mode == "realistic":
-                for source, target, probability, distant_only in self.confusions:
-                    rule = (reported == source) & ~confused & keep
-                    if distant_only:
-                        rule &= distant_k
-                    hit = rule & (u[1] < probability * rho * mult)
-                    reported[hit] = target
-                    confused |= hit
+            if p.mode == "realistic" and self.confusions:
+                reported, confused = self._confuse(ck, distant_k, keep, mult, u[1])
             xk, yk = self._position_noise(xk, yk, dk, mult, rng)
             g = rng.standard_normal((2, K))
             size_factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
             yaw_noise = m * p.position.yaw_std * g[1]
             if p.mode == "realistic":
                 fp = p.false_positives
-                feet = keep & (ck == _ROBOT) & (reported == _ROBOT) & (dk < fp.at_feet_range) \
-                    & ~distant_k & ~partial_k & (u[2] < fp.at_feet_probability * m)
-                if feet.any():
-                    extra.append(self._feet_balls(v[feet], xk[feet], yk[feet], rng))
+                feet = ((ck == _ROBOT) & (reported == _ROBOT) & keep & (dk < fp.at_feet_range) & (bits == 0)
+                        & (u[2] < fp.at_feet_probability * m))
+                at_feet = feet.nonzero()[0]
+                if len(at_feet):
+                    extra.append(self._feet_balls(v[at_feet], xk[at_feet], yk[at_feet], rng))
                     keep &= ~(feet & (u[3] < fp.at_feet_robot_dropped * m))
-        seen = np.zeros((V, N), bool)
-        truly = keep & ~confused
-        seen[v[truly], j[truly]] = True
-        context = _ViewContext(f, o, heading, frames, observer_team)
-        point_rows = self._point_rows(v[keep], j[keep], reported[keep], xk[keep], yk[keep], context,
-                                      size_factor[keep], yaw_noise[keep])
+        seen = np.zeros(V * N, bool)
+        seen[at[keep & ~confused]] = True
+        context = _ViewContext(lay.frame, lay.observer, heading, frames, observer_team, N)
+        kept = keep.nonzero()[0]
+        point_rows = self._point_rows(v[kept], j[kept], src[at[kept]], reported[kept], xk[kept], yk[kept], context,
+                                      size_factor[kept], yaw_noise[kept])
         # The circle keeps the bits of its rim test (every other point report gets them from the report itself).
-        point_rows[0]["sighting"] = (distant_k[keep] * _DISTANT | partial_k[keep] * _PARTIAL)
-        line_rows, lines_seen = self._line_rows(ox[:, 0], oy[:, 0], ch[:, 0], sh[:, 0], rng)
+        point_rows[0]["sighting"] = bits[kept]
+        line_rows, lines_seen = self._line_rows(fx[lay.observer_source], fy[lay.observer_source], ch, sh, rng)
         rows = [line_rows]
         if p.mode != "none" and p.noise_magnitude > 0.0:
             # Reports no object of their class stands behind: confusions, balls at feet, uniform false positives.
-            confused_kept = confused[keep]
+            confused_kept = confused[kept]
             made_up = [(point_rows[0][confused_kept], point_rows[1][confused_kept])] + extra
-            made_up.append(self._false_positives(V, rng))
-            point_rows = (point_rows[0][~confused_kept], point_rows[1][~confused_kept])
+            made_up.append(self._false_positives(lay, rng))
+            real = (~confused_kept).nonzero()[0]
+            point_rows = (point_rows[0][real], point_rows[1][real])
             rows.append(self._made_up_rows(_concatenate(made_up), context, rng))
         rows.append(point_rows)
-        return self._assemble(rows, V, seen, lines_seen, visible, rng)
+        return self._assemble(rows, lay, seen.reshape(V, N), lines_seen, visible.reshape(V, N), rng)
 
-    # ------------------------------------------------------------------------------------------------------------
-    def _hidden(self, cx: np.ndarray, cy: np.ndarray, d: np.ndarray, bearing: np.ndarray,
-                observer: np.ndarray, in_view: np.ndarray) -> np.ndarray:
-        """Objects behind a robot: in its shadow cone (``cone``) or within the occluder radius of the sight line
-        through it (``band``, DynEnv's rule, where only robots in the field of view occlude)."""
-        k = self.occluder_index
-        if len(k) == 0:
-            return np.zeros(d.shape, bool)
+    def _layout(self, views: Views) -> "_Layout":
+        """The index tables of these views, built on first use and kept (a caller's views rarely change)."""
+        frame, observer = np.asarray(views.frame, np.intp), np.asarray(views.observer, np.intp)
+        key = (frame.tobytes(), observer.tobytes())
+        layout = self._layouts.get(key)
+        if layout is None:
+            if len(self._layouts) >= 16:
+                self._layouts.clear()
+            layout = self._layouts[key] = _Layout.build(self, frame, observer)
+        return layout
+
+    def _hidden(self, lay: "_Layout", at: np.ndarray, j: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+                d: np.ndarray, bearing: np.ndarray, in_view: np.ndarray) -> np.ndarray:
+        """(C,) for the candidate pairs ``at`` (objects ``j``): behind a robot, in its shadow cone (``cone``) or
+        within the occluder radius of the sight line through it (``band``, DynEnv's rule, where only robots in the
+        field of view occlude). Occluder quantities are (occluders, views), gathered per candidate's view."""
         occlusion = self.params.occlusion
-        dk, bk = d[:, k], bearing[:, k]                                   # (V, K)
-        valid = (k[None, :] != observer[:, None]) & (np.abs(bk) < math.pi / 2)   # in front of the observer
-        behind = d[:, None, :] > dk[:, :, None] + _EPS
+        occ = lay.occluder_pair                                           # (K, V)
+        dk = d[occ]
+        valid = lay.occluder_not_observer & (np.abs(bearing[occ]) < math.pi / 2)   # in front of the observer
         if occlusion.model == "band":
-            valid &= in_view[:, k]
+            valid &= in_view[occ]
+        limit = np.where(valid, dk + _EPS, np.inf)        # farther than this behind a valid occluder
+        x, y = cx[at], cy[at]
+        if occlusion.model == "band":
             inv_k = 1.0 / np.maximum(dk, _EPS)
-            sx, sy = cx[:, k] * inv_k, cy[:, k] * inv_k                   # unit sight lines to the occluders
-            along = sx[:, :, None] * cx[:, None, :] + sy[:, :, None] * cy[:, None, :]      # (V, K, N)
-            across = np.abs(sx[:, :, None] * cy[:, None, :] - sy[:, :, None] * cx[:, None, :])
-            hide = valid[:, :, None] & behind & (along > 0) & (across < occlusion.occluder_radius)
+            per = np.array((limit, cx[occ] * inv_k, cy[occ] * inv_k))[:, :, lay.pair_view[at]]   # (3, K, C)
+            sx, sy = per[1], per[2]                                       # unit sight lines to the occluders
+            along = sx * x + sy * y
+            across = np.abs(sx * y - sy * x)
+            hide = (d[at] > per[0]) & (along > 0) & (across < occlusion.occluder_radius)
         else:
             ratio = clamp(occlusion.occluder_radius / np.maximum(dk, _EPS), 0.0, 1.0)
             cos_width = np.sqrt(1.0 - ratio * ratio)
             # cos of the angle between the sight lines to target and occluder, without trigonometry
             inv = 1.0 / np.maximum(d, _EPS)
-            ux, uy = cx * inv, cy * inv                                   # unit sight lines (V, N)
-            cos_delta = ux[:, None, :] * ux[:, k, None] + uy[:, None, :] * uy[:, k, None]   # (V, K, N)
-            hide = valid[:, :, None] & behind & (cos_delta > cos_width[:, :, None])
-        hide[:, np.arange(len(k)), k] = False                             # nothing hides itself
-        return hide.any(axis=1)
+            ux, uy = cx * inv, cy * inv                                   # unit sight lines
+            per = np.array((limit, cos_width, ux[occ], uy[occ]))[:, :, lay.pair_view[at]]   # (4, K, C)
+            hide = (d[at] > per[0]) & (ux[at] * per[2] + uy[at] * per[3] > per[1])
+        hide &= lay.occluder_object != j                                  # nothing hides itself
+        return np.logical_or.reduce(hide, axis=0)
 
-    def _nearby(self, frames: SceneFrames, f: np.ndarray, observer: np.ndarray) -> np.ndarray:
-        """Another moving object (not the observer) within ``nearby_distance`` of the object."""
+    def _nearby(self, frames: SceneFrames, lay: "_Layout", at: np.ndarray) -> np.ndarray:
+        """For the pairs ``at``: another moving object (not the observer) within ``nearby_distance`` of the object.
+        Closeness is a property of the frame, so it is found per frame and each view only discounts its observer."""
         k = self.dynamic_index
-        X, Y = frames.x[f], frames.y[f]
+        if not len(k):
+            return np.zeros(len(at), bool)
+        X, Y = frames.x, frames.y
         ddx, ddy = X[:, k, None] - X[:, None, :], Y[:, k, None] - Y[:, None, :]
-        close = ddx * ddx + ddy * ddy < self.params.miss.nearby_distance ** 2   # (V, K, N)
-        close[:, np.arange(len(k)), k] = False
-        close &= (k[None, :, None] != observer[:, None, None])
-        return close.any(axis=1)
+        close = np.zeros((len(X), len(k) + 1, self._n), bool)            # (F, dynamic + a row of none, N)
+        np.less(ddx * ddx + ddy * ddy, self.params.miss.nearby_distance ** 2, out=close[:, :-1])
+        close[:, np.arange(len(k)), k] = False                            # an object is not its own neighbour
+        count = close.sum(axis=1)                                         # (F, N)
+        return count.ravel()[lay.pair_source[at]] > close.ravel()[lay.observer_closeness[at]]
+
+    def _confuse(self, cls: np.ndarray, distant: np.ndarray, keep: np.ndarray, mult: np.ndarray,
+                 u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rule 3: (reported class, confused) after the confusion rules, drawing on ``u``. Rules with distinct
+        sources cannot compete for a report, so they run as one table lookup; otherwise in order."""
+        if self._confusion_rate is not None:
+            hit = keep & (u < self._confusion_rate[cls + distant * 256] * mult)
+            return np.where(hit, self._confusion_target[cls], cls), hit
+        reported, confused = cls.copy(), np.zeros(len(cls), bool)
+        rho = self.params.rho
+        for source, target, probability, distant_only in self.confusions:
+            rule = (reported == source) & ~confused & keep
+            if distant_only:
+                rule &= distant
+            hit = rule & (u < probability * rho * mult)
+            reported[hit] = target
+            confused |= hit
+        return reported, confused
 
     def _position_noise(self, x, y, d, mult, rng):
         p, m = self.params.position, self.params.noise_magnitude
@@ -248,23 +328,24 @@ class Perceiver:
             scale = m * p.uniform_scale * (mult if self.params.mode == "realistic" else 4.0)
             u = rng.random((2,) + x.shape) - 0.5
             return x + u[0] * scale, y + u[1] * scale
-        return self._polar_point_noise(x, y, rng, d)
+        noisy = self._polar_point_noise(np.array((x, y)), rng, d)
+        return noisy[0], noisy[1]
 
-    def _point_rows(self, v, j, cls, x, y, context: "_ViewContext", size_factor, yaw_noise):
-        """Rows of the detected point objects with their own attributes (confused ones are re-dressed later)."""
-        obj = self.objects
+    def _point_rows(self, v, j, src, cls, x, y, context: "_ViewContext", size_factor, yaw_noise):
+        """Rows of the detected point objects with their own attributes (confused ones are re-dressed later);
+        ``src`` is each pair's index in the frames' flattened arrays."""
+        obj, frames = self.objects, context.frames
         rows = np.zeros(len(v), DETECTION_DTYPE)
         rows["class_id"] = cls
         rows["x"], rows["y"] = x, y
         rows["size_x"] = obj.size_x[j] * size_factor
         rows["size_y"] = obj.size_y[j] * size_factor
-        f = context.frame[v]
         is_robot = cls == _ROBOT
-        yaw = _wrap(context.frames.yaw[f, j] - context.heading[v] + yaw_noise)
+        yaw = _wrap(frames.yaw.ravel()[src] - context.heading[v] + yaw_noise)
         rows["yaw"] = np.where(is_robot, yaw, np.nan)
         rows["team"] = np.where(is_robot, obj.team[j] * context.observer_team[v], 0)
-        rows["fallen"] = is_robot & context.frames.fallen[f, j]
-        rows["penalized"] = is_robot & context.frames.penalized[f, j]
+        rows["fallen"] = is_robot & frames.fallen.ravel()[src]
+        rows["penalized"] = is_robot & frames.penalized.ravel()[src]
         rows["subtype"] = obj.subtype[j]
         rows["true_id"] = obj.object_id[j]
         rows["true_class"] = obj.class_id[j]
@@ -280,7 +361,7 @@ class Perceiver:
         if n == 0:
             return part
         p = self.params
-        cls = rows["class_id"].astype(np.intp)
+        cls = rows["class_id"]
         g = rng.standard_normal((2, n))
         m = p.noise_magnitude
         factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
@@ -289,9 +370,10 @@ class Perceiver:
         rows["team"] = 0
         rows["fallen"] = rows["penalized"] = False
         rows["subtype"] = self._class_subtype[cls]
-        robot = np.flatnonzero(cls == _ROBOT)
+        robot = (cls == _ROBOT).nonzero()[0]
         if len(robot):
-            observer = context.observer[v[robot]]
+            view = v[robot]
+            observer = context.observer[view]
             others = self.robot_index
             observer_is_robot = self.is_robot[observer]
             choices = len(others) - observer_is_robot.astype(int)
@@ -299,17 +381,18 @@ class Perceiver:
                 pick = (rng.random(len(robot)) * choices).astype(np.intp)
                 pick += observer_is_robot & (pick >= self._robots_before[observer])
                 r = others[pick]
-                f = context.frame[v[robot]]
-                heading = context.heading[v[robot]]
-                rows["yaw"][robot] = _wrap(context.frames.yaw[f, r] - heading + m * p.position.yaw_std * g[1, robot])
-                rows["team"][robot] = self.objects.team[r] * context.observer_team[v[robot]]
-                rows["fallen"][robot] = context.frames.fallen[f, r]
-                rows["penalized"][robot] = context.frames.penalized[f, r]
+                src = context.frame[view] * context.objects + r
+                frames = context.frames
+                rows["yaw"][robot] = _wrap(frames.yaw.ravel()[src] - context.heading[view]
+                                           + m * p.position.yaw_std * g[1, robot])
+                rows["team"][robot] = self.objects.team[r] * context.observer_team[view]
+                rows["fallen"][robot] = frames.fallen.ravel()[src]
+                rows["penalized"][robot] = frames.penalized.ravel()[src]
             else:                                        # no other robot to resemble: a plausible stranger
                 rows["yaw"][robot] = (rng.random(len(robot)) * 2 - 1) * math.pi
                 rows["team"][robot] = np.where(rng.random(len(robot)) < 0.5, -1, 1)
         for c, subtypes in self._varied_subtypes.items():
-            at = np.flatnonzero(cls == c)
+            at = (cls == c).nonzero()[0]
             if len(at):
                 rows["subtype"][at] = subtypes[(rng.random(len(at)) * len(subtypes)).astype(np.intp)]
         return rows, v
@@ -328,30 +411,30 @@ class Perceiver:
         rows["y"] = ry - ry / dist * toward + rx / dist * side
         return rows, v
 
-    def _false_positives(self, V: int, rng: np.random.Generator):
+    def _false_positives(self, lay: "_Layout", rng: np.random.Generator):
         """Rule 4, uniform part: ``trials`` chances per frame, anywhere a detection of the drawn class could be —
         uniform in distance up to ``max_distance`` (and the class's range), uniform in bearing across the view
         widened by the class's reach asin(radius / max(distance, 2·radius)), as partially seen real objects are."""
-        fp = self.params.false_positives
-        counts = rng.binomial(fp.trials, min(1.0, fp.probability * self.params.noise_magnitude), size=V)
-        if not counts.any():
+        counts = rng.binomial(self.params.false_positives.trials, self._fp_probability, size=len(lay.views))
+        v = np.repeat(lay.views, counts)
+        if not len(v):
             return np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.int64)
-        v = np.repeat(np.arange(V), counts)
         u = rng.random((3, len(v)))                                       # every draw at once
         classes = self._fp_classes[(u[0] * len(self._fp_classes)).astype(np.intp)]
-        keep = classes != _UNKNOWN
-        v, classes, u = v[keep], classes[keep], u[:, keep]
+        if self._fp_none:                                                 # "none" drawn: no report
+            real = (classes != _UNKNOWN).nonzero()[0]
+            v, classes, u = v[real], classes[real], u[:, real]
         rows = np.zeros(len(v), DETECTION_DTYPE)
-        r = u[1] * np.minimum(fp.max_distance, self.class_max[classes])
+        r = u[1] * self._fp_range[classes]
         radius = self.class_reach_radius[classes]          # (at most 30°: nothing stands closer than its size)
-        reach = np.arcsin(clamp(radius / np.maximum(r, np.maximum(2 * radius, _EPS)), 0.0, 1.0))
+        reach = np.arcsin(clamp(radius / np.maximum(r, self._fp_floor[classes]), 0.0, 1.0))
         b = (u[2] * 2 - 1) * (self.params.field_of_view / 2 + reach)
         rows["class_id"] = classes
         rows["x"], rows["y"] = r * np.cos(b), r * np.sin(b)
         rows["true_id"] = -1
         return rows, v
 
-    def _assemble(self, parts, V: int, seen, lines_seen, visible, rng: np.random.Generator) -> Perception:
+    def _assemble(self, parts, lay: "_Layout", seen, lines_seen, visible, rng: np.random.Generator) -> Perception:
         """All rows of all views, each view's rows nearest first, with the sighting bits and confidences every
         report gets by the same rule whether it is real, confused or false."""
         rows, view = _concatenate(parts)
@@ -359,8 +442,7 @@ class Perceiver:
         order = np.lexsort((distance, view))
         # Gathered as raw records: a structured gather copies field by field (ten times slower).
         rows, view, distance = rows.view(_RAW)[order].view(DETECTION_DTYPE), view[order], distance[order]
-        offsets = np.zeros(V + 1, np.int64)
-        np.cumsum(np.bincount(view, minlength=V), out=offsets[1:])
+        offsets = view.searchsorted(lay.view_starts)                      # views are sorted: each one's first row
         self._sighting_bits(rows, view, distance)
         self._confidences(rows, rng)
         return Perception(rows, offsets, seen, lines_seen, visible)
@@ -370,29 +452,31 @@ class Perceiver:
         compute — so no bit tells a false report from a real one: DISTANT beyond the reported class's near range,
         PARTIAL within the class's reach of the view's edge, NEARBY within ``nearby_distance`` of another reported
         ball or robot of the same frame. Lines keep their clipping bits; the circle its rim test."""
-        cls = rows["class_id"].astype(np.intp)
-        idx = np.flatnonzero((cls != _FIELD_LINE) & (cls != _CENTER_CIRCLE))
+        cls = rows["class_id"]
+        idx = self._point_class[cls].nonzero()[0]
         if not len(idx):
             return
         c, d = cls[idx], distance[idx]
         x, y = rows["x"][idx].astype(float), rows["y"][idx].astype(float)
         reach = np.arcsin(clamp(self.class_reach_radius[c] / np.maximum(d, _EPS), 0.0, 1.0))
-        partial = np.abs(np.arctan2(y, x)) > self.params.field_of_view / 2 - reach
-        distant = d > self.class_near[c]
-        dyn = (c == _BALL) | (c == _ROBOT)
-        nearby = np.zeros(len(idx), bool)
-        if dyn.any():                  # each report against its own view's ball and robot reports only
+        bits = (np.abs(np.arctan2(y, x)) > self.params.field_of_view / 2 - reach) * _PARTIAL
+        bits += d > self.class_near[c]                                    # DISTANT
+        dynamic = self._dynamic_class[c].nonzero()[0]                     # ball and robot reports
+        if len(dynamic):
+            # Every (report, ball or robot report of the same view) pair: views are sorted, so a view's dynamic
+            # reports are one run of ``dynamic``.
             pv = view[idx]
-            dv = pv[dyn]
-            first = np.searchsorted(dv, pv)                  # views are sorted: a view's dynamic reports are a run
-            count = np.searchsorted(dv, pv, side="right") - first
-            own = np.flatnonzero(dyn)
-            for k in range(int(count.max())):
-                at = np.minimum(first + k, len(dv) - 1)
-                other = own[at]
-                gap2 = (x - x[other]) ** 2 + (y - y[other]) ** 2
-                nearby |= (k < count) & (other != np.arange(len(idx))) & (gap2 < self.params.miss.nearby_distance ** 2)
-        rows["sighting"][idx] = (distant * _DISTANT | partial * _PARTIAL | nearby * _NEARBY)
+            dv = pv[dynamic]
+            first = dv.searchsorted(pv)
+            count = dv.searchsorted(pv, side="right") - first
+            owner = np.repeat(np.arange(len(idx)), count)
+            other = dynamic[np.arange(len(owner)) - (np.cumsum(count) - count - first)[owner]]
+            gap2 = (x[owner] - x[other]) ** 2 + (y[owner] - y[other]) ** 2
+            near = (gap2 < self.params.miss.nearby_distance ** 2) & (other != owner)
+            nearby = np.zeros(len(idx), bool)
+            nearby[owner[near]] = True
+            bits += nearby * _NEARBY
+        rows["sighting"][idx] = bits
 
     def _confidences(self, rows: np.ndarray, rng: np.random.Generator) -> None:
         """Calibrated detector scores. Each report has evidence z ~ N(d', 1) when it is correct (its object exists
@@ -404,8 +488,8 @@ class Perceiver:
         if p.confidence == "none":
             rows["confidence"] = 1.0
             return
-        cls = rows["class_id"].astype(np.intp)
-        correct = (rows["true_id"] != -1) & (rows["true_class"] == rows["class_id"])
+        cls = rows["class_id"]
+        correct = (rows["true_id"] != -1) & (rows["true_class"] == cls)
         sep = p.confidence_separation
         z = rng.standard_normal(len(rows)) + sep * correct
         logit = self.class_prior_logit[cls] + sep * z - sep * sep / 2
@@ -413,64 +497,87 @@ class Perceiver:
 
     # -- lines and the centre circle ------------------------------------------------------------------------------
     def _line_rows(self, ox, oy, c, s, rng):
-        """Field lines clipped to the view wedge and range; DynEnv's endpoint noise and miss rule."""
-        lines = self.objects.lines
-        V, L = len(ox), len(lines)
+        """Field lines clipped to the view wedge and range; DynEnv's endpoint noise and miss rule.
+
+        x and y, a line's two endpoints and the wedge's two edges travel stacked on a leading axis, so each step is
+        one numpy call for all of them (the arrays are small; per-call overhead is the cost)."""
+        V, L = len(ox), self._line_count
         if L == 0:
             return (np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.int64)), np.zeros(V, int)
-        dx = lines[None, :, 0::2] - ox[:, None, None]                     # (V, L, 2): both endpoints
-        dy = lines[None, :, 1::2] - oy[:, None, None]
-        c, s = c[:, None, None], s[:, None, None]
-        px, py = c * dx + s * dy, -s * dx + c * dy
-        ax, bx, ay, by = px[..., 0], px[..., 1], py[..., 0], py[..., 1]
-        half = self.params.field_of_view / 2
-        sin_h, cos_h = math.sin(half), math.cos(half)
-        edge_y = np.array([-cos_h, cos_h])[:, None, None]                 # the two edges of the view wedge
-        lo, hi = _clip_half_plane(sin_h * ax + edge_y * ay, sin_h * bx + edge_y * by, 0.0, 1.0)
-        lo, hi = lo.max(axis=0), hi.min(axis=0)
-        if math.isfinite(self.line_max):
-            lo, hi = _clip_disc(ax, ay, bx, by, self.line_max, lo, hi)
-        ex, ey = bx - ax, by - ay
-        visible = (hi > lo) & (np.hypot(ex, ey) * (hi - lo) >= MIN_LINE_LENGTH)
-        v, k = np.nonzero(visible)
-        lo, hi, ax, ay, ex, ey = lo[v, k], hi[v, k], ax[v, k], ay[v, k], ex[v, k], ey[v, k]
-        sx, sy, tx, ty = ax + lo * ex, ay + lo * ey, ax + hi * ex, ay + hi * ey
-        partial = (lo > _EPS) | (hi < 1 - _EPS)
-        d_start, d_end = np.hypot(sx, sy), np.hypot(tx, ty)
-        distant = np.maximum(d_start, d_end) > self.line_near
-        p = self.params
-        keep = np.ones(len(v), bool)
-        p_miss = np.zeros(len(v))
-        if p.mode != "none" and p.noise_magnitude > 0.0:
-            m = p.noise_magnitude
-            if p.mode == "realistic":
-                mult_s = p.miss.range_offset + p.miss.range_slope * (d_start / self.line_near) ** 2
-                mult_e = p.miss.range_offset + p.miss.range_slope * (d_end / self.line_near) ** 2
+        # Camera frame of every endpoint, (2 coordinates, V, 2L): columns :L the first endpoints, L: the second.
+        d = self._line_points[:, None, :] - np.array((ox, oy))[:, :, None]
+        cd, sd = c[:, None] * d, s[:, None] * d
+        p = np.empty_like(d)
+        np.add(cd[0], sd[1], out=p[0])                                    # c·dx + s·dy
+        np.subtract(cd[1], sd[0], out=p[1])                               # −s·dx + c·dy
+        a = p[:, :, :L]                                                   # first endpoints (2, V, L)
+        e = p[:, :, L:] - a                                               # directions to the second ones
+        # The two edges of the view wedge, (2 edges, V, 2L): g ≥ 0 inside.
+        sp, cq = self._half_sin * p[0], self._half_cos * p[1]
+        g = np.empty_like(p)
+        np.subtract(sp, cq, out=g[0])
+        np.add(sp, cq, out=g[1])
+        ga = g[:, :, :L]
+        slope = g[:, :, L:] - ga
+        flat = slope == 0
+        t = -ga / np.where(flat, 1.0, slope)
+        enter, leave = np.where(slope > 0, t, 0.0), np.where(slope < 0, t, 1.0)
+        lo = np.maximum(np.maximum(enter[0], enter[1]), 0.0)             # [lo, hi]: the part inside the wedge
+        hi = np.minimum(np.minimum(leave[0], leave[1]), 1.0)
+        outside = flat & (ga < 0)                                         # parallel to an edge, beyond it
+        out = outside[0] | outside[1]
+        if math.isfinite(self.line_max):                                  # and within range of the camera
+            ee, ae, aa = e * e, a * e, a * a
+            len2 = np.maximum(ee[0] + ee[1], _EPS)
+            b = ae[0] + ae[1]
+            disc = b * b - len2 * (aa[0] + aa[1] - self.line_max * self.line_max)
+            root = np.sqrt(np.maximum(disc, 0.0))
+            out |= disc < 0
+            lo = np.maximum(lo, (-b - root) / len2)
+            hi = np.minimum(hi, (-b + root) / len2)
+        visible = (hi > lo) & (np.hypot(e[0], e[1]) * (hi - lo) >= MIN_LINE_LENGTH)
+        visible &= ~out
+        at = visible.ravel().nonzero()[0]                                 # (view, line) pairs in view: v·L + k
+        v = at // L
+        k = at - v * L
+        first = at + v * L                                                # the pair's first endpoint in p
+        a_k = p.reshape(2, -1)[:, first]                                  # (2 coordinates, K)
+        e_k = e.reshape(2, -1)[:, at]
+        bounds = np.array((lo.ravel()[at], hi.ravel()[at]))               # (2, K): lo, hi
+        # The clipped endpoints, (2 coordinates, 2 ends, K): start (lo) and end (hi).
+        ends = a_k[:, None, :] + bounds * e_k[:, None, :]
+        partial = (bounds[0] > _EPS) | (bounds[1] < 1 - _EPS)
+        dist = np.hypot(ends[0], ends[1])                                 # (2 ends, K)
+        distant = np.maximum(dist[0], dist[1]) > self.line_near
+        pr = self.params
+        K = len(v)
+        keep = None
+        if pr.mode != "none" and pr.noise_magnitude > 0.0:
+            m = pr.noise_magnitude
+            if pr.mode == "realistic":
+                mult = pr.miss.range_offset + pr.miss.range_slope * (dist / self.line_near) ** 2
             else:
-                mult_s = mult_e = np.ones(len(v))
-            p_miss = np.minimum(1.0, p.rho * self.line_scale * (mult_s + mult_e) / 2)
-            keep = rng.random(len(v)) >= p_miss
-            if p.position.model == "uniform":
-                scale = 2 * m * p.position.uniform_scale
-                u = rng.random((4, len(v))) - 0.5
-                ms, me = (mult_s, mult_e) if p.mode == "realistic" else (1.0, 1.0)
-                sx, sy = sx + u[0] * scale * ms, sy + u[1] * scale * ms
-                tx, ty = tx + u[2] * scale * me, ty + u[3] * scale * me
+                mult = np.ones((2, K))
+            p_miss = np.minimum(1.0, pr.rho * self.line_scale * (mult[0] + mult[1]) / 2)
+            keep = rng.random(K) >= p_miss
+            if pr.position.model == "uniform":
+                scale = 2 * m * pr.position.uniform_scale
+                u = rng.random((4, K)) - 0.5                              # rows: start x, start y, end x, end y
+                ms = mult if pr.mode == "realistic" else 1.0
+                ends = ends + u.reshape(2, 2, K).transpose(1, 0, 2) * scale * ms
             else:
-                nx, ny_ = self._polar_point_noise(np.concatenate((sx, tx)), np.concatenate((sy, ty)), rng,
-                                                  np.concatenate((d_start, d_end)))
-                n = len(v)
-                sx, tx, sy, ty = nx[:n], nx[n:], ny_[:n], ny_[n:]
-        v, k = v[keep], k[keep]
-        sx, sy, tx, ty = sx[keep], sy[keep], tx[keep], ty[keep]
+                ends = self._polar_point_noise(ends.reshape(2, -1), rng, dist.ravel()).reshape(2, 2, K)
+            v, k = v[keep], k[keep]
+            ends = ends[:, :, keep]
         # Endpoint order by a rule of the observer's frame alone (nearer end first), so a mirrored or rotated
         # situation gives the mirrored or identical report; an order that follows the field would be a compass.
         # Exact ties (a line square to the gaze, clipped by both edges) go right end first: rotations stay
         # consistent; a perfect tie cannot be mirror-symmetric.
-        gap = np.hypot(tx, ty) - np.hypot(sx, sy)
-        swap = (gap < -1e-6) | ((np.abs(gap) <= 1e-6) & (ty < sy))
-        sx, tx = np.where(swap, tx, sx), np.where(swap, sx, tx)
-        sy, ty = np.where(swap, ty, sy), np.where(swap, sy, ty)
+        reach = np.hypot(ends[0], ends[1])
+        gap = reach[1] - reach[0]
+        swap = (gap < -1e-6) | ((np.abs(gap) <= 1e-6) & (ends[1, 1] < ends[1, 0]))
+        ends = np.where(swap, ends[:, ::-1], ends)
+        (sx, tx), (sy, ty) = ends
         rows = np.zeros(len(v), DETECTION_DTYPE)
         rows["class_id"] = _FIELD_LINE
         rows["line_start_x"], rows["line_start_y"], rows["line_end_x"], rows["line_end_y"] = sx, sy, tx, ty
@@ -481,20 +588,21 @@ class Perceiver:
         rows["yaw"] = (np.arctan2(ey, ex) + math.pi / 2) % math.pi - math.pi / 2   # a line has no arrow
         rows["size_x"] = np.sqrt(seg2)
         rows["size_y"] = 0.05
-        rows["sighting"] = distant[keep] * _DISTANT | partial[keep] * _PARTIAL
+        bits = distant * _DISTANT | partial * _PARTIAL
+        rows["sighting"] = bits if keep is None else bits[keep]
         rows["true_id"] = -2 - k                                          # lines: -2, -3, … (never -1 = FP)
         rows["true_class"] = _FIELD_LINE
         return (rows, v), np.bincount(v, minlength=V)
 
-    def _polar_point_noise(self, x, y, rng, d=None):
+    def _polar_point_noise(self, xy: np.ndarray, rng: np.random.Generator, d: np.ndarray) -> np.ndarray:
+        """Noisy copies of points ``xy`` (2, n) at distances ``d``: polar errors, or (random mode) per-axis ones."""
         p, m = self.params.position, self.params.noise_magnitude
-        g = rng.standard_normal((2,) + np.shape(x))
+        g = rng.standard_normal(xy.shape)
         if self.params.mode == "random":
-            return x + g[0] * m * p.random_std, y + g[1] * m * p.random_std
-        d = np.hypot(x, y) if d is None else d
+            return xy + g * m * p.random_std
         r = np.maximum(0.0, d + g[0] * m * (p.radial_base + p.radial_per_m2 * d * d))
-        b = np.arctan2(y, x) + g[1] * m * p.bearing_std
-        return r * np.cos(b), r * np.sin(b)
+        b = np.arctan2(xy[1], xy[0]) + g[1] * m * p.bearing_std
+        return np.array((r * np.cos(b), r * np.sin(b)))
 
     def _circle_rim_in_view(self, x0, y0, ox, oy, c, s) -> np.ndarray:
         """(V,) how many rim samples of the circle lie in the view wedge and range."""
@@ -505,28 +613,6 @@ class Perceiver:
         limit = self.params.classes[ObjectClass.CENTER_CIRCLE].max_range
         inside = (np.abs(np.arctan2(py, px)) <= half) & (px * px + py * py <= limit * limit)
         return inside.sum(axis=1)
-
-
-def _clip_half_plane(ga, gb, lo, hi):
-    """Restrict the segment parameter interval [lo, hi] to where g(t) = ga + t·(gb − ga) ≥ 0."""
-    slope = gb - ga
-    flat = slope == 0
-    t = -ga / np.where(flat, 1.0, slope)
-    lo = np.where(slope > 0, np.maximum(lo, t), lo)
-    hi = np.where(slope < 0, np.minimum(hi, t), hi)
-    outside = flat & (ga < 0)
-    return np.where(outside, 1.0, lo), np.where(outside, 0.0, hi)
-
-
-def _clip_disc(ax, ay, bx, by, radius, lo, hi):
-    """Restrict [lo, hi] to the part of the segment within ``radius`` of the camera."""
-    ex, ey = bx - ax, by - ay
-    a = np.maximum(ex * ex + ey * ey, _EPS)
-    b = ax * ex + ay * ey
-    disc = b * b - a * (ax * ax + ay * ay - radius * radius)
-    root = np.sqrt(np.maximum(disc, 0.0))
-    miss = disc < 0
-    return np.where(miss, 1.0, np.maximum(lo, (-b - root) / a)), np.where(miss, 0.0, np.minimum(hi, (-b + root) / a))
 
 
 _RAW = np.dtype((np.void, DETECTION_DTYPE.itemsize))
@@ -545,9 +631,54 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _ViewContext:
-    """Per view: its frame, observer, camera heading; the frames; each observer's absolute team."""
+    """Per view: its frame, observer, camera heading; the frames; each observer's absolute team; the number of
+    objects (a row of the frames' arrays)."""
     frame: np.ndarray
     observer: np.ndarray
     heading: np.ndarray
     frames: SceneFrames
     observer_team: np.ndarray
+    objects: int
+
+
+@dataclass
+class _Layout:
+    """Index tables of one set of views (each view's frame and observer) over the (view, object) pairs, numbered
+    v·N + j, so per-pair work runs on flat arrays and per-view or per-object values are gathered, not broadcast."""
+    frame: np.ndarray                  # (V,) each view's frame
+    observer: np.ndarray               # (V,) each view's observer
+    views: np.ndarray                  # (V,) 0..V-1
+    view_starts: np.ndarray            # (V + 1,) 0..V
+    pair_view: np.ndarray              # (V·N,) v
+    pair_object: np.ndarray            # (V·N,) j
+    pair_source: np.ndarray            # (V·N,) f·N + j: the pair's object in the frames' flattened (F, N) arrays
+    observer_source: np.ndarray        # (V,) f·N + o: each view's observer there
+    observer_of_pair: np.ndarray       # (V·N,) the pair's observer there
+    own_pair: np.ndarray               # (V,) v·N + o: each observer's own pair
+    circle_pair: np.ndarray | None     # (V,) v·N + the circle
+    visibility_radius: np.ndarray      # (V·N,) the object's
+    max_range: np.ndarray              # (V·N,) the object's
+    occluder_pair: np.ndarray          # (K, V) v·N + k for the occluders k
+    occluder_object: np.ndarray        # (K, 1) k
+    occluder_not_observer: np.ndarray  # (K, V) bool
+    observer_closeness: np.ndarray     # (V·N,) index of (f, the observer's row, j) in ``_nearby``'s closeness table
+
+    @classmethod
+    def build(cls, perceiver: "Perceiver", frame: np.ndarray, observer: np.ndarray) -> "_Layout":
+        V, N = len(frame), perceiver._n
+        views = np.arange(V)
+        v, j = np.repeat(views, N), np.tile(np.arange(N), V)
+        observer_source = frame * N + observer
+        k = perceiver.occluder_index
+        dynamic = perceiver.dynamic_index
+        row = np.full(N, len(dynamic))                  # an observer that is not dynamic: the table's empty row
+        row[dynamic] = np.arange(len(dynamic))
+        circle = perceiver.circle_index
+        return cls(frame=frame, observer=observer, views=views, view_starts=np.arange(V + 1), pair_view=v,
+                   pair_object=j, pair_source=frame[v] * N + j, observer_source=observer_source,
+                   observer_of_pair=observer_source[v], own_pair=views * N + observer,
+                   circle_pair=None if circle is None else views * N + circle,
+                   visibility_radius=np.tile(perceiver.visibility_radius, V),
+                   max_range=np.tile(perceiver.max_range, V), occluder_pair=views[None, :] * N + k[:, None],
+                   occluder_object=k[:, None], occluder_not_observer=k[:, None] != observer[None, :],
+                   observer_closeness=(frame[v] * (len(dynamic) + 1) + row[observer[v]]) * N + j)
