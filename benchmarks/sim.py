@@ -1,7 +1,8 @@
 """dynenv-bench sim: env steps per second and peak memory of the in-process simulator.
 
-One env step is one motion period (50 physics ticks by default) for every robot. Random high-level actions come
-from a pre-drawn pool, so the policy costs nothing; the first 50 steps warm up and are not timed.
+One env step is one motion period (50 physics ticks by default) for every robot; for ``--scenario driving`` one
+100 ms period (10 ticks) of every car. Random high-level actions come from a pre-drawn pool, so the policy costs
+nothing; the first 50 steps warm up and are not timed.
 """
 from __future__ import annotations
 
@@ -81,7 +82,59 @@ def _image_size(text: str) -> tuple[int, int]:
     return width, height
 
 
+def _driving_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
+    from dynenv_ros.driving.world import DrivingWorld
+    world = DrivingWorld(config, seed=args.seed)
+
+    def run(steps: int) -> None:
+        for k in range(steps):
+            result = world.step(pool[k % ACTION_POOL])
+            if result.terminated or result.truncated:
+                world.reset()
+    return run
+
+
+def run_driving(args: Any) -> int:
+    """One env step = one 100 ms period of every car; random discrete actions [acceleration, steering]."""
+    if not 1 <= args.cars <= 10:
+        print("--cars must be in 1..10", file=sys.stderr)
+        return 2
+    if args.observation != "none" or args.envs != 1:
+        print("the driving scenario has physics and rules only so far: use --observation none and --envs 1",
+              file=sys.stderr)
+        return 2
+    if args.steps < 1:
+        print("--steps must be at least 1", file=sys.stderr)
+        return 2
+    cores = pin_cores(args.cores)
+    from dynenv_ros.driving.config import DrivingConfig
+    config = DrivingConfig(n_cars=args.cars)
+    pool = np.random.default_rng(args.seed).integers(0, 3, size=(ACTION_POOL, args.cars, 2))
+    stepper = _driving_stepper(args, config, pool)
+    stepper(WARMUP_STEPS)
+    best = 0.0
+    for _ in range(args.repeat):
+        start = time.perf_counter()
+        stepper(args.steps)
+        best = max(best, args.steps / (time.perf_counter() - start))
+    figures = {
+        "scenario": args.scenario, "cars": args.cars, "steps": args.steps, "observation": args.observation,
+        "envs": 1, "backend": "single", "cores": len(cores),
+        "env_steps_per_s": round(best, 1), "ms_per_env_step": round(1000.0 / best, 4),
+        "physics_ticks_per_s": round(best * config.rates.motion_period_ticks),
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "torch_imported": "torch" in sys.modules, "python": platform.python_version(),
+    }
+    if args.json:
+        print(json.dumps(figures))
+    else:
+        print_table(f"dynenv-bench sim: driving, {args.cars} cars", [(k, str(v)) for k, v in figures.items()])
+    return 0
+
+
 def run(args: Any) -> int:
+    if getattr(args, "scenario", "robocup") == "driving":
+        return run_driving(args)
     if not 1 <= args.players_per_team <= 5:
         print("--players-per-team must be in 1..5", file=sys.stderr)
         return 2

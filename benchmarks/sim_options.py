@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-SCENARIOS = ("robocup",)
+SCENARIOS = ("robocup", "driving")
 OBSERVATIONS = ("none", "full", "partial", "padded", "image")
 NOISE = ("realistic", "random", "none")
 
@@ -11,6 +11,7 @@ NOISE = ("realistic", "random", "none")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", choices=SCENARIOS, default="robocup")
     parser.add_argument("--players-per-team", type=int, default=2)
+    parser.add_argument("--cars", type=int, default=2, help="cars of the driving scenario (1..10)")
     parser.add_argument("--steps", type=int, default=5000, help="motion periods (env steps) to time")
     parser.add_argument("--observation", choices=OBSERVATIONS, default="none",
                         help="none: the world's physics and rules only; full / partial / padded / image: the whole "
