@@ -124,26 +124,25 @@ class PaddedLayout:
         and masks of the touched (robot, frame) pairs are overwritten (``clear=False``: ``out`` is known to be
         zeroed already). Returns (V,) rows dropped per view."""
         V = len(offsets) - 1
-        counts = np.diff(offsets)
-        view = np.repeat(np.arange(V), counts)
-        robot, frame = np.asarray(robot_of_view)[view], np.asarray(frame_of_view)[view]
-        touched_robot, touched_frame = np.asarray(robot_of_view), np.asarray(frame_of_view)
+        view = np.arange(V).repeat(offsets[1:] - offsets[:-1])
+        robot_of_view, frame_of_view = np.asarray(robot_of_view), np.asarray(frame_of_view)
         stream = STREAM_OF_CLASS[features[:, 0].astype(np.int64) & 255]
         dropped = np.zeros(V, np.int64)
         for s, (rows_key, mask_key, limit) in enumerate((("landmarks", "landmark_mask", self.max_landmarks),
                                                          ("objects", "object_mask", self.max_objects))):
             if clear:
-                out[rows_key][touched_robot, touched_frame] = 0.0
-                out[mask_key][touched_robot, touched_frame] = 0.0
-            chosen = np.flatnonzero(stream == s)
+                out[rows_key][robot_of_view, frame_of_view] = 0.0
+                out[mask_key][robot_of_view, frame_of_view] = 0.0
+            chosen = (stream == s).nonzero()[0]
             v = view[chosen]
             per_view = np.bincount(v, minlength=V)
-            rank = np.arange(len(v)) - (np.cumsum(per_view) - per_view)[v]   # rows are grouped by view
-            keep = rank < limit
-            rows = chosen[keep]
-            out[rows_key][robot[rows], frame[rows], rank[keep]] = features[rows]
-            out[mask_key][robot[rows], frame[rows], rank[keep]] = 1.0
-            dropped += np.bincount(v[~keep], minlength=V)
+            rank = np.arange(len(v)) - (per_view.cumsum() - per_view)[v]   # rows are grouped by view
+            kept = (rank < limit).nonzero()[0]
+            v = v[kept]
+            at = (robot_of_view[v], frame_of_view[v], rank[kept])
+            out[rows_key][at] = features[chosen[kept]]
+            out[mask_key][at] = 1.0
+            dropped += np.maximum(per_view - limit, 0)
         return dropped
 
 

@@ -90,6 +90,7 @@ class SoccerObservations:
                                       "proprioception": proprio_space, "game": game_space})
         self.dropped_rows = np.zeros(config.n_robots, np.int64)   # padded: rows beyond the maxima, last period
         self._targets: LearningTargets | None = None              # made on the first build_padded(targets=...)
+        self._views: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # per frame count: each view's robot, frame
 
     def reset(self, world: SoccerWorld) -> None:
         self.world = world
@@ -141,10 +142,13 @@ class SoccerObservations:
         n = self.config.n_robots
         frames = len(perception) // n
         arrays = self.layout.empty(n) if out is None else out
-        views = np.arange(frames * n)
-        self.dropped_rows = self.layout.pack_rows(
-            clamp_features(as_features(perception.detections)), perception.offsets, views % n, views // n,
-            arrays, clear=out is not None).reshape(frames, n).sum(axis=0)
+        if frames not in self._views:
+            views = np.arange(frames * n)
+            self._views[frames] = (views % n, views // n)
+        features = as_features(perception.detections)
+        np.minimum(np.maximum(features, -FEATURE_BOUND, out=features), FEATURE_BOUND, out=features)   # clamp_features
+        self.dropped_rows = self.layout.pack_rows(features, perception.offsets, *self._views[frames], arrays,
+                                                  clear=out is not None).reshape(frames, n).sum(axis=0)
         arrays["proprioception"][:, :frames] = self.vision.proprioception.transpose(1, 0, 2)
         arrays["game"][:] = self.vision.game_controller[-1]
         arrays["previous_action"][:] = previous_actions(self.world.last_actions)

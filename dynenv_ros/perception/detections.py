@@ -51,20 +51,43 @@ def rows_from_messages(detections, true_id: int = -2) -> np.ndarray:
 
 def as_features(detections: np.ndarray) -> np.ndarray:
     """(k, len(FEATURE_COLUMNS)) float32 rows: yaw as cos/sin (0, 0 where undefined), sighting bits split out."""
-    d = detections
+    d = np.ascontiguousarray(detections)
     out = np.empty((len(d), len(FEATURE_COLUMNS)), np.float32)
     yaw = d["yaw"]
     defined = np.isfinite(yaw)
     safe = np.where(defined, yaw, 0.0)
-    out[:, 3] = np.where(defined, np.cos(safe), 0.0)
-    out[:, 4] = np.where(defined, np.sin(safe), 0.0)
-    for column, name in _DIRECT:
-        out[:, column] = d[name]
-    s = d["sighting"]
-    out[:, 16] = (s & 1) > 0
-    out[:, 17] = (s & 2) > 0
-    out[:, 18] = (s & 4) > 0
+    out[:, 3] = np.cos(safe)
+    out[:, 4] = np.sin(safe)
+    out[:, 3:5] *= defined[:, None]                  # undefined: (0, 0)
+    # Runs of columns that are runs of fields too, copied a run at a time through a view of the records.
+    runs = d.view(_RUNS)
+    out[:, 0] = d["class_id"]
+    out[:, 1:3] = runs["position"]
+    out[:, 5:8] = runs["size_confidence"]
+    out[:, 8] = d["team"]
+    out[:, 9:12] = runs["subtype_flags"]
+    out[:, 12:16] = runs["line"]
+    out[:, 16:19] = np.unpackbits(d["sighting"][:, None], axis=1, count=3, bitorder="little")   # distant, partial, nearby
     return out
 
 
-_DIRECT = [(i, name) for i, name in enumerate(FEATURE_COLUMNS) if name in DETECTION_DTYPE.names]
+def _runs(runs: dict[str, tuple[str, int]]) -> np.dtype:
+    """A dtype overlaying the record with runs of consecutive same-typed fields, each as one sub-array, so a run
+    of feature columns is copied with one numpy call. Refuses a run that is not consecutive fields of one type."""
+    names, formats, offsets = [], [], []
+    for name, (first, count) in runs.items():
+        at = DETECTION_DTYPE.names.index(first)
+        fields = [DETECTION_DTYPE.fields[f] for f in DETECTION_DTYPE.names[at:at + count]]
+        size = fields[0][0].itemsize
+        if len({f[0].itemsize for f in fields}) != 1 or any(f[1] != fields[0][1] + i * size
+                                                            for i, f in enumerate(fields)):
+            raise AssertionError(f"{name}: fields {DETECTION_DTYPE.names[at:at + count]} are not one run")
+        names.append(name)
+        formats.append((fields[0][0] if fields[0][0].kind == "f" else np.dtype("u1"), (count,)))
+        offsets.append(fields[0][1])
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": DETECTION_DTYPE.itemsize})
+
+
+# x y | size_x size_y confidence | subtype fallen penalized (bytes: 0/1 flags, an unsigned subtype) | line ends
+_RUNS = _runs({"position": ("x", 2), "size_confidence": ("size_x", 3), "subtype_flags": ("subtype", 3),
+               "line": ("line_start_x", 4)})
