@@ -2,6 +2,8 @@
 motion period, then perceives all robots' frames in one vectorised pass and scores what they truly saw."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dynenv_ros.core.object_classes import ObjectClass
@@ -61,23 +63,28 @@ class SoccerVision:
         self._fallen = np.zeros((frames, total), bool)
         self._penalized = np.zeros((frames, total), bool)
         self._head = np.zeros((frames, n))
-        self._records: list = []
+        self._values: list[float] = []      # recorded this period, flat (see ``frame``)
+        self._recorded = 0
         self._views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.teams = np.array([r.team for r in world.robots], np.int8)
 
     def frame(self, index: int) -> None:
         """Record the world at this vision instant."""
-        if len(self._records) >= len(self._x):
+        if self._recorded >= len(self._x):
             raise RuntimeError("more vision frames than a motion period holds; call perceive() every period")
-        # Plain Python now, one numpy conversion per period in perceive().
+        # Plain Python floats in one flat list now, one numpy conversion per period in perceive(): per robot
+        # (x, y, yaw, fallen, penalized, head yaw, kicking), the ball as a row of the same shape, then the game.
         world = self.world
-        record = [(r.body.position, r.body.angle, r.rules.fallen, r.rules.penalized, r.head_yaw, r.kick is not None)
-                  for r in world.robots]
+        values = self._values
+        for r in world.robots:
+            x, y = r.body.position
+            values += (x, y, r.body.angle, r.rules.fallen, r.rules.penalized, r.head_yaw, r.kick is not None)
+        x, y = world.ball.position
         state = world.state
         # What the GameController broadcasts: ball owner (absolute team), seconds of it left, game seconds left.
-        game = (state.ball_owner, max(0.0, state.ball_owner_remaining) if state.ball_owner else 0.0,
-                world.time_remaining)
-        self._records.append((record, world.ball.position, game))
+        values += (x, y, math.nan, 0, 0, 0, 0, state.ball_owner,
+                   max(0.0, state.ball_owner_remaining) if state.ball_owner else 0.0, world.time_remaining)
+        self._recorded += 1
 
     def positions(self, frame: int) -> tuple[np.ndarray, np.ndarray]:
         """Field positions of the scene's objects at a frame of the last perceived period (for drawing)."""
@@ -90,16 +97,16 @@ class SoccerVision:
         return self._yaw[frame, :n], self._head[frame], self._fallen[frame, :n]
 
     def frames_recorded(self) -> int:
-        return len(self._records)
+        return self._recorded
 
     def perceive(self) -> Perception:
         """All robots' detections for the recorded frames (view index = frame · n_robots + robot)."""
-        frames, n = len(self._records), self.world.n_robots
-        table = np.array([[(p.x, p.y, yaw, fallen, penalized, head, kicking)
-                           for p, yaw, fallen, penalized, head, kicking in record]
-                          + [(ball.x, ball.y, np.nan, 0, 0, 0, 0)] for record, ball, _ in self._records])  # (F, n+1, 7)
-        game = np.array([g for _, _, g in self._records], np.float64).reshape(frames, 3)
-        self._records = []
+        frames, n = self._recorded, self.world.n_robots
+        values = np.array(self._values, np.float64).reshape(frames, 7 * (n + 1) + 3)
+        table = values[:, :7 * (n + 1)].reshape(frames, n + 1, 7)          # robots, then the ball
+        game = values[:, 7 * (n + 1):]
+        self._values = []
+        self._recorded = 0
         # Each robot's own state per frame: head yaw, fallen, penalized, kicking (what it knows of itself).
         self.proprioception = table[:, :n, (5, 3, 4, 6)].astype(np.float32)
         # What the GameController tells each robot per frame, (F, n, 3): ball ownership relative to the robot's team
