@@ -63,6 +63,7 @@ def test_reward_weights_keep_the_original_magnitudes():
     ({"map": {"spawn_spacing": 12.0}}, "map.spawn_spacing"),
     ({"rewards": {"crash_per_speed": -2.0}}, "rewards.crash_per_speed"),
     ({"rewards": {"goal_per_second": float("inf")}}, "rewards.goal_per_second"),
+    ({"rewards": {"blame_cos": 1.0}}, "rewards.blame_cos"),
     ({"speed_limit": 5.0}, "speed_limit"),
     ({"cars": {"top_speed": 5.0}}, "cars.top_speed"),
     ({"cars": 3}, "cars"),

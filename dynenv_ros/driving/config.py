@@ -104,7 +104,7 @@ class PedestrianConfig:
     """Walkers on the walkways; now and then one crosses its road (DynEnv §3, × 0.1 m/px)."""
     count_min: int = 10
     count_max: int = 20
-    mass: float = 90.0                     # kg
+    mass: float = 90.0                     # kg, the original's; unused while pedestrians are kinematic sensors
     radius: float = 0.5                    # m (5 px)
     base_speed_min: int = 3                # base speed = randint(min, max) · speed_unit (3..6 px/s)
     base_speed_max: int = 6
@@ -118,7 +118,6 @@ class PedestrianConfig:
     lateral_min: float = 0.25              # placed this many lane widths outside the road edge (at least) ...
     lateral_max: float = 0.75              # ... and at most
     hit_min_speed: float = 0.1             # m/s: a slower car does not hurt a pedestrian (1 px/s)
-    toward_cos: float = 0.4                # the car is to blame when cos(velocity, direction to the body) > this
 
 
 @dataclass(frozen=True)
@@ -140,6 +139,7 @@ class RewardConfig:
     crash_per_speed: float = 2.0           # RULE: −this·|v| (m/s) per crash = the original −|v|/5 with v in px/s
     opposing_per_metre: float = 0.1        # RULE: per metre driven in the opposing lane (−|v|/10000 px/s per tick)
     progress_per_metre: float = 0.2        # AUXILIARY: per metre closer to the destination (Δpx/50)
+    blame_cos: float = 0.4                 # a car drove into a body when cos(its velocity, direction to it) > this
 
 
 @dataclass(frozen=True)
@@ -190,9 +190,11 @@ class DrivingConfig:
             value = getattr(self.map, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"map.{name} must be an integer of at least 1, got {value!r}")
-        for name in ("cross_probability", "toward_cos"):
-            if not 0.0 <= getattr(self.pedestrians, name) <= 1.0:
-                raise ValueError(f"pedestrians.{name} must be in [0, 1], got {getattr(self.pedestrians, name)}")
+        if not 0.0 <= self.pedestrians.cross_probability <= 1.0:
+            raise ValueError(f"pedestrians.cross_probability must be in [0, 1], got "
+                             f"{self.pedestrians.cross_probability}")
+        if not 0.0 <= self.rewards.blame_cos < 1.0:
+            raise ValueError(f"rewards.blame_cos must be in [0, 1), got {self.rewards.blame_cos}")
         if not 0.0 <= self.cars.reverse_fraction <= 1.0:
             raise ValueError(f"cars.reverse_fraction must be in [0, 1], got {self.cars.reverse_fraction}")
 

@@ -362,11 +362,11 @@ class DrivingWorld:
 
     # -- rule decisions ----------------------------------------------------------------------------------------------
     def _toward(self, car: Car, velocity: tuple[float, float], x: float, y: float) -> bool:
-        """Moving toward a point: cos(velocity, direction to it) > toward_cos (DynEnv's pushing test)."""
+        """Moving toward a point: cos(velocity, direction to it) > blame_cos (DynEnv's pushing test)."""
         dx, dy = x - car.x, y - car.y
         speed, dist = math.hypot(*velocity), math.hypot(dx, dy)
         return speed > 0 and dist > 0 and (velocity[0] * dx + velocity[1] * dy) / (speed * dist) > \
-            self.config.pedestrians.toward_cos
+            self.config.rewards.blame_cos
 
     def _resolve_cars(self, a: Car, b: Car, va: tuple[float, float], vb: tuple[float, float]) -> None:
         """Both crash. Each still driving pays −k·|v|; again if out of its right lane; again, when both were in their
