@@ -24,9 +24,9 @@ def _shm_blocks():
     return {name for name in os.listdir("/dev/shm") if name.startswith("psm_")}
 
 
-def _rollout(backend, steps, envs=3, seed=11, **kwargs):
+def _rollout(backend, steps, envs=3, seed=11, workers=2, **kwargs):
     rng = np.random.default_rng(5)
-    with SoccerVectorEnv(envs, backend=backend, workers=2, config=SHORT, **kwargs) as env:
+    with SoccerVectorEnv(envs, backend=backend, workers=workers, config=SHORT, **kwargs) as env:
         out = [env.reset(seed=seed)]
         for _ in range(steps):
             result = env.step(_actions(rng, envs, 2))
@@ -35,12 +35,27 @@ def _rollout(backend, steps, envs=3, seed=11, **kwargs):
     return out
 
 
+# (workers, parent_steps) -> worlds stepped by this process, worker processes: 3 worlds in shards of 2 and 1, or 1,1,1.
+ARRANGEMENTS = {(2, True): (2, 1), (2, False): (0, 2), (3, True): (1, 2), (1, True): (0, 1)}
+
+
 def test_backends_give_bit_identical_padded_batches_across_episode_ends():
     a = _rollout("inprocess", 300)
-    b = _rollout("subprocess", 300)   # 2 workers: worlds 0-1 and 2
+    b = _rollout("subprocess", 300)   # 2 shards: worlds 0-1 in this process, world 2 in a worker
     assert_identical(a, b)
     ends = [k for k, step in enumerate(a[1:]) if step[4].any()]
     assert ends == [19 + 20 * i for i in range(15)]     # 15 episode ends crossed
+
+
+@pytest.mark.parametrize("workers, parent_steps", list(ARRANGEMENTS))
+def test_every_arrangement_of_shards_gives_the_in_process_batches(workers, parent_steps):
+    """This process stepping a shard or not, one worker or several: the same arrays, across episode ends."""
+    with SoccerVectorEnv(3, backend="subprocess", workers=workers, config=SHORT, parent_steps=parent_steps) as env:
+        assert (env._batch.parent_envs, len(env._batch._procs)) == ARRANGEMENTS[workers, parent_steps]
+    a = _rollout("inprocess", 45)
+    b = _rollout("subprocess", 45, workers=workers, parent_steps=parent_steps)
+    assert_identical(a, b)
+    assert sum(bool(step[4].any()) for step in a[1:]) == 2
 
 
 def test_backends_agree_with_few_slots_and_dropped_rows():
@@ -146,11 +161,16 @@ def test_auto_backend_takes_workers_from_two_worlds_with_perception():
         assert env.backend == full.backend == "inprocess"
 
 
-def test_pinned_workers_run_on_one_cpu_each():
+@pytest.mark.parametrize("parent_steps", [True, False])
+def test_pinned_workers_run_on_one_cpu_each(parent_steps):
+    """The worker of shard s on the s-th CPU; this process (shard 0 when it steps one) keeps its own affinity."""
     cpus = sorted(os.sched_getaffinity(0))
-    with SoccerVectorEnv(3, backend="subprocess", workers=2, config=SHORT, pin_workers=True) as env:
+    with SoccerVectorEnv(3, backend="subprocess", workers=2, config=SHORT, pin_workers=True,
+                         parent_steps=parent_steps) as env:
         env.reset(seed=0)
-        assert [os.sched_getaffinity(p.pid) for p in env._batch._procs] == [{cpus[w % len(cpus)]} for w in range(2)]
+        shards = range(1, 2) if parent_steps else range(2)
+        assert [os.sched_getaffinity(p.pid) for p in env._batch._procs] == [{cpus[s % len(cpus)]} for s in shards]
+        assert sorted(os.sched_getaffinity(0)) == cpus
 
 
 def test_copy_false_hands_out_the_batchs_own_arrays():
@@ -190,18 +210,18 @@ def test_shared_memory_is_released_on_close_collection_and_errors(monkeypatch):
     gc.collect()
     assert not ours & _shm_blocks()
     assert not any(p.is_alive() for p in procs)
-    # A worker that dies: the step fails with a clear error, close() still cleans up.
-    env = SoccerVectorEnv(2, backend="subprocess", config=SHORT)
+    # A worker that dies: the step fails with a clear error, close() still cleans up. Shard 0 is this process's.
+    env = SoccerVectorEnv(3, backend="subprocess", workers=3, config=SHORT)
     env.reset(seed=0)
     ours = _blocks_of(env)
     env._batch._procs[1].kill()
     env._batch._procs[1].join()
     with pytest.raises(RuntimeError, match="worker process 1 died"):
-        env.step(np.zeros((2, 2, 4), int))
+        env.step(np.zeros((3, 2, 4), int))
     env.close()
     assert not ours & _shm_blocks()
     # Interrupted while waiting for the workers (Ctrl-C): the env refuses to go on out of step, close() cleans up.
-    env = SoccerVectorEnv(2, backend="subprocess", config=SHORT)
+    env = SoccerVectorEnv(2, backend="subprocess", config=SHORT, parent_steps=False)
     env.reset(seed=0)
     ours = _blocks_of(env)
     conn = env._batch._conns[1]
@@ -231,6 +251,25 @@ def test_shared_memory_is_released_on_close_collection_and_errors(monkeypatch):
     assert len(made) == 5 and not {block.name.lstrip("/") for block in made} & _shm_blocks()
 
 
+@pytest.mark.parametrize("parent_steps", [True, False])
+def test_errors_in_any_shard_reach_the_caller_and_the_batch_goes_on(parent_steps):
+    """A world that raises — in a worker or in this process's shard — gives its error here, after every worker has
+    answered (the pipes stay in step: the next calls work); a worker killed meanwhile gives a clear error, no hang."""
+    with SoccerVectorEnv(3, backend="subprocess", workers=3, config=SHORT, parent_steps=parent_steps) as env:
+        batch = env._batch
+        for bad in (2, 0):                       # a worker's world; the first shard's (this process's, if it steps)
+            seeds = [1, 2, 3]
+            seeds[bad] = -1
+            with pytest.raises(ValueError, match="negative"):
+                batch.reset(seeds)
+            env.reset(seed=0)
+            env.step(np.zeros((3, 2, 4), int))
+        batch._procs[-1].kill()
+        batch._procs[-1].join()
+        with pytest.raises(RuntimeError, match=f"worker process {len(batch._procs) - 1} died"):
+            env.step(np.zeros((3, 2, 4), int))
+
+
 @pytest.mark.parametrize("backend", ["inprocess", "subprocess"])
 def test_bad_actions_are_refused_before_any_world_moves(backend):
     good = np.zeros((3, 2, 4), int)
@@ -254,6 +293,8 @@ def test_bad_actions_are_refused_before_any_world_moves(backend):
         assert_identical(env.step(good).observations, twin.step(good).observations)
     with pytest.raises(ValueError, match="backend"):
         SoccerVectorEnv(2, backend="threads")
+    with pytest.raises(ValueError, match="parent_steps must be True or False"):
+        SoccerVectorEnv(2, backend="subprocess", parent_steps="no")
 
 
 def test_scripted_team_b_plays_in_the_worlds_and_ignores_given_rows():
