@@ -4,14 +4,16 @@ on every core.
 Both batches hold ``--envs`` worlds (2v2, padded observations, realistic perception by default) and step them with
 random high-level actions from a pre-drawn pool (the policy costs nothing); the figure is env steps per second
 summed over worlds, the whole ``SoccerVectorEnv.step`` included (action checks, perception, packing, the copies
-handed back). The in-process batch runs pinned to one core, the subprocess batch (one worker per core, each pinned
-to its core unless ``--no-pin-workers``) with every core this process may use.
+handed back). The in-process batch runs pinned to one core, the subprocess batch with every core this process may
+use: one shard of worlds per core, this process stepping the first itself and a worker process each of the others
+(``SoccerVectorEnv(parent_steps=True)``, the default; ``--no-parent-steps``: a worker for every shard, this process
+only waiting, as before), each worker pinned to its shard's core unless ``--no-pin-workers``.
 
 What the cores themselves allow is timed too: the ``ceiling`` runs one plain in-process batch per core (the worlds
-split as among the workers), each in its own process pinned to its core, started together, with no pipe, shared
+split as among the shards), each in its own process pinned to its core, started together, with no pipe, shared
 memory or lock step between them (a chunk lasts as long as the slower of them). ``subprocess / ceiling`` is then
 what the subprocess backend keeps of what the machine can give (lost: pipes, copies, each step waiting for the
-slower worker); ``ceiling / inprocess`` is how far the cores scale at all (below 2 where two cores slow each other
+slower shard); ``ceiling / inprocess`` is how far the cores scale at all (below 2 where two cores slow each other
 down: shared caches, hyper-threads, other work on the machine or its host).
 
 On a shared machine the speed drifts by ±10 % within seconds, so the three are timed interleaved in chunks of
@@ -48,9 +50,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise", choices=NOISE, default="realistic", help="perception error mode (padded)")
     parser.add_argument("--preset", choices=("realistic", "dynenv"), default="realistic")
     parser.add_argument("--noise-magnitude", type=float, default=1.0, help="0..5")
-    parser.add_argument("--workers", type=int, default=0, help="subprocess workers; 0 = one per core")
+    parser.add_argument("--workers", type=int, default=0,
+                        help="subprocess shards (SoccerVectorEnv(workers=...)); 0 = one per core")
+    parser.add_argument("--parent-steps", action=argparse.BooleanOptionalAction, default=True,
+                        help="this process steps the first shard itself, worker processes the others "
+                             "(SoccerVectorEnv(parent_steps=True), the default); --no-parent-steps: a worker per shard")
     parser.add_argument("--pin-workers", action=argparse.BooleanOptionalAction, default=True,
-                        help="pin subprocess worker w to core w (SoccerVectorEnv(pin_workers=True))")
+                        help="pin the worker of shard s to core s (SoccerVectorEnv(pin_workers=True))")
     parser.add_argument("--cores", type=int, default=0,
                         help="cores for the subprocess batch (the first N this process may use); 0 = all of them")
     parser.add_argument("--seed", type=int, default=0)
@@ -99,12 +105,13 @@ def run(args: Any) -> int:
     os.sched_setaffinity(0, cores)            # the forkserver, and so every worker, may use all of these
     workers = args.workers or len(cores)
     subprocess = SoccerVectorEnv(args.envs, backend="subprocess", workers=workers, pin_workers=args.pin_workers,
-                                 **kwargs)
+                                 parent_steps=args.parent_steps, **kwargs)
     inprocess = SoccerVectorEnv(args.envs, backend="inprocess", **kwargs)
     context = mp.get_context("forkserver")
     plain = []
     names = ("inprocess", "subprocess", "ceiling")
     seconds = {name: np.zeros(args.repeat) for name in names}      # per round
+    parent_envs, processes = subprocess._batch.parent_envs, len(subprocess._batch._procs)
     try:
         shares = subprocess._batch.sizes
         for w, share in enumerate(shares):
@@ -148,7 +155,8 @@ def run(args: Any) -> int:
     figures = {
         "envs": args.envs, "players_per_team": args.players_per_team, "observation": args.observation,
         "perception": kwargs["perception"], "steps": args.steps, "chunk": args.chunk, "rounds": args.repeat,
-        "workers": workers, "pin_workers": args.pin_workers, "inprocess_cores": len(one_core),
+        "workers": workers, "parent_steps": args.parent_steps, "parent_envs": parent_envs,
+        "worker_processes": processes, "pin_workers": args.pin_workers, "inprocess_cores": len(one_core),
         "subprocess_cores": len(cores),
         "inprocess_env_steps_per_s": round(rate["inprocess"], 1),
         "subprocess_env_steps_per_s": round(rate["subprocess"], 1),
