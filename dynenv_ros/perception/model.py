@@ -83,8 +83,7 @@ class Perceiver:
         lines = np.asarray(objects.lines, float)
         self._line_count = len(lines)
         # Endpoints as (2 coordinates, 2L): first endpoints of all lines, then their second endpoints.
-        self._line_points = np.stack((np.concatenate((lines[:, 0], lines[:, 2])),
-                                      np.concatenate((lines[:, 1], lines[:, 3]))))
+        self._lines = lines
         half = params.field_of_view / 2
         self._half_sin, self._half_cos = math.sin(half), math.cos(half)
         # A circle (soccer's centre circle) is a point object whose visibility is decided by its rim.
@@ -235,15 +234,14 @@ class Perceiver:
                                       size_factor[kept], yaw_noise[kept])
         # The circle keeps the bits of its rim test (every other point report gets them from the report itself).
         point_rows[0]["sighting"] = bits[kept]
-        line_rows, lines_seen = self._line_rows(fx[lay.observer_source], fy[lay.observer_source], ch, sh, rng)
+        line_rows, lines_seen = self._line_rows(lay, fx[lay.observer_source], fy[lay.observer_source], ch, sh, rng)
         rows = [line_rows]
         if p.mode != "none" and p.noise_magnitude > 0.0:
             # Reports no object of their class stands behind: confusions, balls at feet, uniform false positives.
             confused_kept = confused[kept]
-            made_up = [(point_rows[0][confused_kept], point_rows[1][confused_kept])] + extra
+            made_up = [_take(point_rows, confused_kept.nonzero()[0])] + extra
             made_up.append(self._false_positives(lay, rng))
-            real = (~confused_kept).nonzero()[0]
-            point_rows = (point_rows[0][real], point_rows[1][real])
+            point_rows = _take(point_rows, (~confused_kept).nonzero()[0])
             rows.append(self._made_up_rows(_concatenate(made_up), context, rng))
         rows.append(point_rows)
         return self._assemble(rows, lay, seen.reshape(V, N), lines_seen, visible.reshape(V, N), rng)
@@ -274,7 +272,7 @@ class Perceiver:
         x, y = cx[at], cy[at]
         if occlusion.model == "band":
             inv_k = 1.0 / np.maximum(dk, _EPS)
-            per = np.array((limit, cx[occ] * inv_k, cy[occ] * inv_k))[:, :, lay.pair_view[at]]   # (3, K, C)
+            per = np.array((limit, cx[occ] * inv_k, cy[occ] * inv_k)).take(lay.pair_view[at], axis=2)   # (3, K, C)
             sx, sy = per[1], per[2]                                       # unit sight lines to the occluders
             along = sx * x + sy * y
             across = np.abs(sx * y - sy * x)
@@ -285,7 +283,7 @@ class Perceiver:
             # cos of the angle between the sight lines to target and occluder, without trigonometry
             inv = 1.0 / np.maximum(d, _EPS)
             ux, uy = cx * inv, cy * inv                                   # unit sight lines
-            per = np.array((limit, cos_width, ux[occ], uy[occ]))[:, :, lay.pair_view[at]]   # (4, K, C)
+            per = np.array((limit, cos_width, ux[occ], uy[occ])).take(lay.pair_view[at], axis=2)   # (4, K, C)
             hide = (d[at] > per[0]) & (ux[at] * per[2] + uy[at] * per[3] > per[1])
         hide &= lay.occluder_object != j                                  # nothing hides itself
         return np.logical_or.reduce(hide, axis=0)
@@ -423,7 +421,7 @@ class Perceiver:
         classes = self._fp_classes[(u[0] * len(self._fp_classes)).astype(np.intp)]
         if self._fp_none:                                                 # "none" drawn: no report
             real = (classes != _UNKNOWN).nonzero()[0]
-            v, classes, u = v[real], classes[real], u[:, real]
+            v, classes, u = v[real], classes[real], u.take(real, axis=1)
         rows = np.zeros(len(v), DETECTION_DTYPE)
         r = u[1] * self._fp_range[classes]
         radius = self.class_reach_radius[classes]          # (at most 30°: nothing stands closer than its size)
@@ -439,9 +437,10 @@ class Perceiver:
         report gets by the same rule whether it is real, confused or false."""
         rows, view = _concatenate(parts)
         distance = np.hypot(rows["x"], rows["y"])
-        order = np.lexsort((distance, view))
-        # Gathered as raw records: a structured gather copies field by field (ten times slower).
-        rows, view, distance = rows.view(_RAW)[order].view(DETECTION_DTYPE), view[order], distance[order]
+        # Sorted by view, then distance: one stable sort of (view, the distance's bits), which order as the
+        # distance does (never negative).
+        order = ((view << 32) | distance.view(np.uint32)).argsort(kind="stable")
+        (rows, view), distance = _take((rows, view), order), distance[order]
         offsets = view.searchsorted(lay.view_starts)                      # views are sorted: each one's first row
         self._sighting_bits(rows, view, distance)
         self._confidences(rows, rng)
@@ -496,100 +495,98 @@ class Perceiver:
         rows["confidence"] = 1.0 / (1.0 + np.exp(-logit))
 
     # -- lines and the centre circle ------------------------------------------------------------------------------
-    def _line_rows(self, ox, oy, c, s, rng):
+    def _line_rows(self, lay: "_Layout", ox, oy, c, s, rng):
         """Field lines clipped to the view wedge and range; DynEnv's endpoint noise and miss rule.
 
-        x and y, a line's two endpoints and the wedge's two edges travel stacked on a leading axis, so each step is
-        one numpy call for all of them (the arrays are small; per-call overhead is the cost)."""
+        Every (view, line endpoint) is one entry of flat arrays (``_Layout.line_view``: all first endpoints, then
+        all second ones), and per-view values are gathered, not broadcast: broadcasting a small operand costs a
+        numpy inner loop per row."""
         V, L = len(ox), self._line_count
         if L == 0:
             return (np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.int64)), np.zeros(V, int)
-        # Camera frame of every endpoint, (2 coordinates, V, 2L): columns :L the first endpoints, L: the second.
-        d = self._line_points[:, None, :] - np.array((ox, oy))[:, :, None]
-        cd, sd = c[:, None] * d, s[:, None] * d
-        p = np.empty_like(d)
-        np.add(cd[0], sd[1], out=p[0])                                    # c·dx + s·dy
-        np.subtract(cd[1], sd[0], out=p[1])                               # −s·dx + c·dy
-        a = p[:, :, :L]                                                   # first endpoints (2, V, L)
-        e = p[:, :, L:] - a                                               # directions to the second ones
-        # The two edges of the view wedge, (2 edges, V, 2L): g ≥ 0 inside.
-        sp, cq = self._half_sin * p[0], self._half_cos * p[1]
-        g = np.empty_like(p)
-        np.subtract(sp, cq, out=g[0])
+        VL = V * L
+        lv = lay.line_view
+        dx, dy = lay.line_x - ox[lv], lay.line_y - oy[lv]
+        cv, sv = c[lv], s[lv]
+        px = cv * dx + sv * dy                                            # camera frame, (2·V·L,)
+        py = cv * dy - sv * dx                                            # (= −s·dx + c·dy, exactly)
+        ax, ay = px[:VL], py[:VL]                                         # first endpoints
+        ex, ey = px[VL:] - ax, py[VL:] - ay                               # directions to the second ones
+        # The two edges of the view wedge, rows of (2 edges, 2·V·L): g ≥ 0 inside; g(t) = ga + t·slope.
+        sp, cq = self._half_sin * px, self._half_cos * py
+        g = np.empty((2, 2 * VL))
+        np.subtract(sp, cq, out=g[0])                                     # sin·x + (−cos)·y
         np.add(sp, cq, out=g[1])
-        ga = g[:, :, :L]
-        slope = g[:, :, L:] - ga
-        flat = slope == 0
-        t = -ga / np.where(flat, 1.0, slope)
-        enter, leave = np.where(slope > 0, t, 0.0), np.where(slope < 0, t, 1.0)
-        lo = np.maximum(np.maximum(enter[0], enter[1]), 0.0)             # [lo, hi]: the part inside the wedge
+        ga = g[:, :VL]
+        slope = g[:, VL:] - ga
+        t = -ga / np.where(slope == 0, 1.0, slope)
+        # [lo, hi]: the part inside both edges. A line with both ends beyond an edge gets lo = 2 (out of view):
+        # one parallel to an edge and beyond it needs that; with any other slope its [lo, hi] is empty anyway.
+        enter, leave = np.where(slope > 0, t, (ga < 0) * 2.0), np.where(slope < 0, t, 1.0)
+        lo = np.maximum(np.maximum(enter[0], enter[1]), 0.0)
         hi = np.minimum(np.minimum(leave[0], leave[1]), 1.0)
-        outside = flat & (ga < 0)                                         # parallel to an edge, beyond it
-        out = outside[0] | outside[1]
         if math.isfinite(self.line_max):                                  # and within range of the camera
-            ee, ae, aa = e * e, a * e, a * a
-            len2 = np.maximum(ee[0] + ee[1], _EPS)
-            b = ae[0] + ae[1]
-            disc = b * b - len2 * (aa[0] + aa[1] - self.line_max * self.line_max)
-            root = np.sqrt(np.maximum(disc, 0.0))
-            out |= disc < 0
+            len2 = np.maximum(ex * ex + ey * ey, _EPS)
+            b = ax * ex + ay * ey
+            disc = b * b - len2 * (ax * ax + ay * ay - self.line_max * self.line_max)
+            root = np.sqrt(np.maximum(disc, 0.0))                         # disc < 0 (no part in range): lo = hi
             lo = np.maximum(lo, (-b - root) / len2)
             hi = np.minimum(hi, (-b + root) / len2)
-        visible = (hi > lo) & (np.hypot(e[0], e[1]) * (hi - lo) >= MIN_LINE_LENGTH)
-        visible &= ~out
-        at = visible.ravel().nonzero()[0]                                 # (view, line) pairs in view: v·L + k
-        v = at // L
+        visible = (hi > lo) & (np.hypot(ex, ey) * (hi - lo) >= MIN_LINE_LENGTH)
+        at = visible.nonzero()[0]                                         # (view, line) pairs in view: v·L + k
+        v = lv[at]
         k = at - v * L
-        first = at + v * L                                                # the pair's first endpoint in p
-        a_k = p.reshape(2, -1)[:, first]                                  # (2 coordinates, K)
-        e_k = e.reshape(2, -1)[:, at]
-        bounds = np.array((lo.ravel()[at], hi.ravel()[at]))               # (2, K): lo, hi
-        # The clipped endpoints, (2 coordinates, 2 ends, K): start (lo) and end (hi).
-        ends = a_k[:, None, :] + bounds * e_k[:, None, :]
-        partial = (bounds[0] > _EPS) | (bounds[1] < 1 - _EPS)
-        dist = np.hypot(ends[0], ends[1])                                 # (2 ends, K)
-        distant = np.maximum(dist[0], dist[1]) > self.line_near
-        pr = self.params
+        lo, hi, ax, ay, ex, ey = lo[at], hi[at], ax[at], ay[at], ex[at], ey[at]
+        # The clipped ends as (start, end) halves of flat arrays, (2K,).
+        bounds = np.concatenate((lo, hi))
+        x = np.concatenate((ax, ax)) + bounds * np.concatenate((ex, ex))
+        y = np.concatenate((ay, ay)) + bounds * np.concatenate((ey, ey))
         K = len(v)
-        keep = None
+        dist = np.hypot(x, y)
+        bits = ((lo > _EPS) | (hi < 1 - _EPS)) * _PARTIAL
+        bits += np.maximum(dist[:K], dist[K:]) > self.line_near           # DISTANT
+        pr = self.params
         if pr.mode != "none" and pr.noise_magnitude > 0.0:
             m = pr.noise_magnitude
             if pr.mode == "realistic":
                 mult = pr.miss.range_offset + pr.miss.range_slope * (dist / self.line_near) ** 2
             else:
-                mult = np.ones((2, K))
-            p_miss = np.minimum(1.0, pr.rho * self.line_scale * (mult[0] + mult[1]) / 2)
-            keep = rng.random(K) >= p_miss
+                mult = np.ones(2 * K)
+            p_miss = np.minimum(1.0, pr.rho * self.line_scale * (mult[:K] + mult[K:]) / 2)
+            kept = (rng.random(K) >= p_miss).nonzero()[0]
             if pr.position.model == "uniform":
                 scale = 2 * m * pr.position.uniform_scale
                 u = rng.random((4, K)) - 0.5                              # rows: start x, start y, end x, end y
                 ms = mult if pr.mode == "realistic" else 1.0
-                ends = ends + u.reshape(2, 2, K).transpose(1, 0, 2) * scale * ms
+                x = x + np.concatenate((u[0], u[2])) * scale * ms
+                y = y + np.concatenate((u[1], u[3])) * scale * ms
             else:
-                ends = self._polar_point_noise(ends.reshape(2, -1), rng, dist.ravel()).reshape(2, 2, K)
-            v, k = v[keep], k[keep]
-            ends = ends[:, :, keep]
+                x, y = self._polar_point_noise(np.array((x, y)), rng, dist)
+            v, k, bits = v[kept], k[kept], bits[kept]
+            x, y = x.reshape(2, K).take(kept, axis=1), y.reshape(2, K).take(kept, axis=1)
+        else:
+            x, y = x.reshape(2, K), y.reshape(2, K)
         # Endpoint order by a rule of the observer's frame alone (nearer end first), so a mirrored or rotated
         # situation gives the mirrored or identical report; an order that follows the field would be a compass.
         # Exact ties (a line square to the gaze, clipped by both edges) go right end first: rotations stay
         # consistent; a perfect tie cannot be mirror-symmetric.
-        reach = np.hypot(ends[0], ends[1])
+        reach = np.hypot(x, y)
         gap = reach[1] - reach[0]
-        swap = (gap < -1e-6) | ((np.abs(gap) <= 1e-6) & (ends[1, 1] < ends[1, 0]))
-        ends = np.where(swap, ends[:, ::-1], ends)
-        (sx, tx), (sy, ty) = ends
-        rows = np.zeros(len(v), DETECTION_DTYPE)
-        rows["class_id"] = _FIELD_LINE
-        rows["line_start_x"], rows["line_start_y"], rows["line_end_x"], rows["line_end_y"] = sx, sy, tx, ty
+        swap = (gap < -1e-6) | ((np.abs(gap) <= 1e-6) & (y[1] < y[0]))
+        sx, tx = np.where(swap, x[1], x[0]), np.where(swap, x[0], x[1])
+        sy, ty = np.where(swap, y[1], y[0]), np.where(swap, y[0], y[1])
         ex, ey = tx - sx, ty - sy
         seg2 = np.maximum(ex * ex + ey * ey, _EPS)
         t = clamp(-(sx * ex + sy * ey) / seg2, 0.0, 1.0)                # closest point to the camera
-        rows["x"], rows["y"] = sx + t * ex, sy + t * ey
+        rows = np.zeros(len(v), DETECTION_DTYPE)
+        rows["class_id"] = _FIELD_LINE
+        runs = rows.view(_ROW_RUNS)
+        runs["line"] = np.array((sx, sy, tx, ty)).T                       # start x, start y, end x, end y
+        runs["position"] = np.array((sx + t * ex, sy + t * ey)).T
         rows["yaw"] = (np.arctan2(ey, ex) + math.pi / 2) % math.pi - math.pi / 2   # a line has no arrow
         rows["size_x"] = np.sqrt(seg2)
         rows["size_y"] = 0.05
-        bits = distant * _DISTANT | partial * _PARTIAL
-        rows["sighting"] = bits if keep is None else bits[keep]
+        rows["sighting"] = bits
         rows["true_id"] = -2 - k                                          # lines: -2, -3, … (never -1 = FP)
         rows["true_class"] = _FIELD_LINE
         return (rows, v), np.bincount(v, minlength=V)
@@ -616,6 +613,16 @@ class Perceiver:
 
 
 _RAW = np.dtype((np.void, DETECTION_DTYPE.itemsize))
+# Rows as runs of fields (x, y | the line's ends), each written with one numpy call.
+_ROW_RUNS = np.dtype({"names": ["position", "line"], "formats": [("<f4", (2,)), ("<f4", (4,))],
+                      "offsets": [DETECTION_DTYPE.fields["x"][1], DETECTION_DTYPE.fields["line_start_x"][1]],
+                      "itemsize": DETECTION_DTYPE.itemsize})
+
+
+def _take(part: tuple[np.ndarray, np.ndarray], index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``index`` of a (rows, views) part. As raw records: a structured gather copies field by field."""
+    rows, views = part
+    return rows.view(_RAW)[index].view(DETECTION_DTYPE), views[index]
 
 
 def _concatenate(parts):
@@ -662,6 +669,10 @@ class _Layout:
     occluder_object: np.ndarray        # (K, 1) k
     occluder_not_observer: np.ndarray  # (K, V) bool
     observer_closeness: np.ndarray     # (V·N,) index of (f, the observer's row, j) in ``_nearby``'s closeness table
+    # (view, line endpoint) entries: all views' first endpoints (v·L + k), then all their second endpoints.
+    line_view: np.ndarray              # (2·V·L,) v
+    line_x: np.ndarray                 # (2·V·L,) the endpoint's world x
+    line_y: np.ndarray                 # (2·V·L,)
 
     @classmethod
     def build(cls, perceiver: "Perceiver", frame: np.ndarray, observer: np.ndarray) -> "_Layout":
@@ -674,6 +685,7 @@ class _Layout:
         row = np.full(N, len(dynamic))                  # an observer that is not dynamic: the table's empty row
         row[dynamic] = np.arange(len(dynamic))
         circle = perceiver.circle_index
+        lines = perceiver._lines
         return cls(frame=frame, observer=observer, views=views, view_starts=np.arange(V + 1), pair_view=v,
                    pair_object=j, pair_source=frame[v] * N + j, observer_source=observer_source,
                    observer_of_pair=observer_source[v], own_pair=views * N + observer,
@@ -681,4 +693,7 @@ class _Layout:
                    visibility_radius=np.tile(perceiver.visibility_radius, V),
                    max_range=np.tile(perceiver.max_range, V), occluder_pair=views[None, :] * N + k[:, None],
                    occluder_object=k[:, None], occluder_not_observer=k[:, None] != observer[None, :],
-                   observer_closeness=(frame[v] * (len(dynamic) + 1) + row[observer[v]]) * N + j)
+                   observer_closeness=(frame[v] * (len(dynamic) + 1) + row[observer[v]]) * N + j,
+                   line_view=np.tile(np.repeat(views, len(lines)), 2),
+                   line_x=np.concatenate((np.tile(lines[:, 0], V), np.tile(lines[:, 2], V))),
+                   line_y=np.concatenate((np.tile(lines[:, 1], V), np.tile(lines[:, 3], V))))
