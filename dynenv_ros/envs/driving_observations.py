@@ -1,0 +1,314 @@
+"""What a driving agent observes each motion period: the observation seam of ``driving_v0`` and its ``full`` mode.
+
+The env talks to its observations through one small interface (``DrivingObservationBuilder``): ``reset(world)``,
+``on_frame(k)`` at every vision instant of a period (hooked into ``DrivingWorld.step``), ``initial()`` after a reset,
+``build()`` after a period (one observation per car and the observation reward per car), ``infos(i)`` for extra
+per-agent info, and ``space``. A mode is a factory in ``OBSERVATION_BUILDERS`` (or added with
+``register_observation``), called as ``factory(config, perception=…, **options)``; the env never names a mode
+itself, so a perception-based mode (``partial``, ``padded``) plugs in here without touching the env class.
+
+``full`` (this module): the original's FULL observation (DynEnv §4.6) as noise-free ground truth in the
+**observer's frame** (REP 103: x forward along the car's heading, y to its left; metres, seconds, radians, m/s), one
+flat float32 ``Box``. Sections, in this order (``FullLayout.split`` cuts a vector into them):
+
+| section | rows × columns | columns |
+|---|---|---|
+| ``self`` | 1 × 15 | x, y, cos_yaw, sin_yaw (map-frame pose: the one absolute quantity), speed, lateral_speed (own velocity in its frame), yaw_rate, length, width, goal_x, goal_y (destination in its frame), finished, crashed, at_goal, time_remaining (s) |
+| ``cars`` | (n_cars − 1) × 12 | present, x, y, cos_yaw, sin_yaw (heading relative to the observer), vx, vy (velocity in the observer's frame), length, width, finished, crashed, same_team (+1 / −1); one slot per other car in id order; absent (zeros) once it reached its destination and left the map |
+| ``pedestrians`` | pedestrians.count_max × 5 | present, x, y, vx, vy; nearest first, zero-padded (a hit pedestrian has left the world) |
+| ``obstacles`` | obstacles.count_max × 7 | present, x, y, cos_yaw, sin_yaw (the box's orientation relative to the observer), length, width; nearest first, zero-padded |
+| ``lanes`` | lane lines × 5 | x1, y1, x2, y2, kind (1 road edge, −1 centre line, 0 between lanes of one direction), every painted line of the map (8 by default) in ``DrivingMap.lane_lines`` order |
+
+``present`` is the row mask (1 a body, 0 padding). Values are clipped to the space's bounds. Full mode pays no
+observation reward (as the original's driving scenario). ``DrivingGroundTruth.state`` is the env's ``state()``: the
+same bodies in the map frame.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Protocol
+
+import numpy as np
+from gymnasium import spaces
+
+from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
+from dynenv_ros.driving.config import DrivingConfig
+from dynenv_ros.driving.roads import DrivingMap
+from dynenv_ros.sim.ground_truth import WorldSnapshot
+
+SELF_COLUMNS = ("x", "y", "cos_yaw", "sin_yaw", "speed", "lateral_speed", "yaw_rate", "length", "width", "goal_x",
+                "goal_y", "finished", "crashed", "at_goal", "time_remaining")
+CAR_COLUMNS = ("present", "x", "y", "cos_yaw", "sin_yaw", "vx", "vy", "length", "width", "finished", "crashed",
+               "same_team")
+PEDESTRIAN_COLUMNS = ("present", "x", "y", "vx", "vy")
+OBSTACLE_COLUMNS = ("present", "x", "y", "cos_yaw", "sin_yaw", "length", "width")
+LANE_COLUMNS = ("x1", "y1", "x2", "y2", "kind")
+STATE_CAR_COLUMNS = ("x", "y", "cos_yaw", "sin_yaw", "vx", "vy", "yaw_rate", "length", "width", "team", "goal_x",
+                     "goal_y", "finished", "crashed", "at_goal")
+STATE_PEDESTRIAN_COLUMNS = ("present", "x", "y", "vx", "vy")
+STATE_OBSTACLE_COLUMNS = ("present", "x", "y")
+
+VELOCITY_BOUND = 100.0          # m/s: no car gets near it before leaving the road (clipped anyway)
+YAW_RATE_BOUND = 50.0           # rad/s: a spinning crashed car (clipped)
+_FINISHED, _CRASHED, _AT_GOAL = ObjectStatus.FINISHED, ObjectStatus.CRASHED, ObjectStatus.AT_GOAL
+
+
+class DrivingObservationBuilder(Protocol):
+    """What ``driving_v0`` needs from an observation mode (see the module docstring)."""
+    mode: str
+    space: spaces.Space
+
+    def reset(self, world: Any) -> None: ...
+
+    def on_frame(self, index: int) -> None: ...
+
+    def initial(self) -> list[Any]: ...
+
+    def build(self) -> tuple[list[Any], np.ndarray]: ...
+
+    def infos(self, index: int) -> dict[str, Any]: ...
+
+
+# -- bounds ----------------------------------------------------------------------------------------------------------
+def _reach(config: DrivingConfig) -> float:
+    """Longest distance between two points a body can occupy (the walled area's diagonal), m."""
+    m = config.map
+    return math.hypot(m.width + 2 * m.boundary_margin, m.height + 2 * m.boundary_margin)
+
+
+def _limits(config: DrivingConfig) -> dict[str, tuple[float, float]]:
+    reach = _reach(config)
+    size = max(2 * max(config.cars.half_lengths), config.obstacles.size)
+    return {"pos": (-reach, reach), "vel": (-VELOCITY_BOUND, VELOCITY_BOUND), "unit": (-1.0, 1.0),
+            "flag": (0.0, 1.0), "sign": (-1.0, 1.0), "size": (0.0, size),
+            "yaw_rate": (-YAW_RATE_BOUND, YAW_RATE_BOUND), "time": (0.0, float(config.episode_seconds))}
+
+
+_KIND = {"x": "pos", "y": "pos", "x1": "pos", "y1": "pos", "x2": "pos", "y2": "pos", "goal_x": "pos",
+         "goal_y": "pos", "cos_yaw": "unit", "sin_yaw": "unit", "speed": "vel", "lateral_speed": "vel", "vx": "vel",
+         "vy": "vel", "yaw_rate": "yaw_rate", "length": "size", "width": "size", "finished": "flag",
+         "crashed": "flag", "at_goal": "flag", "present": "flag", "same_team": "sign", "team": "sign",
+         "kind": "sign", "time_remaining": "time"}
+
+
+def _bounds(config: DrivingConfig, blocks: list[tuple[tuple[str, ...], int]]) -> tuple[np.ndarray, np.ndarray]:
+    limits = _limits(config)
+    pairs = [limits[_KIND[c]] for columns, rows in blocks for _ in range(rows) for c in columns]
+    low, high = zip(*pairs)
+    return np.array(low, np.float32), np.array(high, np.float32)
+
+
+@dataclass(frozen=True)
+class FullLayout:
+    """Row counts of the flat ``full`` vector for one config; ``split`` names its sections."""
+    cars: int                   # other cars
+    pedestrians: int
+    obstacles: int
+    lanes: int
+
+    @classmethod
+    def for_config(cls, config: DrivingConfig) -> "FullLayout":
+        return cls(config.n_cars - 1, config.pedestrians.count_max, config.obstacles.count_max,
+                   len(DrivingMap(config.map).lane_lines))
+
+    @property
+    def blocks(self) -> list[tuple[str, tuple[str, ...], int]]:
+        return [("self", SELF_COLUMNS, 1), ("cars", CAR_COLUMNS, self.cars),
+                ("pedestrians", PEDESTRIAN_COLUMNS, self.pedestrians), ("obstacles", OBSTACLE_COLUMNS, self.obstacles),
+                ("lanes", LANE_COLUMNS, self.lanes)]
+
+    @property
+    def size(self) -> int:
+        return sum(len(columns) * rows for _, columns, rows in self.blocks)
+
+    def split(self, observation: np.ndarray) -> dict[str, np.ndarray]:
+        """Sections of one observation (or of a batch, last axis): ``self`` (15,), the others (rows, columns)."""
+        obs = np.asarray(observation)
+        if obs.shape[-1] != self.size:
+            raise ValueError(f"a full driving observation has {self.size} values, got {obs.shape[-1]}")
+        out, at = {}, 0
+        for name, columns, rows in self.blocks:
+            width = len(columns) * rows
+            part = obs[..., at:at + width]
+            out[name] = part if name == "self" else part.reshape(*obs.shape[:-1], rows, len(columns))
+            at += width
+        return out
+
+
+# -- ground truth as arrays -------------------------------------------------------------------------------------------
+@dataclass
+class _Bodies:
+    """One snapshot's bodies as map-frame arrays."""
+    cars: np.ndarray            # (n, 15) STATE_CAR_COLUMNS
+    peds: np.ndarray            # (P, 5) STATE_PEDESTRIAN_COLUMNS, in pedestrian order (P = this episode's count)
+    obstacles: np.ndarray       # (O, 3) STATE_OBSTACLE_COLUMNS
+    time_remaining: float
+
+
+def _bodies(snapshot: WorldSnapshot) -> _Bodies:
+    cars, peds, obstacles = [], [], []
+    for o in snapshot.objects:
+        if o.class_id == ObjectClass.CAR:
+            s = o.status
+            cars.append((o.x, o.y, math.cos(o.yaw), math.sin(o.yaw), o.vx, o.vy, o.yaw_rate, o.size_x, o.size_y,
+                         o.team, o.goal_x, o.goal_y, bool(s & _FINISHED), bool(s & _CRASHED), bool(s & _AT_GOAL)))
+        elif o.class_id == ObjectClass.PEDESTRIAN:
+            alive = not o.status & _CRASHED
+            peds.append((1.0, o.x, o.y, o.vx, o.vy) if alive else (0.0, 0.0, 0.0, 0.0, 0.0))
+        elif o.class_id == ObjectClass.OBSTACLE:
+            obstacles.append((1.0, o.x, o.y))
+    return _Bodies(np.array(cars, float).reshape(-1, len(STATE_CAR_COLUMNS)),
+                   np.array(peds, float).reshape(-1, len(STATE_PEDESTRIAN_COLUMNS)),
+                   np.array(obstacles, float).reshape(-1, len(STATE_OBSTACLE_COLUMNS)), snapshot.time_remaining)
+
+
+def _padded(rows: np.ndarray, count: int) -> np.ndarray:
+    out = np.zeros((count, rows.shape[1]))
+    out[:min(count, len(rows))] = rows[:count]
+    return out
+
+
+class DrivingGroundTruth:
+    """Ground-truth encodings of a driving world: every car's ``full`` observation and the global ``state``."""
+
+    def __init__(self, config: DrivingConfig) -> None:
+        self.config = config
+        self.layout = FullLayout.for_config(config)
+        lay = self.layout
+        self.observation_space = spaces.Box(*_bounds(config, [(c, r) for _, c, r in lay.blocks]), dtype=np.float32)
+        self._state_blocks = [(STATE_CAR_COLUMNS, config.n_cars), (STATE_PEDESTRIAN_COLUMNS, lay.pedestrians),
+                              (STATE_OBSTACLE_COLUMNS, lay.obstacles), (("time_remaining",), 1)]
+        self.state_space = spaces.Box(*_bounds(config, self._state_blocks), dtype=np.float32)
+        lines = DrivingMap(config.map).lane_lines
+        self._lines = np.array([(l.x1, l.y1, l.x2, l.y2) for l in lines], float).reshape(-1, 4)
+        self._line_kind = np.array([float(l.kind) for l in lines])
+        self._obstacle_size = (config.obstacles.size, config.obstacles.size)     # length, width (square)
+        n = config.n_cars
+        self._others = [np.array([j for j in range(n) if j != i], np.intp) for i in range(n)]
+
+    def state(self, snapshot: WorldSnapshot) -> np.ndarray:
+        """Map-frame ground truth: cars (id order), pedestrians (index order, absent once hit), obstacles, clock."""
+        b = _bodies(snapshot)
+        lay = self.layout
+        flat = np.concatenate((b.cars.ravel(), _padded(b.peds, lay.pedestrians).ravel(),
+                               _padded(b.obstacles, lay.obstacles).ravel(), (b.time_remaining,)))
+        flat = np.nan_to_num(flat, nan=0.0)
+        return np.clip(flat, self.state_space.low, self.state_space.high).astype(np.float32)
+
+    def observations(self, snapshot: WorldSnapshot) -> np.ndarray:
+        """(n_cars, layout.size) float32: every car's ``full`` observation, in its own frame."""
+        b = _bodies(snapshot)
+        lay = self.layout
+        cars = b.cars
+        n = len(cars)
+        out = np.zeros((n, lay.size))
+        x, y, c, s = cars[:, 0], cars[:, 1], cars[:, 2], cars[:, 3]
+        peds = b.peds[b.peds[:, 0] > 0]
+        obstacles = b.obstacles
+        for i in range(n):
+            ci, si, xi, yi = c[i], s[i], x[i], y[i]
+
+            def to_frame(px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                dx, dy = px - xi, py - yi
+                return ci * dx + si * dy, -si * dx + ci * dy
+
+            def rotate(vx: np.ndarray, vy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                return ci * vx + si * vy, -si * vx + ci * vy
+
+            me = cars[i]
+            speed, lateral = rotate(me[4], me[5])
+            gx, gy = to_frame(me[10], me[11])
+            blocks = [np.array([xi, yi, ci, si, speed, lateral, me[6], me[7], me[8], gx, gy, me[12], me[13], me[14],
+                                b.time_remaining])]
+            # other cars, one slot each in id order
+            o = cars[self._others[i]]
+            ox, oy = to_frame(o[:, 0], o[:, 1])
+            ovx, ovy = rotate(o[:, 4], o[:, 5])
+            present = 1.0 - o[:, 14]                      # a car at its destination has left the map
+            rows = np.column_stack((present, ox, oy, ci * o[:, 2] + si * o[:, 3], ci * o[:, 3] - si * o[:, 2],
+                                    ovx, ovy, o[:, 7], o[:, 8], o[:, 12], o[:, 13],
+                                    np.where(o[:, 9] == me[9], 1.0, -1.0))) * present[:, None]
+            blocks.append(rows.ravel())
+            # pedestrians and obstacles, nearest first
+            px, py = to_frame(peds[:, 1], peds[:, 2])
+            pvx, pvy = rotate(peds[:, 3], peds[:, 4])
+            order = np.argsort(np.hypot(px, py), kind="stable")
+            rows = np.column_stack((np.ones(len(peds)), px, py, pvx, pvy))[order]
+            blocks.append(_padded(rows, lay.pedestrians).ravel())
+            qx, qy = to_frame(obstacles[:, 1], obstacles[:, 2])
+            order = np.argsort(np.hypot(qx, qy), kind="stable")
+            k = len(obstacles)
+            rows = np.column_stack((np.ones(k), qx, qy, np.full(k, ci), np.full(k, -si),
+                                    np.full(k, self._obstacle_size[0]), np.full(k, self._obstacle_size[1])))[order]
+            blocks.append(_padded(rows, lay.obstacles).ravel())
+            l1x, l1y = to_frame(self._lines[:, 0], self._lines[:, 1])
+            l2x, l2y = to_frame(self._lines[:, 2], self._lines[:, 3])
+            blocks.append(np.column_stack((l1x, l1y, l2x, l2y, self._line_kind)).ravel())
+            out[i] = np.concatenate(blocks)
+        out = np.nan_to_num(out, nan=0.0)
+        return np.clip(out, self.observation_space.low, self.observation_space.high).astype(np.float32)
+
+
+# -- the modes --------------------------------------------------------------------------------------------------------
+class FullObservation:
+    """``observation='full'``: ground truth in each car's frame (module docstring); no perception, no reward."""
+    mode = "full"
+
+    def __init__(self, config: DrivingConfig, perception: Any = None) -> None:
+        if perception is not None:
+            raise ValueError("perception applies to perceived observations; observation='full' is noise-free "
+                             f"ground truth (got perception={perception!r}: leave it out)")
+        self.config = config
+        self.ground_truth = DrivingGroundTruth(config)
+        self.layout = self.ground_truth.layout
+        self.space: spaces.Space = self.ground_truth.observation_space
+        self.world: Any = None
+
+    def reset(self, world: Any) -> None:
+        self.world = world
+
+    def on_frame(self, index: int) -> None:
+        pass                                        # the period's end is all full mode looks at
+
+    def initial(self) -> list[Any]:
+        return self.build()[0]
+
+    def build(self) -> tuple[list[Any], np.ndarray]:
+        rows = self.ground_truth.observations(self.world.snapshot())
+        return list(rows), np.zeros(len(rows))
+
+    def infos(self, index: int) -> dict[str, Any]:
+        return {}
+
+
+ObservationFactory = Callable[..., DrivingObservationBuilder]
+OBSERVATION_BUILDERS: dict[str, ObservationFactory] = {"full": FullObservation}
+
+
+def register_observation(name: str, factory: ObservationFactory) -> None:
+    """Add an observation mode: ``factory(config, perception=…, **options)`` → a ``DrivingObservationBuilder``."""
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"an observation mode needs a non-empty name, got {name!r}")
+    OBSERVATION_BUILDERS[name] = factory
+
+
+def observation_builder(mode: Any, config: DrivingConfig, perception: Any = None,
+                        options: Mapping[str, Any] | None = None) -> DrivingObservationBuilder:
+    """The builder of an observation mode; an unknown mode is refused with the valid ones listed."""
+    if not isinstance(mode, str) or mode not in OBSERVATION_BUILDERS:
+        raise ValueError(f"observation must be one of {tuple(OBSERVATION_BUILDERS)}, got {mode!r}")
+    if options is not None and not isinstance(options, Mapping):
+        raise ValueError(f"observation_options must be a mapping or None, got {type(options).__name__}")
+    try:
+        return OBSERVATION_BUILDERS[mode](config, perception=perception, **dict(options or {}))
+    except TypeError as exc:
+        if "unexpected keyword argument" not in str(exc):
+            raise
+        raise ValueError(f"observation={mode!r} does not take that option: {exc}") from None
+
+
+__all__ = ["DrivingObservationBuilder", "FullObservation", "FullLayout", "DrivingGroundTruth", "OBSERVATION_BUILDERS",
+           "register_observation", "observation_builder", "SELF_COLUMNS", "CAR_COLUMNS", "PEDESTRIAN_COLUMNS",
+           "OBSTACLE_COLUMNS", "LANE_COLUMNS", "STATE_CAR_COLUMNS", "STATE_PEDESTRIAN_COLUMNS",
+           "STATE_OBSTACLE_COLUMNS"]
