@@ -1,7 +1,12 @@
-"""dynenv-play: a soccer game between scripted teams, in-process, with a summary and optional recordings.
+"""dynenv-play: a soccer game between scripted teams, or a drive of scripted cars, in-process, with a summary and
+optional recordings.
 
     dynenv-play --players-per-team 2 --policy keeper_and_chasers --seconds 60 --gif game.gif --png-dir frames/
     dynenv-play --watch 0 --perception realistic --noise-magnitude 2 --seconds 20 --gif robot0.gif
+    dynenv-play --scenario driving --cars 3 --seconds 30 --gif drive.gif
+
+Driving: every car is driven by the scripted lane-keeping driver (``driving.scripted.ScriptedDriver``); the GIF
+shows the map top-down (``render.driving``, 3 px per metre unless --pixels-per-metre says otherwise).
 
 Frames are taken at every vision instant (10 Hz), so the GIF plays in real time at --fps 10. With --watch, each
 frame also shows that robot's field of view and its detections (red X: false positive, red ring: confusion,
@@ -24,19 +29,24 @@ from dynenv_ros.soccer.scripted import act_all, team_policies
 from dynenv_ros.soccer.world import SoccerWorld
 
 POLICIES = ("keeper_and_chasers", "chaser", "random")
+SCENARIOS = ("robocup", "driving")
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="dynenv-play", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenario", choices=SCENARIOS, default="robocup")
     parser.add_argument("--players-per-team", type=int, default=2)
+    parser.add_argument("--cars", type=int, default=2, help="driving: number of cars (1-10)")
+    parser.add_argument("--action-mode", choices=("discrete", "continuous"), default="discrete",
+                        help="driving: the action format the scripted driver answers in")
     parser.add_argument("--policy", choices=POLICIES, default="keeper_and_chasers")
-    parser.add_argument("--seconds", type=float, default=120.0, help="game length (s)")
+    parser.add_argument("--seconds", type=float, help="game length (s; default 120 for soccer, 60 for driving)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--gif", type=Path, help="write the game as an animated GIF")
     parser.add_argument("--png-dir", type=Path, help="write every frame as a PNG into this existing folder")
     parser.add_argument("--fps", type=float, default=10.0, help="GIF playback rate (10 = real time)")
-    parser.add_argument("--pixels-per-metre", type=float, default=40.0)
+    parser.add_argument("--pixels-per-metre", type=float, help="default 40 (soccer), 3 (driving)")
     parser.add_argument("--watch", type=int, help="robot id whose field of view and detections are drawn")
     parser.add_argument("--perception", choices=("realistic", "dynenv", "none"), default="realistic")
     parser.add_argument("--noise-magnitude", type=float, help="0..5 (default: the preset's)")
@@ -45,7 +55,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 
 def play(args: argparse.Namespace) -> dict:
-    config = SoccerConfig.from_mapping({"players_per_team": args.players_per_team, "episode_seconds": args.seconds})
+    if args.scenario == "driving":
+        return play_driving(args)
+    seconds = 120.0 if args.seconds is None else args.seconds
+    if args.pixels_per_metre is None:
+        args.pixels_per_metre = 40.0
+    config = SoccerConfig.from_mapping({"players_per_team": args.players_per_team, "episode_seconds": seconds})
     world = SoccerWorld(config, seed=args.seed)
     policies = team_policies(config.players_per_team, args.policy, np.random.default_rng(args.seed),
                              field=config.field, motion=config.motion)
@@ -85,6 +100,56 @@ def play(args: argparse.Namespace) -> dict:
     return {"score": [world.state.score[1], world.state.score[-1]], "periods": world.period,
             "seconds": round(world.game_time, 3), "events": dict(sorted(events.items())),
             "reward_per_robot": {term.name.lower(): [round(v, 3) for v in totals[term]] for term in RewardTerm},
+            "frames": len(recorder) if recorder is not None else 0}
+
+
+def play_driving(args: argparse.Namespace) -> dict:
+    """Every car scripted until the episode ends; events, cars home / crashed and each car's reward terms."""
+    from dynenv_ros.driving.config import DrivingConfig
+    from dynenv_ros.driving.scripted import ScriptedDriver
+    from dynenv_ros.driving.world import DrivingWorld
+    if args.watch is not None:
+        raise ValueError("--watch draws a robot's detections: driving perception is not available in dynenv-play yet")
+    settings = {"n_cars": args.cars, "action_mode": args.action_mode}
+    if args.seconds is not None:
+        settings["episode_seconds"] = args.seconds
+    config = DrivingConfig.from_mapping(settings)
+    world = DrivingWorld(config, seed=args.seed)
+    driver = ScriptedDriver(config)
+    recorder = None
+    if args.gif or args.png_dir:
+        if args.png_dir and not args.png_dir.is_dir():
+            raise ValueError(f"--png-dir {args.png_dir} is not an existing folder")
+        from dynenv_ros.render.driving import DrivingRecorder
+        recorder = DrivingRecorder(world.map, pixels_per_metre=3.0 if args.pixels_per_metre is None
+                                   else args.pixels_per_metre)
+    pngs = 0
+
+    def on_frame(k: int) -> None:
+        nonlocal pngs
+        image = recorder.add(world.snapshot())
+        if args.png_dir:
+            from dynenv_ros.render.topdown import save_png
+            save_png(image, args.png_dir / f"frame_{pngs:05d}.png")
+            pngs += 1
+
+    if recorder is not None:
+        on_frame(0)                                     # the start, before the first period
+    totals = np.zeros((len(RewardTerm), config.n_cars))
+    events: Counter[str] = Counter()
+    result = None
+    while not world.done:
+        result = world.step(driver.actions(world), on_frame=on_frame if recorder is not None else None)
+        totals += result.rewards
+        events.update(e.kind if e.kind != "crash" else f"crash: {e.detail.split(' ')[0]}" for e in result.events)
+    if recorder is not None and args.gif:
+        recorder.save_gif(args.gif, fps=args.fps)
+    cars = world.cars
+    return {"scenario": "driving", "cars": config.n_cars, "periods": world.period,
+            "seconds": round(world.game_time, 3), "home": sum(c.at_goal for c in cars),
+            "crashed": sum(c.crashed for c in cars), "terminated": bool(result and result.terminated),
+            "events": dict(sorted(events.items())),
+            "reward_per_car": {term.name.lower(): [round(v, 3) for v in totals[term]] for term in RewardTerm},
             "frames": len(recorder) if recorder is not None else 0}
 
 
@@ -138,6 +203,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     if args.json:
         print(json.dumps(summary))
+    elif args.scenario == "driving":
+        print(f"{summary['home']} of {summary['cars']} cars home, {summary['crashed']} crashed after "
+              f"{summary['seconds']} s")
+        for kind, count in summary["events"].items():
+            print(f"  {kind}: {count}")
+        for term, values in summary["reward_per_car"].items():
+            print(f"  {term:<12} " + " ".join(f"{v:8.2f}" for v in values))
     else:
         print(f"score {summary['score'][0]}:{summary['score'][1]} after {summary['seconds']} s")
         for kind, count in summary["events"].items():

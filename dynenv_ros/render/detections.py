@@ -5,7 +5,9 @@ frame with the observer's pose and drawn with ``FieldView`` so they land on the 
 ``render_snapshot`` drew. Detections are diamonds with a dark outline (ground truth is discs), so a detection lying
 right on its object stays distinguishable from it. Error marks: a red X over a false positive, a red ring around a
 confusion (reported class differs from the real one), a hollow white circle on a visible object that was missed.
-Pillow only, like the rest of the renderer.
+Scenario-neutral: driving classes (cars by team relation, pedestrians, obstacles, lanes as segments) are drawn the
+same way on a ``render.driving.MapView`` (``render.driving.overlay_driving_detections``). Pillow only, like the rest
+of the renderer.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.perception.model import missed_objects
+from dynenv_ros.render.driving import OBSTACLE, PEDESTRIAN
 from dynenv_ros.render.topdown import BALL, FOV, LEGEND_ROW, TEAM_COLOURS, Colour, FieldView
 from dynenv_ros.soccer.field import FieldGeometry
 
@@ -30,7 +33,10 @@ MISSED: Colour = (255, 255, 255)
 
 # Marker half-sizes in metres (made at least MIN_MARKER_PX so they stay visible on small pictures).
 MARKER_SIZE = {ObjectClass.BALL: 0.08, ObjectClass.ROBOT: 0.13, ObjectClass.GOALPOST: 0.1,
-               ObjectClass.PENALTY_CROSS: 0.09, ObjectClass.LINE_CROSSING: 0.09}
+               ObjectClass.PENALTY_CROSS: 0.09, ObjectClass.LINE_CROSSING: 0.09,
+               ObjectClass.CAR: 1.2, ObjectClass.PEDESTRIAN: 0.6, ObjectClass.OBSTACLE: 1.0}
+LINE_CLASSES = (ObjectClass.FIELD_LINE, ObjectClass.LANE)      # drawn as segments from their endpoints
+HEADED_CLASSES = (ObjectClass.ROBOT, ObjectClass.CAR)          # drawn with a facing tick when yaw is defined
 DEFAULT_MARKER_SIZE = 0.09
 MIN_MARKER_PX = 3.0
 MISSED_RADIUS = 0.17                    # m: larger than any marker, so a miss ring never hides a detection
@@ -51,12 +57,13 @@ def camera_to_field(observer_pose: tuple[float, float, float], x: np.ndarray | f
 
 
 def class_colour(class_id: int, team: int = 0, observer_team: int = 1) -> Colour:
-    """Marker colour of a reported class; robots by team relation (own = the observer's team colour)."""
-    if class_id == ObjectClass.ROBOT:
+    """Marker colour of a reported class; robots and cars by team relation (own = the observer's team colour)."""
+    if class_id in (ObjectClass.ROBOT, ObjectClass.CAR):
         return TEAM_COLOURS.get(int(team) * observer_team, TEAM_COLOURS[0])
     return {ObjectClass.BALL: BALL, ObjectClass.GOALPOST: GOALPOST, ObjectClass.PENALTY_CROSS: MARK,
             ObjectClass.LINE_CROSSING: MARK, ObjectClass.FIELD_LINE: LINE_DETECTION,
-            ObjectClass.CENTER_CIRCLE: LINE_DETECTION}.get(int(class_id), OTHER)
+            ObjectClass.CENTER_CIRCLE: LINE_DETECTION, ObjectClass.LANE: LINE_DETECTION,
+            ObjectClass.PEDESTRIAN: PEDESTRIAN, ObjectClass.OBSTACLE: OBSTACLE}.get(int(class_id), OTHER)
 
 
 def overlay_detections(image: Image.Image, view: FieldView, observer_pose: tuple[float, float, float],
@@ -97,7 +104,7 @@ def overlay_detections(image: Image.Image, view: FieldView, observer_pose: tuple
         return image
     cls = d["class_id"].astype(int)
     fx, fy = camera_to_field(observer_pose, d["x"], d["y"])
-    lines = cls == ObjectClass.FIELD_LINE
+    lines = np.isin(cls, LINE_CLASSES)
     if lines.any():
         sx, sy = camera_to_field(observer_pose, d["line_start_x"][lines], d["line_start_y"][lines])
         ex, ey = camera_to_field(observer_pose, d["line_end_x"][lines], d["line_end_y"][lines])
@@ -116,7 +123,7 @@ def overlay_detections(image: Image.Image, view: FieldView, observer_pose: tuple
         else:
             size = max(MIN_MARKER_PX, view.length_to_pixels(MARKER_SIZE.get(cls[i], DEFAULT_MARKER_SIZE)))
             _diamond(draw, px, py, size, colour)
-            if cls[i] == ObjectClass.ROBOT and np.isfinite(d["yaw"][i]):
+            if cls[i] in HEADED_CLASSES and np.isfinite(d["yaw"][i]):
                 yaw = heading + float(d["yaw"][i])          # the robot's facing, from camera to field frame
                 draw.line((px, py, px + 1.8 * size * math.cos(yaw), py - 1.8 * size * math.sin(yaw)),
                           fill=OUTLINE, width=2)
@@ -142,17 +149,25 @@ def missed_positions(perception_visible: np.ndarray, detections: np.ndarray, obj
 
 
 def draw_legend(image: Image.Image, origin: tuple[float, float], *, observer_team: int = 1,
-                height: int = 14) -> Image.Image:
-    """One row of marker samples with names at ``origin`` (pixels), so a picture explains itself in the docs."""
+                height: int = 14, scenario: str = "robocup") -> Image.Image:
+    """One row of marker samples with names at ``origin`` (pixels), so a picture explains itself in the docs;
+    ``scenario`` 'robocup' or 'driving' picks the classes named."""
     draw = ImageDraw.Draw(image)
     font = ImageFont.load_default(size=max(8, height - 4))
     x, y = origin
     r = height / 2 - 2
-    entries: Sequence[tuple[str, str, Colour]] = (
-        ("diamond", "ball", BALL), ("diamond", "own", TEAM_COLOURS[observer_team]),
-        ("diamond", "opp.", TEAM_COLOURS[-observer_team]), ("diamond", "post", GOALPOST),
-        ("diamond", "mark", MARK), ("line", "line", LINE_DETECTION), ("cross", "false pos.", ERROR),
-        ("ring", "confused", ERROR), ("missed", "missed", MISSED))
+    if scenario == "robocup":
+        classes: Sequence[tuple[str, str, Colour]] = (
+            ("diamond", "ball", BALL), ("diamond", "own", TEAM_COLOURS[observer_team]),
+            ("diamond", "opp.", TEAM_COLOURS[-observer_team]), ("diamond", "post", GOALPOST),
+            ("diamond", "mark", MARK), ("line", "line", LINE_DETECTION))
+    elif scenario == "driving":
+        classes = (("diamond", "car: own team", TEAM_COLOURS[observer_team]),
+                   ("diamond", "other", TEAM_COLOURS[-observer_team]), ("diamond", "pedestrian", PEDESTRIAN),
+                   ("diamond", "obstacle", OBSTACLE), ("line", "lane", LINE_DETECTION))
+    else:
+        raise ValueError(f"scenario must be 'robocup' or 'driving', got {scenario!r}")
+    entries = (*classes, ("cross", "false pos.", ERROR), ("ring", "confused", ERROR), ("missed", "missed", MISSED))
     for kind, label, colour in entries:
         cx, cy = x + r + 1, y + height / 2
         if kind == "diamond":

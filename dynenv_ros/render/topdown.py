@@ -310,11 +310,16 @@ class EpisodeRecorder:
         GIF delays are whole centiseconds, so playback speed is approximate; Pillow merges consecutive identical
         frames (summing their delays), so a reader may count fewer frames than ``len(self)`` for static stretches.
         """
-        if not self.frames:
-            raise ValueError("nothing to save: the recorder has no frames (call add() first)")
-        fps = _check_positive("fps", fps)
-        target = _checked_target(path)
-        duration_ms = max(10, round(1000.0 / fps))
-        first, rest = self.frames[0], self.frames[1:]
-        _write_atomically(target, lambda tmp: first.save(tmp, format="GIF", save_all=True, append_images=rest,
-                                                         duration=duration_ms, loop=0))
+        save_gif(self.frames, path, fps)
+
+
+def save_gif(frames: list[Image.Image], path: str | os.PathLike[str], fps: float = 10.0) -> None:
+    """Frames of any scenario as an animated GIF that loops forever, written atomically (``EpisodeRecorder``)."""
+    if not frames:
+        raise ValueError("nothing to save: the recorder has no frames (call add() first)")
+    fps = _check_positive("fps", fps)
+    target = _checked_target(path)
+    duration_ms = max(10, round(1000.0 / fps))
+    first, rest = frames[0], frames[1:]
+    _write_atomically(target, lambda tmp: first.save(tmp, format="GIF", save_all=True, append_images=rest,
+                                                     duration=duration_ms, loop=0))
