@@ -283,13 +283,14 @@ def test_detection_overlay_draws_driving_classes_in_the_observer_frame():
     world = env.world
     image = render_driving(world.snapshot(), world.map, pixels_per_metre=4.0)
     view = MapView.of(world.map, 4.0)
-    rows = empty(3)
-    rows["class_id"] = [ObjectClass.PEDESTRIAN, ObjectClass.OBSTACLE, ObjectClass.LANE]
-    rows["x"], rows["y"] = [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]
-    rows["true_id"] = [5, 6, -2]
+    rows = empty(4)
+    rows["class_id"] = [ObjectClass.SELF, ObjectClass.PEDESTRIAN, ObjectClass.OBSTACLE, ObjectClass.LANE]
+    rows["x"], rows["y"] = [20.0, 10.0, 0.0, 0.0], [0.0, 0.0, 10.0, 0.0]
+    rows["true_id"] = [0, 5, 6, -2]
     rows["true_class"] = rows["class_id"]
-    rows["line_start_x"], rows["line_end_x"] = [0, 0, -5.0], [0, 0, 5.0]
-    rows["line_start_y"], rows["line_end_y"] = [0, 0, -6.0], [0, 0, -6.0]
+    rows["line_start_x"], rows["line_end_x"] = [0, 0, 0, -5.0], [0, 0, 0, 5.0]
+    rows["line_start_y"], rows["line_end_y"] = [0, 0, 0, -6.0], [0, 0, 0, -6.0]
+    before = np.asarray(image).copy()
     car = world.cars[0]
     overlay_driving_detections(image, view, (car.x, car.y, car.yaw), rows, view_radius=68.0)
     pixels = np.asarray(image)
@@ -299,6 +300,8 @@ def test_detection_overlay_draws_driving_classes_in_the_observer_frame():
                            ((0.0, -6.0), d.LINE_DETECTION)):
         px, py = (round(v) for v in view.field_to_pixel(car.x + c * x - s * y, car.y + s * x + c * y))
         assert tuple(pixels[py, px]) == colour
+    px, py = (round(v) for v in view.field_to_pixel(car.x + c * 20.0, car.y + s * 20.0))
+    np.testing.assert_array_equal(pixels[py - 2:py + 3, px - 2:px + 3], before[py - 2:py + 3, px - 2:px + 3])  # SELF
 
 
 def test_play_writes_a_driving_gif(tmp_path):

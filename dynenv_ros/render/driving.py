@@ -288,7 +288,8 @@ def overlay_driving_detections(image: Image.Image, view: MapView, observer_pose:
     ``detections``: ``perception.detections.DETECTION_DTYPE`` rows in the car's frame (x forward, y left; lanes as
     ``LANE`` rows with line endpoints); ``observer_pose`` = the car's (x, y, yaw) in the map frame. Markers and
     error marks as ``render.detections.overlay_detections`` (diamonds; red X false positive, red ring confusion,
-    white ring ``truth``: visible but missed). ``view_radius`` (m) draws the 360° view's range as a circle.
+    white ring ``truth``: visible but missed). ``SELF`` rows (the car's own odometry and destination) are not
+    sightings and are skipped. ``view_radius`` (m) draws the 360° view's range as a circle.
     """
     from dynenv_ros.render.detections import MISSED, draw_legend, overlay_detections   # perception only when used
     if view_radius is not None:
@@ -297,7 +298,10 @@ def overlay_driving_detections(image: Image.Image, view: MapView, observer_pose:
         px, py = view.field_to_pixel(observer_pose[0], observer_pose[1])
         r = view.length_to_pixels(view_radius)
         ImageDraw.Draw(image).ellipse((px - r, py - r, px + r, py + r), outline=MISSED, width=1)
-    overlay_detections(image, view, observer_pose, detections, truth=truth, observer_team=observer_team,
+    rows = np.asarray(detections)
+    if len(rows):
+        rows = rows[rows["class_id"] != ObjectClass.SELF]     # what the car knows of itself, not a sighting
+    overlay_detections(image, view, observer_pose, rows, truth=truth, observer_team=observer_team,
                        fov_half_angle=None, legend=False)
     if legend and view.legend_height >= 2 * LEGEND_ROW:
         draw_legend(image, (4, view.legend_row(1) - LEGEND_ROW / 2), observer_team=observer_team,
