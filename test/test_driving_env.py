@@ -1,4 +1,4 @@
-"""driving_v0: the PettingZoo Parallel environment over DrivingWorld, its full observation, rendering and dynenv-play."""
+"""driving_v0: the PettingZoo Parallel env over DrivingWorld, its full observation, rendering and dynenv-play."""
 import math
 import subprocess
 import sys

@@ -185,7 +185,7 @@ class DrivingGroundTruth:
         self._line_kind = np.array([float(l.kind) for l in lines])
         self._obstacle_size = (config.obstacles.size, config.obstacles.size)     # length, width (square)
         n = config.n_cars
-        self._others = [np.array([j for j in range(n) if j != i], np.intp) for i in range(n)]
+        self._others_table = np.array([[j for j in range(n) if j != i] for i in range(n)], np.intp).reshape(n, n - 1)
 
     def state(self, snapshot: WorldSnapshot) -> np.ndarray:
         """Map-frame ground truth: cars (id order), pedestrians (index order, absent once hit), obstacles, clock."""
@@ -197,57 +197,66 @@ class DrivingGroundTruth:
         return np.clip(flat, self.state_space.low, self.state_space.high).astype(np.float32)
 
     def observations(self, snapshot: WorldSnapshot) -> np.ndarray:
-        """(n_cars, layout.size) float32: every car's ``full`` observation, in its own frame."""
+        """(n_cars, layout.size) float32: every car's ``full`` observation, in its own frame (all observers at
+        once: each body's offset from each car, turned into that car's frame)."""
         b = _bodies(snapshot)
         lay = self.layout
         cars = b.cars
         n = len(cars)
-        out = np.zeros((n, lay.size))
-        x, y, c, s = cars[:, 0], cars[:, 1], cars[:, 2], cars[:, 3]
+        x, y = cars[:, 0:1], cars[:, 1:2]                   # (n, 1): broadcast over the bodies seen
+        c, s = cars[:, 2:3], cars[:, 3:4]
+
+        def to_frame(px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            dx, dy = px - x, py - y
+            return c * dx + s * dy, c * dy - s * dx
+
+        def rotate(vx: np.ndarray, vy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return c * vx + s * vy, c * vy - s * vx
+
+        speed, lateral = rotate(cars[:, 4:5], cars[:, 5:6])
+        gx, gy = to_frame(cars[:, 10:11], cars[:, 11:12])
+        blocks = [np.hstack((cars[:, 0:4], speed, lateral, cars[:, 6:9], gx, gy, cars[:, 12:15],
+                             np.full((n, 1), b.time_remaining)))]
+        # Other cars, one slot each in id order; a car at its destination has left the map (absent, zeros).
+        others = self._others_table
+        o = cars[others]                                    # (n, n-1, 15)
+        ox, oy = to_frame(o[..., 0], o[..., 1])
+        ovx, ovy = rotate(o[..., 4], o[..., 5])
+        present = 1.0 - o[..., 14]
+        cos_rel = c * o[..., 2] + s * o[..., 3]
+        sin_rel = c * o[..., 3] - s * o[..., 2]
+        same = np.where(o[..., 9] == cars[:, 9:10], 1.0, -1.0)
+        rows = np.stack((present, ox, oy, cos_rel, sin_rel, ovx, ovy, o[..., 7], o[..., 8], o[..., 12], o[..., 13],
+                         same), axis=-1) * present[..., None]
+        blocks.append(rows.reshape(n, -1))
+        # Pedestrians (the live ones) and obstacles, nearest first, zero-padded.
         peds = b.peds[b.peds[:, 0] > 0]
-        obstacles = b.obstacles
-        for i in range(n):
-            ci, si, xi, yi = c[i], s[i], x[i], y[i]
-
-            def to_frame(px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                dx, dy = px - xi, py - yi
-                return ci * dx + si * dy, -si * dx + ci * dy
-
-            def rotate(vx: np.ndarray, vy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                return ci * vx + si * vy, -si * vx + ci * vy
-
-            me = cars[i]
-            speed, lateral = rotate(me[4], me[5])
-            gx, gy = to_frame(me[10], me[11])
-            blocks = [np.array([xi, yi, ci, si, speed, lateral, me[6], me[7], me[8], gx, gy, me[12], me[13], me[14],
-                                b.time_remaining])]
-            # other cars, one slot each in id order
-            o = cars[self._others[i]]
-            ox, oy = to_frame(o[:, 0], o[:, 1])
-            ovx, ovy = rotate(o[:, 4], o[:, 5])
-            present = 1.0 - o[:, 14]                      # a car at its destination has left the map
-            rows = np.column_stack((present, ox, oy, ci * o[:, 2] + si * o[:, 3], ci * o[:, 3] - si * o[:, 2],
-                                    ovx, ovy, o[:, 7], o[:, 8], o[:, 12], o[:, 13],
-                                    np.where(o[:, 9] == me[9], 1.0, -1.0))) * present[:, None]
-            blocks.append(rows.ravel())
-            # pedestrians and obstacles, nearest first
-            px, py = to_frame(peds[:, 1], peds[:, 2])
-            pvx, pvy = rotate(peds[:, 3], peds[:, 4])
-            order = np.argsort(np.hypot(px, py), kind="stable")
-            rows = np.column_stack((np.ones(len(peds)), px, py, pvx, pvy))[order]
-            blocks.append(_padded(rows, lay.pedestrians).ravel())
-            qx, qy = to_frame(obstacles[:, 1], obstacles[:, 2])
-            order = np.argsort(np.hypot(qx, qy), kind="stable")
-            k = len(obstacles)
-            rows = np.column_stack((np.ones(k), qx, qy, np.full(k, ci), np.full(k, -si),
-                                    np.full(k, self._obstacle_size[0]), np.full(k, self._obstacle_size[1])))[order]
-            blocks.append(_padded(rows, lay.obstacles).ravel())
-            l1x, l1y = to_frame(self._lines[:, 0], self._lines[:, 1])
-            l2x, l2y = to_frame(self._lines[:, 2], self._lines[:, 3])
-            blocks.append(np.column_stack((l1x, l1y, l2x, l2y, self._line_kind)).ravel())
-            out[i] = np.concatenate(blocks)
-        out = np.nan_to_num(out, nan=0.0)
+        px, py = to_frame(peds[:, 1], peds[:, 2])
+        pvx, pvy = rotate(peds[:, 3], peds[:, 4])
+        rows = np.stack((np.ones_like(px), px, py, pvx, pvy), axis=-1)
+        blocks.append(_nearest_first(rows, np.hypot(px, py), lay.pedestrians).reshape(n, -1))
+        q = b.obstacles
+        qx, qy = to_frame(q[:, 1], q[:, 2])
+        ones = np.ones_like(qx)
+        rows = np.stack((ones, qx, qy, c * ones, -s * ones, self._obstacle_size[0] * ones,
+                         self._obstacle_size[1] * ones), axis=-1)
+        blocks.append(_nearest_first(rows, np.hypot(qx, qy), lay.obstacles).reshape(n, -1))
+        l1x, l1y = to_frame(self._lines[:, 0], self._lines[:, 1])
+        l2x, l2y = to_frame(self._lines[:, 2], self._lines[:, 3])
+        kind = np.broadcast_to(self._line_kind, l1x.shape)
+        blocks.append(np.stack((l1x, l1y, l2x, l2y, kind), axis=-1).reshape(n, -1))
+        out = np.nan_to_num(np.hstack(blocks), nan=0.0)
         return np.clip(out, self.observation_space.low, self.observation_space.high).astype(np.float32)
+
+
+def _nearest_first(rows: np.ndarray, distance: np.ndarray, count: int) -> np.ndarray:
+    """(n, k, F) rows per observer → (n, count, F), each observer's sorted by ``distance`` (n, k), zero-padded."""
+    n, k, f = rows.shape
+    out = np.zeros((n, count, f))
+    if k:
+        order = np.argsort(distance, axis=1, kind="stable")[:, :count]
+        out[:, :order.shape[1]] = np.take_along_axis(rows, order[..., None], axis=1)
+    return out
 
 
 # -- the modes --------------------------------------------------------------------------------------------------------

@@ -126,7 +126,8 @@ def car_corners(x: float, y: float, yaw: float, half_length: float, half_width: 
 
 
 def _box(draw: ImageDraw.ImageDraw, view: MapView, x: float, y: float, yaw: float, half_length: float,
-         half_width: float, *, fill: Colour | None, outline: Colour | None, width: int = 1) -> list[tuple[float, float]]:
+         half_width: float, *, fill: Colour | None, outline: Colour | None,
+         width: int = 1) -> list[tuple[float, float]]:
     points = [view.field_to_pixel(px, py) for px, py in car_corners(x, y, yaw, half_length, half_width)]
     draw.polygon(points, fill=fill, outline=outline, width=width)
     return points
@@ -278,7 +279,7 @@ def _draw_world_legend(draw: ImageDraw.ImageDraw, view: MapView) -> None:
         x += draw.textlength(label, font=font) + 10
 
 
-# -- one car's detections ---------------------------------------------------------------------------------------------
+# -- one car's detections ------------------------------------------------------------------------------------------
 def overlay_driving_detections(image: Image.Image, view: MapView, observer_pose: tuple[float, float, float],
                                detections: np.ndarray, *, truth: Iterable[tuple[float, float]] | None = None,
                                observer_team: int = 1, view_radius: float | None = None,
@@ -309,7 +310,7 @@ def overlay_driving_detections(image: Image.Image, view: MapView, observer_pose:
     return image
 
 
-# -- recording ----------------------------------------------------------------------------------------------------------
+# -- recording -----------------------------------------------------------------------------------------------------
 class DrivingRecorder:
     """Renders snapshots as they arrive and keeps the frames (as 8-bit palette images, a third of the memory of RGB),
     to save one animated GIF per episode (``topdown.save_gif``)."""
