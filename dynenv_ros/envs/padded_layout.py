@@ -126,24 +126,33 @@ class PaddedLayout:
         V = len(offsets) - 1
         view = np.arange(V).repeat(offsets[1:] - offsets[:-1])
         robot_of_view, frame_of_view = np.asarray(robot_of_view), np.asarray(frame_of_view)
+        features = np.ascontiguousarray(features, np.float32)
         stream = STREAM_OF_CLASS[features[:, 0].astype(np.int64) & 255]
+        records = features.view(_ROW)[:, 0]        # whole rows as single items: one copy per row, not per column
         dropped = np.zeros(V, np.int64)
         for s, (rows_key, mask_key, limit) in enumerate((("landmarks", "landmark_mask", self.max_landmarks),
                                                          ("objects", "object_mask", self.max_objects))):
+            rows_out, mask_out = out[rows_key], out[mask_key]
+            if rows_out.dtype != np.float32:
+                raise TypeError(f"pack_rows: out[{rows_key!r}] must be float32 (as from empty()), got {rows_out.dtype}")
             if clear:
-                out[rows_key][robot_of_view, frame_of_view] = 0.0
-                out[mask_key][robot_of_view, frame_of_view] = 0.0
+                rows_out[robot_of_view, frame_of_view] = 0.0
+                mask_out[robot_of_view, frame_of_view] = 0.0
             chosen = (stream == s).nonzero()[0]
             v = view[chosen]
             per_view = np.bincount(v, minlength=V)
             rank = np.arange(len(v)) - (per_view.cumsum() - per_view)[v]   # rows are grouped by view
-            kept = (rank < limit).nonzero()[0]
-            v = v[kept]
-            at = (robot_of_view[v], frame_of_view[v], rank[kept])
-            out[rows_key][at] = features[chosen[kept]]
-            out[mask_key][at] = 1.0
-            dropped += np.maximum(per_view - limit, 0)
+            if per_view.max(initial=0) > limit:                 # rows beyond the maximum (the farthest): dropped
+                kept = (rank < limit).nonzero()[0]
+                chosen, v, rank = chosen[kept], v[kept], rank[kept]
+                dropped += np.maximum(per_view - limit, 0)
+            at = (robot_of_view[v], frame_of_view[v], rank)
+            rows_out.view(_ROW)[..., 0][at] = records[chosen]
+            mask_out[at] = 1.0
         return dropped
+
+
+_ROW = np.dtype((np.void, FEATURES * 4))     # one float32 feature row as an opaque item
 
 
 def clamp_features(features: np.ndarray) -> np.ndarray:
