@@ -1,0 +1,620 @@
+"""Driving perception: what each car's sensors report in one vision frame — 360° view, occlusion by rotated boxes,
+the original's error model with its bugs fixed (docs/perception.md, "Driving").
+
+Scenario-specific where soccer's ``Perceiver`` (perception/model.py) cannot serve without edits: a 360° view (its field
+of view must be under π), box occluders with rotated corners (its occluders are discs), three sight lines per
+object (hidden / PARTIAL by occlusion instead of by the view's edge), lanes as oriented lane segments and a SELF row.
+It reuses the scenario-independent pieces: ``DETECTION_DTYPE`` rows, the Sighting bits, the calibrated-confidence
+rule and the same leak rules (every feature of a false or confused report drawn as a real one of its class at that
+place would have it). Everything is computed for all cars of a period as one set of arrays.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dynenv_ros.core.arrays import clamp
+from dynenv_ros.core.object_classes import ObjectClass, Sighting, Subtype
+from dynenv_ros.perception.detections import DETECTION_DTYPE
+from dynenv_ros.perception.driving_params import POINT_CLASSES, DrivingPerceptionParams
+
+_CAR, _PED, _OBST = int(ObjectClass.CAR), int(ObjectClass.PEDESTRIAN), int(ObjectClass.OBSTACLE)
+_LANE, _SELF, _UNKNOWN = int(ObjectClass.LANE), int(ObjectClass.SELF), int(ObjectClass.UNKNOWN)
+_DISTANT, _PARTIAL, _NEARBY = int(Sighting.DISTANT), int(Sighting.PARTIAL), int(Sighting.NEARBY)
+_SAME, _OPPOSING, _EDGE = int(Subtype.LANE_SAME_DIRECTION), int(Subtype.LANE_OPPOSING), int(Subtype.LANE_EDGE)
+LANE_CENTRE, ROAD_EDGE = 0, 1
+EGO_COLUMNS = ("speed", "yaw_rate", "goal_x", "goal_y", "length", "width", "crashed", "finished")
+EDGE_WIDTH = 0.15            # m: a road edge line's painted width (its report's size_y)
+_EPS = 1e-9
+_RAW = np.dtype((np.void, DETECTION_DTYPE.itemsize))
+
+
+@dataclass
+class DrivingScene:
+    """What stays fixed for an episode. Objects are numbered as the world's snapshot ids: cars 0..n−1, pedestrians
+    n..n+P−1, obstacles n+P..; each car is also an observer (view v = car v)."""
+    car_half_length: np.ndarray          # (n,) m
+    car_half_width: np.ndarray           # (n,) m
+    car_team: np.ndarray                 # (n,) int8 absolute team
+    n_pedestrians: int
+    pedestrian_radius: float
+    obstacle_xy: np.ndarray              # (O, 2) m, map frame
+    obstacle_half: float                 # m, axis-aligned squares
+    buildings: np.ndarray                # (B, 5) centre x, y, half x, half y, yaw (rad): rotated boxes
+    lanes: np.ndarray                    # (L, 4) x1 y1 x2 y2: lane centres in their direction of travel, road edges
+    lane_kind: np.ndarray                # (L,) LANE_CENTRE or ROAD_EDGE
+    lane_width: float                    # m: a lane centre's report size_y
+
+    @property
+    def n_cars(self) -> int:
+        return len(self.car_half_length)
+
+
+@dataclass
+class DrivingState:
+    """The world at one vision instant (map frame)."""
+    x: np.ndarray; y: np.ndarray; yaw: np.ndarray            # noqa: E702  (n,) cars
+    speed: np.ndarray                    # (n,) signed, along the heading, m/s
+    yaw_rate: np.ndarray                 # (n,) rad/s
+    present: np.ndarray                  # (n,) bool: in the world (a car at its destination has left)
+    crashed: np.ndarray                  # (n,) bool
+    finished: np.ndarray                 # (n,) bool
+    goal_x: np.ndarray; goal_y: np.ndarray                   # noqa: E702  (n,) destinations
+    pedestrian_x: np.ndarray; pedestrian_y: np.ndarray       # noqa: E702  (P,)
+    pedestrian_alive: np.ndarray         # (P,) bool
+
+
+@dataclass
+class DrivingPerception:
+    """All cars' reports of one frame, view after view (view v = car v): per view its SELF row first, then every
+    report nearest first. ``of_view(v)`` is a slice (no copy)."""
+    detections: np.ndarray               # DETECTION_DTYPE
+    offsets: np.ndarray                  # (V + 1,)
+    visible: np.ndarray                  # (V, N) bool: in range and not hidden
+    seen: np.ndarray                     # (V, N) bool: reported as its own class (before false positives)
+    lanes_seen: np.ndarray               # (V,) lanes reported
+    ego: np.ndarray                      # (V, 8) float32 EGO_COLUMNS: the SELF rows' values
+
+    def of_view(self, view: int) -> np.ndarray:
+        return self.detections[self.offsets[view]:self.offsets[view + 1]]
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+
+def _wrap(angle):
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+class DrivingPerceiver:
+    """Tables for one episode's scene and one parameter set; ``perceive(state, rng)`` once per frame."""
+
+    def __init__(self, scene: DrivingScene, params: DrivingPerceptionParams) -> None:
+        self.scene, self.params = scene, params
+        n, P, O = scene.n_cars, scene.n_pedestrians, len(scene.obstacle_xy)
+        self.n, self.P, self.O = n, P, O
+        N = self.N = n + P + O
+        self.cls = np.concatenate((np.full(n, _CAR), np.full(P, _PED), np.full(O, _OBST))).astype(np.uint8)
+        # Outline per object: box half sizes (hx along its heading, hy across) plus a radius (pedestrians).
+        self.hx = np.concatenate((scene.car_half_length, np.zeros(P), np.full(O, scene.obstacle_half)))
+        self.hy = np.concatenate((scene.car_half_width, np.zeros(P), np.full(O, scene.obstacle_half)))
+        self.rr = np.concatenate((np.zeros(n), np.full(P, scene.pedestrian_radius), np.zeros(O)))
+        self.team = scene.car_team.astype(np.int8)
+        self.single_team = len(set(self.team.tolist())) <= 1
+        t = params.classes
+        self.class_near, self.class_max = np.full(256, np.inf), np.full(256, params.view_range)
+        self.class_scale, self.class_prior_logit = np.ones(256), np.zeros(256)
+        for c, cp in t.items():
+            self.class_near[c], self.class_max[c], self.class_scale[c] = cp.near_range, cp.max_range, cp.miss_scale
+            self.class_prior_logit[c] = math.log(cp.correct_prior / (1 - cp.correct_prior))
+        self.max_range, self.near = self.class_max[self.cls], self.class_near[self.cls]
+        # What each occluder kind hides, per class: row 0 buildings (everything), 1 cars, 2 obstacles.
+        occ = params.occlusion
+        self.hides = np.zeros((3, 256), bool)
+        if occ.enabled:
+            self.hides[0, list(POINT_CLASSES)] = True
+            self.hides[1, [int(c) for c in occ.cars_hide]] = True
+            self.hides[2, [int(c) for c in occ.obstacles_hide]] = True
+        self._small_hide = self.hides[1] | self.hides[2]
+        b = np.asarray(scene.buildings, float).reshape(-1, 5)
+        self.B = len(b)
+        # Occluders: buildings, then cars, then obstacles; centre, unit axis, half sizes, bounding radius, kind,
+        # object index (−1: a building). Cars' rows are refreshed every frame.
+        k = self.B + n + O
+        self.occ_x, self.occ_y = np.zeros(k), np.zeros(k)
+        self.occ_ux, self.occ_uy = np.ones(k), np.zeros(k)
+        self.occ_a = np.concatenate((b[:, 2], scene.car_half_length, np.full(O, scene.obstacle_half)))
+        self.occ_b = np.concatenate((b[:, 3], scene.car_half_width, np.full(O, scene.obstacle_half)))
+        self.occ_r = np.hypot(self.occ_a, self.occ_b)
+        self.occ_kind = np.concatenate((np.zeros(self.B, int), np.ones(n, int), np.full(O, 2)))
+        self.occ_obj = np.concatenate((np.full(self.B, -1), np.arange(n), n + P + np.arange(O)))
+        self.occ_x[:self.B], self.occ_y[:self.B] = b[:, 0], b[:, 1]
+        self.occ_ux[:self.B], self.occ_uy[:self.B] = np.cos(b[:, 4]), np.sin(b[:, 4])
+        self.occ_x[self.B + n:], self.occ_y[self.B + n:] = scene.obstacle_xy[:, 0], scene.obstacle_xy[:, 1]
+        # Object positions: obstacles fixed, the rest written every frame.
+        self._x, self._y, self._yaw = np.zeros(N), np.zeros(N), np.zeros(N)
+        self._x[n + P:], self._y[n + P:] = scene.obstacle_xy[:, 0], scene.obstacle_xy[:, 1]
+        self._present = np.ones(N, bool)
+        lanes = np.asarray(scene.lanes, float).reshape(-1, 4)
+        self.lanes, self.lane_kind = lanes, np.asarray(scene.lane_kind, int)
+        self.lane_heading = np.arctan2(lanes[:, 3] - lanes[:, 1], lanes[:, 2] - lanes[:, 0])
+        self.lane_size_y = np.where(self.lane_kind == LANE_CENTRE, scene.lane_width, EDGE_WIDTH)
+        miss = params.miss
+        self._factor = np.array([miss.partial_factor if bits & _PARTIAL else miss.distant_factor
+                                 if bits & _DISTANT else miss.nearby_factor if bits & _NEARBY else 1.0
+                                 for bits in range(8)])
+        self._confusion_rate, self._confusion_target = np.zeros(512), np.arange(256, dtype=np.uint8)
+        for rule in params.confusions:
+            rate = rule.probability * params.rho
+            self._confusion_rate[int(rule.source) + 256], self._confusion_target[rule.source] = rate, rule.target
+            if not rule.distant_only:
+                self._confusion_rate[int(rule.source)] = rate
+        fp = params.false_positives
+        self._fp_classes = np.asarray([int(c) for c in fp.classes], np.uint8)
+        self._fp_probability = min(1.0, fp.probability * params.noise_magnitude)
+        self._fp_range = np.minimum(fp.max_distance, self.class_max)
+        self.noisy = params.mode != "none" and params.noise_magnitude > 0.0
+        self._own = np.arange(n) * N + np.arange(n)           # (view, own object) in the flat (V·N) pairs
+        self._max_range_pairs = np.tile(self.max_range, n)
+        self._lane_view, self._lane_index = np.repeat(np.arange(n), len(lanes)), np.tile(np.arange(len(lanes)), n)
+        self._lane_len2 = np.tile(np.maximum((lanes[:, 2] - lanes[:, 0]) ** 2 + (lanes[:, 3] - lanes[:, 1]) ** 2,
+                                             _EPS), n)
+
+    # ------------------------------------------------------------------------------------------------------------
+    def perceive(self, st: DrivingState, rng: np.random.Generator) -> DrivingPerception:
+        p, n, P, N = self.params, self.n, self.P, self.N
+        X, Y, YAW, present = self._x, self._y, self._yaw, self._present
+        X[:n], Y[:n], YAW[:n] = st.x, st.y, st.yaw
+        X[n:n + P], Y[n:n + P] = st.pedestrian_x, st.pedestrian_y
+        present[:n], present[n:n + P] = st.present, st.pedestrian_alive
+        ox, oy, oyaw = np.asarray(st.x, float), np.asarray(st.y, float), np.asarray(st.yaw, float)
+        c, s = np.cos(oyaw), np.sin(oyaw)
+        self.occ_x[self.B:self.B + n], self.occ_y[self.B:self.B + n] = ox, oy
+        self.occ_ux[self.B:self.B + n], self.occ_uy[self.B:self.B + n] = c, s
+        # Every (view, object) pair: world offsets, then the observer's frame.
+        dx, dy = (X[None, :] - ox[:, None]).ravel(), (Y[None, :] - oy[:, None]).ravel()
+        d = np.hypot(dx, dy)
+        cand = (d <= self._max_range_pairs) & np.tile(present, n)
+        cand[self._own] = False
+        at = cand.nonzero()[0]
+        v, j = at // N, at % N
+        blocked = self._blocked(v, j, X[j], Y[j], YAW[j], self.hx[j], self.hy[j], self.rr[j], self.cls[j], ox, oy,
+                                st.present, dx[at], dy[at], d[at])
+        shown = (blocked < 3).nonzero()[0]
+        at, v, j, blocked = at[shown], v[shown], j[shown], blocked[shown]
+        visible = np.zeros(n * N, bool)
+        visible[at] = True
+        cv, sv = c[v], s[v]
+        xk, yk = cv * dx[at] + sv * dy[at], cv * dy[at] - sv * dx[at]
+        dk = d[at]
+        ck = self.cls[j]
+        K = len(at)
+        bits = (blocked > 0) * _PARTIAL + (dk > self.near[j]) * _DISTANT
+        reported, confused, keep = ck, np.zeros(K, bool), np.ones(K, bool)
+        size_factor, yaw_noise = np.ones(K), np.zeros(K)
+        made_up = []
+        m, rho = p.noise_magnitude, p.rho
+        if self.noisy:
+            if p.mode == "realistic":
+                nearby = self._nearby_truth(v, j, X, Y, present)
+                factor = self._factor[bits + nearby * _NEARBY]
+                mult = (p.miss.range_offset + p.miss.range_slope * (dk / p.miss.range_reference) ** 2) * factor
+            else:
+                mult = np.ones(K)
+            u = rng.random((4, K))
+            keep = u[0] >= rho * self.class_scale[ck] * mult
+            if p.mode == "realistic" and p.confusions:
+                confused = keep & (u[1] < self._confusion_rate[ck + (bits & _DISTANT) * 256] * mult)
+                reported = np.where(confused, self._confusion_target[ck], ck)
+            xk, yk = self._position_noise(xk, yk, dk, mult, rng)
+            g = rng.standard_normal((2, K))
+            size_factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
+            yaw_noise = self._yaw_noise(g[1], rng)
+            if p.mode == "realistic":
+                fp = p.false_positives
+                near_car = ((ck == _CAR) & (reported == _CAR) & keep & (dk < fp.near_car_range)
+                            & ((bits & (_DISTANT | _PARTIAL)) == 0) & (u[2] < fp.near_car_probability * m))
+                if near_car.any():
+                    w = near_car.nonzero()[0]
+                    made_up.append(self._near_car_pedestrians(v[w], xk[w], yk[w], YAW[j[w]] - oyaw[v[w]],
+                                                              self.hx[j[w]], self.hy[j[w]], rng))
+        seen = np.zeros(n * N, bool)
+        seen[at[keep & ~confused]] = True
+        kept = keep.nonzero()[0]
+        v, j, ck, reported, confused = v[kept], j[kept], ck[kept], reported[kept], confused[kept]
+        rows = np.zeros(len(kept), DETECTION_DTYPE)
+        rows["class_id"] = reported
+        rows["x"], rows["y"] = xk[kept], yk[kept]
+        f = size_factor[kept]
+        rows["size_x"] = 2 * (self.hx[j] + self.rr[j]) * f
+        rows["size_y"] = 2 * (self.hy[j] + self.rr[j]) * f
+        is_car = ck == _CAR
+        rows["yaw"] = np.where(is_car, _wrap(YAW[j] - oyaw[v] + yaw_noise[kept]), np.nan)
+        rows["team"] = np.where(is_car, self.team[np.minimum(j, n - 1)] * self.team[v], 0)
+        rows["sighting"] = bits[kept]
+        rows["true_id"] = j
+        rows["true_class"] = ck
+        parts = [(rows, v)]
+        if self.noisy:
+            if confused.any():       # re-dressed as a real report of the class it is given as
+                w = confused.nonzero()[0]
+                rows_c = rows.view(_RAW)[w].view(DETECTION_DTYPE)
+                self._dress(rows_c, v[w], oyaw, st, rng)
+                keep_rows = (~confused).nonzero()[0]
+                parts = [(rows.view(_RAW)[keep_rows].view(DETECTION_DTYPE), v[keep_rows]), (rows_c, v[w])]
+            made_up.append(self._uniform_false_positives(rng))
+            fake = self._place_made_up(made_up, ox, oy, oyaw, c, s, st, rng)
+            if fake is not None:
+                parts.append(fake)
+        lane_rows, lanes_seen = self._lanes(ox, oy, oyaw, c, s, rng)
+        parts.append(lane_rows)
+        self_rows, ego = self._self_rows(st, ox, oy, c, s, rng)
+        parts.append(self_rows)
+        return self._assemble(parts, visible.reshape(n, N), seen.reshape(n, N), lanes_seen, ego, rng)
+
+    # -- geometry --------------------------------------------------------------------------------------------------
+    def _blocked(self, v, j, tx, ty, tyaw, thx, thy, trr, tcls, ox, oy, cars_present, ddx, ddy, d):
+        """(K,) how many of each target's three sight lines (centre, both edges of its outline) an occluder
+        blocks. ``j`` is the target's object index (−1: made up); the observer (car ``v``) and the target itself
+        never occlude. Exact segment–box tests (separating axes) with the boxes' rotated corners."""
+        K = len(v)
+        if K == 0 or not self.hides.any():
+            return np.zeros(K, int)
+        inv = 1.0 / np.maximum(d, _EPS)
+        ex, ey = ddx * inv, ddy * inv                                      # unit sight lines
+        ux, uy = np.cos(tyaw), np.sin(tyaw)
+        w = thx * np.abs(ux * ey - uy * ex) + thy * np.abs(ux * ex + uy * ey) + trr   # outline half-width
+        # Combinations (target, occluder): every building for the classes buildings hide ...
+        B = self.B
+        parts_k, parts_o = [], []
+        if B and self.hides[0].any():
+            hb = self.hides[0][tcls].nonzero()[0]
+            parts_k.append(np.repeat(hb, B))
+            parts_o.append(np.tile(np.arange(B), len(hb)))
+        # ... and the cars and obstacles whose bounding circle comes near the widened sight line.
+        small = self._small_hide[tcls].nonzero()[0]
+        M = len(self.occ_x) - B
+        if len(small) and M:
+            qx = self.occ_x[None, B:] - ox[v[small], None]
+            qy = self.occ_y[None, B:] - oy[v[small], None]
+            sx, sy = ex[small, None], ey[small, None]
+            along = qx * sx + qy * sy
+            across = np.abs(qx * sy - qy * sx)
+            R = self.occ_r[None, B:]
+            kind = self.occ_kind[B:]
+            obj = self.occ_obj[B:]
+            near = ((along > -R) & (along < d[small, None] + R) & (across < R + w[small, None])
+                    & self.hides[kind[None, :], tcls[small, None]]
+                    & (obj[None, :] != j[small, None]) & (obj[None, :] != v[small, None]))
+            car_rows = kind == 1
+            if not cars_present.all():
+                near[:, car_rows] &= cars_present[None, :]
+            a, o = near.nonzero()
+            parts_k.append(small[a])
+            parts_o.append(B + o)
+        if not parts_k:
+            return np.zeros(K, int)
+        k = np.concatenate(parts_k)
+        o = np.concatenate(parts_o)
+        if not len(k):
+            return np.zeros(K, int)
+        # Three ray ends per combination: the target's centre and its outline's edges, across the sight line.
+        off = w[k]
+        nx, ny = -ey[k] * off, ex[k] * off
+        px = tx[k] + np.array((0.0 * nx, nx, -nx))                          # (3, C)
+        py = ty[k] + np.array((0.0 * ny, ny, -ny))
+        hit = _segments_hit_boxes(ox[v[k]], oy[v[k]], px, py, self.occ_x[o], self.occ_y[o], self.occ_ux[o],
+                                  self.occ_uy[o], self.occ_a[o], self.occ_b[o])
+        blocked = np.zeros((3, K), bool)
+        for r in range(3):
+            blocked[r, k[hit[r]]] = True
+        return blocked.sum(axis=0)
+
+    def _nearby_truth(self, v, j, X, Y, present):
+        """For the pairs (v, j): a pedestrian within ``nearby_distance`` of a car or obstacle other than the
+        observer (true positions; the report's NEARBY bit is recomputed from the reports)."""
+        n, P = self.n, self.P
+        out = np.zeros(len(v), bool)
+        ped = ((j >= n) & (j < n + P)).nonzero()[0]
+        if not len(ped) or not P:
+            return out
+        others = np.concatenate((np.arange(n), np.arange(n + P, self.N)))
+        gx = X[n:n + P, None] - X[None, others]
+        gy = Y[n:n + P, None] - Y[None, others]
+        close = (gx * gx + gy * gy < self.params.miss.nearby_distance ** 2) & present[None, others]
+        count = close.sum(axis=1)
+        jp = j[ped] - n
+        out[ped] = count[jp] - close[jp, v[ped]] > 0                     # column v is car v: the observer
+        return out
+
+    # -- noise -----------------------------------------------------------------------------------------------------
+    def _position_noise(self, x, y, d, mult, rng):
+        p, m = self.params.position, self.params.noise_magnitude
+        if p.model == "uniform":
+            scale = m * p.uniform_scale * (mult if self.params.mode == "realistic" else 1.0)
+            u = rng.random((2, len(x))) - 0.5
+            return x + u[0] * scale, y + u[1] * scale
+        g = rng.standard_normal((2, len(x)))
+        if self.params.mode == "random":
+            return x + g[0] * m * p.random_std, y + g[1] * m * p.random_std
+        r = np.maximum(0.0, d + g[0] * m * (p.radial_base + p.radial_per_m2 * d * d))
+        b = np.arctan2(y, x) + g[1] * m * p.bearing_std
+        return r * np.cos(b), r * np.sin(b)
+
+    def _yaw_noise(self, g, rng):
+        """Heading error: Gaussian σ = m·yaw_std (polar), uniform ± 0.5·m·yaw_std (uniform, the original)."""
+        p, m = self.params.position, self.params.noise_magnitude
+        if p.model == "uniform":
+            return (rng.random(len(g)) - 0.5) * m * p.yaw_std
+        return g * m * p.yaw_std
+
+    # -- made-up reports ---------------------------------------------------------------------------------------------
+    def _dress(self, rows, v, oyaw, st: DrivingState, rng):
+        """Give reports that no object of their class stands behind (false positives, confusions) what a real report
+        of that class has: a car the outline, heading (relative, with the heading error) and team of a randomly
+        chosen other car in the world (a random car type and heading when there is none); an obstacle or
+        pedestrian its class's size. Sizes get the same size error as real reports."""
+        cls = rows["class_id"]
+        K = len(rows)
+        p, m = self.params, self.params.noise_magnitude
+        g = rng.standard_normal((2, K))
+        f = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
+        rows["yaw"] = np.nan
+        rows["team"] = 0
+        rows["subtype"] = 0
+        ped, obst = cls == _PED, cls == _OBST
+        rows["size_x"] = np.where(ped, 2 * self.scene.pedestrian_radius, 2 * self.scene.obstacle_half) * f
+        rows["size_y"] = rows["size_x"]
+        car = (cls == _CAR).nonzero()[0]
+        if len(car):
+            vc = v[car]
+            pc = np.asarray(st.present, bool).nonzero()[0]
+            own = np.asarray(st.present, bool)[vc]
+            choices = len(pc) - own
+            pick = (rng.random(len(car)) * np.maximum(choices, 1)).astype(np.intp)
+            pick += own & (pick >= np.searchsorted(pc, vc))
+            none = choices <= 0
+            other = pc[np.minimum(pick, max(len(pc) - 1, 0))] if len(pc) else np.zeros(len(car), np.intp)
+            hl, hw = self.scene.car_half_length, self.scene.car_half_width
+            typ = (rng.random(len(car)) * len(hl)).astype(np.intp)       # no other car: one of the scene's outlines
+            src = np.where(none, typ, other)
+            rows["size_x"][car] = 2 * hl[src] * f[car]
+            rows["size_y"][car] = 2 * hw[src] * f[car]
+            rel = np.where(none, (rng.random(len(car)) * 2 - 1) * math.pi, np.asarray(st.yaw)[src] - oyaw[vc])
+            rows["yaw"][car] = _wrap(rel + self._yaw_noise(g[1, car], rng))
+            team = self.team[src] * self.team[vc]
+            if not self.single_team:
+                team = np.where(none, np.where(rng.random(len(car)) < 0.5, -1, 1), team)
+            rows["team"][car] = team
+
+    def _uniform_false_positives(self, rng):
+        """``trials`` chances per view, uniform in distance up to ``max_distance`` (and the class's range) and in
+        bearing all round; ``none`` draws nothing."""
+        counts = rng.binomial(self.params.false_positives.trials, self._fp_probability, size=self.n)
+        v = np.repeat(np.arange(self.n), counts)
+        if not len(v):
+            return np.zeros(0, DETECTION_DTYPE), v
+        u = rng.random((3, len(v)))
+        cls = self._fp_classes[(u[0] * len(self._fp_classes)).astype(np.intp)]
+        real = (cls != _UNKNOWN).nonzero()[0]
+        v, cls, u = v[real], cls[real], u[:, real]
+        r = u[1] * self._fp_range[cls]
+        b = (u[2] * 2 - 1) * math.pi
+        rows = np.zeros(len(v), DETECTION_DTYPE)
+        rows["class_id"] = cls
+        rows["x"], rows["y"] = r * np.cos(b), r * np.sin(b)
+        return rows, v
+
+    def _near_car_pedestrians(self, v, cx, cy, yaw, hx, hy, rng):
+        """Rule 4 of the paper for driving: a pedestrian reported next to a nearby car (the original: 10ρ per car
+        seen within 25 m), just outside the car's outline in a random direction."""
+        K = len(v)
+        u = rng.random((2, K))
+        phi = u[0] * 2 * math.pi
+        support = hx * np.abs(np.cos(phi - yaw)) + hy * np.abs(np.sin(phi - yaw))
+        reach = support + self.scene.pedestrian_radius + u[1] * self.params.false_positives.near_car_spread
+        rows = np.zeros(K, DETECTION_DTYPE)
+        rows["class_id"] = _PED
+        rows["x"], rows["y"] = cx + reach * np.cos(phi), cy + reach * np.sin(phi)
+        return rows, v
+
+    def _place_made_up(self, parts, ox, oy, oyaw, c, s, st, rng):
+        """Dress the false positives, then keep only those a real object of their class could be seen at (within
+        its range, not hidden) with the PARTIAL bit the same occlusion test gives a real one."""
+        rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
+        v = np.concatenate([vv for _, vv in parts])
+        if not len(rows):
+            return None
+        rows["true_id"] = -1
+        rows["true_class"] = _UNKNOWN
+        self._dress(rows, v, oyaw, st, rng)
+        x, y = rows["x"].astype(float), rows["y"].astype(float)
+        cls = rows["class_id"]
+        d = np.hypot(x, y)
+        cv, sv = c[v], s[v]
+        wx, wy = cv * x - sv * y, sv * x + cv * y                            # world offsets
+        car = cls == _CAR
+        yaw_world = np.where(car, np.nan_to_num(rows["yaw"].astype(float)) + oyaw[v], 0.0)
+        half_x = rows["size_x"].astype(float) / 2
+        half_y = rows["size_y"].astype(float) / 2
+        ped = cls == _PED
+        blocked = self._blocked(v, np.full(len(v), -1), ox[v] + wx, oy[v] + wy, yaw_world,
+                                np.where(ped, 0.0, half_x), np.where(ped, 0.0, half_y), np.where(ped, half_x, 0.0),
+                                cls, ox, oy, np.asarray(st.present, bool), wx, wy, d)
+        ok = ((blocked < 3) & (d <= self.class_max[cls])).nonzero()[0]
+        rows = rows.view(_RAW)[ok].view(DETECTION_DTYPE)
+        rows["sighting"] = (blocked[ok] > 0) * _PARTIAL
+        return rows, v[ok]
+
+    # -- lanes -------------------------------------------------------------------------------------------------------
+    def _lanes(self, ox, oy, oyaw, c, s, rng):
+        """Lane centres and road edges within the lane class's range, as segments in the observer's frame."""
+        p = self.params
+        L, V = len(self.lanes), self.n
+        if L == 0:
+            return (np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.intp)), np.zeros(V, int)
+        lv, k = self._lane_view, self._lane_index
+        # (V, L) by broadcasting: endpoints relative to each observer, turned into its frame.
+        l0x, l0y, l1x, l1y = self.lanes.T
+        ax0, ay0 = l0x[None, :] - ox[:, None], l0y[None, :] - oy[:, None]
+        cc, ss = c[:, None], s[:, None]
+        ax, ay = (cc * ax0 + ss * ay0).ravel(), (cc * ay0 - ss * ax0).ravel()
+        ex0, ey0 = l1x - l0x, l1y - l0y
+        ex, ey = (cc * ex0 + ss * ey0).ravel(), (cc * ey0 - ss * ex0).ravel()
+        len2 = self._lane_len2
+        R = p.classes[ObjectClass.LANE].max_range
+        bb = ax * ex + ay * ey
+        disc = bb * bb - len2 * (ax * ax + ay * ay - R * R)
+        root = np.sqrt(np.maximum(disc, 0.0))
+        lo = np.maximum(0.0, (-bb - root) / len2)
+        hi = np.minimum(1.0, (-bb + root) / len2)
+        ok = (disc > 0) & ((hi - lo) * np.sqrt(len2) >= p.lanes.min_length)
+        at = ok.nonzero()[0]
+        lv, k, lo, hi = lv[at], k[at], lo[at], hi[at]
+        ax, ay, ex, ey = ax[at], ay[at], ex[at], ey[at]
+        sx, sy, tx, ty = ax + lo * ex, ay + lo * ey, ax + hi * ex, ay + hi * ey
+        bits = ((lo > _EPS) | (hi < 1 - _EPS)) * _PARTIAL
+        # The point nearest the car: where the perpendicular from the origin meets the visible segment.
+        gx, gy = tx - sx, ty - sy
+        g2 = np.maximum(gx * gx + gy * gy, _EPS)
+        t = clamp(-(sx * gx + sy * gy) / g2, 0.0, 1.0)
+        nx, ny = sx + t * gx, sy + t * gy
+        dn = np.hypot(nx, ny)
+        if self.noisy:
+            m, lp = p.noise_magnitude, p.lanes
+            realistic = p.mode == "realistic"
+            mult = (p.miss.range_offset + p.miss.range_slope * (dn / p.miss.range_reference) ** 2 if realistic
+                    else np.ones(len(at)))
+            u = rng.random((3, len(at)))
+            keep = (u[0] >= p.rho * self.class_scale[_LANE] * mult).nonzero()[0]
+            if lp.model == "uniform":
+                shift = (u[1] - 0.5) * m * lp.lateral_uniform * mult
+                turn = (u[2] - 0.5) * m * lp.angle_uniform * mult
+            else:
+                g = rng.standard_normal((2, len(at)))
+                shift = g[0] * m * (lp.lateral_base + lp.lateral_per_m2 * dn * dn)
+                turn = g[1] * m * lp.angle_std
+            inv = 1.0 / np.sqrt(g2)
+            px, py = -gy * inv * shift, gx * inv * shift                   # sideways, along the segment's normal
+            ct, st_ = np.cos(turn), np.sin(turn)
+            out = []
+            for qx, qy in ((sx, sy), (tx, ty)):                               # turned about the nearest point
+                rx, ry = qx - nx, qy - ny
+                out += [nx + px + ct * rx - st_ * ry, ny + py + st_ * rx + ct * ry]
+            sx, sy, tx, ty = (a[keep] for a in out)
+            lv, k, bits = lv[keep], k[keep], bits[keep]
+            gx, gy = tx - sx, ty - sy
+            g2 = np.maximum(gx * gx + gy * gy, _EPS)
+        # Endpoint order by a rule of the observer's frame alone: nearer end first; equally far ends (both
+        # clipped at the range) rear end first, which a mirror image keeps; then the right end first. Never the map's
+        # direction of the line.
+        gap = np.hypot(tx, ty) - np.hypot(sx, sy)
+        tie = np.abs(gap) <= 1e-6
+        swap = (gap < -1e-6) | (tie & (tx < sx - 1e-6)) | (tie & (np.abs(tx - sx) <= 1e-6) & (ty < sy))
+        sx, tx = np.where(swap, tx, sx), np.where(swap, sx, tx)
+        sy, ty = np.where(swap, ty, sy), np.where(swap, sy, ty)
+        gx, gy = tx - sx, ty - sy
+        t = clamp(-(sx * gx + sy * gy) / g2, 0.0, 1.0)
+        rows = np.zeros(len(lv), DETECTION_DTYPE)
+        rows["class_id"] = _LANE
+        rows["x"], rows["y"] = sx + t * gx, sy + t * gy
+        rows["line_start_x"], rows["line_start_y"], rows["line_end_x"], rows["line_end_y"] = sx, sy, tx, ty
+        rows["yaw"] = (np.arctan2(gy, gx) + math.pi / 2) % math.pi - math.pi / 2     # a painted line has no arrow
+        rows["size_x"] = np.sqrt(g2)
+        rows["size_y"] = self.lane_size_y[k]
+        centre = self.lane_kind[k] == LANE_CENTRE
+        same = np.cos(self.lane_heading[k] - oyaw[lv]) >= 0
+        rows["subtype"] = np.where(centre, np.where(same, _SAME, _OPPOSING), _EDGE)
+        rows["sighting"] = bits
+        rows["true_id"] = -2 - k
+        rows["true_class"] = _LANE
+        return (rows, lv), np.bincount(lv, minlength=V)
+
+    # -- the observer itself -------------------------------------------------------------------------------------------
+    def _self_rows(self, st: DrivingState, ox, oy, c, s, rng):
+        """One SELF row per car: what it knows of itself — its destination in its own frame (navigation), speed and
+        yaw rate (odometry) as ``line_start`` (x: speed m/s, y: yaw rate rad/s), its outline, crashed (``fallen``)
+        and finished (``penalized``). Never a map-frame pose."""
+        V = self.n
+        gx, gy = np.asarray(st.goal_x, float) - ox, np.asarray(st.goal_y, float) - oy
+        goal_x, goal_y = c * gx + s * gy, c * gy - s * gx
+        speed, yaw_rate = np.asarray(st.speed, float), np.asarray(st.yaw_rate, float)
+        if self.noisy:
+            sp, m = self.params.self_state, self.params.noise_magnitude
+            g = rng.standard_normal((4, V))
+            speed, yaw_rate = speed + g[0] * m * sp.speed_std, yaw_rate + g[1] * m * sp.yaw_rate_std
+            goal_x, goal_y = goal_x + g[2] * m * sp.goal_std, goal_y + g[3] * m * sp.goal_std
+        rows = np.zeros(V, DETECTION_DTYPE)
+        rows["class_id"] = _SELF
+        rows["x"], rows["y"] = goal_x, goal_y
+        rows["yaw"] = np.nan
+        rows["size_x"], rows["size_y"] = 2 * self.scene.car_half_length, 2 * self.scene.car_half_width
+        rows["confidence"] = 1.0
+        rows["fallen"], rows["penalized"] = st.crashed, st.finished
+        rows["line_start_x"], rows["line_start_y"] = speed, yaw_rate
+        rows["true_id"] = np.arange(V)
+        rows["true_class"] = _SELF
+        ego = np.column_stack((speed, yaw_rate, goal_x, goal_y, rows["size_x"], rows["size_y"], st.crashed,
+                               st.finished)).astype(np.float32)
+        return (rows, np.arange(V)), ego
+
+    # -- assembly ----------------------------------------------------------------------------------------------------
+    def _assemble(self, parts, visible, seen, lanes_seen, ego, rng) -> DrivingPerception:
+        rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
+        view = np.concatenate([v for _, v in parts]).astype(np.int64)
+        distance = np.hypot(rows["x"], rows["y"]).astype(np.float32)
+        not_self = (rows["class_id"] != _SELF).astype(np.int64)
+        order = ((view << 33) | (not_self << 32) | distance.view(np.uint32)).argsort(kind="stable")
+        rows, view, distance = rows.view(_RAW)[order].view(DETECTION_DTYPE), view[order], distance[order]
+        offsets = view.searchsorted(np.arange(self.n + 1))
+        cls = rows["class_id"]
+        point = (cls == _CAR) | (cls == _PED) | (cls == _OBST)
+        # DISTANT and NEARBY from the report itself, by one rule for real and made-up reports alike.
+        bits = rows["sighting"]
+        bits[point] = (bits[point] & _PARTIAL) | (distance[point] > self.class_near[cls[point]]) * _DISTANT
+        ped = (cls == _PED).nonzero()[0]
+        crowd = ((cls == _CAR) | (cls == _OBST)).nonzero()[0]
+        if len(ped) and len(crowd):
+            pv, cv = view[ped], view[crowd]
+            first = cv.searchsorted(pv)
+            count = cv.searchsorted(pv, side="right") - first
+            owner = np.repeat(np.arange(len(ped)), count)
+            other = crowd[np.arange(len(owner)) - (np.cumsum(count) - count - first)[owner]]
+            me = ped[owner]
+            gap2 = (rows["x"][me] - rows["x"][other]).astype(float) ** 2 + (
+                rows["y"][me] - rows["y"][other]).astype(float) ** 2
+            close = np.zeros(len(rows), bool)
+            close[me[gap2 < self.params.miss.nearby_distance ** 2]] = True
+            bits |= (close * _NEARBY).astype(np.uint8)
+        rows["sighting"] = bits
+        # Confidence: the calibrated detector score of perception/model.py (docs/perception.md); SELF rows 1.
+        p = self.params
+        if p.confidence == "none":
+            rows["confidence"] = 1.0
+        else:
+            sep = p.confidence_separation
+            correct = (rows["true_id"] != -1) & (rows["true_class"] == cls)
+            z = rng.standard_normal(len(rows)) + sep * correct
+            conf = 1.0 / (1.0 + np.exp(-(self.class_prior_logit[cls] + sep * z - sep * sep / 2)))
+            rows["confidence"] = np.where(cls == _SELF, 1.0, conf)
+        return DrivingPerception(rows, offsets, visible, seen, lanes_seen, ego)
+
+
+def _segments_hit_boxes(ox, oy, px, py, cx, cy, ux, uy, a, b):
+    """(3, C) bool: segment O→P crosses the box (centre c, unit axis u, half sizes a along u and b across) —
+    separating-axis test on the box's two axes and the segment's normal. ``px``/``py`` are (3, C)."""
+    qx, qy = ox - cx, oy - cy                                               # O relative to the box centre
+    rx, ry = px - cx, py - cy                                               # P relative to the box centre
+    qu, qv = qx * ux + qy * uy, qy * ux - qx * uy
+    ru, rv = rx * ux + ry * uy, ry * ux - rx * uy
+    apart = (np.minimum(qu, ru) > a) | (np.maximum(qu, ru) < -a) | (np.minimum(qv, rv) > b) | (np.maximum(qv, rv) < -b)
+    Dx, Dy = px - ox, py - oy                                               # the segment
+    centre = np.abs(qy * Dx - qx * Dy)                                      # |(c − O) × D|
+    extent = a * np.abs(ux * Dy - uy * Dx) + b * np.abs(ux * Dx + uy * Dy)  # box's reach across the segment
+    return ~apart & (centre <= extent)
+
+
+__all__ = ["DrivingScene", "DrivingState", "DrivingPerception", "DrivingPerceiver", "EGO_COLUMNS", "LANE_CENTRE",
+           "ROAD_EDGE"]
