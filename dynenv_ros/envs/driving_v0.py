@@ -40,8 +40,8 @@ from dynenv_ros.driving.cars import ACCELERATION_CHOICES, BRAKE, STEERING_CHOICE
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.world import DrivingWorld
 from dynenv_ros.envs.driving_observations import DrivingGroundTruth, observation_builder
-from dynenv_ros.envs.soccer_session import checked_seed
 from dynenv_ros.sim.reward_terms import RewardTerm
+from dynenv_ros.sim.seeding import checked_seed
 
 TERMS = tuple(term.name.lower() for term in RewardTerm)
 

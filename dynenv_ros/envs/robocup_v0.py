@@ -32,9 +32,10 @@ import numpy as np
 from pettingzoo import ParallelEnv
 
 from dynenv_ros.envs.soccer_observations import SoccerObservations
-from dynenv_ros.envs.soccer_session import checked_seed, kickoff_team
+from dynenv_ros.envs.soccer_session import kickoff_team
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder, action_space
 from dynenv_ros.sim.reward_terms import RewardTerm
+from dynenv_ros.sim.seeding import checked_seed
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.world import TEAM_A, TEAM_B, SoccerWorld
 

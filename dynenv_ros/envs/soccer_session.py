@@ -15,6 +15,7 @@ from dynenv_ros.perception.model import missed_objects
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.sim.ground_truth import WorldSnapshot
 from dynenv_ros.sim.reward_terms import RewardTerm
+from dynenv_ros.sim.seeding import checked_seed
 from dynenv_ros.soccer.actions import IDLE, Kick, SoccerAction, Turn, Walk
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.vision import SoccerVision
@@ -242,19 +243,3 @@ def kickoff_team(value: Any) -> int:
     if isinstance(value, (int, np.integer)) and not isinstance(value, bool) and int(value) in (TEAM_A, TEAM_B):
         return int(value)
     raise ValueError(f"kickoff_team must be 'a' or 'b', got {value!r} ({type(value).__name__})")
-
-
-MAX_SEED = 2 ** 64 - 1      # the whole uint64 of ResetSimulation.seed and SeedSequence's child seeds
-
-
-def checked_seed(seed: Any) -> int | None:
-    """None, or a whole number in [0, 2^64 - 1]; floats, bools, strings and out-of-range numbers are refused with
-    the reason rather than failing inside numpy's generator."""
-    if seed is None:
-        return None
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise ValueError(f"seed must be a whole number in [0, 2**64 - 1] or None, got {seed!r} "
-                         f"({type(seed).__name__})")
-    if not 0 <= int(seed) <= MAX_SEED:
-        raise ValueError(f"seed must be in [0, 2**64 - 1], got {seed}")
-    return int(seed)

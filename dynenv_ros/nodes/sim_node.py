@@ -25,8 +25,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
-from dynenv_ros.envs.soccer_session import (MISSING_ACTION_RULES, PeriodOutput, SoccerSession, checked_seed,
-                                            kickoff_team, refusal_key)
+from dynenv_ros.envs.soccer_session import (MISSING_ACTION_RULES, PeriodOutput, SoccerSession, kickoff_team,
+                                            refusal_key)
 from dynenv_ros.perception.params import MODES, PRESETS, load_preset
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import markers, topics
@@ -38,6 +38,7 @@ from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int,
 from dynenv_ros.ros.qos import (REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, action_queue, latched,
                                 realtime_stream, sim_stream)
 from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, robot_transforms, static_transforms, tf_qos, tf_static_qos
+from dynenv_ros.sim.seeding import checked_seed
 from dynenv_ros.soccer.config import SoccerConfig, robot_names
 
 # Actions that passed the inbox's screen and wait for this node's thread, per robot: one legitimate action per
