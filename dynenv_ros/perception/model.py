@@ -169,8 +169,7 @@ class Perceiver:
         in_view[lay.own_pair] = False
         if self.circle_index is not None:                  # the circle: seen when enough of its rim is in view
             circle = lay.circle_pair
-            rim_count = self._circle_rim_in_view(fx[src[circle]], fy[src[circle]], fx[lay.observer_source],
-                                                 fy[lay.observer_source], ch, sh)
+            rim_count = self._circle_rim_in_view(lay, fx, fy, ch, sh)
             in_view[circle] = rim_count >= 3
             partial[circle] = rim_count < CIRCLE_SAMPLES
         # From here on, only the pairs in view: 1-D arrays of candidates, then of the K visible pairs.
@@ -214,8 +213,7 @@ class Perceiver:
             keep = u[0] >= p_miss
             if p.mode == "realistic" and self.confusions:
                 reported, confused = self._confuse(ck, distant_k, keep, mult, u[1])
-            xk, yk = self._position_noise(xk, yk, dk, mult, rng)
-            g = rng.standard_normal((2, K))
+            xk, yk, g = self._position_noise(xk, yk, dk, mult, rng)
             size_factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
             yaw_noise = m * p.position.yaw_std * g[1]
             if p.mode == "realistic":
@@ -294,11 +292,14 @@ class Perceiver:
         k = self.dynamic_index
         if not len(k):
             return np.zeros(len(at), bool)
-        X, Y = frames.x, frames.y
-        ddx, ddy = X[:, k, None] - X[:, None, :], Y[:, k, None] - Y[:, None, :]
-        close = np.zeros((len(X), len(k) + 1, self._n), bool)            # (F, dynamic + a row of none, N)
-        np.less(ddx * ddx + ddy * ddy, self.params.miss.nearby_distance ** 2, out=close[:, :-1])
-        close[:, np.arange(len(k)), k] = False                            # an object is not its own neighbour
+        X, Y = frames.x.ravel(), frames.y.ravel()
+        first, second = lay.close_first, lay.close_second
+        ddx, ddy = X[first] - X[second], Y[first] - Y[second]
+        F, N = len(frames.x), self._n
+        close = np.zeros((F, len(k) + 1, N), bool)                       # (F, dynamic + a row of none, N)
+        np.less((ddx * ddx + ddy * ddy).reshape(F, len(k), N), self.params.miss.nearby_distance ** 2,
+                out=close[:, :-1])
+        close.ravel()[lay.close_self] = False                             # an object is not its own neighbour
         count = close.sum(axis=1)                                         # (F, N)
         return count.ravel()[lay.pair_source[at]] > close.ravel()[lay.observer_closeness[at]]
 
@@ -321,13 +322,16 @@ class Perceiver:
         return reported, confused
 
     def _position_noise(self, x, y, d, mult, rng):
+        """Noisy positions, and the (2, n) standard normals of the size and yaw errors, which come next in the
+        draw order (polar model: drawn in the same call)."""
         p, m = self.params.position, self.params.noise_magnitude
         if p.model == "uniform":
             scale = m * p.uniform_scale * (mult if self.params.mode == "realistic" else 4.0)
             u = rng.random((2,) + x.shape) - 0.5
-            return x + u[0] * scale, y + u[1] * scale
-        noisy = self._polar_point_noise(np.array((x, y)), rng, d)
-        return noisy[0], noisy[1]
+            return x + u[0] * scale, y + u[1] * scale, rng.standard_normal((2,) + x.shape)
+        g = rng.standard_normal((4,) + x.shape)
+        noisy = self._polar_point_noise(np.array((x, y)), g[:2], d)
+        return noisy[0], noisy[1], g[2:]
 
     def _point_rows(self, v, j, src, cls, x, y, context: "_ViewContext", size_factor, yaw_noise):
         """Rows of the detected point objects with their own attributes (confused ones are re-dressed later);
@@ -536,36 +540,36 @@ class Perceiver:
         at = visible.nonzero()[0]                                         # (view, line) pairs in view: v·L + k
         v = lv[at]
         k = at - v * L
-        lo, hi, ax, ay, ex, ey = lo[at], hi[at], ax[at], ay[at], ex[at], ey[at]
-        # The clipped ends as (start, end) halves of flat arrays, (2K,).
-        bounds = np.concatenate((lo, hi))
-        x = np.concatenate((ax, ax)) + bounds * np.concatenate((ex, ex))
-        y = np.concatenate((ay, ay)) + bounds * np.concatenate((ey, ey))
+        a, e, bounds = np.array((ax, ay)).take(at, axis=1), np.array((ex, ey)).take(at, axis=1), np.array((lo, hi))
+        bounds = bounds.take(at, axis=1)
+        lo, hi = bounds
+        # The clipped ends as (coordinate, start/end, pair) = a + bound·e.
+        ends = a[:, None] + bounds * e[:, None]
+        x, y = ends
         K = len(v)
         dist = np.hypot(x, y)
         bits = ((lo > _EPS) | (hi < 1 - _EPS)) * _PARTIAL
-        bits += np.maximum(dist[:K], dist[K:]) > self.line_near           # DISTANT
+        bits += np.maximum(dist[0], dist[1]) > self.line_near             # DISTANT
         pr = self.params
         if pr.mode != "none" and pr.noise_magnitude > 0.0:
             m = pr.noise_magnitude
             if pr.mode == "realistic":
                 mult = pr.miss.range_offset + pr.miss.range_slope * (dist / self.line_near) ** 2
             else:
-                mult = np.ones(2 * K)
-            p_miss = np.minimum(1.0, pr.rho * self.line_scale * (mult[:K] + mult[K:]) / 2)
+                mult = np.ones((2, K))
+            p_miss = np.minimum(1.0, pr.rho * self.line_scale * (mult[0] + mult[1]) / 2)
             kept = (rng.random(K) >= p_miss).nonzero()[0]
             if pr.position.model == "uniform":
                 scale = 2 * m * pr.position.uniform_scale
                 u = rng.random((4, K)) - 0.5                              # rows: start x, start y, end x, end y
                 ms = mult if pr.mode == "realistic" else 1.0
-                x = x + np.concatenate((u[0], u[2])) * scale * ms
-                y = y + np.concatenate((u[1], u[3])) * scale * ms
+                ends = ends + u.reshape(2, 2, K).transpose(1, 0, 2) * scale * ms
             else:
-                x, y = self._polar_point_noise(np.array((x, y)), rng, dist)
+                ends = self._polar_point_noise(ends.reshape(2, 2 * K), rng.standard_normal((2, 2 * K)),
+                                               dist.reshape(2 * K)).reshape(2, 2, K)
             v, k, bits = v[kept], k[kept], bits[kept]
-            x, y = x.reshape(2, K).take(kept, axis=1), y.reshape(2, K).take(kept, axis=1)
-        else:
-            x, y = x.reshape(2, K), y.reshape(2, K)
+            ends = ends.take(kept, axis=2)
+        x, y = ends
         # Endpoint order by a rule of the observer's frame alone (nearer end first), so a mirrored or rotated
         # situation gives the mirrored or identical report; an order that follows the field would be a compass.
         # Exact ties (a line square to the gaze, clipped by both edges) go right end first: rotations stay
@@ -573,17 +577,19 @@ class Perceiver:
         reach = np.hypot(x, y)
         gap = reach[1] - reach[0]
         swap = (gap < -1e-6) | ((np.abs(gap) <= 1e-6) & (y[1] < y[0]))
-        sx, tx = np.where(swap, x[1], x[0]), np.where(swap, x[0], x[1])
-        sy, ty = np.where(swap, y[1], y[0]), np.where(swap, y[0], y[1])
-        ex, ey = tx - sx, ty - sy
-        seg2 = np.maximum(ex * ex + ey * ey, _EPS)
-        t = clamp(-(sx * ex + sy * ey) / seg2, 0.0, 1.0)                # closest point to the camera
+        ends = np.where(swap, ends[:, ::-1], ends)                        # (coordinate, start/end, pair)
+        start = ends[:, 0]
+        e = ends[:, 1] - start
+        ee = e * e
+        seg2 = np.maximum(ee[0] + ee[1], _EPS)
+        se = start * e
+        t = clamp(-(se[0] + se[1]) / seg2, 0.0, 1.0)                     # closest point to the camera
         rows = np.zeros(len(v), DETECTION_DTYPE)
         rows["class_id"] = _FIELD_LINE
         runs = rows.view(_ROW_RUNS)
-        runs["line"] = np.array((sx, sy, tx, ty)).T                       # start x, start y, end x, end y
-        runs["position"] = np.array((sx + t * ex, sy + t * ey)).T
-        rows["yaw"] = (np.arctan2(ey, ex) + math.pi / 2) % math.pi - math.pi / 2   # a line has no arrow
+        runs["line"].reshape(-1, 2, 2)[...] = ends.transpose(2, 1, 0)     # start x, start y, end x, end y
+        runs["position"] = (start + t * e).T
+        rows["yaw"] = (np.arctan2(e[1], e[0]) + math.pi / 2) % math.pi - math.pi / 2   # a line has no arrow
         rows["size_x"] = np.sqrt(seg2)
         rows["size_y"] = 0.05
         rows["sighting"] = bits
@@ -591,25 +597,28 @@ class Perceiver:
         rows["true_class"] = _FIELD_LINE
         return (rows, v), np.bincount(v, minlength=V)
 
-    def _polar_point_noise(self, xy: np.ndarray, rng: np.random.Generator, d: np.ndarray) -> np.ndarray:
-        """Noisy copies of points ``xy`` (2, n) at distances ``d``: polar errors, or (random mode) per-axis ones."""
+    def _polar_point_noise(self, xy: np.ndarray, g: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """Noisy copies of points ``xy`` (2, n) at distances ``d``: polar errors, or (random mode) per-axis ones,
+        from the standard normals ``g`` (2, n)."""
         p, m = self.params.position, self.params.noise_magnitude
-        g = rng.standard_normal(xy.shape)
         if self.params.mode == "random":
             return xy + g * m * p.random_std
         r = np.maximum(0.0, d + g[0] * m * (p.radial_base + p.radial_per_m2 * d * d))
         b = np.arctan2(xy[1], xy[0]) + g[1] * m * p.bearing_std
         return np.array((r * np.cos(b), r * np.sin(b)))
 
-    def _circle_rim_in_view(self, x0, y0, ox, oy, c, s) -> np.ndarray:
-        """(V,) how many rim samples of the circle lie in the view wedge and range."""
-        rx = x0[:, None] + self.rim_offsets[None, :, 0] - ox[:, None]
-        ry = y0[:, None] + self.rim_offsets[None, :, 1] - oy[:, None]
-        px, py = c[:, None] * rx + s[:, None] * ry, -s[:, None] * rx + c[:, None] * ry
+    def _circle_rim_in_view(self, lay: "_Layout", fx, fy, c, s) -> np.ndarray:
+        """(V,) how many rim samples of the circle lie in the view wedge and range. (view, sample) entries are
+        flat (``_Layout.rim_view``), per-view values gathered."""
+        rv = lay.rim_view
+        rx = fx[lay.rim_circle] + lay.rim_x - fx[lay.rim_observer]
+        ry = fy[lay.rim_circle] + lay.rim_y - fy[lay.rim_observer]
+        cr, sr = c[rv], s[rv]
+        px, py = cr * rx + sr * ry, cr * ry - sr * rx                     # (= −s·rx + c·ry, exactly)
         half = self.params.field_of_view / 2
         limit = self.params.classes[ObjectClass.CENTER_CIRCLE].max_range
         inside = (np.abs(np.arctan2(py, px)) <= half) & (px * px + py * py <= limit * limit)
-        return inside.sum(axis=1)
+        return inside.reshape(-1, CIRCLE_SAMPLES).sum(axis=1)
 
 
 _RAW = np.dtype((np.void, DETECTION_DTYPE.itemsize))
@@ -669,6 +678,18 @@ class _Layout:
     occluder_object: np.ndarray        # (K, 1) k
     occluder_not_observer: np.ndarray  # (K, V) bool
     observer_closeness: np.ndarray     # (V·N,) index of (f, the observer's row, j) in ``_nearby``'s closeness table
+    # ``_nearby``'s (frame, dynamic object k, object j) entries: k's and j's index in the frames' flat arrays,
+    # and the entries where k = j.
+    close_first: np.ndarray
+    close_second: np.ndarray
+    close_self: np.ndarray
+    # (view, circle rim sample) entries: v, the circle's and the observer's index in the frames' flat arrays, and
+    # the sample's offset from the circle's centre.
+    rim_view: np.ndarray | None
+    rim_circle: np.ndarray | None
+    rim_observer: np.ndarray | None
+    rim_x: np.ndarray | None
+    rim_y: np.ndarray | None
     # (view, line endpoint) entries: all views' first endpoints (v·L + k), then all their second endpoints.
     line_view: np.ndarray              # (2·V·L,) v
     line_x: np.ndarray                 # (2·V·L,) the endpoint's world x
@@ -686,6 +707,15 @@ class _Layout:
         row[dynamic] = np.arange(len(dynamic))
         circle = perceiver.circle_index
         lines = perceiver._lines
+        F, D = int(frame.max(initial=-1)) + 1, len(dynamic)
+        f_, k_, j_ = np.meshgrid(np.arange(F), np.arange(D), np.arange(N), indexing="ij")
+        close_self = (f_ * (D + 1) + k_) * N + dynamic[k_]
+        rim = {"rim_view": None, "rim_circle": None, "rim_observer": None, "rim_x": None, "rim_y": None}
+        if circle is not None:
+            rim_view = np.repeat(views, CIRCLE_SAMPLES)
+            rim = {"rim_view": rim_view, "rim_circle": frame[rim_view] * N + circle,
+                   "rim_observer": observer_source[rim_view], "rim_x": np.tile(perceiver.rim_offsets[:, 0], V),
+                   "rim_y": np.tile(perceiver.rim_offsets[:, 1], V)}
         return cls(frame=frame, observer=observer, views=views, view_starts=np.arange(V + 1), pair_view=v,
                    pair_object=j, pair_source=frame[v] * N + j, observer_source=observer_source,
                    observer_of_pair=observer_source[v], own_pair=views * N + observer,
@@ -694,6 +724,8 @@ class _Layout:
                    max_range=np.tile(perceiver.max_range, V), occluder_pair=views[None, :] * N + k[:, None],
                    occluder_object=k[:, None], occluder_not_observer=k[:, None] != observer[None, :],
                    observer_closeness=(frame[v] * (len(dynamic) + 1) + row[observer[v]]) * N + j,
+                   close_first=(f_ * N + dynamic[k_]).ravel(), close_second=(f_ * N + j_).ravel(),
+                   close_self=close_self[:, np.arange(D), dynamic].ravel(), **rim,
                    line_view=np.tile(np.repeat(views, len(lines)), 2),
                    line_x=np.concatenate((np.tile(lines[:, 0], V), np.tile(lines[:, 2], V))),
                    line_y=np.concatenate((np.tile(lines[:, 1], V), np.tile(lines[:, 3], V))))
