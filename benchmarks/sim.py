@@ -1,7 +1,8 @@
 """dynenv-bench sim: env steps per second and peak memory of the in-process simulator.
 
 One env step is one motion period (50 physics ticks by default) for every robot; for ``--scenario driving`` one
-100 ms period (10 ticks) of every car. Random high-level actions come from a pre-drawn pool, so the policy costs
+100 ms period (10 ticks) of every car (``--observation none``: the world alone; ``full`` / ``partial``: the whole
+``driving_v0`` step, ``partial`` with the driving perception preset ``--perception``). Random high-level actions come from a pre-drawn pool, so the policy costs
 nothing; the first 50 steps warm up and are not timed.
 """
 from __future__ import annotations
@@ -94,14 +95,36 @@ def _driving_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int]
     return run
 
 
+def _driving_env_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
+    """The whole ``driving_v0`` step (world, observations, rewards, infos); a new episode when every car is done."""
+    from dynenv_ros.envs.driving_v0 import parallel_env
+    perception = args.perception if args.observation == "partial" else None
+    env = parallel_env(n_cars=args.cars, observation=args.observation, perception=perception)
+    env.reset(seed=args.seed)
+    names = env.possible_agents
+    actions = [dict(zip(names, row)) for row in pool]
+
+    def run(steps: int) -> None:
+        for k in range(steps):
+            env.step(actions[k % ACTION_POOL])
+            if not env.agents:
+                env.reset()
+    return run
+
+
+DRIVING_OBSERVATIONS = ("none", "full", "partial")
+
+
 def run_driving(args: Any) -> int:
-    """One env step = one 100 ms period of every car; random discrete actions [acceleration, steering]."""
+    """One env step = one 100 ms period of every car; random discrete actions [acceleration, steering].
+    ``--observation none``: the world alone; ``full`` / ``partial``: the whole ``driving_v0`` step with that
+    observation (``partial``: the driving perception with the ``--perception`` preset)."""
     if not 1 <= args.cars <= 10:
         print("--cars must be in 1..10", file=sys.stderr)
         return 2
-    if args.observation != "none" or args.envs != 1:
-        print("the driving scenario has physics and rules only so far: use --observation none and --envs 1",
-              file=sys.stderr)
+    if args.observation not in DRIVING_OBSERVATIONS or args.envs != 1:
+        print(f"the driving scenario observes {' / '.join(DRIVING_OBSERVATIONS)} with --envs 1 (got --observation "
+              f"{args.observation}, --envs {args.envs})", file=sys.stderr)
         return 2
     if args.steps < 1:
         print("--steps must be at least 1", file=sys.stderr)
@@ -110,7 +133,7 @@ def run_driving(args: Any) -> int:
     from dynenv_ros.driving.config import DrivingConfig
     config = DrivingConfig(n_cars=args.cars)
     pool = np.random.default_rng(args.seed).integers(0, 3, size=(ACTION_POOL, args.cars, 2))
-    stepper = _driving_stepper(args, config, pool)
+    stepper = (_driving_stepper if args.observation == "none" else _driving_env_stepper)(args, config, pool)
     stepper(WARMUP_STEPS)
     best = 0.0
     for _ in range(args.repeat):
@@ -119,9 +142,12 @@ def run_driving(args: Any) -> int:
         best = max(best, args.steps / (time.perf_counter() - start))
     figures = {
         "scenario": args.scenario, "cars": args.cars, "steps": args.steps, "observation": args.observation,
+        "perception": args.perception if args.observation == "partial" else "n/a",
         "envs": 1, "backend": "single", "cores": len(cores),
         "env_steps_per_s": round(best, 1), "ms_per_env_step": round(1000.0 / best, 4),
         "physics_ticks_per_s": round(best * config.rates.motion_period_ticks),
+        "car_frames_per_s": round(best * config.rates.frames_per_period * args.cars)
+        if args.observation == "partial" else None,
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
         "torch_imported": "torch" in sys.modules, "python": platform.python_version(),
     }

@@ -20,6 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="perception error mode (partial, padded and image observations)")
     parser.add_argument("--preset", choices=("realistic", "dynenv"), default="realistic",
                         help="perception parameter preset for --noise realistic/random")
+    parser.add_argument("--perception", choices=("realistic", "dynenv", "none"), default="realistic",
+                        help="driving perception preset (--scenario driving --observation partial)")
     parser.add_argument("--noise-magnitude", type=float, default=1.0, help="0..5")
     parser.add_argument("--image-size", default="160x120", help="WIDTHxHEIGHT of camera images (--observation image)")
     parser.add_argument("--envs", type=int, default=1, help="worlds stepped as one vectorised batch")

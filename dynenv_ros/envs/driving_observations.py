@@ -291,8 +291,125 @@ class FullObservation:
         return {}
 
 
+# -- perceived modes --------------------------------------------------------------------------------------------------
+EGO_BOUNDS = {"speed": "vel", "yaw_rate": "yaw_rate", "goal_x": "pos", "goal_y": "pos", "length": "size",
+              "width": "size", "crashed": "flag", "finished": "flag"}
+PREVIOUS_ACTION_COLUMNS = ("throttle", "brake", "steering")
+
+
+def feature_bound(config: DrivingConfig) -> float:
+    """The one bound (±) of every perceived feature column: the walled area's diagonal (224.7 m by default), which
+    also covers speeds (±100 m/s), yaw rates and sizes. Feature rows are clipped to it."""
+    return float(max(_reach(config), VELOCITY_BOUND, YAW_RATE_BOUND))
+
+
+def driving_perception_params(setting: Any) -> Any:
+    """A preset name (``realistic``, ``dynenv``, ``none``), a mapping ``{"preset": name, **overrides}``, ready
+    ``DrivingPerceptionParams``, or None (``realistic``)."""
+    from dynenv_ros.perception.driving_params import DrivingPerceptionParams, load_driving_preset
+    if setting is None:
+        return load_driving_preset("realistic")
+    if isinstance(setting, DrivingPerceptionParams):
+        return setting
+    if isinstance(setting, str):
+        return load_driving_preset(setting)
+    if isinstance(setting, Mapping):
+        values = dict(setting)
+        return load_driving_preset(values.pop("preset", "realistic"), **values)
+    raise ValueError(f"perception must be a driving preset name, a mapping or DrivingPerceptionParams, "
+                     f"got {setting!r}")
+
+
+class PartialObservation:
+    """``observation='partial'``: what the car's sensors report (``driving/vision.py``), per vision frame of the
+    period (one with the default rates) its detection rows as float32 feature rows
+    (``perception.detections.FEATURE_COLUMNS``: the SELF row first, then nearest first; variable length), the ego
+    values (``perception.driving_model.EGO_COLUMNS``, the SELF row's values: what the car knows of itself) per frame,
+    and the previous period's action [throttle, brake, steering]. No observation reward (the driving world defines
+    none); ``infos``: ``visible_objects`` (cars, pedestrians, obstacles in range and not hidden), ``seen_objects``
+    (of those, reported as their own class) and ``lanes_seen``, summed over the period's frames."""
+    mode = "partial"
+
+    def __init__(self, config: DrivingConfig, perception: Any = None) -> None:
+        from dynenv_ros.perception.detections import FEATURE_COLUMNS
+        from dynenv_ros.perception.driving_model import EGO_COLUMNS
+        self.config = config
+        self.params = driving_perception_params(perception)
+        self.frames = config.rates.frames_per_period
+        self.bound = feature_bound(config)
+        row = spaces.Box(-self.bound, self.bound, (len(FEATURE_COLUMNS),), np.float32)
+        low, high = _bounds(config, [(EGO_COLUMNS, self.frames)])
+        mode_space = _previous_action_space(config)
+        self.space: spaces.Space = spaces.Dict({
+            "detections": spaces.Tuple([spaces.Sequence(row, stack=True)] * self.frames),
+            "ego": spaces.Box(low.reshape(self.frames, -1), high.reshape(self.frames, -1), dtype=np.float32),
+            "previous_action": mode_space})
+        self._ego_low, self._ego_high = low.reshape(self.frames, -1), high.reshape(self.frames, -1)
+        self._action_low, self._action_high = mode_space.low, mode_space.high
+        self.world: Any = None
+        self.vision: Any = None
+        self._perceptions: list[Any] = []
+        n = config.n_cars
+        self._counts = np.zeros((n, 3), np.int64)
+
+    def reset(self, world: Any) -> None:
+        from dynenv_ros.driving.vision import DrivingVision
+        self.world = world
+        if self.vision is None or self.vision.world is not world:
+            self.vision = DrivingVision(world, self.params)
+        else:
+            self.vision.reset()
+        self._perceptions = []
+
+    def on_frame(self, index: int) -> None:
+        if index == 0:
+            self._perceptions = []
+        self._perceptions.append(self.vision.perceive())
+
+    def initial(self) -> list[Any]:
+        """After a reset: every frame of the period shows the initial state."""
+        for k in range(self.frames):
+            self.on_frame(k)
+        return self.build()[0]
+
+    def build(self) -> tuple[list[Any], np.ndarray]:
+        from dynenv_ros.perception.detections import as_features
+        n, b = self.config.n_cars, self.bound
+        frames = self._perceptions
+        features, offsets = [], []
+        ego = np.empty((n, len(frames), self._ego_low.shape[1]), np.float32)
+        counts = self._counts
+        counts[:] = 0
+        for f, p in enumerate(frames):
+            rows = as_features(p.detections)
+            np.minimum(np.maximum(rows, -b, out=rows), b, out=rows)
+            features.append(rows)
+            offsets.append(p.offsets)
+            ego[:, f] = p.ego
+            counts[:, 0] += p.visible.sum(axis=1)
+            counts[:, 1] += p.seen.sum(axis=1)
+            counts[:, 2] += p.lanes_seen
+        np.clip(ego, self._ego_low[:len(frames)], self._ego_high[:len(frames)], out=ego)
+        actions = np.array([(a.throttle, a.brake, a.steering) for a in self.world.last_actions], np.float32)
+        np.clip(actions, self._action_low, self._action_high, out=actions)
+        out = [{"detections": tuple(rows[off[i]:off[i + 1]] for rows, off in zip(features, offsets)),
+                "ego": ego[i], "previous_action": actions[i]} for i in range(n)]
+        return out, np.zeros(n)
+
+    def infos(self, index: int) -> dict[str, Any]:
+        c = self._counts[index]
+        return {"visible_objects": int(c[0]), "seen_objects": int(c[1]), "lanes_seen": int(c[2])}
+
+
+def _previous_action_space(config: DrivingConfig) -> spaces.Box:
+    """[throttle −1..1, brake 0..1, steering ±max_yaw_rate rad/s] (a discrete action as the command it became)."""
+    w = config.cars.max_yaw_rate
+    return spaces.Box(np.array([-1.0, 0.0, -w], np.float32), np.array([1.0, 1.0, w], np.float32), dtype=np.float32)
+
+
 ObservationFactory = Callable[..., DrivingObservationBuilder]
-OBSERVATION_BUILDERS: dict[str, ObservationFactory] = {"full": FullObservation}
+OBSERVATION_BUILDERS: dict[str, ObservationFactory] = {"full": FullObservation,
+                                                      "partial": PartialObservation}
 
 
 def register_observation(name: str, factory: ObservationFactory) -> None:
@@ -317,7 +434,8 @@ def observation_builder(mode: Any, config: DrivingConfig, perception: Any = None
         raise ValueError(f"observation={mode!r} does not take that option: {exc}") from None
 
 
-__all__ = ["DrivingObservationBuilder", "FullObservation", "FullLayout", "DrivingGroundTruth", "OBSERVATION_BUILDERS",
+__all__ = ["DrivingObservationBuilder", "FullObservation", "PartialObservation", "driving_perception_params",
+           "feature_bound", "PREVIOUS_ACTION_COLUMNS", "FullLayout", "DrivingGroundTruth", "OBSERVATION_BUILDERS",
            "register_observation", "observation_builder", "SELF_COLUMNS", "CAR_COLUMNS", "PEDESTRIAN_COLUMNS",
            "OBSTACLE_COLUMNS", "LANE_COLUMNS", "STATE_CAR_COLUMNS", "STATE_PEDESTRIAN_COLUMNS",
            "STATE_OBSTACLE_COLUMNS"]
