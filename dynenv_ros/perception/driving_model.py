@@ -17,6 +17,7 @@ import numpy as np
 
 from dynenv_ros.core.arrays import clamp
 from dynenv_ros.core.object_classes import ObjectClass, Sighting, Subtype
+from dynenv_ros.perception import driving_kernels as kernels
 from dynenv_ros.perception.detections import DETECTION_DTYPE
 from dynenv_ros.perception.driving_params import POINT_CLASSES, DrivingPerceptionParams
 
@@ -156,11 +157,11 @@ class DrivingPerceiver:
         self._fp_probability = min(1.0, fp.probability * params.noise_magnitude)
         self._fp_range = np.minimum(fp.max_distance, self.class_max)
         self.noisy = params.mode != "none" and params.noise_magnitude > 0.0
-        self._own = np.arange(n) * N + np.arange(n)           # (view, own object) in the flat (V·N) pairs
-        self._max_range_pairs = np.tile(self.max_range, n)
-        self._lane_view, self._lane_index = np.repeat(np.arange(n), len(lanes)), np.tile(np.arange(len(lanes)), n)
-        self._lane_len2 = np.tile(np.maximum((lanes[:, 2] - lanes[:, 0]) ** 2 + (lanes[:, 3] - lanes[:, 1]) ** 2,
-                                             _EPS), n)
+        self._any_hides = bool(self.hides.any())
+        self._occluders = (self.occ_x, self.occ_y, self.occ_ux, self.occ_uy, self.occ_a, self.occ_b, self.occ_r,
+                           self.occ_kind, self.occ_obj)
+        self._nearby2 = params.miss.nearby_distance ** 2
+        self._lane_len2 = np.maximum((lanes[:, 2] - lanes[:, 0]) ** 2 + (lanes[:, 3] - lanes[:, 1]) ** 2, _EPS)
 
     # ------------------------------------------------------------------------------------------------------------
     def perceive(self, st: DrivingState, rng: np.random.Generator) -> DrivingPerception:
@@ -173,35 +174,23 @@ class DrivingPerceiver:
         c, s = np.cos(oyaw), np.sin(oyaw)
         self.occ_x[self.B:self.B + n], self.occ_y[self.B:self.B + n] = ox, oy
         self.occ_ux[self.B:self.B + n], self.occ_uy[self.B:self.B + n] = c, s
-        # Every (view, object) pair: world offsets, then the observer's frame.
-        dx, dy = (X[None, :] - ox[:, None]).ravel(), (Y[None, :] - oy[:, None]).ravel()
-        d = np.hypot(dx, dy)
-        cand = (d <= self._max_range_pairs) & np.tile(present, n)
-        cand[self._own] = False
-        at = cand.nonzero()[0]
-        v, j = at // N, at % N
-        blocked = self._blocked(v, j, X[j], Y[j], YAW[j], self.hx[j], self.hy[j], self.rr[j], self.cls[j], ox, oy,
-                                st.present, dx[at], dy[at], d[at])
-        shown = (blocked < 3).nonzero()[0]
-        at, v, j, blocked = at[shown], v[shown], j[shown], blocked[shown]
+        # Every (view, object) pair in range, present and not hidden, in the observer's frame (one compiled pass).
+        realistic = p.mode == "realistic"
         visible = np.zeros(n * N, bool)
-        visible[at] = True
-        cv, sv = c[v], s[v]
-        xk, yk = cv * dx[at] + sv * dy[at], cv * dy[at] - sv * dx[at]
-        dk = d[at]
+        miss = p.miss
+        at, v, j, xk, yk, dk, bits, mult = kernels.visible_pairs(
+            X, Y, np.cos(YAW), np.sin(YAW), present, np.asarray(st.present, bool), self.hx, self.hy, self.rr, self.cls,
+            self.max_range, self.near, ox, oy, c, s, *self._occluders, self.hides, self.B, self._any_hides,
+            realistic and self.noisy, n, P, self._nearby2, self._factor, miss.range_offset, miss.range_slope,
+            miss.range_reference, visible)
         ck = self.cls[j]
         K = len(at)
-        bits = (blocked > 0) * _PARTIAL + (dk > self.near[j]) * _DISTANT
         reported, confused, keep = ck, np.zeros(K, bool), np.ones(K, bool)
         size_factor, yaw_noise = np.ones(K), np.zeros(K)
         made_up = []
         m, rho = p.noise_magnitude, p.rho
         if self.noisy:
-            if p.mode == "realistic":
-                nearby = self._nearby_truth(v, j, X, Y, present)
-                factor = self._factor[bits + nearby * _NEARBY]
-                mult = (p.miss.range_offset + p.miss.range_slope * (dk / p.miss.range_reference) ** 2) * factor
-            else:
+            if p.mode != "realistic":
                 mult = np.ones(K)
             u = rng.random((4, K))
             keep = u[0] >= rho * self.class_scale[ck] * mult
@@ -253,81 +242,6 @@ class DrivingPerceiver:
         self_rows, ego = self._self_rows(st, ox, oy, c, s, rng)
         parts.append(self_rows)
         return self._assemble(parts, visible.reshape(n, N), seen.reshape(n, N), lanes_seen, ego, rng)
-
-    # -- geometry --------------------------------------------------------------------------------------------------
-    def _blocked(self, v, j, tx, ty, tyaw, thx, thy, trr, tcls, ox, oy, cars_present, ddx, ddy, d):
-        """(K,) how many of each target's three sight lines (centre, both edges of its outline) an occluder
-        blocks. ``j`` is the target's object index (−1: made up); the observer (car ``v``) and the target itself
-        never occlude. Exact segment–box tests (separating axes) with the boxes' rotated corners."""
-        K = len(v)
-        if K == 0 or not self.hides.any():
-            return np.zeros(K, int)
-        inv = 1.0 / np.maximum(d, _EPS)
-        ex, ey = ddx * inv, ddy * inv                                      # unit sight lines
-        ux, uy = np.cos(tyaw), np.sin(tyaw)
-        w = thx * np.abs(ux * ey - uy * ex) + thy * np.abs(ux * ex + uy * ey) + trr   # outline half-width
-        # Combinations (target, occluder): every building for the classes buildings hide ...
-        B = self.B
-        parts_k, parts_o = [], []
-        if B and self.hides[0].any():
-            hb = self.hides[0][tcls].nonzero()[0]
-            parts_k.append(np.repeat(hb, B))
-            parts_o.append(np.tile(np.arange(B), len(hb)))
-        # ... and the cars and obstacles whose bounding circle comes near the widened sight line.
-        small = self._small_hide[tcls].nonzero()[0]
-        M = len(self.occ_x) - B
-        if len(small) and M:
-            qx = self.occ_x[None, B:] - ox[v[small], None]
-            qy = self.occ_y[None, B:] - oy[v[small], None]
-            sx, sy = ex[small, None], ey[small, None]
-            along = qx * sx + qy * sy
-            across = np.abs(qx * sy - qy * sx)
-            R = self.occ_r[None, B:]
-            kind = self.occ_kind[B:]
-            obj = self.occ_obj[B:]
-            near = ((along > -R) & (along < d[small, None] + R) & (across < R + w[small, None])
-                    & self.hides[kind[None, :], tcls[small, None]]
-                    & (obj[None, :] != j[small, None]) & (obj[None, :] != v[small, None]))
-            car_rows = kind == 1
-            if not cars_present.all():
-                near[:, car_rows] &= cars_present[None, :]
-            a, o = near.nonzero()
-            parts_k.append(small[a])
-            parts_o.append(B + o)
-        if not parts_k:
-            return np.zeros(K, int)
-        k = np.concatenate(parts_k)
-        o = np.concatenate(parts_o)
-        if not len(k):
-            return np.zeros(K, int)
-        # Three ray ends per combination: the target's centre and its outline's edges, across the sight line.
-        off = w[k]
-        nx, ny = -ey[k] * off, ex[k] * off
-        px = tx[k] + np.array((0.0 * nx, nx, -nx))                          # (3, C)
-        py = ty[k] + np.array((0.0 * ny, ny, -ny))
-        hit = _segments_hit_boxes(ox[v[k]], oy[v[k]], px, py, self.occ_x[o], self.occ_y[o], self.occ_ux[o],
-                                  self.occ_uy[o], self.occ_a[o], self.occ_b[o])
-        blocked = np.zeros((3, K), bool)
-        for r in range(3):
-            blocked[r, k[hit[r]]] = True
-        return blocked.sum(axis=0)
-
-    def _nearby_truth(self, v, j, X, Y, present):
-        """For the pairs (v, j): a pedestrian within ``nearby_distance`` of a car or obstacle other than the
-        observer (true positions; the report's NEARBY bit is recomputed from the reports)."""
-        n, P = self.n, self.P
-        out = np.zeros(len(v), bool)
-        ped = ((j >= n) & (j < n + P)).nonzero()[0]
-        if not len(ped) or not P:
-            return out
-        others = np.concatenate((np.arange(n), np.arange(n + P, self.N)))
-        gx = X[n:n + P, None] - X[None, others]
-        gy = Y[n:n + P, None] - Y[None, others]
-        close = (gx * gx + gy * gy < self.params.miss.nearby_distance ** 2) & present[None, others]
-        count = close.sum(axis=1)
-        jp = j[ped] - n
-        out[ped] = count[jp] - close[jp, v[ped]] > 0                     # column v is car v: the observer
-        return out
 
     # -- noise -----------------------------------------------------------------------------------------------------
     def _position_noise(self, x, y, d, mult, rng):
@@ -440,9 +354,13 @@ class DrivingPerceiver:
         half_x = rows["size_x"].astype(float) / 2
         half_y = rows["size_y"].astype(float) / 2
         ped = cls == _PED
-        blocked = self._blocked(v, np.full(len(v), -1), ox[v] + wx, oy[v] + wy, yaw_world,
-                                np.where(ped, 0.0, half_x), np.where(ped, 0.0, half_y), np.where(ped, half_x, 0.0),
-                                cls, ox, oy, np.asarray(st.present, bool), wx, wy, d)
+        if self._any_hides:
+            blocked = kernels.blocked_reports(v, ox[v] + wx, oy[v] + wy, np.cos(yaw_world), np.sin(yaw_world),
+                                              np.where(ped, 0.0, half_x), np.where(ped, 0.0, half_y),
+                                              np.where(ped, half_x, 0.0), cls, wx, wy, d, ox, oy,
+                                              np.asarray(st.present, bool), *self._occluders, self.hides, self.B)
+        else:
+            blocked = np.zeros(len(v), np.int64)
         ok = ((blocked < 3) & (d <= self.class_max[cls])).nonzero()[0]
         rows = rows.view(_RAW)[ok].view(DETECTION_DTYPE)
         rows["sighting"] = (blocked[ok] > 0) * _PARTIAL
@@ -455,33 +373,11 @@ class DrivingPerceiver:
         L, V = len(self.lanes), self.n
         if L == 0:
             return (np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.intp)), np.zeros(V, int)
-        lv, k = self._lane_view, self._lane_index
-        # (V, L) by broadcasting: endpoints relative to each observer, turned into its frame.
-        l0x, l0y, l1x, l1y = self.lanes.T
-        ax0, ay0 = l0x[None, :] - ox[:, None], l0y[None, :] - oy[:, None]
-        cc, ss = c[:, None], s[:, None]
-        ax, ay = (cc * ax0 + ss * ay0).ravel(), (cc * ay0 - ss * ax0).ravel()
-        ex0, ey0 = l1x - l0x, l1y - l0y
-        ex, ey = (cc * ex0 + ss * ey0).ravel(), (cc * ey0 - ss * ex0).ravel()
-        len2 = self._lane_len2
         R = p.classes[ObjectClass.LANE].max_range
-        bb = ax * ex + ay * ey
-        disc = bb * bb - len2 * (ax * ax + ay * ay - R * R)
-        root = np.sqrt(np.maximum(disc, 0.0))
-        lo = np.maximum(0.0, (-bb - root) / len2)
-        hi = np.minimum(1.0, (-bb + root) / len2)
-        ok = (disc > 0) & ((hi - lo) * np.sqrt(len2) >= p.lanes.min_length)
-        at = ok.nonzero()[0]
-        lv, k, lo, hi = lv[at], k[at], lo[at], hi[at]
-        ax, ay, ex, ey = ax[at], ay[at], ex[at], ey[at]
-        sx, sy, tx, ty = ax + lo * ex, ay + lo * ey, ax + hi * ex, ay + hi * ey
-        bits = ((lo > _EPS) | (hi < 1 - _EPS)) * _PARTIAL
-        # The point nearest the car: where the perpendicular from the origin meets the visible segment.
+        lv, k, bits, g = kernels.clip_lanes(self.lanes, self._lane_len2, ox, oy, c, s, R, p.lanes.min_length)
+        sx, sy, tx, ty, nx, ny, g2, dn = g
         gx, gy = tx - sx, ty - sy
-        g2 = np.maximum(gx * gx + gy * gy, _EPS)
-        t = clamp(-(sx * gx + sy * gy) / g2, 0.0, 1.0)
-        nx, ny = sx + t * gx, sy + t * gy
-        dn = np.hypot(nx, ny)
+        at = lv
         if self.noisy:
             m, lp = p.noise_magnitude, p.lanes
             realistic = p.mode == "realistic"
@@ -510,16 +406,11 @@ class DrivingPerceiver:
         # Endpoint order by a rule of the observer's frame alone: nearer end first; equally far ends (both
         # clipped at the range) rear end first, which a mirror image keeps; then the right end first. Never the map's
         # direction of the line.
-        gap = np.hypot(tx, ty) - np.hypot(sx, sy)
-        tie = np.abs(gap) <= 1e-6
-        swap = (gap < -1e-6) | (tie & (tx < sx - 1e-6)) | (tie & (np.abs(tx - sx) <= 1e-6) & (ty < sy))
-        sx, tx = np.where(swap, tx, sx), np.where(swap, sx, tx)
-        sy, ty = np.where(swap, ty, sy), np.where(swap, sy, ty)
+        sx, sy, tx, ty, px, py = kernels.order_lane_ends(sx, sy, tx, ty, g2)
         gx, gy = tx - sx, ty - sy
-        t = clamp(-(sx * gx + sy * gy) / g2, 0.0, 1.0)
         rows = np.zeros(len(lv), DETECTION_DTYPE)
         rows["class_id"] = _LANE
-        rows["x"], rows["y"] = sx + t * gx, sy + t * gy
+        rows["x"], rows["y"] = px, py
         rows["line_start_x"], rows["line_start_y"], rows["line_end_x"], rows["line_end_y"] = sx, sy, tx, ty
         rows["yaw"] = (np.arctan2(gy, gx) + math.pi / 2) % math.pi - math.pi / 2     # a painted line has no arrow
         rows["size_x"] = np.sqrt(g2)
@@ -600,20 +491,6 @@ class DrivingPerceiver:
             conf = 1.0 / (1.0 + np.exp(-(self.class_prior_logit[cls] + sep * z - sep * sep / 2)))
             rows["confidence"] = np.where(cls == _SELF, 1.0, conf)
         return DrivingPerception(rows, offsets, visible, seen, lanes_seen, ego)
-
-
-def _segments_hit_boxes(ox, oy, px, py, cx, cy, ux, uy, a, b):
-    """(3, C) bool: segment O→P crosses the box (centre c, unit axis u, half sizes a along u and b across) —
-    separating-axis test on the box's two axes and the segment's normal. ``px``/``py`` are (3, C)."""
-    qx, qy = ox - cx, oy - cy                                               # O relative to the box centre
-    rx, ry = px - cx, py - cy                                               # P relative to the box centre
-    qu, qv = qx * ux + qy * uy, qy * ux - qx * uy
-    ru, rv = rx * ux + ry * uy, ry * ux - rx * uy
-    apart = (np.minimum(qu, ru) > a) | (np.maximum(qu, ru) < -a) | (np.minimum(qv, rv) > b) | (np.maximum(qv, rv) < -b)
-    Dx, Dy = px - ox, py - oy                                               # the segment
-    centre = np.abs(qy * Dx - qx * Dy)                                      # |(c − O) × D|
-    extent = a * np.abs(ux * Dy - uy * Dx) + b * np.abs(ux * Dx + uy * Dy)  # box's reach across the segment
-    return ~apart & (centre <= extent)
 
 
 __all__ = ["DrivingScene", "DrivingState", "DrivingPerception", "DrivingPerceiver", "EGO_COLUMNS", "LANE_CENTRE",

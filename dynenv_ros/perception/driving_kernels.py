@@ -1,0 +1,229 @@
+"""Compiled geometry of the driving perception (``driving_model.py``): the per-pair visibility, occlusion by
+rotated boxes along three sight lines, and lane clipping, as numba kernels (``@njit(cache=True)``).
+
+Each kernel does, pair by pair, exactly the floating-point operations the numpy expressions they replace did, in
+the same order, so the outputs are bit-identical (hypot, sqrt and the arithmetic are IEEE-exact or the same libm
+calls; angles are turned into cos/sin, and arctan2 taken, in numpy by the caller). No kernel draws random numbers:
+every draw stays in the caller's seeded ``numpy.random.Generator``, same draws in the same order.
+
+The first call of each kernel compiles it (or loads it from ``__pycache__``, numba's cache, keyed on this file's
+contents and the CPU), which ``warm_up()`` does once per process.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+_EPS = 1e-9
+
+
+@numba.njit(cache=True)
+def _segment_hits_box(ox, oy, px, py, cx, cy, ux, uy, a, b):
+    """Segment O→P crosses the box (centre c, unit axis u, half sizes a along u and b across): separating axes."""
+    qx, qy = ox - cx, oy - cy
+    rx, ry = px - cx, py - cy
+    qu, qv = qx * ux + qy * uy, qy * ux - qx * uy
+    ru, rv = rx * ux + ry * uy, ry * ux - rx * uy
+    if min(qu, ru) > a or max(qu, ru) < -a or min(qv, rv) > b or max(qv, rv) < -b:
+        return False
+    Dx, Dy = px - ox, py - oy
+    centre = abs(qy * Dx - qx * Dy)
+    extent = a * abs(ux * Dy - uy * Dx) + b * abs(ux * Dx + uy * Dy)
+    return centre <= extent
+
+
+@numba.njit(cache=True)
+def _sight_lines_blocked(vv, jj, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, d, ox, oy, cars_present,
+                         occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B):
+    """How many of one target's three sight lines (centre, both outline edges) an occluder blocks (0..3)."""
+    inv = 1.0 / max(d, _EPS)
+    ex, ey = ddx * inv, ddy * inv
+    w = thx * abs(ux * ey - uy * ex) + thy * abs(ux * ex + uy * ey) + trr
+    nx, ny = -ey * w, ex * w
+    p0x, p0y = tx + 0.0 * nx, ty + 0.0 * ny
+    p1x, p1y = tx + nx, ty + ny
+    p2x, p2y = tx + -nx, ty + -ny
+    x0, y0 = ox[vv], oy[vv]
+    b0 = b1 = b2 = False
+    if hides[0, tcls]:
+        for o in range(B):
+            cx, cy, cux, cuy, a, b = occ_x[o], occ_y[o], occ_ux[o], occ_uy[o], occ_a[o], occ_b[o]
+            b0 = b0 or _segment_hits_box(x0, y0, p0x, p0y, cx, cy, cux, cuy, a, b)
+            b1 = b1 or _segment_hits_box(x0, y0, p1x, p1y, cx, cy, cux, cuy, a, b)
+            b2 = b2 or _segment_hits_box(x0, y0, p2x, p2y, cx, cy, cux, cuy, a, b)
+            if b0 and b1 and b2:
+                return 3
+    if hides[1, tcls] or hides[2, tcls]:
+        n_cars = len(cars_present)
+        for o in range(B, len(occ_x)):
+            kind, obj = occ_kind[o], occ_obj[o]
+            if not hides[kind, tcls] or obj == jj or obj == vv:
+                continue
+            if kind == 1 and not cars_present[o - B]:
+                continue
+            qx, qy = occ_x[o] - x0, occ_y[o] - y0
+            along = qx * ex + qy * ey
+            across = abs(qx * ey - qy * ex)
+            R = occ_r[o]
+            if not (along > -R and along < d + R and across < R + w):
+                continue
+            cx, cy, cux, cuy, a, b = occ_x[o], occ_y[o], occ_ux[o], occ_uy[o], occ_a[o], occ_b[o]
+            b0 = b0 or _segment_hits_box(x0, y0, p0x, p0y, cx, cy, cux, cuy, a, b)
+            b1 = b1 or _segment_hits_box(x0, y0, p1x, p1y, cx, cy, cux, cuy, a, b)
+            b2 = b2 or _segment_hits_box(x0, y0, p2x, p2y, cx, cy, cux, cuy, a, b)
+            if b0 and b1 and b2:
+                return 3
+        _ = n_cars
+    return int(b0) + int(b1) + int(b2)
+
+
+@numba.njit(cache=True)
+def blocked_reports(v, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, d, ox, oy, cars_present,
+                    occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B):
+    """(K,) blocked sight lines of made-up reports (no object behind them: nothing is excluded but the observer)."""
+    K = len(v)
+    out = np.zeros(K, np.int64)
+    for k in range(K):
+        out[k] = _sight_lines_blocked(v[k], -1, tx[k], ty[k], ux[k], uy[k], thx[k], thy[k], trr[k], tcls[k], ddx[k],
+                                      ddy[k], d[k], ox, oy, cars_present, occ_x, occ_y, occ_ux, occ_uy, occ_a,
+                                      occ_b, occ_r, occ_kind, occ_obj, hides, B)
+    return out
+
+
+@numba.njit(cache=True)
+def visible_pairs(X, Y, UX, UY, present, cars_present, hx, hy, rr, cls, max_range, near, ox, oy, c, s,
+                  occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B, any_hides,
+                  realistic, n_cars, n_peds, nearby2, factor, range_offset, range_slope, range_reference, visible):
+    """Every (view v, object j) pair in range, present, not the observer and not hidden (fewer than three sight
+    lines blocked), view after view, object after object: its index v·N + j, v, j, the offset in the observer's
+    frame (x forward, y left), the distance, the sighting bits (PARTIAL if a sight line is blocked, DISTANT beyond the
+    class's near range) and, in realistic mode, the miss multiplier (range term × the factor of the bits, NEARBY from
+    the true positions: a pedestrian within the nearby distance of a car or obstacle other than the observer).
+    Marks ``visible`` (V·N bools)."""
+    V, N = len(ox), len(X)
+    cap = V * N
+    at = np.empty(cap, np.int64)
+    vo = np.empty(cap, np.int64)
+    jo = np.empty(cap, np.int64)
+    xo = np.empty(cap)
+    yo = np.empty(cap)
+    do = np.empty(cap)
+    bo = np.empty(cap, np.int64)
+    mo = np.empty(cap)
+    K = 0
+    for v in range(V):
+        x0, y0, cv, sv = ox[v], oy[v], c[v], s[v]
+        for j in range(N):
+            if j == v or not present[j]:
+                continue
+            dx, dy = X[j] - x0, Y[j] - y0
+            d = math.hypot(dx, dy)
+            if not d <= max_range[j]:
+                continue
+            blocked = 0
+            if any_hides:
+                blocked = _sight_lines_blocked(v, j, X[j], Y[j], UX[j], UY[j], hx[j], hy[j], rr[j], cls[j], dx, dy,
+                                               d, ox, oy, cars_present, occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b,
+                                               occ_r, occ_kind, occ_obj, hides, B)
+            if blocked >= 3:
+                continue
+            visible[v * N + j] = True
+            at[K], vo[K], jo[K], do[K] = v * N + j, v, j, d
+            xo[K], yo[K] = cv * dx + sv * dy, cv * dy - sv * dx
+            bits = (2 if blocked > 0 else 0) + (1 if d > near[j] else 0)           # PARTIAL 2, DISTANT 1
+            bo[K] = bits
+            if realistic:
+                close = False
+                if n_cars <= j < n_cars + n_peds:
+                    for o in range(N):
+                        if o == v or n_cars <= o < n_cars + n_peds or not present[o]:
+                            continue
+                        gx, gy = X[j] - X[o], Y[j] - Y[o]
+                        if gx * gx + gy * gy < nearby2:
+                            close = True
+                            break
+                r = d / range_reference
+                mo[K] = (range_offset + range_slope * (r * r)) * factor[bits + (4 if close else 0)]
+            K += 1
+    return at[:K], vo[:K], jo[:K], xo[:K], yo[:K], do[:K], bo[:K], mo[:K]
+
+
+@numba.njit(cache=True)
+def clip_lanes(lanes, len2, ox, oy, c, s, R, min_length):
+    """Each (view, lane) whose segment meets the circle of radius R about the observer for at least ``min_length``:
+    view, lane, the clipped segment's ends in the observer's frame, PARTIAL if clipped, the point nearest the car,
+    the clipped segment's squared length (≥ ε) and the nearest point's distance."""
+    V, L = len(ox), len(lanes)
+    cap = V * L
+    lv = np.empty(cap, np.int64)
+    lk = np.empty(cap, np.int64)
+    out = np.empty((8, cap))
+    bits = np.empty(cap, np.int64)
+    K = 0
+    for v in range(V):
+        cc, ss, x0, y0 = c[v], s[v], ox[v], oy[v]
+        for k in range(L):
+            l0x, l0y, l1x, l1y = lanes[k, 0], lanes[k, 1], lanes[k, 2], lanes[k, 3]
+            ax0, ay0 = l0x - x0, l0y - y0
+            ax, ay = cc * ax0 + ss * ay0, cc * ay0 - ss * ax0
+            ex0, ey0 = l1x - l0x, l1y - l0y
+            ex, ey = cc * ex0 + ss * ey0, cc * ey0 - ss * ex0
+            ln2 = len2[k]
+            bb = ax * ex + ay * ey
+            disc = bb * bb - ln2 * (ax * ax + ay * ay - R * R)
+            root = math.sqrt(max(disc, 0.0))
+            lo = max(0.0, (-bb - root) / ln2)
+            hi = min(1.0, (-bb + root) / ln2)
+            if not (disc > 0 and (hi - lo) * math.sqrt(ln2) >= min_length):
+                continue
+            sx, sy, tx, ty = ax + lo * ex, ay + lo * ey, ax + hi * ex, ay + hi * ey
+            gx, gy = tx - sx, ty - sy
+            g2 = max(gx * gx + gy * gy, _EPS)
+            t = min(max(-(sx * gx + sy * gy) / g2, 0.0), 1.0)
+            nx, ny = sx + t * gx, sy + t * gy
+            lv[K], lk[K] = v, k
+            bits[K] = 2 if (lo > _EPS or hi < 1 - _EPS) else 0
+            out[0, K], out[1, K], out[2, K], out[3, K] = sx, sy, tx, ty
+            out[4, K], out[5, K], out[6, K] = nx, ny, g2
+            out[7, K] = math.hypot(nx, ny)
+            K += 1
+    return lv[:K], lk[:K], bits[:K], out[:, :K]
+
+
+@numba.njit(cache=True)
+def order_lane_ends(sx, sy, tx, ty, g2):
+    """Endpoint order by a rule of the observer's frame alone (nearer end first; equally far: rear end first, then
+    the right end) and the point nearest the car; returns start x, y, end x, y, nearest x, y (6, K)."""
+    K = len(sx)
+    out = np.empty((6, K))
+    for i in range(K):
+        a, b, e, f = sx[i], sy[i], tx[i], ty[i]
+        gap = math.hypot(e, f) - math.hypot(a, b)
+        tie = abs(gap) <= 1e-6
+        if gap < -1e-6 or (tie and e < a - 1e-6) or (tie and abs(e - a) <= 1e-6 and f < b):
+            a, b, e, f = e, f, a, b
+        gx, gy = e - a, f - b
+        t = min(max(-(a * gx + b * gy) / g2[i], 0.0), 1.0)
+        out[0, i], out[1, i], out[2, i], out[3, i] = a, b, e, f
+        out[4, i], out[5, i] = a + t * gx, b + t * gy
+    return out
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) every kernel once, on tiny inputs."""
+    z = np.zeros(1)
+    zi = np.zeros(1, np.int64)
+    hides = np.zeros((3, 256), np.bool_)
+    occ = (z, z, z + 1, z, z + 1, z + 1, z + 1, zi, zi - 1)
+    blocked_reports(zi, z, z, z, z, z, z, z, np.zeros(1, np.uint8), z, z, z + 1, z, z, np.ones(1, np.bool_), *occ,
+                    hides, 1)
+    visible_pairs(z, z, z, z, np.ones(1, np.bool_), np.ones(1, np.bool_), z, z, z, np.zeros(1, np.uint8), z + 1,
+                  z + 1, z, z, z + 1, z, *occ, hides, 1, False, False, 1, 0, 1.0, np.ones(8), 1.0, 0.0, 1.0,
+                  np.zeros(1, np.bool_))
+    clip_lanes(np.zeros((1, 4)), z + 1, z, z, z + 1, z, 1.0, 0.0)
+    order_lane_ends(z, z, z, z, z + 1)
+
+
+__all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "order_lane_ends", "warm_up"]
