@@ -116,3 +116,27 @@ def test_partial_features_are_clipped_and_bad_perception_refused():
         parallel_env(observation="partial", perception="blurry")
     with pytest.raises(ValueError, match="perception must be"):
         parallel_env(observation="partial", perception=3)
+
+
+def test_play_watch_writes_a_gif_with_one_cars_detections(tmp_path):
+    import json
+    import subprocess
+    import sys
+    from PIL import Image
+    gif = tmp_path / "car1.gif"
+    base = [sys.executable, "-m", "dynenv_ros.envs.play", "--scenario", "driving", "--cars", "3", "--seconds", "0.5",
+            "--pixels-per-metre", "1.5", "--json"]
+    watched = subprocess.run(base + ["--watch", "1", "--gif", str(gif)], capture_output=True, text=True, timeout=120)
+    assert watched.returncode == 0, watched.stderr
+    plain = subprocess.run(base + ["--gif", str(tmp_path / "plain.gif")], capture_output=True, text=True, timeout=120)
+    assert json.loads(watched.stdout) == json.loads(plain.stdout)       # perception draws from its own generator
+    assert json.loads(watched.stdout)["frames"] == 6
+    with Image.open(gif) as image, Image.open(tmp_path / "plain.gif") as other:
+        assert image.format == "GIF" and image.n_frames == 6
+        image.seek(3)
+        other.seek(3)
+        drawn = np.asarray(image.convert("RGB"), np.int16)
+        assert drawn.shape == np.asarray(other.convert("RGB")).shape
+        assert np.abs(drawn - np.asarray(other.convert("RGB"), np.int16)).sum(axis=2).astype(bool).sum() > 50
+    bad = subprocess.run(base + ["--watch", "3"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "--watch must be a car id in 0..2" in bad.stderr

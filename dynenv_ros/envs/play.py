@@ -4,13 +4,14 @@ optional recordings.
     dynenv-play --players-per-team 2 --policy keeper_and_chasers --seconds 60 --gif game.gif --png-dir frames/
     dynenv-play --watch 0 --perception realistic --noise-magnitude 2 --seconds 20 --gif robot0.gif
     dynenv-play --scenario driving --cars 3 --seconds 30 --gif drive.gif
+    dynenv-play --scenario driving --cars 3 --watch 0 --seconds 20 --gif car0.gif
 
 Driving: every car is driven by the scripted lane-keeping driver (``driving.scripted.ScriptedDriver``); the GIF
 shows the map top-down (``render.driving``, 3 px per metre unless --pixels-per-metre says otherwise).
 
 Frames are taken at every vision instant (10 Hz), so the GIF plays in real time at --fps 10. With --watch, each
-frame also shows that robot's field of view and its detections (red X: false positive, red ring: confusion,
-white circle: in view but missed).
+frame also shows that robot's field of view (driving: that car's 360° range) and its detections (red X: false
+positive, red ring: confusion, white circle: in view but missed), from the --perception preset.
 """
 from __future__ import annotations
 
@@ -47,7 +48,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--png-dir", type=Path, help="write every frame as a PNG into this existing folder")
     parser.add_argument("--fps", type=float, default=10.0, help="GIF playback rate (10 = real time)")
     parser.add_argument("--pixels-per-metre", type=float, help="default 40 (soccer), 3 (driving)")
-    parser.add_argument("--watch", type=int, help="robot id whose field of view and detections are drawn")
+    parser.add_argument("--watch", type=int, help="robot (driving: car) id whose field of view and detections are drawn")
     parser.add_argument("--perception", choices=("realistic", "dynenv", "none"), default="realistic")
     parser.add_argument("--noise-magnitude", type=float, help="0..5 (default: the preset's)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
@@ -108,14 +109,13 @@ def play_driving(args: argparse.Namespace) -> dict:
     from dynenv_ros.driving.config import DrivingConfig
     from dynenv_ros.driving.scripted import ScriptedDriver
     from dynenv_ros.driving.world import DrivingWorld
-    if args.watch is not None:
-        raise ValueError("--watch draws a robot's detections: driving perception is not available in dynenv-play yet")
     settings = {"n_cars": args.cars, "action_mode": args.action_mode}
     if args.seconds is not None:
         settings["episode_seconds"] = args.seconds
     config = DrivingConfig.from_mapping(settings)
     world = DrivingWorld(config, seed=args.seed)
     driver = ScriptedDriver(config)
+    watcher = _DrivingWatcher(world, args) if args.watch is not None else None
     recorder = None
     if args.gif or args.png_dir:
         if args.png_dir and not args.png_dir.is_dir():
@@ -127,7 +127,8 @@ def play_driving(args: argparse.Namespace) -> dict:
 
     def on_frame(k: int) -> None:
         nonlocal pngs
-        image = recorder.add(world.snapshot())
+        snapshot = world.snapshot()
+        image = recorder.add(snapshot if watcher is None else watcher.draw(recorder, snapshot))
         if args.png_dir:
             from dynenv_ros.render.topdown import save_png
             save_png(image, args.png_dir / f"frame_{pngs:05d}.png")
@@ -151,6 +152,33 @@ def play_driving(args: argparse.Namespace) -> dict:
             "events": dict(sorted(events.items())),
             "reward_per_car": {term.name.lower(): [round(v, 3) for v in totals[term]] for term in RewardTerm},
             "frames": len(recorder) if recorder is not None else 0}
+
+
+class _DrivingWatcher:
+    """Perceives at every vision instant and draws one car's detections (its 360° range as a circle) over the frame.
+    Perception draws from its own generator (seeded from --seed), so the drive is the same with or without --watch."""
+
+    def __init__(self, world, args: argparse.Namespace) -> None:
+        from dynenv_ros.driving.vision import DrivingVision
+        from dynenv_ros.perception.driving_params import load_driving_preset
+        if not 0 <= args.watch < world.n_cars:
+            raise ValueError(f"--watch must be a car id in 0..{world.n_cars - 1}, got {args.watch}")
+        overrides = {} if args.noise_magnitude is None else {"noise_magnitude": args.noise_magnitude}
+        self.params = load_driving_preset(args.perception, **overrides)
+        self.world, self.car = world, args.watch
+        self.vision = DrivingVision(world, self.params, rng=np.random.default_rng([args.seed, 1]))
+
+    def draw(self, recorder, snapshot):
+        from dynenv_ros.render.driving import overlay_driving_detections
+        perception = self.vision.perceive()
+        v = self.car
+        missed = (perception.visible[v] & ~perception.seen[v]).nonzero()[0]
+        me = snapshot.objects[v]
+        image = recorder.render(snapshot)
+        overlay_driving_detections(image, recorder.view, (me.x, me.y, me.yaw), perception.of_view(v),
+                                   truth=[(snapshot.objects[j].x, snapshot.objects[j].y) for j in missed],
+                                   observer_team=self.world.cars[v].team, view_radius=self.params.view_range)
+        return image
 
 
 class _Watcher:
