@@ -178,6 +178,12 @@ def test_sim_benchmark_runs_the_driving_world():
     figures = json.loads(result.stdout)
     assert figures["scenario"] == "driving" and figures["cars"] == 3 and figures["env_steps_per_s"] > 0
     assert figures["physics_ticks_per_s"] == round(figures["env_steps_per_s"] * 10)
-    refused = subprocess.run(command[:-1] + ["--observation", "partial"], capture_output=True, text=True,
+    perceived = subprocess.run(command + ["--observation", "partial", "--perception", "dynenv"], capture_output=True,
+                               text=True, timeout=120, cwd=REPO)
+    assert perceived.returncode == 0, perceived.stderr
+    figures = json.loads(perceived.stdout)
+    assert figures["observation"] == "partial" and figures["perception"] == "dynenv"
+    assert figures["car_frames_per_s"] == round(figures["env_steps_per_s"] * 3)
+    refused = subprocess.run(command[:-1] + ["--observation", "padded"], capture_output=True, text=True,
                              timeout=120, cwd=REPO)
-    assert refused.returncode == 2 and "--observation none" in refused.stderr
+    assert refused.returncode == 2 and "none / full / partial" in refused.stderr
