@@ -211,6 +211,86 @@ def order_lane_ends(sx, sy, tx, ty, g2):
     return out
 
 
+# -- records (DETECTION_DTYPE rows written field by field; ``rows`` come zeroed) -------------------------------------
+@numba.njit(cache=True)
+def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy, m, speed_std, yaw_rate_std,
+              goal_std, half_length, half_width, crashed, finished, self_class):
+    """One SELF row per car (goal in its own frame, speed and yaw rate, with the self-state noise ``g`` (4, V) when
+    ``noisy``) and its ego values (float32 EGO_COLUMNS)."""
+    for v in range(len(ox)):
+        gx, gy = goal_x[v] - ox[v], goal_y[v] - oy[v]
+        ax, ay = c[v] * gx + s[v] * gy, c[v] * gy - s[v] * gx
+        sp, yr = speed[v], yaw_rate[v]
+        if noisy:
+            sp = sp + g[0, v] * m * speed_std
+            yr = yr + g[1, v] * m * yaw_rate_std
+            ax = ax + g[2, v] * m * goal_std
+            ay = ay + g[3, v] * m * goal_std
+        r = rows[v]
+        r.class_id = self_class
+        r.x, r.y = ax, ay
+        r.yaw = np.nan
+        r.size_x, r.size_y = 2 * half_length[v], 2 * half_width[v]
+        r.confidence = 1.0
+        r.fallen, r.penalized = crashed[v], finished[v]
+        r.line_start_x, r.line_start_y = sp, yr
+        r.true_id = v
+        r.true_class = self_class
+        ego[v, 0], ego[v, 1], ego[v, 2], ego[v, 3] = sp, yr, ax, ay
+        ego[v, 4], ego[v, 5] = r.size_x, r.size_y
+        ego[v, 6], ego[v, 7] = crashed[v], finished[v]
+
+
+@numba.njit(cache=True)
+def sort_reports(rows, view, distance_bits, n_views, self_class):
+    """Rows view after view, each view's SELF row first, then nearest first (stable); the view offsets."""
+    M = len(rows)
+    key = np.empty(M, np.int64)
+    for i in range(M):
+        not_self = 0 if rows[i].class_id == self_class else 1
+        key[i] = (view[i] << 33) | (not_self << 32) | np.int64(distance_bits[i])
+    order = np.argsort(key, kind="mergesort")
+    out = np.empty(M, rows.dtype)
+    sorted_view = np.empty(M, np.int64)
+    for i in range(M):
+        out[i] = rows[order[i]]
+        sorted_view[i] = view[order[i]]
+    offsets = np.empty(n_views + 1, np.int64)
+    k = 0
+    for v in range(n_views + 1):
+        while k < M and sorted_view[k] < v:
+            k += 1
+        offsets[v] = k
+    return out, order, offsets
+
+
+@numba.njit(cache=True)
+def sighting_bits(rows, distance, offsets, class_near, nearby2, car, pedestrian, obstacle, distant, partial, nearby):
+    """DISTANT and NEARBY of the sorted reports from the reports themselves, by one rule for real and made-up ones:
+    DISTANT beyond the class's near range, NEARBY a pedestrian within the nearby distance of a reported car or
+    obstacle of the same view (PARTIAL kept)."""
+    for v in range(len(offsets) - 1):
+        for i in range(offsets[v], offsets[v + 1]):
+            cls = rows[i].class_id
+            if cls == car or cls == pedestrian or cls == obstacle:
+                b = rows[i].sighting & partial
+                if distance[i] > class_near[cls]:
+                    b |= distant
+                rows[i].sighting = b
+        for i in range(offsets[v], offsets[v + 1]):
+            if rows[i].class_id != pedestrian:
+                continue
+            for o in range(offsets[v], offsets[v + 1]):
+                cls = rows[o].class_id
+                if cls != car and cls != obstacle:
+                    continue
+                dx = np.float64(rows[i].x - rows[o].x)
+                dy = np.float64(rows[i].y - rows[o].y)
+                if dx ** 2 + dy ** 2 < nearby2:
+                    rows[i].sighting |= nearby
+                    break
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel once, on tiny inputs."""
     z = np.zeros(1)

@@ -161,6 +161,7 @@ class DrivingPerceiver:
         self._occluders = (self.occ_x, self.occ_y, self.occ_ux, self.occ_uy, self.occ_a, self.occ_b, self.occ_r,
                            self.occ_kind, self.occ_obj)
         self._nearby2 = params.miss.nearby_distance ** 2
+        self._no_self_noise = np.zeros((4, n))
         self._lane_len2 = np.maximum((lanes[:, 2] - lanes[:, 0]) ** 2 + (lanes[:, 3] - lanes[:, 1]) ** 2, _EPS)
 
     # ------------------------------------------------------------------------------------------------------------
@@ -429,26 +430,14 @@ class DrivingPerceiver:
         yaw rate (odometry) as ``line_start`` (x: speed m/s, y: yaw rate rad/s), its outline, crashed (``fallen``)
         and finished (``penalized``). Never a map-frame pose."""
         V = self.n
-        gx, gy = np.asarray(st.goal_x, float) - ox, np.asarray(st.goal_y, float) - oy
-        goal_x, goal_y = c * gx + s * gy, c * gy - s * gx
         speed, yaw_rate = np.asarray(st.speed, float), np.asarray(st.yaw_rate, float)
-        if self.noisy:
-            sp, m = self.params.self_state, self.params.noise_magnitude
-            g = rng.standard_normal((4, V))
-            speed, yaw_rate = speed + g[0] * m * sp.speed_std, yaw_rate + g[1] * m * sp.yaw_rate_std
-            goal_x, goal_y = goal_x + g[2] * m * sp.goal_std, goal_y + g[3] * m * sp.goal_std
-        rows = np.zeros(V, DETECTION_DTYPE)
-        rows["class_id"] = _SELF
-        rows["x"], rows["y"] = goal_x, goal_y
-        rows["yaw"] = np.nan
-        rows["size_x"], rows["size_y"] = 2 * self.scene.car_half_length, 2 * self.scene.car_half_width
-        rows["confidence"] = 1.0
-        rows["fallen"], rows["penalized"] = st.crashed, st.finished
-        rows["line_start_x"], rows["line_start_y"] = speed, yaw_rate
-        rows["true_id"] = np.arange(V)
-        rows["true_class"] = _SELF
-        ego = np.column_stack((speed, yaw_rate, goal_x, goal_y, rows["size_x"], rows["size_y"], st.crashed,
-                               st.finished)).astype(np.float32)
+        sp, m = self.params.self_state, self.params.noise_magnitude
+        g = rng.standard_normal((4, V)) if self.noisy else self._no_self_noise
+        rows, ego = np.zeros(V, DETECTION_DTYPE), np.empty((V, len(EGO_COLUMNS)), np.float32)
+        kernels.self_rows(rows, ego, np.asarray(st.goal_x, float), np.asarray(st.goal_y, float), ox, oy, c, s, speed,
+                          yaw_rate, g, self.noisy, m, sp.speed_std, sp.yaw_rate_std, sp.goal_std,
+                          self.scene.car_half_length, self.scene.car_half_width, np.asarray(st.crashed, bool),
+                          np.asarray(st.finished, bool), _SELF)
         return (rows, np.arange(V)), ego
 
     # -- assembly ----------------------------------------------------------------------------------------------------
@@ -456,30 +445,11 @@ class DrivingPerceiver:
         rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
         view = np.concatenate([v for _, v in parts]).astype(np.int64)
         distance = np.hypot(rows["x"], rows["y"]).astype(np.float32)
-        not_self = (rows["class_id"] != _SELF).astype(np.int64)
-        order = ((view << 33) | (not_self << 32) | distance.view(np.uint32)).argsort(kind="stable")
-        rows, view, distance = rows.view(_RAW)[order].view(DETECTION_DTYPE), view[order], distance[order]
-        offsets = view.searchsorted(np.arange(self.n + 1))
-        cls = rows["class_id"]
-        point = (cls == _CAR) | (cls == _PED) | (cls == _OBST)
+        rows, order, offsets = kernels.sort_reports(rows, view, distance.view(np.uint32), self.n, _SELF)
         # DISTANT and NEARBY from the report itself, by one rule for real and made-up reports alike.
-        bits = rows["sighting"]
-        bits[point] = (bits[point] & _PARTIAL) | (distance[point] > self.class_near[cls[point]]) * _DISTANT
-        ped = (cls == _PED).nonzero()[0]
-        crowd = ((cls == _CAR) | (cls == _OBST)).nonzero()[0]
-        if len(ped) and len(crowd):
-            pv, cv = view[ped], view[crowd]
-            first = cv.searchsorted(pv)
-            count = cv.searchsorted(pv, side="right") - first
-            owner = np.repeat(np.arange(len(ped)), count)
-            other = crowd[np.arange(len(owner)) - (np.cumsum(count) - count - first)[owner]]
-            me = ped[owner]
-            gap2 = (rows["x"][me] - rows["x"][other]).astype(float) ** 2 + (
-                rows["y"][me] - rows["y"][other]).astype(float) ** 2
-            close = np.zeros(len(rows), bool)
-            close[me[gap2 < self.params.miss.nearby_distance ** 2]] = True
-            bits |= (close * _NEARBY).astype(np.uint8)
-        rows["sighting"] = bits
+        kernels.sighting_bits(rows, distance[order], offsets, self.class_near, self.params.miss.nearby_distance ** 2,
+                              _CAR, _PED, _OBST, _DISTANT, _PARTIAL, _NEARBY)
+        cls = rows["class_id"]
         # Confidence: the calibrated detector score of perception/model.py (docs/perception.md); SELF rows 1.
         p = self.params
         if p.confidence == "none":
