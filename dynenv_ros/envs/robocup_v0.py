@@ -40,6 +40,7 @@ from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.world import TEAM_A, TEAM_B, SoccerWorld
 
 RESET_OPTIONS = ("kickoff_team",)
+_TERM_NAMES = tuple(term.name.lower() for term in sorted(RewardTerm))   # rows of a period's rewards
 
 
 class RoboCupParallelEnv(ParallelEnv):
@@ -115,13 +116,13 @@ class RoboCupParallelEnv(ParallelEnv):
                                  names=self.possible_agents)
         observations, seen_rewards = self.observations.build()
         result.rewards[RewardTerm.OBSERVATION] += seen_rewards
-        totals = result.rewards.sum(axis=0)
-        terms = [{term.name.lower(): float(result.rewards[term, i]) for term in RewardTerm}
-                 for i in range(len(self.possible_agents))]
+        totals = result.rewards.sum(axis=0).tolist()
+        # Rows of the rewards are the terms in RewardTerm order; one conversion to Python floats for all.
+        terms = [dict(zip(_TERM_NAMES, column)) for column in result.rewards.T.tolist()]
         obs, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
         for i, agent in enumerate(self.agents):
             obs[agent] = observations[i]
-            rewards[agent] = float(totals[i])
+            rewards[agent] = totals[i]
             terminations[agent] = result.terminated
             truncations[agent] = result.truncated
             # Gymnasium's key for "ended by the time limit, bootstrap from the final observation", which

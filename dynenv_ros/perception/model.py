@@ -193,12 +193,11 @@ class Perceiver:
         bits += distant_k
         xk, yk = cx[at], cy[at]
         reported = ck
-        confused = np.zeros(K, bool)
-        size_factor = np.ones(K)
-        yaw_noise = np.zeros(K)
-        keep = np.ones(K, bool)
         extra = []
-        if p.mode != "none" and p.noise_magnitude > 0.0:
+        if p.mode == "none" or p.noise_magnitude <= 0.0:
+            confused, keep = np.zeros(K, bool), np.ones(K, bool)
+            size_factor, yaw_noise = np.ones(K), np.zeros(K)
+        else:
             m, rho = p.noise_magnitude, p.rho
             if p.mode == "realistic":
                 nearby_k = self._nearby(frames, lay, at)
@@ -213,6 +212,8 @@ class Perceiver:
             keep = u[0] >= p_miss
             if p.mode == "realistic" and self.confusions:
                 reported, confused = self._confuse(ck, distant_k, keep, mult, u[1])
+            else:
+                confused = np.zeros(K, bool)
             xk, yk, g = self._position_noise(xk, yk, dk, mult, rng)
             size_factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
             yaw_noise = m * p.position.yaw_std * g[1]
@@ -378,8 +379,8 @@ class Perceiver:
             observer = context.observer[view]
             others = self.robot_index
             observer_is_robot = self.is_robot[observer]
-            choices = len(others) - observer_is_robot.astype(int)
-            if len(others) and (choices > 0).all():
+            choices = len(others) - observer_is_robot
+            if len(others) > 1 or len(others) and (choices > 0).all():   # (two robots: always another one)
                 pick = (rng.random(len(robot)) * choices).astype(np.intp)
                 pick += observer_is_robot & (pick >= self._robots_before[observer])
                 r = others[pick]

@@ -14,6 +14,7 @@ from dynenv_ros.soccer.robot import BODY_RADIUS
 from dynenv_ros.soccer.world import SoccerWorld
 
 GOALPOST_ID, PENALTY_MARK_ID, CROSSING_ID, CENTER_CIRCLE_ID = 1000, 1100, 1200, 1300
+_PROPRIOCEPTION_FIELDS = np.array((5, 3, 4, 6))   # of a robot's recorded values: head yaw, fallen, penalized, kicking
 
 
 def soccer_scene(world: SoccerWorld) -> SceneObjects:
@@ -108,13 +109,12 @@ class SoccerVision:
         self._values = []
         self._recorded = 0
         # Each robot's own state per frame: head yaw, fallen, penalized, kicking (what it knows of itself).
-        self.proprioception = table[:, :n, (5, 3, 4, 6)].astype(np.float32)
+        self.proprioception = table[:, :n].take(_PROPRIOCEPTION_FIELDS, axis=2).astype(np.float32)
         # What the GameController tells each robot per frame, (F, n, 3): ball ownership relative to the robot's team
         # (+1 own, -1 opponents, 0 free), seconds left of that ownership (0 when free), game seconds left.
         controller = np.empty((frames, n, 3), np.float32)
-        controller[:, :, 0] = game[:, :1] * self.teams
-        controller[:, :, 1] = game[:, 1:2]
-        controller[:, :, 2] = game[:, 2:3]
+        controller[:] = game[:, None]
+        controller[:, :, 0] *= self.teams                 # ±1 and 0 times a float32: exact, as in float64
         self.game_controller = controller
         self._x[:frames, :n + 1], self._y[:frames, :n + 1] = table[:, :, 0], table[:, :, 1]
         self._yaw[:frames, :n] = table[:, :n, 2]
