@@ -16,6 +16,8 @@ import math
 import numba
 import numpy as np
 
+from dynenv_ros.perception.detections import DETECTION_DTYPE as _DETECTION
+
 _EPS = 1e-9
 
 
@@ -193,22 +195,64 @@ def clip_lanes(lanes, len2, ox, oy, c, s, R, min_length):
 
 
 @numba.njit(cache=True)
-def order_lane_ends(sx, sy, tx, ty, g2):
-    """Endpoint order by a rule of the observer's frame alone (nearer end first; equally far: rear end first, then
-    the right end) and the point nearest the car; returns start x, y, end x, y, nearest x, y (6, K)."""
-    K = len(sx)
-    out = np.empty((6, K))
+def _order_ends(a, b, e, f, g2):
+    """One segment's ends in order (nearer end first; equally far: rear end first, then the right end) and the point
+    nearest the car."""
+    gap = math.hypot(e, f) - math.hypot(a, b)
+    tie = abs(gap) <= 1e-6
+    if gap < -1e-6 or (tie and e < a - 1e-6) or (tie and abs(e - a) <= 1e-6 and f < b):
+        a, b, e, f = e, f, a, b
+    gx, gy = e - a, f - b
+    t = min(max(-(a * gx + b * gy) / g2, 0.0), 1.0)
+    return a, b, e, f, a + t * gx, b + t * gy
+
+
+@numba.njit(cache=True)
+def lane_rows(lv, k, bits, g, noisy, keep, shift, ct, st, same, centre, size_y, n_views, lane_class, same_subtype,
+              opposing_subtype, edge_subtype):
+    """The lane reports of ``clip_lanes``' segments ``g`` (kept ones only when ``noisy``: shifted sideways by
+    ``shift`` along the segment's normal and turned by the angle of cos ``ct``, sin ``st`` about the point nearest
+    the car), ends ordered by ``_order_ends``; all fields but the yaw, whose direction (gx, gy) it returns; and the
+    count per view."""
+    K = len(lv)
+    M = 0
     for i in range(K):
-        a, b, e, f = sx[i], sy[i], tx[i], ty[i]
-        gap = math.hypot(e, f) - math.hypot(a, b)
-        tie = abs(gap) <= 1e-6
-        if gap < -1e-6 or (tie and e < a - 1e-6) or (tie and abs(e - a) <= 1e-6 and f < b):
-            a, b, e, f = e, f, a, b
-        gx, gy = e - a, f - b
-        t = min(max(-(a * gx + b * gy) / g2[i], 0.0), 1.0)
-        out[0, i], out[1, i], out[2, i], out[3, i] = a, b, e, f
-        out[4, i], out[5, i] = a + t * gx, b + t * gy
-    return out
+        if not noisy or keep[i]:
+            M += 1
+    rows = np.zeros(M, _DETECTION)
+    gxo, gyo = np.empty(M), np.empty(M)
+    seen = np.zeros(n_views, np.int64)
+    r = 0
+    for i in range(K):
+        if noisy and not keep[i]:
+            continue
+        sx, sy, tx, ty, nx, ny, g2 = g[0, i], g[1, i], g[2, i], g[3, i], g[4, i], g[5, i], g[6, i]
+        if noisy:
+            gx, gy = tx - sx, ty - sy
+            inv = 1.0 / math.sqrt(g2)
+            px, py = -gy * inv * shift[i], gx * inv * shift[i]
+            c, s = ct[i], st[i]
+            rx, ry = sx - nx, sy - ny
+            sx, sy = nx + px + c * rx - s * ry, ny + py + s * rx + c * ry
+            rx, ry = tx - nx, ty - ny
+            tx, ty = nx + px + c * rx - s * ry, ny + py + s * rx + c * ry
+            gx, gy = tx - sx, ty - sy
+            g2 = max(gx * gx + gy * gy, _EPS)
+        a, b, e, f, qx, qy = _order_ends(sx, sy, tx, ty, g2)
+        gxo[r], gyo[r] = e - a, f - b
+        w = rows[r]
+        w.class_id = lane_class
+        w.x, w.y = qx, qy
+        w.line_start_x, w.line_start_y, w.line_end_x, w.line_end_y = a, b, e, f
+        w.size_x = math.sqrt(g2)
+        w.size_y = size_y[k[i]]
+        w.subtype = (same_subtype if same[i] else opposing_subtype) if centre[k[i]] else edge_subtype
+        w.sighting = bits[i]
+        w.true_id = -2 - k[i]
+        w.true_class = lane_class
+        seen[lv[i]] += 1
+        r += 1
+    return rows, gxo, gyo, seen
 
 
 # -- records (DETECTION_DTYPE rows written field by field; ``rows`` come zeroed) -------------------------------------
@@ -303,7 +347,16 @@ def warm_up() -> None:
                   z + 1, z, z, z + 1, z, *occ, hides, 1, False, False, 1, 0, 1.0, np.ones(8), 1.0, 0.0, 1.0,
                   np.zeros(1, np.bool_))
     clip_lanes(np.zeros((1, 4)), z + 1, z, z, z + 1, z, 1.0, 0.0)
-    order_lane_ends(z, z, z, z, z + 1)
+    rows = np.zeros(1, _DETECTION)
+    self_rows(rows, np.zeros((1, 8), np.float32), z, z, z, z, z + 1, z, z, z, np.zeros((4, 1)), True, 1.0, 1.0, 1.0,
+              1.0, z + 1, z + 1, np.zeros(1, np.bool_), np.zeros(1, np.bool_), 0)
+    rows, order, offsets = sort_reports(rows, zi, np.zeros(1, np.uint32), 1, 0)
+    sighting_bits(rows, np.zeros(1, np.float32), offsets, np.ones(256), 1.0, 1, 2, 3, 1, 2, 4)
+    f = np.ones(1, np.bool_)
+    for noisy, keep, e in ((True, f, z), (False, z, z)):
+        lane_rows(zi, zi, zi, np.ones((8, 2))[:, :1], noisy, keep, e if noisy else z, e + 1 if noisy else z, e, f,
+                  f, z + 1, 1, 0, 0, 0, 0)
 
 
-__all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "order_lane_ends", "warm_up"]
+__all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "self_rows", "sort_reports", "sighting_bits",
+           "warm_up"]

@@ -162,6 +162,7 @@ class DrivingPerceiver:
                            self.occ_kind, self.occ_obj)
         self._nearby2 = params.miss.nearby_distance ** 2
         self._no_self_noise = np.zeros((4, n))
+        self._no_lane_noise = np.zeros(0)
         self._lane_len2 = np.maximum((lanes[:, 2] - lanes[:, 0]) ** 2 + (lanes[:, 3] - lanes[:, 1]) ** 2, _EPS)
 
     # ------------------------------------------------------------------------------------------------------------
@@ -376,53 +377,32 @@ class DrivingPerceiver:
             return (np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.intp)), np.zeros(V, int)
         R = p.classes[ObjectClass.LANE].max_range
         lv, k, bits, g = kernels.clip_lanes(self.lanes, self._lane_len2, ox, oy, c, s, R, p.lanes.min_length)
-        sx, sy, tx, ty, nx, ny, g2, dn = g
-        gx, gy = tx - sx, ty - sy
-        at = lv
+        dn = g[7]
+        keep = shift = ct = st_ = self._no_lane_noise
         if self.noisy:
             m, lp = p.noise_magnitude, p.lanes
             realistic = p.mode == "realistic"
             mult = (p.miss.range_offset + p.miss.range_slope * (dn / p.miss.range_reference) ** 2 if realistic
-                    else np.ones(len(at)))
-            u = rng.random((3, len(at)))
-            keep = (u[0] >= p.rho * self.class_scale[_LANE] * mult).nonzero()[0]
+                    else np.ones(len(lv)))
+            u = rng.random((3, len(lv)))
+            keep = u[0] >= p.rho * self.class_scale[_LANE] * mult
             if lp.model == "uniform":
                 shift = (u[1] - 0.5) * m * lp.lateral_uniform * mult
                 turn = (u[2] - 0.5) * m * lp.angle_uniform * mult
             else:
-                g = rng.standard_normal((2, len(at)))
-                shift = g[0] * m * (lp.lateral_base + lp.lateral_per_m2 * dn * dn)
-                turn = g[1] * m * lp.angle_std
-            inv = 1.0 / np.sqrt(g2)
-            px, py = -gy * inv * shift, gx * inv * shift                   # sideways, along the segment's normal
-            ct, st_ = np.cos(turn), np.sin(turn)
-            out = []
-            for qx, qy in ((sx, sy), (tx, ty)):                               # turned about the nearest point
-                rx, ry = qx - nx, qy - ny
-                out += [nx + px + ct * rx - st_ * ry, ny + py + st_ * rx + ct * ry]
-            sx, sy, tx, ty = (a[keep] for a in out)
-            lv, k, bits = lv[keep], k[keep], bits[keep]
-            gx, gy = tx - sx, ty - sy
-            g2 = np.maximum(gx * gx + gy * gy, _EPS)
+                n2 = rng.standard_normal((2, len(lv)))
+                shift = n2[0] * m * (lp.lateral_base + lp.lateral_per_m2 * dn * dn)
+                turn = n2[1] * m * lp.angle_std
+            ct, st_ = np.cos(turn), np.sin(turn)           # turned about the nearest point, shifted along the normal
         # Endpoint order by a rule of the observer's frame alone: nearer end first; equally far ends (both
         # clipped at the range) rear end first, which a mirror image keeps; then the right end first. Never the map's
         # direction of the line.
-        sx, sy, tx, ty, px, py = kernels.order_lane_ends(sx, sy, tx, ty, g2)
-        gx, gy = tx - sx, ty - sy
-        rows = np.zeros(len(lv), DETECTION_DTYPE)
-        rows["class_id"] = _LANE
-        rows["x"], rows["y"] = px, py
-        rows["line_start_x"], rows["line_start_y"], rows["line_end_x"], rows["line_end_y"] = sx, sy, tx, ty
-        rows["yaw"] = (np.arctan2(gy, gx) + math.pi / 2) % math.pi - math.pi / 2     # a painted line has no arrow
-        rows["size_x"] = np.sqrt(g2)
-        rows["size_y"] = self.lane_size_y[k]
-        centre = self.lane_kind[k] == LANE_CENTRE
         same = np.cos(self.lane_heading[k] - oyaw[lv]) >= 0
-        rows["subtype"] = np.where(centre, np.where(same, _SAME, _OPPOSING), _EDGE)
-        rows["sighting"] = bits
-        rows["true_id"] = -2 - k
-        rows["true_class"] = _LANE
-        return (rows, lv), np.bincount(lv, minlength=V)
+        rows, gx, gy, lanes_seen = kernels.lane_rows(lv, k, bits, g, self.noisy, keep, shift, ct, st_, same,
+                                                     self.lane_kind == LANE_CENTRE, self.lane_size_y, V, _LANE, _SAME,
+                                                     _OPPOSING, _EDGE)
+        rows["yaw"] = (np.arctan2(gy, gx) + math.pi / 2) % math.pi - math.pi / 2     # a painted line has no arrow
+        return (rows, lv[keep] if self.noisy else lv), lanes_seen
 
     # -- the observer itself -------------------------------------------------------------------------------------------
     def _self_rows(self, st: DrivingState, ox, oy, c, s, rng):
