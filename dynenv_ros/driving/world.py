@@ -62,6 +62,7 @@ class DrivingWorld:
         rng = self.rng
         self._tick_seconds = c.rates.tick_seconds
         self._period_seconds = c.period_seconds
+        self._vision_offsets = tuple(enumerate(c.rates.vision_tick_offsets()))   # fixed per config
         self._episode_ticks = c.episode_ticks
         self.physics = PhysicsWorld(self._tick_seconds)
         space = self.physics.space
@@ -275,7 +276,7 @@ class DrivingWorld:
             car.apply(action, seconds)
         space_step, dt = self.physics.space.step, self._tick_seconds
         done = 0
-        for frame, boundary in enumerate(self.config.rates.vision_tick_offsets()):
+        for frame, boundary in self._vision_offsets:
             for _ in range(boundary - done):   # tick by tick, so a contact's event carries its own tick
                 self.tick += 1
                 space_step(dt)

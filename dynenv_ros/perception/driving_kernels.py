@@ -255,6 +255,32 @@ def lane_rows(lv, k, bits, g, noisy, keep, shift, ct, st, same, centre, size_y, 
     return rows, gxo, gyo, seen
 
 
+@numba.njit(cache=True)
+def pair_rows(kept, reported, true_class, xk, yk, size_factor, yaw_noise, v, j, bits, hx, hy, rr, yaw, oyaw, team,
+              n_cars, car):
+    """The reports of the kept (view, object) pairs: class as reported, position, size (× the size error), relative
+    heading with its error and team relation (cars), sighting bits, the true object and class."""
+    rows = np.zeros(len(kept), _DETECTION)
+    for r in range(len(kept)):
+        i = kept[r]
+        jj, vv = j[i], v[i]
+        w = rows[r]
+        w.class_id = reported[i]
+        w.x, w.y = xk[i], yk[i]
+        f = size_factor[i]
+        w.size_x = 2 * (hx[jj] + rr[jj]) * f
+        w.size_y = 2 * (hy[jj] + rr[jj]) * f
+        if true_class[i] == car:
+            w.yaw = (yaw[jj] - oyaw[vv] + yaw_noise[i] + math.pi) % (2 * math.pi) - math.pi
+            w.team = team[min(jj, n_cars - 1)] * team[vv]
+        else:
+            w.yaw = np.nan
+        w.sighting = bits[i]
+        w.true_id = jj
+        w.true_class = true_class[i]
+    return rows
+
+
 # -- records (DETECTION_DTYPE rows written field by field; ``rows`` come zeroed) -------------------------------------
 @numba.njit(cache=True)
 def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy, m, speed_std, yaw_rate_std,
@@ -347,6 +373,8 @@ def warm_up() -> None:
                   z + 1, z, z, z + 1, z, *occ, hides, 1, False, False, 1, 0, 1.0, np.ones(8), 1.0, 0.0, 1.0,
                   np.zeros(1, np.bool_))
     clip_lanes(np.zeros((1, 4)), z + 1, z, z, z + 1, z, 1.0, 0.0)
+    u8 = np.zeros(1, np.uint8)
+    pair_rows(zi, u8, u8, z, z, z + 1, z, zi, zi, zi, z, z, z, z, z, np.zeros(1, np.int8), 1, 1)
     rows = np.zeros(1, _DETECTION)
     self_rows(rows, np.zeros((1, 8), np.float32), z, z, z, z, z + 1, z, z, z, np.zeros((4, 1)), True, 1.0, 1.0, 1.0,
               1.0, z + 1, z + 1, np.zeros(1, np.bool_), np.zeros(1, np.bool_), 0)
@@ -358,5 +386,5 @@ def warm_up() -> None:
                   f, z + 1, 1, 0, 0, 0, 0)
 
 
-__all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "self_rows", "sort_reports", "sighting_bits",
+__all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "pair_rows", "self_rows", "sort_reports", "sighting_bits",
            "warm_up"]

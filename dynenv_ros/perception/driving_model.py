@@ -214,19 +214,9 @@ class DrivingPerceiver:
         seen = np.zeros(n * N, bool)
         seen[at[keep & ~confused]] = True
         kept = keep.nonzero()[0]
-        v, j, ck, reported, confused = v[kept], j[kept], ck[kept], reported[kept], confused[kept]
-        rows = np.zeros(len(kept), DETECTION_DTYPE)
-        rows["class_id"] = reported
-        rows["x"], rows["y"] = xk[kept], yk[kept]
-        f = size_factor[kept]
-        rows["size_x"] = 2 * (self.hx[j] + self.rr[j]) * f
-        rows["size_y"] = 2 * (self.hy[j] + self.rr[j]) * f
-        is_car = ck == _CAR
-        rows["yaw"] = np.where(is_car, _wrap(YAW[j] - oyaw[v] + yaw_noise[kept]), np.nan)
-        rows["team"] = np.where(is_car, self.team[np.minimum(j, n - 1)] * self.team[v], 0)
-        rows["sighting"] = bits[kept]
-        rows["true_id"] = j
-        rows["true_class"] = ck
+        rows = kernels.pair_rows(kept, reported, ck, xk, yk, size_factor, yaw_noise, v, j, bits, self.hx, self.hy,
+                                 self.rr, YAW, oyaw, self.team, n, _CAR)
+        v, confused = v[kept], confused[kept]
         parts = [(rows, v)]
         if self.noisy:
             if confused.any():       # re-dressed as a real report of the class it is given as
