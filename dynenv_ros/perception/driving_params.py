@@ -17,7 +17,7 @@ import yaml
 
 from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.core.settings import check_numbers
-from dynenv_ros.perception.params import preset_dir
+from dynenv_ros.perception.params import parse_class, parse_section, preset_dir
 
 MODES = ("realistic", "random", "none")
 CONFIDENCE_MODELS = ("calibrated", "none")
@@ -196,29 +196,10 @@ class DrivingPerceptionParams:
         return self.miss.base * self.noise_magnitude
 
 
-def _class(name: Any, where: str, allowed: Mapping[str, ObjectClass] = CLASS_NAMES) -> ObjectClass:
-    if name not in allowed:
-        raise ValueError(f"{where}: unknown class {name!r}; classes: {', '.join(allowed)}")
-    return allowed[name]
-
-
-def _section(cls: type, values: Any, where: str) -> Any:
-    if not isinstance(values, Mapping):
-        raise ValueError(f"{where} must be a mapping, got {values!r}")
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ValueError(f"{where}: unknown setting(s) {unknown}; known: {sorted(known)}")
-    try:
-        return cls(**values)
-    except TypeError as exc:
-        raise ValueError(f"{where}: {exc}") from None
-
-
 def _class_list(values: Any, where: str, allowed: Mapping[str, ObjectClass] = CLASS_NAMES) -> tuple:
     if not isinstance(values, (list, tuple)):
         raise ValueError(f"{where} must be a list of class names, got {values!r}")
-    return tuple(_class(c, where, allowed) for c in values)
+    return tuple(parse_class(c, where, allowed) for c in values)
 
 
 def driving_params_from_mapping(values: Mapping[str, Any]) -> DrivingPerceptionParams:
@@ -242,31 +223,32 @@ def driving_params_from_mapping(values: Mapping[str, Any]) -> DrivingPerceptionP
     if "classes" in values:
         if not isinstance(values["classes"], Mapping):
             raise ValueError("classes must map class names to their settings")
-        kwargs["classes"] = {_class(name, "classes"): _section(DrivingClassParams, v, f"classes.{name}")
+        kwargs["classes"] = {parse_class(name, "classes", CLASS_NAMES):
+                             parse_section(DrivingClassParams, v, f"classes.{name}")
                              for name, v in values["classes"].items()}
     for key, cls in (("miss", DrivingMissParams), ("position", DrivingPositionParams), ("lanes", DrivingLaneParams),
                      ("self_state", DrivingSelfParams)):
         if key in values:
-            kwargs[key] = _section(cls, values[key], key)
+            kwargs[key] = parse_section(cls, values[key], key)
     if "occlusion" in values:
         occ = dict(values["occlusion"] or {})
         for key in ("cars_hide", "obstacles_hide"):
             if key in occ:
                 occ[key] = _class_list(occ[key], f"occlusion.{key}", OCCLUDABLE)
-        kwargs["occlusion"] = _section(DrivingOcclusionParams, occ, "occlusion")
+        kwargs["occlusion"] = parse_section(DrivingOcclusionParams, occ, "occlusion")
     if "false_positives" in values:
         fp = dict(values["false_positives"] or {})
         if "classes" in fp:
             fp["classes"] = _class_list(fp["classes"], "false_positives.classes")
-        kwargs["false_positives"] = _section(DrivingFalsePositiveParams, fp, "false_positives")
+        kwargs["false_positives"] = parse_section(DrivingFalsePositiveParams, fp, "false_positives")
     if "confusions" in values:
         rules = []
         for i, rule in enumerate(values["confusions"] or ()):
             where = f"confusions[{i}]"
             rule = dict(rule)
             for key in ("source", "target"):
-                rule[key] = _class(rule.get(key), f"{where}.{key}")
-            rules.append(_section(DrivingConfusion, rule, where))
+                rule[key] = parse_class(rule.get(key), f"{where}.{key}", CLASS_NAMES)
+            rules.append(parse_section(DrivingConfusion, rule, where))
         kwargs["confusions"] = tuple(rules)
     return DrivingPerceptionParams(**kwargs)
 

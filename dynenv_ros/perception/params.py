@@ -184,13 +184,16 @@ def load_yaml(path: str | Path, **overrides: Any) -> PerceptionParams:
         raise ValueError(f"{path}: {exc}") from None
 
 
-def _class(name: Any, where: str) -> ObjectClass:
-    if name not in CLASS_NAMES:
-        raise ValueError(f"{where}: unknown class {name!r}; classes: {', '.join(CLASS_NAMES)}")
-    return CLASS_NAMES[name]
+def parse_class(name: Any, where: str, allowed: Mapping[str, ObjectClass] = CLASS_NAMES) -> ObjectClass:
+    """The class a settings file names (``allowed``: name → class, soccer's by default); else ValueError naming
+    ``where`` and the known names. Shared with the driving perception's settings."""
+    if name not in allowed:
+        raise ValueError(f"{where}: unknown class {name!r}; classes: {', '.join(allowed)}")
+    return allowed[name]
 
 
-def _section(cls: type, values: Any, where: str) -> Any:
+def parse_section(cls: type, values: Any, where: str) -> Any:
+    """A settings dataclass from a mapping; unknown keys or a bad value raise ValueError naming ``where``."""
     if not isinstance(values, Mapping):
         raise ValueError(f"{where} must be a mapping, got {values!r}")
     known = {f.name for f in fields(cls)}
@@ -222,23 +225,23 @@ def from_mapping(values: Mapping[str, Any]) -> PerceptionParams:
     if "classes" in values:
         if not isinstance(values["classes"], Mapping):
             raise ValueError("classes must map class names to their settings")
-        kwargs["classes"] = {_class(name, "classes"): _section(ClassParams, v, f"classes.{name}")
+        kwargs["classes"] = {parse_class(name, "classes"): parse_section(ClassParams, v, f"classes.{name}")
                              for name, v in values["classes"].items()}
     for key, cls in (("miss", MissParams), ("position", PositionParams), ("occlusion", OcclusionParams)):
         if key in values:
-            kwargs[key] = _section(cls, values[key], key)
+            kwargs[key] = parse_section(cls, values[key], key)
     if "false_positives" in values:
         fp = dict(values["false_positives"] or {})
         if "classes" in fp:
-            fp["classes"] = tuple(_class(c, "false_positives.classes") for c in fp["classes"])
-        kwargs["false_positives"] = _section(FalsePositiveParams, fp, "false_positives")
+            fp["classes"] = tuple(parse_class(c, "false_positives.classes") for c in fp["classes"])
+        kwargs["false_positives"] = parse_section(FalsePositiveParams, fp, "false_positives")
     if "confusions" in values:
         rules = []
         for i, rule in enumerate(values["confusions"] or ()):
             where = f"confusions[{i}]"
             rule = dict(rule)
             for key in ("source", "target"):
-                rule[key] = _class(rule.get(key), f"{where}.{key}")
-            rules.append(_section(Confusion, rule, where))
+                rule[key] = parse_class(rule.get(key), f"{where}.{key}")
+            rules.append(parse_section(Confusion, rule, where))
         kwargs["confusions"] = tuple(rules)
     return PerceptionParams(**kwargs)
