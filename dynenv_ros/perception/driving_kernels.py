@@ -37,6 +37,15 @@ def _segment_hits_box(ox, oy, px, py, cx, cy, ux, uy, a, b):
 
 
 @numba.njit(cache=True)
+def _three_lines(b0, b1, b2, x0, y0, p0x, p0y, p1x, p1y, p2x, p2y, cx, cy, ux, uy, a, b):
+    """The three sight lines from (x0, y0) already blocked, or-ed with whether this box blocks them."""
+    b0 = b0 or _segment_hits_box(x0, y0, p0x, p0y, cx, cy, ux, uy, a, b)
+    b1 = b1 or _segment_hits_box(x0, y0, p1x, p1y, cx, cy, ux, uy, a, b)
+    b2 = b2 or _segment_hits_box(x0, y0, p2x, p2y, cx, cy, ux, uy, a, b)
+    return b0, b1, b2
+
+
+@numba.njit(cache=True)
 def _sight_lines_blocked(vv, jj, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, d, ox, oy, cars_present,
                          occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B):
     """How many of one target's three sight lines (centre, both outline edges) an occluder blocks (0..3)."""
@@ -52,9 +61,7 @@ def _sight_lines_blocked(vv, jj, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, 
     if hides[0, tcls]:
         for o in range(B):
             cx, cy, cux, cuy, a, b = occ_x[o], occ_y[o], occ_ux[o], occ_uy[o], occ_a[o], occ_b[o]
-            b0 = b0 or _segment_hits_box(x0, y0, p0x, p0y, cx, cy, cux, cuy, a, b)
-            b1 = b1 or _segment_hits_box(x0, y0, p1x, p1y, cx, cy, cux, cuy, a, b)
-            b2 = b2 or _segment_hits_box(x0, y0, p2x, p2y, cx, cy, cux, cuy, a, b)
+            b0, b1, b2 = _three_lines(b0, b1, b2, x0, y0, p0x, p0y, p1x, p1y, p2x, p2y, cx, cy, cux, cuy, a, b)
             if b0 and b1 and b2:
                 return 3
     if hides[1, tcls] or hides[2, tcls]:
@@ -72,9 +79,7 @@ def _sight_lines_blocked(vv, jj, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, 
             if not (along > -R and along < d + R and across < R + w):
                 continue
             cx, cy, cux, cuy, a, b = occ_x[o], occ_y[o], occ_ux[o], occ_uy[o], occ_a[o], occ_b[o]
-            b0 = b0 or _segment_hits_box(x0, y0, p0x, p0y, cx, cy, cux, cuy, a, b)
-            b1 = b1 or _segment_hits_box(x0, y0, p1x, p1y, cx, cy, cux, cuy, a, b)
-            b2 = b2 or _segment_hits_box(x0, y0, p2x, p2y, cx, cy, cux, cuy, a, b)
+            b0, b1, b2 = _three_lines(b0, b1, b2, x0, y0, p0x, p0y, p1x, p1y, p2x, p2y, cx, cy, cux, cuy, a, b)
             if b0 and b1 and b2:
                 return 3
         _ = n_cars
