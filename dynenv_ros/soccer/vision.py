@@ -77,10 +77,11 @@ class SoccerVision:
         # (x, y, yaw, fallen, penalized, head yaw, kicking), the ball as a row of the same shape, then the game.
         world = self.world
         values = self._values
-        for r in world.robots:
-            x, y = r.body.position
+        # Within SoccerWorld.step the world has just read every position (``instant_positions``); else read them.
+        positions, ball = world.instant_positions or ([r.body.position for r in world.robots], world.ball.position)
+        for r, (x, y) in zip(world.robots, positions):
             values += (x, y, r.body.angle, r.rules.fallen, r.rules.penalized, r.head_yaw, r.kick is not None)
-        x, y = world.ball.position
+        x, y = ball
         state = world.state
         # What the GameController broadcasts: ball owner (absolute team), seconds of it left, game seconds left.
         values += (x, y, math.nan, 0, 0, 0, 0, state.ball_owner,

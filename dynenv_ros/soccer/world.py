@@ -59,6 +59,7 @@ class SoccerWorld:
         self.physics = PhysicsWorld(self._tick_seconds)
         space = self.physics.space
         self.tick = 0
+        self.instant_positions: tuple[list, Any] | None = None   # see _approach_rewards
         self.period = 0
         self.state = GameState(kickoff_team=kickoff_team)
         self.ledger = RewardLedger(c.n_robots)
@@ -229,8 +230,11 @@ class SoccerWorld:
             frame = frame_of.get(boundary)
             if frame is not None:
                 self._vision_instant((frame + 1) / len(vision))
-                if on_frame is not None:
-                    on_frame(frame)
+                try:
+                    if on_frame is not None:
+                        on_frame(frame)
+                finally:
+                    self.instant_positions = None
         self._flush_progress()
         self.period += 1
         truncated = self.period >= self.config.episode_periods
@@ -328,12 +332,16 @@ class SoccerWorld:
     def _approach_rewards(self) -> None:
         """The robot of each team closest to the ball is paid for closing in on it (DynEnv §6.1)."""
         weight = self.config.rewards.approach_per_m
-        bx, by = self.ball.position
+        # Every body's position once (a pymunk read costs µs), kept for this instant's on_frame callback: the
+        # last rule of the instant has acted, and nothing moves before the callback returns (then cleared).
+        positions = [robot.body.position for robot in self.robots]
+        ball = self.ball.position
+        self.instant_positions = (positions, ball)
+        bx, by = ball
         best: dict[int, tuple[float, Robot]] = {}
-        for robot in self.robots:
+        for robot, (x, y) in zip(self.robots, positions):
             if robot.rules.penalized:
                 continue
-            x, y = robot.body.position
             d = math.hypot(x - bx, y - by)
             if robot.team not in best or d < best[robot.team][0]:
                 best[robot.team] = (d, robot)
