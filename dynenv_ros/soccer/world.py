@@ -321,9 +321,11 @@ class SoccerWorld:
 
     def _check_illegal_defenders(self) -> None:
         limit = self.config.penalties.max_in_own_penalty_area
+        inside_any = [r for r in self.robots if r.rules.entered_own_area_tick is not None and not r.rules.penalized]
+        if len(inside_any) <= limit:                   # no team can have more (the usual case: one pass)
+            return
         for team in (TEAM_A, TEAM_B):
-            inside = [r for r in self.robots
-                      if r.team == team and not r.rules.penalized and r.rules.entered_own_area_tick is not None]
+            inside = [r for r in inside_any if r.team == team]
             if len(inside) > limit:
                 inside.sort(key=lambda r: (r.rules.entered_own_area_tick, r.slot))
                 for robot in inside[limit:]:
