@@ -239,7 +239,11 @@ def test_every_parameter_preset_starts_the_simulator(make_node, preset):
     import yaml
     values = yaml.safe_load((REPO / "config" / preset).read_text())["/**"]["ros__parameters"]
     sim = make_node(SimNode, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
-    assert sim.config.players_per_team == values["players_per_team"] and sim.mode == values["mode"]
+    assert sim.scenario == values.get("scenario", "robocup") and sim.mode == values["mode"]
+    if sim.scenario == "robocup":
+        assert sim.config.players_per_team == values["players_per_team"]
+    else:
+        assert sim.config.n_cars == values["n_cars"]
 
 
 def test_whole_numbers_are_accepted_for_real_valued_parameters(make_node):

@@ -1,9 +1,11 @@
-"""The simulator node: the soccer world and each robot's vision pipeline on ROS 2 topics.
+"""The simulator node: a scenario's world (``scenario``: robocup soccer or urban driving) and each agent's vision
+pipeline on ROS 2 topics.
 
-Publishes per robot its detections at vision rate, the ground truth and ``/clock`` at vision rate, per-robot step
-feedback at motion rate, diagnostics and RViz markers; subscribes to each robot's actions. Stepped mode runs a
+Publishes per robot (car) its detections at vision rate, the ground truth and ``/clock`` at vision rate, per-robot
+step feedback at motion rate, diagnostics and RViz markers; subscribes to each robot's actions. Stepped mode runs a
 motion period as soon as every controlled robot has acted (or on ``/sim/step``); real-time mode is paced by a wall
-timer. All game logic is in ``envs/soccer_session.py``; this file only converts and publishes (docs/ros_graph.md).
+timer. All game logic is in the sessions (``envs/soccer_session.py``, ``envs/driving_session.py``); this file only
+converts and publishes (docs/ros_graph.md).
 """
 from __future__ import annotations
 
@@ -25,11 +27,14 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
-from dynenv_ros.envs.soccer_session import (MISSING_ACTION_RULES, PeriodOutput, SoccerSession, kickoff_team,
-                                            refusal_key)
+from dynenv_ros.driving.config import DrivingConfig, car_names
+from dynenv_ros.envs.driving_session import DrivingSession
+from dynenv_ros.envs.session import MISSING_ACTION_RULES, PeriodOutput, refusal_key
+from dynenv_ros.envs.soccer_session import SoccerSession, kickoff_team
+from dynenv_ros.perception.driving_params import load_driving_preset
 from dynenv_ros.perception.params import MODES, PRESETS, load_preset
 from dynenv_ros.ros import conversions as cv
-from dynenv_ros.ros import markers, topics
+from dynenv_ros.ros import driving_markers, markers, topics
 from dynenv_ros.ros.cdr import detection_array_cdr
 from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
@@ -46,7 +51,15 @@ from dynenv_ros.soccer.config import SoccerConfig, robot_names
 ACTION_HANDOVER_DEPTH = 10
 
 MODES_OF_RUNNING = ("stepped", "realtime")
-RESET_OPTIONS = ("kickoff_team",)
+SCENARIOS = ("robocup", "driving")
+RESET_OPTIONS = ("kickoff_team",)                    # robocup; driving takes none
+# Parameters only one scenario has: giving one to the other scenario is refused (it would change nothing).
+SCENARIO_PARAMETERS = {"robocup": ("players_per_team", "falls_enabled"),
+                       "driving": ("n_cars", "action_mode", "teams")}
+# Defaults that differ: rates (physics Hz, ticks per vision frame, ticks per motion period), episode seconds, the
+# agent whose detections the markers show.
+SCENARIO_DEFAULTS = {"robocup": dict(rates=(100.0, 10, 50), episode_seconds=120.0, marker_robot="team_a_0"),
+                     "driving": dict(rates=(100.0, 10, 10), episode_seconds=60.0, marker_robot="car_0")}
 MAX_STEP_PERIODS = 100   # /sim/step: at most this many motion periods per call, so services stay answered
 MAX_OPTIONS_CHARS = 4096  # /sim/reset: options_yaml longer than this is refused before parsing
 
@@ -56,7 +69,25 @@ class SimNode(Node):
         """``node_options`` go to rclpy's Node (context, parameter_overrides, ...) for in-process tests."""
         super().__init__("sim_node", **node_options)
         fixed = dict(read_only=True)   # these shape the world: set them at start (YAML preset, --ros-args -p)
-        players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team.", **fixed)
+        self.scenario = declare_str(self, "scenario", "robocup", "Which world: robocup (soccer) or driving (urban "
+                                    "driving); read-only.", choices=SCENARIOS, **fixed)
+        driving = self.scenario == "driving"
+        other = SCENARIOS[1 - SCENARIOS.index(self.scenario)]
+        given = sorted(set(SCENARIO_PARAMETERS[other]) & set(getattr(self, "_parameter_overrides", {}) or {}))
+        if given:
+            raise ParameterException(f"{', '.join(given)}: a parameter of scenario '{other}', not of "
+                                     f"'{self.scenario}' (it uses {', '.join(SCENARIO_PARAMETERS[self.scenario])})",
+                                     given)
+        defaults = SCENARIO_DEFAULTS[self.scenario]
+        if driving:
+            n_cars = declare_int(self, "n_cars", 2, 1, 10, "Cars (driving).", **fixed)
+            action_mode = declare_str(self, "action_mode", "discrete", "Driving actions: discrete (the original's "
+                                      "3x3 commands) or continuous (throttle, brake, steering).",
+                                      choices=("discrete", "continuous"), **fixed)
+            teams = declare_int(self, "teams", 1, 1, 2, "Driving teams: 1 (every car shares the bonus) or 2.",
+                                **fixed)
+        else:
+            players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team.", **fixed)
         self.mode = declare_str(self, "mode", "stepped", "stepped: a period runs when every controlled robot has "
                                 "acted (or on /sim/step); realtime: paced by the wall clock.", choices=MODES_OF_RUNNING,
                                 **fixed)
@@ -71,17 +102,23 @@ class SimNode(Node):
                                  choices=("",) + MODES, **fixed)
         magnitude = declare_float(self, "noise_magnitude", -1.0, -1.0, 5.0,
                                   "Noise magnitude 0..5; -1: the preset's.", **fixed)
-        physics_hz = declare_float(self, "physics_hz", 100.0, 10.0, 1000.0, "Physics ticks per second.", **fixed)
-        vision_ticks = declare_int(self, "vision_period_ticks", 10, 1, 1000, "Ticks per vision frame.", **fixed)
-        motion_ticks = declare_int(self, "motion_period_ticks", 50, 1, 10000, "Ticks per motion period.", **fixed)
-        episode_s = declare_float(self, "episode_seconds", 120.0, 0.5, 86400.0, "Episode length (s).", **fixed)
-        falls = declare_bool(self, "falls_enabled", True, "Random and contact falls.", **fixed)
+        hz, vision_default, motion_default = defaults["rates"]
+        physics_hz = declare_float(self, "physics_hz", hz, 10.0, 1000.0, "Physics ticks per second.", **fixed)
+        vision_ticks = declare_int(self, "vision_period_ticks", vision_default, 1, 1000, "Ticks per vision frame.",
+                                   **fixed)
+        motion_ticks = declare_int(self, "motion_period_ticks", motion_default, 1, 10000,
+                                   "Ticks per motion period.", **fixed)
+        episode_s = declare_float(self, "episode_seconds", defaults["episode_seconds"], 0.5, 86400.0,
+                                  "Episode length (s).", **fixed)
+        if not driving:
+            falls = declare_bool(self, "falls_enabled", True, "Random and contact falls.", **fixed)
         seed = declare_int(self, "seed", -1, -1, 2**62, "World seed; -1 draws one.", **fixed)
         controlled = declare_str_list(self, "controlled_robots", [], "Robots whose actions a period waits for "
                                       "(names like team_a_0); empty: all.", **fixed)
         self.auto_reset = declare_bool(self, "auto_reset", True, "Start a new episode when one ends.")
         self.publish_markers = declare_bool(self, "publish_markers", True, "RViz/Foxglove markers.")
-        self.marker_robot = declare_str(self, "marker_robot", "team_a_0", "Robot whose detections are drawn.")
+        self.marker_robot = declare_str(self, "marker_robot", defaults["marker_robot"],
+                                        "Robot (car) whose detections are drawn.")
         diag_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.", **fixed)
         self.wait_for_subscribers = declare_int(
             self, "wait_for_subscribers", 1, 0, 100, "Stepped mode: hold the first observation until every robot's "
@@ -96,29 +133,37 @@ class SimNode(Node):
         self.exit_when_finished = declare_bool(self, "exit_when_finished", False, "Exit (status 0) when an episode "
                                                "ends and auto_reset is off, after every subscriber has it.", **fixed)
         self.report_path = declare_str(self, "report_path", "", "Write a JSON summary here on exit.", **fixed)
+        rates = {"physics_hz": physics_hz, "vision_period_ticks": vision_ticks, "motion_period_ticks": motion_ticks}
+        overrides: dict[str, Any] = {}
+        if noise_mode:
+            overrides["mode"] = noise_mode
+        if magnitude >= 0:
+            overrides["noise_magnitude"] = magnitude
         try:
-            config = SoccerConfig.from_mapping({
-                "players_per_team": players, "episode_seconds": episode_s, "falls": {"enabled": falls},
-                "rates": {"physics_hz": physics_hz, "vision_period_ticks": vision_ticks,
-                          "motion_period_ticks": motion_ticks}})
-            overrides: dict[str, Any] = {}
-            if noise_mode:
-                overrides["mode"] = noise_mode
-            if magnitude >= 0:
-                overrides["noise_magnitude"] = magnitude
-            params = load_preset(preset, **overrides)
+            if driving:
+                config: Any = DrivingConfig.from_mapping({"n_cars": n_cars, "action_mode": action_mode,
+                                                          "teams": teams, "episode_seconds": episode_s,
+                                                          "rates": rates})
+                params: Any = load_driving_preset(preset, **overrides)
+            else:
+                config = SoccerConfig.from_mapping({
+                    "players_per_team": players, "episode_seconds": episode_s, "falls": {"enabled": falls},
+                    "rates": rates})
+                params = load_preset(preset, **overrides)
         except ValueError as error:
-            raise ParameterException(str(error), ["players_per_team"]) from None
+            raise ParameterException(str(error), ["n_cars" if driving else "players_per_team"]) from None
         self.config = config
-        names = robot_names(players)
+        names = car_names(n_cars) if driving else robot_names(players)
         unknown = [c for c in controlled if c not in names]
         if unknown:
             raise ParameterException(f"unknown robots {unknown}; robots are {names}", ["controlled_robots"])
         if self.marker_robot and self.marker_robot not in names:
             raise ParameterException(f"'{self.marker_robot}' is not one of {names}", ["marker_robot"])
-        self.session = SoccerSession(config, params, seed=None if seed < 0 else seed,
-                                     missing_action=self.missing_action,
-                                     controlled=[names.index(c) for c in controlled] if controlled else None)
+        session_type: Any = DrivingSession if driving else SoccerSession
+        self.session = session_type(config, params, seed=None if seed < 0 else seed,
+                                    missing_action=self.missing_action,
+                                    controlled=[names.index(c) for c in controlled] if controlled else None)
+        self.map = self.session.world.map if driving else None
         self.names = names
         self._seed = None if seed < 0 else seed
         self.session.missed_for = names.index(self.marker_robot) if self.marker_robot else None
@@ -153,7 +198,8 @@ class SimNode(Node):
         # TF (ros/tf.py): the robots and their heads per frame; the team frames once, latched.
         self.tf_pub = self.create_publisher(TFMessage, local(TF_TOPIC), tf_qos())
         self.tf_static_pub = self.create_publisher(TFMessage, local(TF_STATIC_TOPIC), tf_static_qos())
-        self.tf_static_pub.publish(static_transforms(cv.sim_time(0, config.rates.tick_seconds)))
+        if not driving:               # the team frames of soccer's localization outputs
+            self.tf_static_pub.publish(static_transforms(cv.sim_time(0, config.rates.tick_seconds)))
         self._last_tf_ns = -1
         self.truth_marker_pub = self.create_publisher(MarkerArray, local(topics.GROUND_TRUTH_MARKERS),
                                                       QoSProfile(depth=5))
@@ -182,10 +228,12 @@ class SimNode(Node):
             self.start_timer = self.create_timer(0.05, self._start_when_subscribed, clock=self.wall)
         else:
             self._start()
+        world = (f"driving, {n_cars} cars ({config.action_mode} actions)" if driving
+                 else f"{players}v{players}")
         self.get_logger().info(
-            f"{players}v{players} {self.mode} ({config.rates.vision_hz:g} Hz vision, {config.rates.motion_hz:g} Hz "
-            f"motion), perception '{preset}' mode {params.mode} magnitude {params.noise_magnitude:g}; robots "
-            f"{', '.join(names)}")
+            f"{world} {self.mode} ({config.rates.vision_hz:g} Hz vision, {config.rates.motion_hz:g} Hz "
+            f"motion), perception '{preset}' mode {params.mode} magnitude {params.noise_magnitude:g}; "
+            f"{'cars' if driving else 'robots'} {', '.join(names)}")
 
     # -- episodes --------------------------------------------------------------------------------------------------
     def _start(self) -> None:
@@ -222,7 +270,10 @@ class SimNode(Node):
         # back; WorldState.tick and game_time restart with each episode. One vision period separates episodes.
         if self.episodes_started:
             self._tick_offset += self.session.world.tick + self.config.rates.vision_period_ticks
-        self.session.reset(seed=seed, kickoff_team=kickoff)
+        if self.scenario == "driving":
+            self.session.reset(seed=seed)
+        else:
+            self.session.reset(seed=seed, kickoff_team=kickoff)
         self.episodes_started += 1
         self._buffer.clear()
         self._emit(self.session.initial())
@@ -239,9 +290,10 @@ class SimNode(Node):
             if not isinstance(options, dict):
                 raise ValueError(f"options_yaml must be a mapping such as {{kickoff_team: b}}, got "
                                  f"{type(options).__name__}")
-            unknown = sorted(set(options) - set(RESET_OPTIONS), key=repr)
+            known = RESET_OPTIONS if self.scenario == "robocup" else ()
+            unknown = sorted(set(options) - set(known), key=repr)
             if unknown:
-                raise ValueError(f"unknown reset option(s) {unknown}; known: {list(RESET_OPTIONS)}")
+                raise ValueError(f"unknown reset option(s) {unknown}; known: {list(known)}")
             kickoff = kickoff_team(options.get("kickoff_team", "a"))
             seed = checked_seed(int(request.seed)) if request.use_seed else None
         except (ValueError, yaml.YAMLError) as error:
@@ -290,14 +342,19 @@ class SimNode(Node):
         if msg.robot_id != robot:
             return "rejected_unknown_robot", (f"unknown_robot: robot_id {msg.robot_id} on "
                                               f"{topics.action(self.names[robot])} (expected {robot})")
-        reason = self.session.check(msg.robot_id, msg.episode_id, msg.motion_period, msg.walk, msg.turn, msg.kick,
-                                    float(msg.head_yaw_delta))
+        reason = self.session.check(msg.robot_id, msg.episode_id, msg.motion_period, *self._action_fields(msg))
         return (refusal_key(reason), f"{self.names[robot]}: {reason}") if reason else ("", "")
+
+    def _action_fields(self, msg: Action) -> tuple:
+        """The scenario's fields of an Action (the other scenario's are ignored, as Action.msg says)."""
+        if self.scenario == "driving":
+            return float(msg.throttle), float(msg.brake), float(msg.steering)
+        return msg.walk, msg.turn, msg.kick, float(msg.head_yaw_delta)
 
     def _receive_action(self, robot: int, msg: Action) -> None:
         """On this node's thread: an action that passed the screen; the period may have moved on since."""
-        accepted, reason = self.session.submit(msg.robot_id, msg.episode_id, msg.motion_period, msg.walk,
-                                               msg.turn, msg.kick, float(msg.head_yaw_delta))
+        accepted, reason = self.session.submit(msg.robot_id, msg.episode_id, msg.motion_period,
+                                               *self._action_fields(msg))
         if not accepted:
             self._count_refusals(Counter({refusal_key(reason): 1}), f"{self.names[robot]}: {reason}", counted=True)
             return
@@ -332,8 +389,9 @@ class SimNode(Node):
             self._emit(output)
         else:
             self._buffer.extend((output, k) for k in range(len(output.frames)))
+        logged = getattr(self.session, "logged_events", ("goal", "penalty"))
         for event in output.events:
-            if event.kind in ("goal", "penalty"):
+            if event.kind in logged:
                 who = self.names[event.robot] if event.robot is not None else f"team {'A' if event.team > 0 else 'B'}"
                 self.get_logger().info(f"{event.kind}: {who} {event.detail}")
 
@@ -401,10 +459,12 @@ class SimNode(Node):
         for i, fb in enumerate(output.feedback):
             self._publish(self.feedback_pubs[i], cv.step_feedback(
                 robot_id=i, episode_id=output.episode_id, motion_period=output.motion_period, rewards=fb.rewards,
-                terminated=output.terminated, truncated=output.truncated, seen_object_ids=fb.seen_object_ids,
-                landmarks_seen=fb.landmarks_seen, stamp=stamp))
+                terminated=output.terminated if fb.terminated is None else fb.terminated,
+                truncated=output.truncated if fb.truncated is None else fb.truncated,
+                seen_object_ids=fb.seen_object_ids, landmarks_seen=fb.landmarks_seen, stamp=stamp))
         if output.terminated or output.truncated:
-            self.episode_scores.append((self.session.world.state.score[1], self.session.world.state.score[-1]))
+            if self.scenario == "robocup":
+                self.episode_scores.append((self.session.world.state.score[1], self.session.world.state.score[-1]))
             if self.auto_reset and self.mode == "stepped":
                 self._reset(None, 1)
             elif not self.auto_reset and self.exit_when_finished:
@@ -432,11 +492,18 @@ class SimNode(Node):
                                 "feedback_per_robot": self.periods_run + self.episodes_started},
                   # what a lossless recorder must hold on each /<robot>/action (the main job checks it)
                   "accepted_actions": {n: self.session.accepted_per_robot[i] for i, n in enumerate(self.names)},
-                  "robots": self.names}
+                  "robots": self.names, "scenario": self.scenario}
+        if self.scenario == "driving":     # finished episodes, then the one running (if any period ran)
+            report["episodes"] = list(self.session.episodes)
+            if not self.session.finished and self.session.world.period > 0:
+                report["episodes"].append(self.session.summary())
         with open(self.report_path, "w") as handle:
             json.dump(report, handle, indent=2)
 
     def _publish_markers(self, frame, stamp) -> None:
+        if self.scenario == "driving":
+            self._publish_driving_markers(frame, stamp)
+            return
         self.truth_marker_pub.publish(markers.ground_truth_markers(frame.snapshot, self.config.field, stamp,
                                                                    include_field=True))
         if self.marker_robot:
@@ -446,6 +513,16 @@ class SimNode(Node):
             self.detection_marker_pub.publish(markers.detection_markers(
                 robot.detections, (me.x, me.y, me.yaw + me.head_yaw), stamp, missed=missed,
                 robot_name=self.marker_robot))
+
+    def _publish_driving_markers(self, frame, stamp) -> None:
+        self.truth_marker_pub.publish(driving_markers.ground_truth_markers(frame.snapshot, self.map, stamp,
+                                                                           include_map=True))
+        if self.marker_robot:
+            i = self.names.index(self.marker_robot)
+            me, car = frame.snapshot.objects[i], frame.robots[i]
+            missed = [] if car.missed is None else [tuple(p) for p in car.missed.tolist()]
+            self.detection_marker_pub.publish(driving_markers.detection_markers(
+                car.detections, (me.x, me.y, me.yaw), stamp, missed=missed, car_name=self.marker_robot))
 
     # -- parameters and diagnostics ----------------------------------------------------------------------------------
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
