@@ -207,3 +207,28 @@ def test_scenario_is_read_only(make_node, executor):
     sim, probe = _start(make_node, executor)
     refused = sim.set_parameters([Parameter("scenario", value="robocup")])[0]
     assert not refused.successful and "read-only" in refused.reason
+
+
+@pytest.mark.parametrize("action_mode", ["discrete", "continuous"])
+def test_scripted_drivers_drive_every_car_without_a_refusal(make_node, executor, action_mode):
+    from policy_node.scripted_driver import ScriptedDriverNode
+    sim = _sim(make_node, action_mode=action_mode, episode_seconds=4.0, auto_reset=False,
+               wait_for_ground_truth_subscribers=2)
+    driver = make_node(ScriptedDriverNode, parameter_overrides=[Parameter("n_cars", value=2),
+                                                                Parameter("action_mode", value=action_mode)])
+    executor.add_node(sim)
+    executor.add_node(driver)
+    probe = Probe(make_node, executor)
+    assert probe.spin(lambda: sim.session.finished, 30.0), dict(sim.session.counts)
+    counts = sim.session.counts
+    assert counts["accepted"] == 80 and counts["missing"] == 0
+    assert not any(k.startswith("rejected_") and v for k, v in counts.items()), dict(counts)
+    assert probe.spin(lambda: probe.periods_received(41))
+    start, end = probe.truth[0].objects[:2], probe.truth[-1].objects[:2]
+    assert all(math.hypot(b.x - a.x, b.y - a.y) > 5.0 for a, b in zip(start, end))   # both drove off
+
+
+def test_scripted_driver_refuses_unknown_cars(make_node):
+    from policy_node.scripted_driver import ScriptedDriverNode
+    with pytest.raises(ParameterException, match="car_5"):
+        make_node(ScriptedDriverNode, parameter_overrides=[Parameter("cars", value=["car_5"])])
