@@ -4,8 +4,8 @@ Subcommands:
   info BAG [--json]                                   topics, types, counts, start/end, duration, rate per topic
   echo BAG --topic T [--limit N] [--format yaml|json] decoded messages as plain dicts
   render BAG --out game.gif [--robot NAME] [--fps F] [--pixels-per-metre P] [--stride K]
-                                                      /world_state replayed top-down, optionally with one robot's
-                                                      detections overlaid
+                                                      /world_state replayed top-down (soccer or driving),
+                                                      optionally with one robot's (car's) detections overlaid
   export BAG --out DIR [--format csv|npz]             one table per kind: world_state, detections, feedback, actions
   reindex BAG                                         make an unfinished (killed, disk full) bag readable again
 
@@ -339,39 +339,59 @@ def _connections_of_type(reader: Any, msgtype: str) -> list[Any]:
     return [c for c in reader.connections if c.msgtype == msgtype]
 
 
+RENDER_DEFAULT_PPM = {"robocup": 40.0, "driving": 4.0}     # the soccer field is 10.4 m wide, the driving map 182 m
+
+
+def _scenario_of(reader: Any, worlds: list[Any]) -> str:
+    """'robocup' or 'driving', from the first WorldState's ``scenario`` field."""
+    for connection, _, raw in reader.messages(connections=worlds):
+        scenario = int(reader.deserialize(raw, connection.msgtype).scenario)
+        return "driving" if scenario == 1 else "robocup"       # WorldState.SCENARIO_DRIVING
+    return "robocup"
+
+
 def render(path: str | os.PathLike[str], out: str | os.PathLike[str], *, robot: str | None = None,
-           fps: float = 10.0, pixels_per_metre: float = 40.0, stride: int = 1, ignore_damage: bool = False,
+           fps: float = 10.0, pixels_per_metre: float | None = None, stride: int = 1, ignore_damage: bool = False,
            notice: Callable[[str], None] = _print_notice) -> int:
-    """Replay the bag's WorldState messages as a top-down GIF; with ``robot`` (a namespace such as "team_a_0"),
-    overlay the detections that robot reported at the same sim time. Returns the number of frames rendered.
+    """Replay the bag's WorldState messages as a top-down GIF; with ``robot`` (a namespace such as "team_a_0" or
+    "car_0"), overlay the detections that robot reported at the same sim time. Returns the number of frames.
 
-    Frames are kept in memory until the GIF is written; ``stride`` renders every k-th world state for long bags.
-    The options are bounded (RENDER_* above): the scale, the image's sides and the memory all frames take, checked
-    before anything is drawn. The field geometry is the default FieldGeometry (a bag does not carry it).
+    The scenario is the first WorldState's: soccer is drawn on the default FieldGeometry, driving with
+    ``render/driving.py`` on the default driving map (a bag carries neither). ``pixels_per_metre`` defaults to
+    40 (soccer) or 4 (driving). Frames are kept in memory until the GIF is written; ``stride`` renders every k-th
+    world state for long bags. The options are bounded (RENDER_* above): the scale, the image's sides and the
+    memory all frames take, checked before anything is drawn.
     """
-    from dynenv_ros.render.detections import field_view, overlay_detections
-    from dynenv_ros.render.topdown import EpisodeRecorder
-    from dynenv_ros.soccer.field import FieldGeometry
-
     if stride < 1:
         raise BagError(f"--stride must be >= 1, got {stride}")
     if not (math.isfinite(fps) and RENDER_FPS_RANGE[0] <= fps <= RENDER_FPS_RANGE[1]):
         raise BagError(f"--fps must be between {RENDER_FPS_RANGE[0]:g} and {RENDER_FPS_RANGE[1]:g} (GIF frame "
                        f"delays are whole centiseconds), got {fps:g}")
     low, high = RENDER_PPM_RANGE
-    if not (math.isfinite(pixels_per_metre) and low <= pixels_per_metre <= high):
+    if pixels_per_metre is not None and not (math.isfinite(pixels_per_metre) and low <= pixels_per_metre <= high):
         raise BagError(f"--pixels-per-metre must be between {low:g} and {high:g}, got {pixels_per_metre:g}")
-    geometry = FieldGeometry()
-    view = field_view(geometry, pixels_per_metre)
-    width, height = view.size
-    if max(width, height) > RENDER_MAX_SIDE_PX:
-        raise BagError(f"--pixels-per-metre {pixels_per_metre:g} makes {width}x{height} px frames; at most "
-                       f"{RENDER_MAX_SIDE_PX} px a side (lower --pixels-per-metre)")
-    recorder = EpisodeRecorder(geometry, pixels_per_metre=pixels_per_metre)
     with open_bag(path, ignore_damage=ignore_damage, notice=notice) as reader:
         worlds = _connections_of_type(reader, WORLD_STATE_TYPE)
         if not worlds:
             raise BagError(f"the bag has no {WORLD_STATE_TYPE} messages to render")
+        scenario = _scenario_of(reader, worlds)
+        ppm = RENDER_DEFAULT_PPM[scenario] if pixels_per_metre is None else pixels_per_metre
+        if scenario == "driving":
+            from dynenv_ros.driving.roads import DrivingMap
+            from dynenv_ros.render.driving import DrivingRecorder, overlay_driving_detections
+            recorder: Any = DrivingRecorder(DrivingMap(), pixels_per_metre=ppm)
+            view = recorder.view
+        else:
+            from dynenv_ros.render.detections import field_view, overlay_detections
+            from dynenv_ros.render.topdown import EpisodeRecorder
+            from dynenv_ros.soccer.field import FieldGeometry
+            geometry = FieldGeometry()
+            view = field_view(geometry, ppm)
+            recorder = EpisodeRecorder(geometry, pixels_per_metre=ppm)
+        width, height = view.size
+        if max(width, height) > RENDER_MAX_SIDE_PX:
+            raise BagError(f"--pixels-per-metre {ppm:g} makes {width}x{height} px frames; at most "
+                           f"{RENDER_MAX_SIDE_PX} px a side (lower --pixels-per-metre)")
         frames = -(-sum(c.msgcount for c in worlds) // stride)
         if frames * width * height * 3 > RENDER_MAX_FRAME_BYTES:
             raise BagError(f"{frames} frames of {width}x{height} px would take "
@@ -396,19 +416,29 @@ def render(path: str | os.PathLike[str], out: str | os.PathLike[str], *, robot: 
             if seen % stride == 0:
                 world_states.append((stamp_ns(message.header.stamp), snapshot_from_msg(message)))
             seen += 1
+    observer_class = ObjectClass.CAR if scenario == "driving" else ObjectClass.ROBOT
     for stamp, snapshot in world_states:
-        balls = snapshot.of_class(ObjectClass.BALL)
-        ball_radius = balls[0].size_x / 2 if balls and balls[0].size_x > 0 else 0.05
-        recorder.ball_radius = ball_radius
-        frame = recorder.add(snapshot)
+        if scenario == "driving":
+            frame = recorder.render(snapshot)
+        else:
+            balls = snapshot.of_class(ObjectClass.BALL)
+            recorder.ball_radius = balls[0].size_x / 2 if balls and balls[0].size_x > 0 else 0.05
+            frame = recorder.add(snapshot)
         detections = pending_detections.get(stamp)
         if robot is not None and detections is not None:
             observer = next((o for o in snapshot.objects if o.id == detections.robot_id
-                             and o.class_id == ObjectClass.ROBOT), None)
+                             and o.class_id == observer_class), None)
             if observer is not None:
-                pose = (observer.x, observer.y, observer.yaw + float(detections.head_yaw))
-                overlay_detections(frame, view, pose, detection_rows(detections.detections),
-                                   observer_team=-1 if observer.team == -1 else 1)
+                team = -1 if observer.team == -1 else 1
+                rows = detection_rows(detections.detections)
+                if scenario == "driving":
+                    overlay_driving_detections(frame, view, (observer.x, observer.y, observer.yaw), rows,
+                                               observer_team=team)
+                else:
+                    pose = (observer.x, observer.y, observer.yaw + float(detections.head_yaw))
+                    overlay_detections(frame, view, pose, rows, observer_team=team)
+        if scenario == "driving":
+            recorder.add(frame)
     target = Path(out)
     target.parent.mkdir(parents=True, exist_ok=True)
     recorder.save_gif(target, fps=fps)
@@ -596,14 +626,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=None, help="at most this many messages")
     p.add_argument("--format", choices=("yaml", "json"), default="yaml",
                    help="yaml documents, or JSON Lines (NaN written as null)")
-    p = sub.add_parser("render", help="top-down GIF of /world_state, optionally with one robot's detections")
+    p = sub.add_parser("render", help="top-down GIF of /world_state (soccer or driving), optionally with one "
+                       "robot's (car's) detections")
     p.add_argument("bag")
     p.add_argument("--out", required=True, help="GIF file to write")
-    p.add_argument("--robot", default=None, help="overlay this robot's detections (e.g. team_a_0)")
+    p.add_argument("--robot", default=None, help="overlay this robot's detections (e.g. team_a_0, car_0)")
     p.add_argument("--fps", type=float, default=10.0,
                    help=f"frames per second, {RENDER_FPS_RANGE[0]:g} to {RENDER_FPS_RANGE[1]:g}")
-    p.add_argument("--pixels-per-metre", type=float, default=40.0,
-                   help=f"scale, {RENDER_PPM_RANGE[0]:g} to {RENDER_PPM_RANGE[1]:g}, frames at most "
+    p.add_argument("--pixels-per-metre", type=float, default=None,
+                   help=f"scale, {RENDER_PPM_RANGE[0]:g} to {RENDER_PPM_RANGE[1]:g} (default 40 for soccer, 4 for "
+                        f"driving), frames at most "
                         f"{RENDER_MAX_SIDE_PX} px a side and {RENDER_MAX_FRAME_BYTES >> 30} GiB in all")
     p.add_argument("--stride", type=int, default=1, help="render every k-th world state")
     p.add_argument("--ignore-damage", action="store_true", help=damage_help)
