@@ -4,8 +4,11 @@ Graphs: ``train`` — live training over ROS: simulator games, their policy node
 (``graph/train_graph.py``). ``soccer`` (default) — the simulator node in stepped mode, team A played by a trained policy file (one
 policy node) or scripted, team B by one scripted policy node per robot, and the recorder, for ``duration_s`` of sim
 time; it prints achieved rates, message counts and the score, leaves the bag and a GIF in the run directory, and
-checks the bag holds every message the simulator published and every action it accepted. ``selfcheck`` — every
-dynenv_msgs interface across processes. ``--help`` lists the settings and the graphs that use them.
+checks the bag holds every message the simulator published and every action it accepted. With
+``scenario: driving`` the same graph plays urban driving instead: the simulator with ``n_cars`` cars, one
+``scripted_driver`` node driving them all, and the recorder; it prints cars home, crashes, pedestrians hit and the
+reward per car. ``selfcheck`` — every dynenv_msgs interface across processes. ``--help`` lists the settings and the
+graphs (and scenarios) that use them.
 """
 from __future__ import annotations
 
@@ -40,6 +43,8 @@ class ConfigError(ValueError):
 
 
 POLICIES = ("keeper_and_chasers", "chaser", "random")
+SCENARIOS = ("robocup", "driving")
+ACTION_MODES = ("discrete", "continuous")
 PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
 SHIPPED_POLICY = "policy_node/pretrained/policy.onnx"     # relative to the repository (see team_a_policy)
 
@@ -47,6 +52,7 @@ SHIPPED_POLICY = "policy_node/pretrained/policy.onnx"     # relative to the repo
 @dataclass(frozen=True)
 class MainJobConfig:
     graph: str = "soccer"
+    scenario: str = "robocup"        # soccer graph: robocup (soccer) or driving
     seed: int = 0
     samples_per_type: int = 5        # selfcheck graph
     duration_s: float = 60.0         # soccer graph: sim seconds
@@ -60,6 +66,8 @@ class MainJobConfig:
     games: int = 2                   # train graph: simulator games feeding the trainer
     train_minutes: float = 3.0       # train graph: the trainer's wall-time budget
     episode_seconds: float = 10.0    # train graph: sim seconds per episode
+    n_cars: int = 2                  # driving: cars, each driven by the scripted driver
+    action_mode: str = "discrete"    # driving: discrete | continuous
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> "MainJobConfig":
@@ -104,6 +112,12 @@ class MainJobConfig:
             raise ConfigError(f"episode_seconds must be in [1, 600], got {self.episode_seconds}")
         if self.policy not in POLICIES:
             raise ConfigError(f"policy must be one of {POLICIES}, got {self.policy!r}")
+        if self.scenario not in SCENARIOS:
+            raise ConfigError(f"scenario must be one of {SCENARIOS}, got {self.scenario!r}")
+        if not 1 <= self.n_cars <= 10:
+            raise ConfigError(f"n_cars must be in [1, 10], got {self.n_cars}")
+        if self.action_mode not in ACTION_MODES:
+            raise ConfigError(f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}")
         if self.team_a != "scripted":
             path = team_a_policy(self.team_a)
             if path.suffix not in (".onnx", ".safetensors"):
@@ -117,6 +131,7 @@ class MainJobConfig:
 # is refused, because it would change nothing (the config file may hold every key).
 SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
     "graph": ("soccer | train | selfcheck: what to run", ("soccer", "train", "selfcheck")),
+    "scenario": ("robocup | driving: the world the soccer graph plays (driving: scripted drivers)", ("soccer",)),
     "seed": ("world seed (soccer, train) / sample seed (selfcheck), 0..2^31-1", ("soccer", "train", "selfcheck")),
     "timeout_s": ("wall-clock limit of the whole run, s (train: beyond train_minutes)",
                   ("soccer", "train", "selfcheck")),
@@ -134,7 +149,12 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
     "gif": ("render the recorded bag as game.gif (true | false)", ("soccer",)),
     "samples_per_type": ("messages per type and calls per service that must arrive intact, 1..1000",
                          ("selfcheck",)),
+    "n_cars": ("cars, 1..10 (scenario driving)", ("soccer",)),
+    "action_mode": ("discrete | continuous: the cars' actions (scenario driving)", ("soccer",)),
 }
+# Settings of the soccer graph that only one scenario uses (a --set for the other scenario is refused).
+SCENARIO_SETTINGS: dict[str, str] = {"players_per_team": "robocup", "policy": "robocup", "team_a": "robocup",
+                                     "n_cars": "driving", "action_mode": "driving"}
 
 
 def check_overrides_apply(config: "MainJobConfig", overrides: dict[str, Any]) -> None:
@@ -143,6 +163,11 @@ def check_overrides_apply(config: "MainJobConfig", overrides: dict[str, Any]) ->
     if unused:
         used = sorted(k for k, (_, graphs) in SETTINGS_HELP.items() if config.graph in graphs)
         raise ConfigError(f"--set {', '.join(unused)}: not used by graph '{config.graph}' (it uses {used})")
+    if config.graph == "soccer":
+        other = sorted(k for k in overrides if SCENARIO_SETTINGS.get(k, config.scenario) != config.scenario)
+        if other:
+            raise ConfigError(f"--set {', '.join(other)}: not used by scenario '{config.scenario}' (set "
+                              f"scenario={SCENARIO_SETTINGS[other[0]]} for it)")
 
 
 def settings_epilog() -> str:
@@ -205,6 +230,8 @@ def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path, config: MainJobCon
 
 
 def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
+    if config.scenario == "driving":
+        return driving_graph(config, run_dir)
     names = robot_names(config.players_per_team)
     learned = config.team_a != "scripted"
     scripted_nodes = len(names) - (config.players_per_team if learned else 0)
@@ -231,6 +258,21 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
     recorder = NodeLaunch("recorder", "dynenv_ros.nodes.recorder", {"output": str(run_dir / "bag"),
                                                                      "use_sim_time": True})
     return [recorder, *policies, sim]
+
+
+def driving_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
+    """The simulator (scenario driving, stepped), one scripted_driver node for every car, and the recorder."""
+    sim = NodeLaunch("sim_node", "dynenv_ros.nodes.sim_node", {
+        "scenario": "driving", "n_cars": config.n_cars, "action_mode": config.action_mode, "seed": config.seed,
+        "perception_preset": config.perception, "mode": "stepped", "episode_seconds": config.duration_s,
+        "auto_reset": False, "exit_when_finished": True, "report_path": str(run_dir / "sim_report.json"),
+        "wait_for_subscribers": 2, "wait_for_ground_truth_subscribers": 2, "wait_for_recorder": True},
+        ends_run=True)
+    driver = NodeLaunch("scripted_driver", "policy_node.scripted_driver",
+                        {"n_cars": config.n_cars, "action_mode": config.action_mode})
+    recorder = NodeLaunch("recorder", "dynenv_ros.nodes.recorder", {"output": str(run_dir / "bag"),
+                                                                     "use_sim_time": True})
+    return [recorder, driver, sim]
 
 
 def missing_from_bag(report: dict[str, Any], info: dict[str, Any]) -> dict[str, tuple[int, int]]:
@@ -263,8 +305,56 @@ def actions_not_recorded(report: dict[str, Any], bag: Path) -> dict[str, tuple[i
     return differences
 
 
+def check_bag(report: dict[str, Any], run_dir: Path) -> tuple[bool, Path]:
+    """Print the bag's size and whether it holds everything published and accepted; (complete, bag path)."""
+    from dynenv_ros.bags.inspect import bag_info
+    bag = run_dir / "bag"
+    if not bag.exists():
+        print(f"  no bag was recorded in {bag}")
+        return False, bag
+    info = bag_info(bag)
+    lost = {**missing_from_bag(report, info), **actions_not_recorded(report, bag)}
+    counts = {t["name"]: t["count"] for t in info["topics"]}
+    total = sum(counts.values())
+    print(f"  bag {bag}: {total} messages on {len(counts)} topics, {info['duration_s']:.1f} s; "
+          + ("every published message recorded" if not lost else f"LOST (published or accepted, recorded): {lost}"))
+    return not lost, bag
+
+
+def summarise_driving(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
+    from dynenv_ros.bags.inspect import render
+    report = read_report(run_dir / "sim_report.json", "simulator")
+    if report is None:
+        return False
+    diag = report["diagnostics"]
+    rejected = sum(int(v) for k, v in diag.items() if k.startswith("rejected_"))
+    episodes = report.get("episodes", [])
+    print(f"  driving: {config.n_cars} cars ({config.action_mode} actions), scripted drivers, perception "
+          f"'{config.perception}'")
+    if episodes:
+        last = episodes[-1]
+        rewards = ", ".join(f"{name} {value:+.2f}" for name, value in last["reward_per_car"].items())
+        print(f"  game: {last['sim_seconds']:.1f} s of sim time in {last['periods']} periods; cars home "
+              f"{last['cars_home']}/{config.n_cars}, crashed {last['crashed']}, pedestrians hit "
+              f"{last['pedestrians_hit']}; reward per car: {rewards}")
+    else:
+        print("  game: unfinished")
+    print(f"  stepped-mode real-time factor {diag['real_time_factor_running']}x "
+          f"({diag['real_time_factor_since_start']}x with start-up); actions accepted "
+          f"{diag['accepted']}, missing {diag['missing']}, rejected {rejected}")
+    complete, bag = check_bag(report, run_dir)
+    ok = rejected == 0 and bool(episodes) and complete
+    if config.gif and bag.exists():
+        target = run_dir / "game.gif"
+        frames = render(bag, target, robot="car_0", fps=10.0)
+        print(f"  replay: {target} ({frames} frames, car_0's detections overlaid)")
+    return ok
+
+
 def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
     from dynenv_ros.bags.inspect import bag_info, render
+    if config.scenario == "driving":
+        return summarise_driving(outcome, run_dir, config)
     report = read_report(run_dir / "sim_report.json", "simulator")
     if report is None:
         return False
@@ -340,7 +430,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     run_dir = args.output_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     domain_id = config.domain_id if config.domain_id >= 0 else 1 + os.getpid() % 100
     graph = GRAPHS[config.graph]
-    print(f"dynenv-run: graph '{config.graph}' on ROS domain {domain_id}; logs in {run_dir}")
+    played = f" (scenario '{config.scenario}')" if config.graph == "soccer" and config.scenario != "robocup" else ""
+    print(f"dynenv-run: graph '{config.graph}'{played} on ROS domain {domain_id}; logs in {run_dir}")
     timeout_s = config.timeout_s + (60.0 * config.train_minutes if config.graph == "train" else 0.0)
     outcome = run_graph(graph.build(config, run_dir), run_dir, domain_id, timeout_s)
     for node in outcome.nodes:

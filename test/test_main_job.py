@@ -43,6 +43,44 @@ def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
     assert (tmp_path / "game.gif").stat().st_size > 0 and (tmp_path / "bag").is_dir()
 
 
+def test_main_job_plays_records_and_replays_a_driving_game(tmp_path, capsys):
+    """`make run ARGS="--set scenario=driving"`: simulator (driving), scripted drivers, recorder; lossless bag,
+    GIF, and the summary's cars home, crashes, reward per car and action counts."""
+    output = _run_main(tmp_path, capsys, "scenario=driving", "duration_s=3", "n_cars=3", "action_mode=continuous")
+    report = json.loads((tmp_path / "sim_report.json").read_text())
+    assert report["scenario"] == "driving" and report["robots"] == ["car_0", "car_1", "car_2"]
+    assert report["diagnostics"]["periods_run"] == "30" and report["diagnostics"]["missing"] == "0"
+    assert report["diagnostics"]["accepted"] == "90"
+    episode = report["episodes"][-1]
+    assert episode["periods"] == 30 and set(episode["reward_per_car"]) == {"car_0", "car_1", "car_2"}
+    assert "cars home 0/3, crashed 0" in output and "reward per car: car_0 +" in output
+    assert "actions accepted 90, missing 0, rejected 0" in output
+    assert "every published message recorded" in output and "dynenv-run: OK" in output
+    assert (tmp_path / "game.gif").stat().st_size > 0
+
+
+def test_scenario_settings_are_checked_and_refused_for_the_other_scenario():
+    from dynenv_ros.main_job import REPO_CONFIG, soccer_graph
+    from pathlib import Path
+    with pytest.raises(ConfigError, match="scenario must be one of"):
+        MainJobConfig.from_mapping({"scenario": "flying"})
+    with pytest.raises(ConfigError, match="n_cars must be in"):
+        MainJobConfig.from_mapping({"n_cars": 11})
+    with pytest.raises(ConfigError, match="action_mode must be one of"):
+        MainJobConfig.from_mapping({"action_mode": "joystick"})
+    with pytest.raises(ConfigError, match="players_per_team: not used by scenario 'driving'"):
+        load_config(REPO_CONFIG, {"scenario": "driving", "players_per_team": 3})
+    with pytest.raises(ConfigError, match="n_cars: not used by scenario 'robocup'"):
+        load_config(REPO_CONFIG, {"n_cars": 3})
+    with pytest.raises(ConfigError, match="scenario: not used by graph 'train'"):
+        load_config(REPO_CONFIG, {"graph": "train", "scenario": "driving"})
+    config = load_config(REPO_CONFIG, {"scenario": "driving", "n_cars": 4})
+    nodes = {n.name: n for n in soccer_graph(config, Path("/tmp/run"))}
+    assert set(nodes) == {"recorder", "scripted_driver", "sim_node"}
+    assert nodes["sim_node"].parameters["scenario"] == "driving" and nodes["sim_node"].parameters["n_cars"] == 4
+    assert nodes["scripted_driver"].parameters == {"n_cars": 4, "action_mode": "discrete"}
+
+
 def test_main_job_plays_a_trained_policy_for_team_a(tmp_path, capsys):
     """team_a=<policy file>: one policy node (onnxruntime) drives team A against the scripted team B."""
     import torch
