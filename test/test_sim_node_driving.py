@@ -232,3 +232,13 @@ def test_scripted_driver_refuses_unknown_cars(make_node):
     from policy_node.scripted_driver import ScriptedDriverNode
     with pytest.raises(ParameterException, match="car_5"):
         make_node(ScriptedDriverNode, parameter_overrides=[Parameter("cars", value=["car_5"])])
+
+
+def test_realtime_driving_publishes_one_frame_a_period_in_sim_time(make_node, executor):
+    sim = _sim(make_node, mode="realtime", real_time_factor=10.0, missing_action="hold")
+    executor.add_node(sim)
+    probe = Probe(make_node, executor)
+    assert probe.spin(lambda: len(probe.detections["car_0"]) >= 15, 20.0)
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in probe.detections["car_0"]]
+    assert {round(b - a, 6) for a, b in zip(stamps, stamps[1:])} == {0.1}
+    assert sim.session.counts["missing"] > 0                  # nobody acted: the cars kept braking
