@@ -79,15 +79,15 @@ class SimNode(Node):
                                      f"'{self.scenario}' (it uses {', '.join(SCENARIO_PARAMETERS[self.scenario])})",
                                      given)
         defaults = SCENARIO_DEFAULTS[self.scenario]
-        if driving:
-            n_cars = declare_int(self, "n_cars", 2, 1, 10, "Cars (driving).", **fixed)
-            action_mode = declare_str(self, "action_mode", "discrete", "Driving actions: discrete (the original's "
-                                      "3x3 commands) or continuous (throttle, brake, steering).",
-                                      choices=("discrete", "continuous"), **fixed)
-            teams = declare_int(self, "teams", 1, 1, 2, "Driving teams: 1 (every car shares the bonus) or 2.",
-                                **fixed)
-        else:
-            players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team.", **fixed)
+        # Both scenarios' parameters are declared (so --help and `ros2 param` list them all); a value given for the
+        # other scenario's was refused above.
+        players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team (robocup only).", **fixed)
+        n_cars = declare_int(self, "n_cars", 2, 1, 10, "Cars (driving only).", **fixed)
+        action_mode = declare_str(self, "action_mode", "discrete", "Driving only: discrete (the original's 3x3 "
+                                  "commands) or continuous (throttle, brake, steering).",
+                                  choices=("discrete", "continuous"), **fixed)
+        teams = declare_int(self, "teams", 1, 1, 2, "Driving only: 1 team (every car shares the bonus) or 2.",
+                            **fixed)
         self.mode = declare_str(self, "mode", "stepped", "stepped: a period runs when every controlled robot has "
                                 "acted (or on /sim/step); realtime: paced by the wall clock.", choices=MODES_OF_RUNNING,
                                 **fixed)
@@ -102,23 +102,25 @@ class SimNode(Node):
                                  choices=("",) + MODES, **fixed)
         magnitude = declare_float(self, "noise_magnitude", -1.0, -1.0, 5.0,
                                   "Noise magnitude 0..5; -1: the preset's.", **fixed)
+        # Defaults by scenario (robocup / driving): 100 Hz physics, a vision frame every 10 ticks, a motion period
+        # of 50 / 10 ticks, episodes of 120 / 60 s.
         hz, vision_default, motion_default = defaults["rates"]
         physics_hz = declare_float(self, "physics_hz", hz, 10.0, 1000.0, "Physics ticks per second.", **fixed)
         vision_ticks = declare_int(self, "vision_period_ticks", vision_default, 1, 1000, "Ticks per vision frame.",
                                    **fixed)
         motion_ticks = declare_int(self, "motion_period_ticks", motion_default, 1, 10000,
-                                   "Ticks per motion period.", **fixed)
+                                   "Ticks per motion period (default robocup 50, driving 10).", **fixed)
         episode_s = declare_float(self, "episode_seconds", defaults["episode_seconds"], 0.5, 86400.0,
-                                  "Episode length (s).", **fixed)
-        if not driving:
-            falls = declare_bool(self, "falls_enabled", True, "Random and contact falls.", **fixed)
+                                  "Episode length, s (default robocup 120, driving 60).", **fixed)
+        falls = declare_bool(self, "falls_enabled", True, "Random and contact falls (robocup only).", **fixed)
         seed = declare_int(self, "seed", -1, -1, 2**62, "World seed; -1 draws one.", **fixed)
         controlled = declare_str_list(self, "controlled_robots", [], "Robots whose actions a period waits for "
                                       "(names like team_a_0); empty: all.", **fixed)
         self.auto_reset = declare_bool(self, "auto_reset", True, "Start a new episode when one ends.")
         self.publish_markers = declare_bool(self, "publish_markers", True, "RViz/Foxglove markers.")
         self.marker_robot = declare_str(self, "marker_robot", defaults["marker_robot"],
-                                        "Robot (car) whose detections are drawn.")
+                                        "Robot (car) whose detections are drawn (default robocup team_a_0, "
+                                        "driving car_0).")
         diag_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.", **fixed)
         self.wait_for_subscribers = declare_int(
             self, "wait_for_subscribers", 1, 0, 100, "Stepped mode: hold the first observation until every robot's "
