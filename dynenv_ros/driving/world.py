@@ -163,6 +163,16 @@ class DrivingWorld:
     def time_remaining(self) -> float:
         return max(0.0, (self._episode_ticks - self.tick) * self._tick_seconds)
 
+    def cars_done(self) -> list[bool]:
+        """Per car: finished, and nothing more to earn (crashed, or its team's bonus decided). A car home while a
+        team-mate still drives stays in the game: the team bonus is paid to cars already home."""
+        pending = set()
+        for team in {car.team for car in self.cars}:
+            members = [car for car in self.cars if car.team == team]
+            if not all(car.finished for car in members) and not any(car.crashed for car in members):
+                pending.add(team)
+        return [car.finished and (car.crashed or car.team not in pending) for car in self.cars]
+
     @property
     def names(self) -> list[str]:
         return self.config.car_names

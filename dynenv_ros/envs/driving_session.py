@@ -163,7 +163,7 @@ class DrivingSession(ActionSession):
             seen |= p.seen
             lanes += p.lanes_seen
         lanes /= len(perceptions)
-        ended = self._ended()
+        ended = self.world.cars_done()
         feedback = []
         for i in range(n):
             car_terminated = terminated or ended[i]
@@ -171,16 +171,6 @@ class DrivingSession(ActionSession):
                                           [int(j) for j in np.flatnonzero(seen[i])], float(lanes[i]),
                                           car_terminated, truncated and not car_terminated))
         return PeriodOutput(self.episode_id, period, frames, feedback, terminated, truncated, events)
-
-    def _ended(self) -> list[bool]:
-        """Per car: finished, and nothing more to earn (crashed, or its team's bonus decided) — driving_v0's."""
-        cars = self.world.cars
-        pending = set()
-        for team in {car.team for car in cars}:
-            members = [car for car in cars if car.team == team]
-            if not all(car.finished for car in members) and not any(car.crashed for car in members):
-                pending.add(team)
-        return [car.finished and (car.crashed or car.team not in pending) for car in cars]
 
     @staticmethod
     def _missed(snapshot, perception, view: int) -> np.ndarray:

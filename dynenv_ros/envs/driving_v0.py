@@ -134,7 +134,7 @@ class DrivingParallelEnv(ParallelEnv):
                 for car in self.world.cars:
                     if car.team == e.team:
                         events.setdefault(car.index, []).append(f"{e.kind}: {e.detail}" if e.detail else e.kind)
-        ended = self._ended()
+        ended = self.world.cars_done()
         obs, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
         for agent in self.agents:
             i = self._index[agent]
@@ -152,16 +152,6 @@ class DrivingParallelEnv(ParallelEnv):
     def _status(self, i: int) -> dict[str, bool]:
         car = self.world.cars[i]
         return {"finished": car.finished, "crashed": car.crashed, "at_goal": car.at_goal}
-
-    def _ended(self) -> list[bool]:
-        """Per car: finished, and nothing more to earn (crashed, or its team's bonus decided)."""
-        cars = self.world.cars
-        pending = set()
-        for team in {car.team for car in cars}:
-            members = [car for car in cars if car.team == team]
-            if not all(car.finished for car in members) and not any(car.crashed for car in members):
-                pending.add(team)
-        return [car.finished and (car.crashed or car.team not in pending) for car in cars]
 
     def state(self) -> np.ndarray:
         """Map-frame ground truth (``driving_observations.DrivingGroundTruth.state``)."""
