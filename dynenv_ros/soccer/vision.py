@@ -68,6 +68,8 @@ class SoccerVision:
         self._recorded = 0
         self._views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.teams = np.array([r.team for r in world.robots], np.int8)
+        self._diagonal = (np.arange(n), np.arange(n))
+        self._landmark_index = np.flatnonzero(self.perceiver.is_landmark)
 
     def frame(self, index: int) -> None:
         """Record the world at this vision instant."""
@@ -142,12 +144,15 @@ class SoccerVision:
         """(n_robots,) DynEnv's reward for looking around, from what each robot truly saw this period."""
         n = self.world.n_robots
         frames = len(perception) // n
-        seen = perception.seen.reshape(frames, n, -1)                       # (F, observer, object)
+        # Frames in which each observer truly saw each object: one reduction, then integer sums of it (exact, so
+        # the same as summing per frame first).
+        counts = perception.seen.reshape(frames, n, -1).sum(axis=0)        # (observer, object)
         w = self.world.config.rewards
-        robot_frames = np.minimum(w.observation_robot_cap, seen[:, :, :n].sum(axis=0))   # (observer, robot)
-        robot_frames[np.arange(n), np.arange(n)] = 0                       # oneself does not count
-        landmarks = self.landmarks_seen(perception)
-        landmark_term = np.minimum(float(w.observation_landmark_cap), landmarks.sum(axis=0) / len(landmarks))
-        ball_frames = np.minimum(w.observation_ball_cap, seen[:, :, n].sum(axis=0))
+        robot_frames = np.minimum(w.observation_robot_cap, counts[:, :n])   # (observer, robot)
+        robot_frames[self._diagonal] = 0                                   # oneself does not count
+        landmarks = (counts[:, self._landmark_index].sum(axis=1)
+                     + perception.lines_seen.reshape(frames, n).sum(axis=0))   # over the frames
+        landmark_term = np.minimum(float(w.observation_landmark_cap), landmarks / frames)
+        ball_frames = np.minimum(w.observation_ball_cap, counts[:, n])
         return (w.observation_robot * robot_frames.sum(axis=1) + w.observation_landmark * landmark_term
                 + w.observation_ball * ball_frames)
