@@ -12,7 +12,16 @@ Per robot, for the F vision frames of a motion period:
 | ``game`` | (3,) | ``GAME_COLUMNS``: what the GameController broadcasts, at the period's last frame |
 | ``previous_action`` | (4,) | ``ACTION_COLUMNS``: the action the robot took last period (zeros after a reset) |
 
-All float32 Boxes. Rows beyond a stream's maximum are dropped farthest first (counted); the default maxima (40
+All float32 Boxes. The layout is one definition for both scenarios: a ``LayoutSpec`` names a scenario's two
+detection streams (their keys and classes: the static one first, the dynamic one second), its proprioception, game
+and previous-action columns with their bounds, and its feature bound. ``SOCCER`` (this module) gives the table above
+exactly; driving's (``envs.driving_observations.driving_layout_spec``) has the streams ``lanes`` (the car's SELF row
+in slot 0, then lane rows) and ``objects`` (cars, pedestrians, obstacles), the ego values as proprioception, the
+seconds remaining as ``game`` and [throttle, brake, steering] as the previous action (docs/driving.md). The rest
+(``pack_rows``, ``fitting``, ``pack_frames``, ``empty``) is scenario-neutral and reads the spec. The first stream's
+maximum is ``max_landmarks``, the second's ``max_objects``, whatever the scenario calls the streams.
+
+Soccer: rows beyond a stream's maximum are dropped farthest first (counted); the default maxima (40
 landmarks; the ball, every other robot and 4 more objects) held every detection of every frame in 1,000 periods
 of random play under each preset (docs/perception.md). This module is the single definition: the
 PettingZoo env (``observation="padded"``), the vectorised batch, the agent's input adapter and the policy node all
@@ -20,7 +29,8 @@ pack with ``pack_rows``, so the same detections give the same arrays everywhere.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 from gymnasium import spaces
@@ -49,23 +59,101 @@ GAME_BOUND = 1000.0          # s; longer than any configurable episode
 MAX_FRAMES = 64
 MAX_SLOTS = 256
 
-# Stream of each class id: 0 landmarks, 1 objects, -1 neither.
-STREAM_OF_CLASS = np.full(256, -1, np.int8)
-STREAM_OF_CLASS[list(LANDMARK_CLASSES)] = 0
-STREAM_OF_CLASS[list(OBJECT_CLASSES)] = 1
+
+@dataclass(frozen=True)
+class StreamSpec:
+    """One detection stream: its rows' key, its mask's key and the classes whose rows it holds."""
+    key: str
+    mask: str
+    classes: tuple[int, ...]
+
+
+def _floats(values) -> tuple[float, ...]:
+    return tuple(float(v) for v in values)
+
+
+@dataclass(frozen=True)
+class LayoutSpec:
+    """What a scenario puts in the padded layout (module docstring). ``streams``: (static, dynamic); every column
+    tuple comes with its per-column ``low`` / ``high`` bounds; ``feature_bound``: ± the bound of every detection
+    feature (rows are clipped to it). Soccer's previous-action head bound is set per config (``space(head_max)``)."""
+    scenario: str
+    streams: tuple[StreamSpec, StreamSpec]
+    feature_bound: float
+    proprioception_columns: tuple[str, ...]
+    proprioception_low: tuple[float, ...]
+    proprioception_high: tuple[float, ...]
+    game_columns: tuple[str, ...]
+    game_low: tuple[float, ...]
+    game_high: tuple[float, ...]
+    action_columns: tuple[str, ...]
+    action_low: tuple[float, ...]
+    action_high: tuple[float, ...]
+    # Stream of each class id: 0 the first stream, 1 the second, -1 neither (derived from ``streams``).
+    stream_of_class: np.ndarray = field(init=False, repr=False, compare=False, hash=False)
+
+    def __post_init__(self) -> None:
+        for name in ("proprioception_low", "proprioception_high", "game_low", "game_high", "action_low",
+                     "action_high"):
+            object.__setattr__(self, name, _floats(getattr(self, name)))
+        object.__setattr__(self, "feature_bound", float(self.feature_bound))
+        if len(self.streams) != 2:
+            raise ValueError(f"a layout has two streams (static, dynamic), got {len(self.streams)}")
+        keys = self.keys
+        if len(set(keys)) != len(keys):
+            raise ValueError(f"LayoutSpec {self.scenario!r}: repeated keys in {keys}")
+        for columns, low, high in ((self.proprioception_columns, self.proprioception_low, self.proprioception_high),
+                                   (self.game_columns, self.game_low, self.game_high),
+                                   (self.action_columns, self.action_low, self.action_high)):
+            if not len(columns) == len(low) == len(high) or any(a > b for a, b in zip(low, high)):
+                raise ValueError(f"LayoutSpec {self.scenario!r}: bounds of {columns} do not match them")
+        table = np.full(256, -1, np.int8)
+        for s, stream in enumerate(self.streams):
+            if (table[list(stream.classes)] >= 0).any():
+                raise ValueError(f"LayoutSpec {self.scenario!r}: a class in two streams")
+            table[list(stream.classes)] = s
+        table.flags.writeable = False
+        object.__setattr__(self, "stream_of_class", table)
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """The observation's keys, in order: each stream's rows and mask, proprioception, game, previous_action."""
+        (a, b) = self.streams
+        return (a.key, a.mask, b.key, b.mask, "proprioception", "game", "previous_action")
+
+
+SOCCER = LayoutSpec(
+    "soccer", (StreamSpec("landmarks", "landmark_mask", tuple(int(c) for c in LANDMARK_CLASSES)),
+               StreamSpec("objects", "object_mask", tuple(int(c) for c in OBJECT_CLASSES))),
+    FEATURE_BOUND, PROPRIOCEPTION_COLUMNS, (-math.pi,) * 4, (math.pi,) * 4,
+    GAME_COLUMNS, (-1.0, 0.0, 0.0), (1.0, GAME_BOUND, GAME_BOUND),
+    ACTION_COLUMNS, (0.0, 0.0, 0.0, -math.pi), (4.0, 2.0, 2.0, math.pi))
+STREAM_OF_CLASS = SOCCER.stream_of_class     # soccer's: 0 landmarks, 1 objects, -1 neither
 
 
 @dataclass(frozen=True)
 class PaddedLayout:
     frames: int = 5
-    max_landmarks: int = DEFAULT_MAX_LANDMARKS
-    max_objects: int = 2 * 2 + EXTRA_OBJECT_SLOTS
+    max_landmarks: int = DEFAULT_MAX_LANDMARKS      # the first (static) stream's maximum
+    max_objects: int = 2 * 2 + EXTRA_OBJECT_SLOTS   # the second (dynamic) stream's maximum
+    spec: LayoutSpec = SOCCER
 
     def __post_init__(self) -> None:
         for name in ("frames", "max_landmarks", "max_objects"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"PaddedLayout.{name} must be a positive integer, got {value!r}")
+        if not isinstance(self.spec, LayoutSpec):
+            raise ValueError(f"PaddedLayout.spec must be a LayoutSpec, got {self.spec!r}")
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return self.spec.keys
+
+    @property
+    def maxima(self) -> tuple[int, int]:
+        """(first stream's, second stream's) maximum rows per frame."""
+        return self.max_landmarks, self.max_objects
 
     @classmethod
     def for_players(cls, players_per_team: int, frames: int, max_landmarks: int | None = None,
@@ -76,40 +164,45 @@ class PaddedLayout:
 
     @classmethod
     def fitting(cls, frames_per_robot: list[list[np.ndarray]], max_landmarks: int | None = None,
-                max_objects: int | None = None) -> "PaddedLayout":
+                max_objects: int | None = None, spec: LayoutSpec = SOCCER) -> "PaddedLayout":
         """The smallest layout that holds these rows (per robot, per frame a (k, 19) array), or the given maxima
         where set (a fixed-shape runtime's)."""
         longest = np.zeros(2, np.int64)
         for frames in frames_per_robot:
             for rows in frames:
-                stream = STREAM_OF_CLASS[np.asarray(rows)[:, 0].astype(np.int64) & 255]
+                stream = spec.stream_of_class[np.asarray(rows)[:, 0].astype(np.int64) & 255]
                 longest = np.maximum(longest, np.bincount(stream[stream >= 0], minlength=2))
         return cls(max([len(frames) for frames in frames_per_robot] + [1]),
-                   max_landmarks or max(1, int(longest[0])), max_objects or max(1, int(longest[1])))
+                   max_landmarks or max(1, int(longest[0])), max_objects or max(1, int(longest[1])), spec)
 
     def shapes(self) -> dict[str, tuple[int, ...]]:
-        F, L, O = self.frames, self.max_landmarks, self.max_objects
-        return {"landmarks": (F, L, FEATURES), "landmark_mask": (F, L), "objects": (F, O, FEATURES),
-                "object_mask": (F, O), "proprioception": (F, len(PROPRIOCEPTION_COLUMNS)),
-                "game": (len(GAME_COLUMNS),), "previous_action": (len(ACTION_COLUMNS),)}
+        F, spec = self.frames, self.spec
+        (a, b) = spec.streams
+        return {a.key: (F, self.max_landmarks, FEATURES), a.mask: (F, self.max_landmarks),
+                b.key: (F, self.max_objects, FEATURES), b.mask: (F, self.max_objects),
+                "proprioception": (F, len(spec.proprioception_columns)),
+                "game": (len(spec.game_columns),), "previous_action": (len(spec.action_columns),)}
 
-    def space(self, head_max: float = np.pi) -> spaces.Dict:
-        shapes = self.shapes()
-        bounds = {"landmarks": FEATURE_BOUND, "objects": FEATURE_BOUND, "landmark_mask": None,
-                  "object_mask": None, "proprioception": np.pi}
+    def space(self, head_max: float | None = None) -> spaces.Dict:
+        """The observation space. ``head_max`` (soccer only; default π): the head turn's bound, rad per period."""
+        spec, shapes = self.spec, self.shapes()
+        action_low, action_high = np.array(spec.action_low, np.float32), np.array(spec.action_high, np.float32)
+        if head_max is not None:
+            if "head_yaw_delta" not in spec.action_columns:
+                raise ValueError(f"head_max applies to soccer's layout, not {spec.scenario!r}'s")
+            at = spec.action_columns.index("head_yaw_delta")
+            action_low[at], action_high[at] = -head_max, head_max
+        proprio_low = np.broadcast_to(np.array(spec.proprioception_low, np.float32), shapes["proprioception"])
+        proprio_high = np.broadcast_to(np.array(spec.proprioception_high, np.float32), shapes["proprioception"])
         out = {}
-        for key in KEYS:
-            if key in ("landmark_mask", "object_mask"):
-                out[key] = spaces.Box(0.0, 1.0, shapes[key], np.float32)
-            elif key == "game":
-                out[key] = spaces.Box(np.array([-1.0, 0.0, 0.0], np.float32),
-                                      np.array([1.0, GAME_BOUND, GAME_BOUND], np.float32), dtype=np.float32)
-            elif key == "previous_action":
-                out[key] = spaces.Box(np.array([0, 0, 0, -head_max], np.float32),
-                                      np.array([4, 2, 2, head_max], np.float32), dtype=np.float32)
-            else:
-                out[key] = spaces.Box(-bounds[key], bounds[key], shapes[key], np.float32)
-        return spaces.Dict(out)
+        for stream in spec.streams:
+            out[stream.key] = spaces.Box(-spec.feature_bound, spec.feature_bound, shapes[stream.key], np.float32)
+            out[stream.mask] = spaces.Box(0.0, 1.0, shapes[stream.mask], np.float32)
+        out["proprioception"] = spaces.Box(proprio_low.copy(), proprio_high.copy(), dtype=np.float32)
+        out["game"] = spaces.Box(np.array(spec.game_low, np.float32), np.array(spec.game_high, np.float32),
+                                 dtype=np.float32)
+        out["previous_action"] = spaces.Box(action_low, action_high, dtype=np.float32)
+        return spaces.Dict({key: out[key] for key in spec.keys})
 
     def empty(self, *batch: int) -> dict[str, np.ndarray]:
         """Zeroed arrays with leading ``batch`` axes (e.g. ``empty(E, A)``)."""
@@ -127,11 +220,11 @@ class PaddedLayout:
         view = np.arange(V).repeat(offsets[1:] - offsets[:-1])
         robot_of_view, frame_of_view = np.asarray(robot_of_view), np.asarray(frame_of_view)
         features = np.ascontiguousarray(features, np.float32)
-        stream = STREAM_OF_CLASS[features[:, 0].astype(np.int64) & 255]
+        stream = self.spec.stream_of_class[features[:, 0].astype(np.int64) & 255]
         records = features.view(_ROW)[:, 0]        # whole rows as single items: one copy per row, not per column
         dropped = np.zeros(V, np.int64)
-        for s, (rows_key, mask_key, limit) in enumerate((("landmarks", "landmark_mask", self.max_landmarks),
-                                                         ("objects", "object_mask", self.max_objects))):
+        for s, (spec, limit) in enumerate(zip(self.spec.streams, self.maxima)):
+            rows_key, mask_key = spec.key, spec.mask
             rows_out, mask_out = out[rows_key], out[mask_key]
             if rows_out.dtype != np.float32:
                 raise TypeError(f"pack_rows: out[{rows_key!r}] must be float32 (as from empty()), got {rows_out.dtype}")
@@ -155,9 +248,10 @@ class PaddedLayout:
 _ROW = np.dtype((np.void, FEATURES * 4))     # one float32 feature row as an opaque item
 
 
-def clamp_features(features: np.ndarray) -> np.ndarray:
-    """Feature rows within the space's bounds (a far false positive cannot leave the Box)."""
-    return np.clip(features, -FEATURE_BOUND, FEATURE_BOUND)
+def clamp_features(features: np.ndarray, bound: float = FEATURE_BOUND) -> np.ndarray:
+    """Feature rows within the space's bounds (a far false positive cannot leave the Box); ``bound``: the
+    layout's ``spec.feature_bound`` (soccer's by default)."""
+    return np.clip(features, -bound, bound)
 
 
 def pack_frames(layout: PaddedLayout, frames_per_robot: list[list[np.ndarray]]) -> tuple[dict[str, np.ndarray],
