@@ -235,7 +235,7 @@ def test_unknown_or_missing_agents_are_refused():
     ({"n_cars": 0}, "n_cars"), ({"n_cars": 11}, "n_cars"), ({"speed": 3}, "unknown driving setting"),
     ({"action_mode": "analog"}, "action_mode"), ({"cars": {"powers": [1.0]}}, "one value per car type"),
     ({"pedestrians": {"count_min": 5, "count_max": 2}}, "count_min"),
-    ({"observation": "padded"}, r"observation must be one of \('full', 'partial'\)"),
+    ({"observation": "image"}, r"observation must be one of \('full', 'partial', 'padded'\)"),
     ({"observation": ["full"]}, "observation must be one of"),
     ({"perception": "realistic"}, "ground truth"), ({"observation_options": {"max_rows": 3}}, "does not take"),
     ({"render_mode": "human"}, "render_mode"), ({"pixels_per_metre": 0}, "pixels_per_metre")])

@@ -372,7 +372,9 @@ class PartialObservation:
             self.on_frame(k)
         return self.build()[0]
 
-    def build(self) -> tuple[list[Any], np.ndarray]:
+    def _gather(self) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray, np.ndarray]:
+        """The period's frames: per frame its clipped feature rows and view offsets, the ego values (n, F, 8) and the
+        previous actions (n, 3), clipped to their spaces; the infos' counts updated."""
         from dynenv_ros.perception.detections import as_features
         n, b = self.config.n_cars, self.bound
         frames = self._perceptions
@@ -392,6 +394,11 @@ class PartialObservation:
         np.clip(ego, self._ego_low[:len(frames)], self._ego_high[:len(frames)], out=ego)
         actions = np.array([(a.throttle, a.brake, a.steering) for a in self.world.last_actions], np.float32)
         np.clip(actions, self._action_low, self._action_high, out=actions)
+        return features, offsets, ego, actions
+
+    def build(self) -> tuple[list[Any], np.ndarray]:
+        n = self.config.n_cars
+        features, offsets, ego, actions = self._gather()
         out = [{"detections": tuple(rows[off[i]:off[i + 1]] for rows, off in zip(features, offsets)),
                 "ego": ego[i], "previous_action": actions[i]} for i in range(n)]
         return out, np.zeros(n)
@@ -407,9 +414,109 @@ def _previous_action_space(config: DrivingConfig) -> spaces.Box:
     return spaces.Box(np.array([-1.0, 0.0, -w], np.float32), np.array([1.0, 1.0, w], np.float32), dtype=np.float32)
 
 
+# -- the padded layout ------------------------------------------------------------------------------------------------
+# Room in the objects stream beyond every other car, pedestrian and obstacle a config can place: one near-car false
+# positive per other car and the 10 false-positive trials per view of the presets (docs/driving.md).
+FALSE_POSITIVE_SLOTS = 10
+GAME_COLUMNS = ("seconds_remaining",)
+
+
+def driving_layout_spec(config: DrivingConfig) -> Any:
+    """Driving's ``envs.padded_layout.LayoutSpec``: streams ``lanes`` (SELF and LANE rows: the car's SELF row in slot
+    0, then lanes nearest first) and ``objects`` (CAR, PEDESTRIAN, OBSTACLE and UNKNOWN rows, nearest first); the
+    ego values as proprioception, the seconds remaining as ``game``, [throttle, brake, steering] as the previous
+    action, each with ``partial``'s bounds; features within ±``feature_bound(config)``."""
+    from dynenv_ros.envs.padded_layout import LayoutSpec, StreamSpec
+    from dynenv_ros.perception.driving_model import EGO_COLUMNS
+    ego_low, ego_high = _bounds(config, [(EGO_COLUMNS, 1)])
+    actions = _previous_action_space(config)
+    C = ObjectClass
+    return LayoutSpec("driving", (StreamSpec("lanes", "lane_mask", (int(C.SELF), int(C.LANE))),
+                                  StreamSpec("objects", "object_mask", (int(C.CAR), int(C.PEDESTRIAN), int(C.OBSTACLE),
+                                                                        int(C.UNKNOWN)))),
+                      feature_bound(config), EGO_COLUMNS, ego_low, ego_high, GAME_COLUMNS, (0.0,),
+                      (float(config.episode_seconds),), PREVIOUS_ACTION_COLUMNS, actions.low, actions.high)
+
+
+def default_maxima(config: DrivingConfig) -> tuple[int, int]:
+    """(lanes, objects) rows per frame that hold every report the presets can make: the SELF row and each of the map's
+    lanes (``driving.vision.map_lanes``: 11 by default); every other car, pedestrian and obstacle the config can place,
+    a near-car false positive per other car and ``FALSE_POSITIVE_SLOTS`` (2 cars: 52; 10 cars: 68)."""
+    from dynenv_ros.driving.vision import map_lanes
+    lanes = 1 + len(map_lanes(DrivingMap(config.map))[0])
+    objects = 2 * (config.n_cars - 1) + config.pedestrians.count_max + config.obstacles.count_max
+    return lanes, objects + FALSE_POSITIVE_SLOTS
+
+
+def driving_layout(config: DrivingConfig, max_lanes: int | None = None, max_objects: int | None = None) -> Any:
+    """The ``PaddedLayout`` of a config: one frame per vision frame of the period, ``default_maxima`` unless given."""
+    from dynenv_ros.envs.padded_layout import PaddedLayout
+    lanes, objects = default_maxima(config)
+    return PaddedLayout(config.rates.frames_per_period, lanes if max_lanes is None else max_lanes,
+                        objects if max_objects is None else max_objects, driving_layout_spec(config))
+
+
+class PaddedObservation(PartialObservation):
+    """``observation='padded'``: ``partial``'s rows in the fixed-shape layout of ``envs.padded_layout`` (keys
+    ``lanes``, ``lane_mask``, ``objects``, ``object_mask``, ``proprioception`` (F, 8) the ego values, ``game`` (1,)
+    the seconds remaining at the period's last frame, ``previous_action`` (3,)), packed by ``PaddedLayout.pack_rows``.
+    Options ``max_lanes``, ``max_objects`` (default ``default_maxima``); rows beyond them are dropped farthest first
+    and counted in ``infos[agent]['dropped_detections']`` (besides ``partial``'s infos)."""
+    mode = "padded"
+
+    def __init__(self, config: DrivingConfig, perception: Any = None, max_lanes: int | None = None,
+                 max_objects: int | None = None) -> None:
+        super().__init__(config, perception)
+        self.layout = driving_layout(config, max_lanes, max_objects)
+        self.space = self.layout.space()
+        n = config.n_cars
+        self.dropped_rows = np.zeros(n, np.int64)
+        self._time_remaining = 0.0
+        self._views: dict[int, tuple[np.ndarray, np.ndarray]] = {}   # per frame count: each view's car, frame
+        self.arrays: dict[str, np.ndarray] = {}
+
+    def on_frame(self, index: int) -> None:
+        super().on_frame(index)
+        self._time_remaining = self.world.time_remaining
+
+    def build_padded(self, out: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """Fill ``out`` (``layout.empty(n_cars)``, or new arrays kept in ``self.arrays``) without per-car dicts and
+        return the observation reward per car (zeros: the driving world defines none). For vectorised batches."""
+        n = self.config.n_cars
+        features, offsets, ego, actions = self._gather()
+        frames = len(features)
+        if frames not in self._views:
+            views = np.arange(frames * n)
+            self._views[frames] = (views % n, views // n)
+        bases = np.cumsum([0] + [len(rows) for rows in features[:-1]])
+        joined = np.concatenate([off[:-1] + base for off, base in zip(offsets, bases)]
+                                + [np.array([bases[-1] + offsets[-1][-1]])])
+        arrays = self.layout.empty(n) if out is None else out
+        self.dropped_rows = self.layout.pack_rows(np.concatenate(features), joined, *self._views[frames], arrays,
+                                                  clear=out is not None).reshape(frames, n).sum(axis=0)
+        arrays["proprioception"][:, :frames] = ego
+        arrays["game"][:, 0] = self._time_remaining
+        arrays["previous_action"][:] = actions
+        self.arrays = arrays
+        return np.zeros(n)
+
+    def initial_padded(self, out: dict[str, np.ndarray] | None = None) -> None:
+        for k in range(self.frames):
+            self.on_frame(k)
+        self.build_padded(out)
+
+    def build(self) -> tuple[list[Any], np.ndarray]:
+        rewards = self.build_padded()
+        return [{key: value[i] for key, value in self.arrays.items()} for i in range(self.config.n_cars)], rewards
+
+    def infos(self, index: int) -> dict[str, Any]:
+        return {**super().infos(index), "dropped_detections": int(self.dropped_rows[index])}
+
+
 ObservationFactory = Callable[..., DrivingObservationBuilder]
 OBSERVATION_BUILDERS: dict[str, ObservationFactory] = {"full": FullObservation,
-                                                      "partial": PartialObservation}
+                                                      "partial": PartialObservation,
+                                                      "padded": PaddedObservation}
 
 
 def register_observation(name: str, factory: ObservationFactory) -> None:
@@ -434,7 +541,9 @@ def observation_builder(mode: Any, config: DrivingConfig, perception: Any = None
         raise ValueError(f"observation={mode!r} does not take that option: {exc}") from None
 
 
-__all__ = ["DrivingObservationBuilder", "FullObservation", "PartialObservation", "driving_perception_params",
+__all__ = ["DrivingObservationBuilder", "FullObservation", "PartialObservation", "PaddedObservation",
+           "driving_layout_spec", "driving_layout", "default_maxima", "FALSE_POSITIVE_SLOTS", "GAME_COLUMNS",
+           "driving_perception_params",
            "feature_bound", "PREVIOUS_ACTION_COLUMNS", "FullLayout", "DrivingGroundTruth", "OBSERVATION_BUILDERS",
            "register_observation", "observation_builder", "SELF_COLUMNS", "CAR_COLUMNS", "PEDESTRIAN_COLUMNS",
            "OBSTACLE_COLUMNS", "LANE_COLUMNS", "STATE_CAR_COLUMNS", "STATE_PEDESTRIAN_COLUMNS",
