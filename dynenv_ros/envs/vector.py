@@ -1,4 +1,4 @@
-"""Many independent soccer worlds stepped together, as arrays: in this process or in worker processes.
+"""Many independent worlds stepped together, as arrays: in this process or in worker processes.
 
 ``SoccerVectorEnv(E, observation="padded")`` (the default) returns what every robot perceives — the emulated vision
 pipeline's detections, with its misses, confusions and errors — in the fixed-shape layout of
@@ -21,6 +21,11 @@ faster depends on the machine: see docs/benchmarks.md (`dynenv-bench vector`). F
 automatically; the last observation of a finished episode is returned separately in ``final_observations``.
 ``targets=True`` adds the self-supervised localization and reconstruction targets of every robot
 (``envs.learning_targets``), written by the worlds into the batch's arrays like the observations.
+
+``DrivingVectorEnv`` is the same batch over driving worlds (``driving_v0``'s perception and its padded layout, with
+(E, A) axes over cars): the batch machinery (``InProcessBatch``, ``SubprocessBatch``, ``VectorEnv``) reads what is
+scenario-specific from the settings (``_Settings`` soccer, ``_DrivingSettings`` driving): the world, the observation
+builder, the action width and checks.
 """
 from __future__ import annotations
 
@@ -37,6 +42,7 @@ from typing import Any, Callable, Mapping, Union
 
 import numpy as np
 
+from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.envs.learning_targets import target_shapes
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.envs.soccer_observations import SoccerObservations, perception_params
@@ -74,6 +80,9 @@ class BatchStep:
     # teacher=KIND: (E, A, 4) int64, the scripted teacher's action for each robot at ``observations``' instant
     # (envs.teacher); else None.
     teacher_actions: np.ndarray | None = None
+    # Driving: (E, A) bool, the car can earn nothing more this episode (driving_v0's per-car termination: crashed, or
+    # home with its team's bonus decided; every car when the episode ended by itself); else None.
+    agents_terminated: np.ndarray | None = None
 
 
 def _seeds(seed: int | None, count: int) -> list[int]:
@@ -92,10 +101,63 @@ class _Settings:
     targets: bool = False
     scripted_team_b: str | None = None
     teacher: str | None = None
+    scenario = "soccer"
+    action_width = 4             # [walk, turn, kick, head]
+
+    @property
+    def n_agents(self) -> int:
+        return self.config.n_robots
 
     def observations(self) -> SoccerObservations:
         return SoccerObservations(self.config, self.observation, self.perception,
                                   max_landmarks=self.max_landmarks, max_objects=self.max_objects)
+
+    def make_world(self) -> SoccerWorld:
+        return SoccerWorld(self.config)
+
+    def full_observations(self, observations: SoccerObservations, world: SoccerWorld) -> np.ndarray:
+        return observations.ground_truth.observations(world)
+
+    def validate_actions(self, actions: Any, num_envs: int) -> Any:
+        return validate_actions(actions, self.config, num_envs)
+
+
+@dataclass(frozen=True)
+class _DrivingSettings:
+    """What every driving world of a batch is built from (pickled once to each worker)."""
+    config: DrivingConfig
+    observation: str
+    perception: Any                      # DrivingPerceptionParams (padded) or None (full)
+    max_lanes: int | None
+    max_objects: int | None
+    targets = False
+    scripted_team_b = None
+    teacher = None
+    scenario = "driving"
+
+    @property
+    def n_agents(self) -> int:
+        return self.config.n_cars
+
+    @property
+    def action_width(self) -> int:       # discrete [acceleration, steering]; continuous [throttle, brake, steering]
+        return 2 if self.config.action_mode == "discrete" else 3
+
+    def observations(self) -> Any:
+        from dynenv_ros.envs.driving_observations import observation_builder
+        options = {"max_lanes": self.max_lanes, "max_objects": self.max_objects} if self.observation == "padded" \
+            else None
+        return observation_builder(self.observation, self.config, self.perception, options)
+
+    def make_world(self) -> Any:
+        from dynenv_ros.driving.world import DrivingWorld
+        return DrivingWorld(self.config)
+
+    def full_observations(self, observations: Any, world: Any) -> np.ndarray:
+        return observations.ground_truth.observations(world.snapshot())
+
+    def validate_actions(self, actions: Any, num_envs: int) -> Any:
+        return validate_driving_actions(actions, self.config, num_envs)
 
 
 def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
@@ -103,7 +165,7 @@ def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, .
     ``final/<key>``, learning targets ``targets/<key>`` and ``final_targets/<key>`` (``settings.targets``), and
     the per-step items."""
     obs = settings.observations()
-    E, A = num_envs, settings.config.n_robots
+    E, A = num_envs, settings.n_agents
     if settings.observation == "padded":
         shapes = obs.layout.shapes()
     else:
@@ -121,6 +183,8 @@ def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, .
     spec["terminated"] = ((E,), np.dtype(bool))
     spec["truncated"] = ((E,), np.dtype(bool))
     spec["dropped"] = ((E, A), np.dtype(np.int64))
+    if settings.scenario == "driving":
+        spec["agents_terminated"] = ((E, A), np.dtype(bool))
     return spec
 
 
@@ -134,6 +198,7 @@ class InProcessBatch:
         self.settings = settings
         self.config = settings.config
         self.padded = settings.observation == "padded"
+        self.driving = settings.scenario == "driving"
         self._scripted: list[Any] = []
         self._scripted_robots = range(0)
         if settings.scripted_team_b is not None:
@@ -142,7 +207,7 @@ class InProcessBatch:
                                            head_mode=self.config.head_mode, motion=self.config.motion)
             self._scripted_robots = range(n, 2 * n)
         self._teacher = Teacher(self.config, settings.teacher) if settings.teacher is not None else None
-        self.worlds = [SoccerWorld(self.config) for _ in range(num_envs)]
+        self.worlds = [settings.make_world() for _ in range(num_envs)]
         self.observers = [settings.observations() for _ in range(num_envs)]
         if arrays is None:
             arrays = {key: np.zeros(shape, dtype) for key, (shape, dtype) in _storage(settings, num_envs).items()}
@@ -162,7 +227,12 @@ class InProcessBatch:
     def _observe_initial(self, e: int) -> None:
         world, obs = self.worlds[e], self.observers[e]
         obs.reset(world)
-        if self.padded:
+        if self.driving:
+            if self.padded:
+                obs.initial_padded(out=self._obs[e])
+            else:
+                self._obs[e][FULL_KEY][:] = self.settings.full_observations(obs, world)
+        elif self.padded:
             obs.initial_padded(out=self._obs[e], targets=self._targets[e])
         else:
             self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
@@ -174,9 +244,13 @@ class InProcessBatch:
             world.reset(seed=seed)
             self._observe_initial(e)
         self.arrays["dropped"][:] = 0
+        if self.driving:
+            self.arrays["agents_terminated"][:] = False
 
     def step(self, actions: Any) -> None:
         """``actions`` already validated (``validate_actions``): one row of A actions per world."""
+        if self.driving:
+            return self._step_driving(actions)
         terms, dropped = self.arrays["reward_terms"], self.arrays["dropped"]
         terminated, truncated = self.arrays["terminated"], self.arrays["truncated"]
         for e, (world, obs, acts) in enumerate(zip(self.worlds, self.observers, actions)):
@@ -203,6 +277,31 @@ class InProcessBatch:
             elif self._teacher is not None:
                 self._teacher.label(world, self.arrays["teacher"][e])
 
+    def _step_driving(self, actions: Any) -> None:
+        """Driving worlds: as ``step``, with driving_v0's per-car termination in ``agents_terminated`` (the world
+        itself ignores the actions of finished cars)."""
+        terms, dropped, ended = self.arrays["reward_terms"], self.arrays["dropped"], self.arrays["agents_terminated"]
+        terminated, truncated = self.arrays["terminated"], self.arrays["truncated"]
+        discrete = self.config.action_mode == "discrete"
+        for e, (world, obs, acts) in enumerate(zip(self.worlds, self.observers, actions)):
+            if isinstance(acts, np.ndarray) and discrete and acts.dtype.kind == "f":
+                acts = acts.astype(np.int64)        # integral (validated): the world's fast path takes indices
+            result = world.step(acts, on_frame=obs.on_frame)
+            terms[e] = result.rewards
+            if self.padded:
+                terms[e, RewardTerm.OBSERVATION] += obs.build_padded(out=self._obs[e])
+                dropped[e] = obs.dropped_rows
+            else:
+                self._obs[e][FULL_KEY][:] = self.settings.full_observations(obs, world)
+            ended[e] = world.cars_done()
+            ended[e] |= result.terminated
+            terminated[e], truncated[e] = result.terminated, result.truncated
+            if result.terminated or result.truncated:
+                for key, final in self._final[e].items():
+                    final[...] = self._obs[e][key]
+                world.reset(seed=int(world.rng.integers(2**63)))
+                self._observe_initial(e)
+
     def close(self) -> None:
         pass
 
@@ -226,6 +325,31 @@ def _fast_valid(actions: np.ndarray, config: SoccerConfig) -> bool:
     motion = actions[..., :3]
     return bool((motion >= 0).all() and (motion < (len(Walk), len(Turn), len(Kick))).all()
                 and (np.abs(actions[..., 3].astype(np.float64)) <= m.head_step * m.head_units + 1e-9).all())
+
+
+def validate_driving_actions(actions: Any, config: DrivingConfig, num_envs: int) -> Any:
+    """Check a batch of driving actions before any world moves: the array itself when every row is valid (discrete
+    (E, A, 2) integral indices 0..2; continuous (E, A, 3) [throttle, brake, steering] within the bounds), else the
+    parsed ``DrivingAction``s; ValueError names the env, the car and the field."""
+    from dynenv_ros.driving.cars import parse_action as parse_driving_action
+    arr = np.asarray(actions)
+    discrete = config.action_mode == "discrete"
+    width = 2 if discrete else 3
+    expected = (num_envs, config.n_cars)
+    if arr.shape[:2] != expected:
+        raise ValueError(f"actions must have shape {expected + (width,)}, got {arr.shape}")
+    if arr.shape == expected + (width,) and arr.dtype.kind in "iuf" and np.isfinite(arr).all():
+        if discrete:
+            if (arr == np.floor(arr)).all() and (arr >= 0).all() and (arr < 3).all():
+                return arr
+        else:
+            w = config.cars.max_yaw_rate
+            low, high = np.array([-1.0, 0.0, -w]), np.array([1.0, 1.0, w])
+            if (arr >= low).all() and (arr <= high).all():
+                return arr
+    w = config.cars.max_yaw_rate
+    return [[parse_driving_action(f"env {e} car {i}", raw, mode=config.action_mode, max_yaw_rate=w)
+             for i, raw in enumerate(row)] for e, row in enumerate(arr)]
 
 
 def validate_actions(actions: Any, config: SoccerConfig, num_envs: int) -> Any:
@@ -367,6 +491,7 @@ class SubprocessBatch:
         shards = min(num_envs, workers or len(cpus))
         self.config = settings.config
         self.num_envs = num_envs
+        self.scenario = settings.scenario
         # The larger shards first: with parent_steps this process's, which starts at once, while a worker's start
         # and answer wait for wake-ups (5 worlds on 2 cores: 3 here and 2 in the worker beat 2 and 3 by 2-8 %).
         self.sizes = [num_envs // shards + (1 if s < num_envs % shards else 0) for s in range(shards)]
@@ -377,7 +502,7 @@ class SubprocessBatch:
         self._procs: list[Any] = []
         self._awaiting = False
         spec = _storage(settings, num_envs)
-        spec["actions"] = ((num_envs, self.config.n_robots, 4), np.dtype(np.float64))   # written before each step
+        spec["actions"] = ((num_envs, settings.n_agents, settings.action_width), np.dtype(np.float64))  # each step
         self._shared = SharedArrays(spec)
         self._finalizer = weakref.finalize(self, _shutdown, self._conns, self._procs, self._shared)
         self.arrays = self._shared.arrays
@@ -405,8 +530,8 @@ class SubprocessBatch:
     def _call(self, messages: list[bytes], local: Callable[[], None] | None = None) -> None:
         """Send each worker its message, run ``local`` (the parent's shard) meanwhile, then wait for every reply."""
         if self._awaiting:
-            raise RuntimeError("an earlier call to the soccer workers was interrupted, so their replies are out of "
-                               "step; close() this env and make a new one")
+            raise RuntimeError(f"an earlier call to the {self.scenario} workers was interrupted, so their replies are "
+                               "out of step; close() this env and make a new one")
         self._awaiting = True              # until every reply is in (not so after a KeyboardInterrupt mid-step)
         sent, errors, died = [], [], None
         for w, (conn, message) in enumerate(zip(self._conns, messages)):
@@ -431,7 +556,7 @@ class SubprocessBatch:
         self._awaiting = False
         if died:
             w, exc = died
-            raise RuntimeError(f"soccer worker process {w} died ({exc!r}); see its error output above. Scripts "
+            raise RuntimeError(f"{self.scenario} worker process {w} died ({exc!r}); see its error output above. Scripts "
                                "that start workers need an `if __name__ == '__main__':` guard") from exc
         if errors:
             raise errors[0]
@@ -464,7 +589,110 @@ class SubprocessBatch:
         self._finalizer()
 
 
-class SoccerVectorEnv:
+class VectorEnv:
+    """What every batch of worlds shares (``SoccerVectorEnv``, ``DrivingVectorEnv``): ``reset(seed)``,
+    ``step(actions) -> BatchStep``, ``close()``; the scenario's class checks its settings and calls ``_start``."""
+
+    def _start(self, settings: Any, observations: Any, num_envs: int, backend: str, workers: int | None,
+               pin_workers: bool, parent_steps: bool, copy: bool) -> None:
+        self._settings = settings
+        self.observation = settings.observation
+        self.layout: PaddedLayout | None = observations.layout if settings.observation == "padded" else None
+        self.single_observation_space = observations.space
+        if backend == "auto":
+            backend = "subprocess" if num_envs >= AUTO_SUBPROCESS_MIN_ENVS[settings.observation] \
+                and len(os.sched_getaffinity(0)) > 1 else "inprocess"
+        if backend == "inprocess":
+            self._batch: InProcessBatch | SubprocessBatch = InProcessBatch(num_envs, settings)
+        elif backend == "subprocess":
+            self._batch = SubprocessBatch(num_envs, settings, workers, pin_workers, parent_steps)
+        else:
+            raise ValueError(f"backend must be 'auto', 'inprocess' or 'subprocess', got {backend!r}")
+        self.backend = backend
+        self.num_envs = num_envs
+        self.copy = copy
+        arrays = self._batch.arrays
+        self._keys = [k[4:] for k in arrays if k.startswith("obs/")]
+        self._target_keys = [k[8:] for k in arrays if k.startswith("targets/")]
+        self.with_targets = bool(settings.targets)
+        self.teacher = settings.teacher
+        self._was_reset = self._closed = False
+
+    def _observation(self, prefix: str, index: Any = slice(None), copy: bool = True) -> Observation:
+        arrays = self._batch.arrays
+        if self.observation == "full":
+            value = arrays[prefix + FULL_KEY][index]
+            return value.copy() if copy else value
+        return {k: arrays[prefix + k][index].copy() if copy else arrays[prefix + k][index] for k in self._keys}
+
+    def _targets(self, prefix: str, index: Any = slice(None), copy: bool = True) -> dict[str, np.ndarray]:
+        arrays = self._batch.arrays
+        return {k: arrays[prefix + k][index].copy() if copy else arrays[prefix + k][index] for k in self._target_keys}
+
+    @property
+    def targets(self) -> dict[str, np.ndarray]:
+        """The learning targets of the observations returned last (by ``reset()`` or ``step()``), copied."""
+        self._check_open()
+        if not self.with_targets:
+            raise RuntimeError(f"this {type(self).__name__} was made without targets=True")
+        if not self._was_reset:
+            raise RuntimeError("no targets before reset(); call reset(seed) first")
+        return self._targets("targets/")
+
+    @property
+    def teacher_actions(self) -> np.ndarray:
+        """The teacher's (E, A, 4) labels of the observations returned last, copied."""
+        self._check_open()
+        if self.teacher is None:
+            raise RuntimeError(f"this {type(self).__name__} was made without a teacher")
+        if not self._was_reset:
+            raise RuntimeError("no teacher labels before reset(); call reset(seed) first")
+        return self._batch.arrays["teacher"].copy()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError(f"{type(self).__name__} is closed")
+
+    def reset(self, seed: int | None = None) -> Observation:
+        self._check_open()
+        self._batch.reset(_seeds(seed, self.num_envs))
+        self._was_reset = True
+        return self._observation("obs/", copy=self.copy)
+
+    def step(self, actions: Any) -> BatchStep:
+        self._check_open()
+        valid = self._settings.validate_actions(actions, self.num_envs)   # before any world moves
+        if not self._was_reset:
+            raise RuntimeError(f"{type(self).__name__}.step() before reset(); call reset(seed) first")
+        self._batch.step(valid)
+        arrays = self._batch.arrays
+        terms = arrays["reward_terms"].copy()
+        terminated, truncated = arrays["terminated"].copy(), arrays["truncated"].copy()
+        ended = [int(e) for e in np.flatnonzero(terminated | truncated)]
+        finals = {e: self._observation("final/", e) for e in ended}
+        if not self.with_targets:
+            targets, final_targets = None, {}
+        else:
+            targets = self._targets("targets/", copy=self.copy)
+            final_targets = {e: self._targets("final_targets/", e) for e in ended}
+        teacher = arrays["teacher"].copy() if self.teacher is not None else None
+        agents_terminated = arrays["agents_terminated"].copy() if "agents_terminated" in arrays else None
+        return BatchStep(self._observation("obs/", copy=self.copy), terms.sum(axis=1), terms, terminated,
+                         truncated, finals, arrays["dropped"].copy(), targets, final_targets, teacher,
+                         agents_terminated)
+
+    def close(self) -> None:
+        self._closed = True
+        self._batch.close()
+
+    def __enter__(self) -> "VectorEnv":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+class SoccerVectorEnv(VectorEnv):
     """``num_envs`` soccer worlds as one batch: ``reset(seed)`` and ``step(actions (E, A, 4)) -> BatchStep``.
 
     ``observation="padded"`` (default): perceived detections as ``{key: (E, A, ...)}`` float32 arrays
@@ -517,97 +745,45 @@ class SoccerVectorEnv:
         settings = _Settings(self.config, observation, perception_params(perception), max_landmarks, max_objects,
                              bool(targets), scripted_team_b, teacher)
         observations = settings.observations()      # checks the layout maxima; gives the spaces
-        self.observation = observation
-        self.layout: PaddedLayout | None = observations.layout if observation == "padded" else None
-        self.single_observation_space = observations.space
-        if backend == "auto":
-            backend = "subprocess" if num_envs >= AUTO_SUBPROCESS_MIN_ENVS[observation] \
-                and len(os.sched_getaffinity(0)) > 1 else "inprocess"
-        if backend == "inprocess":
-            self._batch: InProcessBatch | SubprocessBatch = InProcessBatch(num_envs, settings)
-        elif backend == "subprocess":
-            self._batch = SubprocessBatch(num_envs, settings, workers, pin_workers, parent_steps)
-        else:
-            raise ValueError(f"backend must be 'auto', 'inprocess' or 'subprocess', got {backend!r}")
-        self.backend = backend
-        self.num_envs = num_envs
-        self.copy = copy
-        arrays = self._batch.arrays
-        self._keys = [k[4:] for k in arrays if k.startswith("obs/")]
-        self._target_keys = [k[8:] for k in arrays if k.startswith("targets/")]
-        self.with_targets = bool(targets)
-        self.teacher = teacher
+        self._start(settings, observations, num_envs, backend, workers, pin_workers, parent_steps, copy)
         self.target_shapes: dict[str, tuple[int, ...]] | None = \
             target_shapes(self.config.players_per_team) if targets else None
-        self._was_reset = self._closed = False
-
-    def _observation(self, prefix: str, index: Any = slice(None), copy: bool = True) -> Observation:
-        arrays = self._batch.arrays
-        if self.observation == "full":
-            value = arrays[prefix + FULL_KEY][index]
-            return value.copy() if copy else value
-        return {k: arrays[prefix + k][index].copy() if copy else arrays[prefix + k][index] for k in self._keys}
-
-    def _targets(self, prefix: str, index: Any = slice(None), copy: bool = True) -> dict[str, np.ndarray]:
-        arrays = self._batch.arrays
-        return {k: arrays[prefix + k][index].copy() if copy else arrays[prefix + k][index] for k in self._target_keys}
-
-    @property
-    def targets(self) -> dict[str, np.ndarray]:
-        """The learning targets of the observations returned last (by ``reset()`` or ``step()``), copied."""
-        self._check_open()
-        if not self.with_targets:
-            raise RuntimeError("this SoccerVectorEnv was made without targets=True")
-        if not self._was_reset:
-            raise RuntimeError("no targets before reset(); call reset(seed) first")
-        return self._targets("targets/")
-
-    @property
-    def teacher_actions(self) -> np.ndarray:
-        """The teacher's (E, A, 4) labels of the observations returned last, copied."""
-        self._check_open()
-        if self.teacher is None:
-            raise RuntimeError("this SoccerVectorEnv was made without a teacher")
-        if not self._was_reset:
-            raise RuntimeError("no teacher labels before reset(); call reset(seed) first")
-        return self._batch.arrays["teacher"].copy()
-
-    def _check_open(self) -> None:
-        if self._closed:
-            raise RuntimeError("SoccerVectorEnv is closed")
-
-    def reset(self, seed: int | None = None) -> Observation:
-        self._check_open()
-        self._batch.reset(_seeds(seed, self.num_envs))
-        self._was_reset = True
-        return self._observation("obs/", copy=self.copy)
-
-    def step(self, actions: Any) -> BatchStep:
-        self._check_open()
-        valid = validate_actions(actions, self.config, self.num_envs)   # before any world moves
-        if not self._was_reset:
-            raise RuntimeError("SoccerVectorEnv.step() before reset(); call reset(seed) first")
-        self._batch.step(valid)
-        arrays = self._batch.arrays
-        terms = arrays["reward_terms"].copy()
-        terminated, truncated = arrays["terminated"].copy(), arrays["truncated"].copy()
-        ended = [int(e) for e in np.flatnonzero(terminated | truncated)]
-        finals = {e: self._observation("final/", e) for e in ended}
-        if not self.with_targets:
-            targets, final_targets = None, {}
-        else:
-            targets = self._targets("targets/", copy=self.copy)
-            final_targets = {e: self._targets("final_targets/", e) for e in ended}
-        teacher = arrays["teacher"].copy() if self.teacher is not None else None
-        return BatchStep(self._observation("obs/", copy=self.copy), terms.sum(axis=1), terms, terminated,
-                         truncated, finals, arrays["dropped"].copy(), targets, final_targets, teacher)
-
-    def close(self) -> None:
-        self._closed = True
-        self._batch.close()
 
     def __enter__(self) -> "SoccerVectorEnv":
         return self
 
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
+
+class DrivingVectorEnv(VectorEnv):
+    """``num_envs`` driving worlds as one batch: ``reset(seed)`` and ``step(actions) -> BatchStep``, over cars.
+
+    ``observation="padded"`` (default): each car's perceived detections (``driving_v0(observation="padded")``) as
+    ``{key: (E, A, ...)}`` float32 arrays (``self.layout``: driving's ``PaddedLayout``; ``max_lanes``,
+    ``max_objects`` its maxima), ``perception`` as ``driving_v0``'s (a preset name, a mapping, params; None:
+    realistic); ``"full"``: the ground truth (E, A, D), no perception. ``config``: a ``DrivingConfig`` or its settings
+    as a mapping. Actions (E, A, 2) discrete indices or (E, A, 3) [throttle, brake, steering] by
+    ``config.action_mode``. ``BatchStep.agents_terminated`` (E, A): the car can earn nothing more this episode
+    (driving_v0's per-car termination); its later actions are ignored by its world and its transitions until the
+    episode ends carry no reward. Backends, shards, ``copy`` and automatic resets as ``SoccerVectorEnv``."""
+
+    def __init__(self, num_envs: int, backend: str = "auto", workers: int | None = None,
+                 config: DrivingConfig | Mapping[str, Any] | None = None, observation: str = "padded",
+                 perception: Any = None, max_lanes: int | None = None, max_objects: int | None = None,
+                 copy: bool = True, pin_workers: bool = False, parent_steps: bool = True) -> None:
+        from dynenv_ros.envs.driving_observations import driving_perception_params
+        self.config = config if isinstance(config, DrivingConfig) else DrivingConfig.from_mapping(config or {})
+        if observation not in VECTOR_OBSERVATIONS:
+            raise ValueError(f"observation must be one of {VECTOR_OBSERVATIONS}, got {observation!r}")
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        if not isinstance(parent_steps, bool):
+            raise ValueError(f"parent_steps must be True or False, got {parent_steps!r}")
+        if observation == "full" and (perception is not None or max_lanes is not None or max_objects is not None):
+            raise ValueError("observation='full' is noise-free ground truth: perception, max_lanes and max_objects "
+                             "apply to observation='padded'")
+        params = driving_perception_params(perception) if observation == "padded" else None
+        settings = _DrivingSettings(self.config, observation, params, max_lanes, max_objects)
+        observations = settings.observations()      # checks the layout maxima; gives the spaces
+        self._start(settings, observations, int(num_envs), backend, workers, pin_workers, parent_steps, copy)
+
+    def __enter__(self) -> "DrivingVectorEnv":
+        return self
