@@ -20,6 +20,9 @@ On a shared machine the speed drifts by ±10 % within seconds, so the three are 
 ``--chunk`` batch steps (in-process, subprocess, ceiling, in-process, …) and each figure is its env steps over its
 summed time: all three see the same conditions. ``--repeat`` rounds of ``--steps`` batch steps each; the figures
 are those of all rounds together, with the lowest and highest per-round ratio beside them.
+
+``--scenario driving`` times ``DrivingVectorEnv`` the same way: ``--envs`` driving worlds of ``--cars`` cars, padded
+observations under the ``--perception`` preset (or ``--observation full``), random discrete actions from a pool.
 """
 from __future__ import annotations
 
@@ -41,6 +44,10 @@ ACTION_POOL = 256
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", choices=("robocup", "driving"), default="robocup")
+    parser.add_argument("--cars", type=int, default=2, help="cars per world (--scenario driving, 1..10)")
+    parser.add_argument("--perception", choices=("realistic", "dynenv", "none"), default="realistic",
+                        help="driving perception preset (--scenario driving, padded)")
     parser.add_argument("--envs", type=int, default=8, help="worlds in each batch")
     parser.add_argument("--players-per-team", type=int, default=2)
     parser.add_argument("--steps", type=int, default=200,
@@ -63,12 +70,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
 
 
-def _plain_batch(conn: Any, core: int, envs: int, kwargs: dict[str, Any], batches: np.ndarray, seed: int) -> None:
+def _env_class(scenario: str) -> Any:
+    from dynenv_ros.envs.vector import DrivingVectorEnv, SoccerVectorEnv
+    return DrivingVectorEnv if scenario == "driving" else SoccerVectorEnv
+
+
+def _plain_batch(conn: Any, core: int, envs: int, kwargs: dict[str, Any], batches: np.ndarray, seed: int,
+                 scenario: str = "robocup") -> None:
     """One process of the ceiling: pinned to ``core``, an in-process batch of ``envs`` worlds; steps ``n`` batch
     steps whenever it receives ``n`` and answers the seconds they took (0 ends it)."""
-    from dynenv_ros.envs.vector import SoccerVectorEnv
     os.sched_setaffinity(0, [core])
-    with SoccerVectorEnv(envs, backend="inprocess", **kwargs) as env:
+    with _env_class(scenario)(envs, backend="inprocess", **kwargs) as env:
         env.reset(seed=seed)
         _seconds(env, batches[:, :envs], WARMUP_STEPS, 0)
         conn.send(None)
@@ -89,24 +101,34 @@ def run(args: Any) -> int:
     if min(args.envs, args.steps, args.chunk) < 1 or not 1 <= args.players_per_team <= 5:
         raise SystemExit("--envs, --steps and --chunk must be at least 1, --players-per-team in 1..5")
     from benchmarks.sim import perception_setting
-    from dynenv_ros.envs.vector import SoccerVectorEnv
     from dynenv_ros.soccer.config import SoccerConfig
 
     allowed = sorted(os.sched_getaffinity(0))
     cores = allowed[:args.cores] if args.cores > 0 else allowed
     one_core = cores[:1]
-    config = SoccerConfig(players_per_team=args.players_per_team)
     rng = np.random.default_rng(args.seed)
-    pool = rng.integers([0, 0, 0, 0], [5, 3, 3, 2 * config.motion.head_units + 1],
-                        size=(ACTION_POOL, config.n_robots, 4))
+    driving = getattr(args, "scenario", "robocup") == "driving"
+    VectorEnv = _env_class("driving" if driving else "robocup")
+    if driving:
+        from dynenv_ros.driving.config import DrivingConfig
+        if not 1 <= args.cars <= 10:
+            raise SystemExit("--cars must be in 1..10")
+        config: Any = DrivingConfig(n_cars=args.cars)
+        pool = rng.integers(0, 3, size=(ACTION_POOL, config.n_cars, 2))
+        kwargs = dict(config=config, observation=args.observation,
+                      perception=args.perception if args.observation == "padded" else None)
+    else:
+        config = SoccerConfig(players_per_team=args.players_per_team)
+        pool = rng.integers([0, 0, 0, 0], [5, 3, 3, 2 * config.motion.head_units + 1],
+                            size=(ACTION_POOL, config.n_robots, 4))
+        kwargs = dict(config=config, observation=args.observation,
+                      perception=perception_setting(args) if args.observation == "padded" else "none")
     batches = np.stack([np.roll(pool, e, axis=0) for e in range(args.envs)], axis=1)
-    kwargs = dict(config=config, observation=args.observation,
-                  perception=perception_setting(args) if args.observation == "padded" else "none")
     os.sched_setaffinity(0, cores)            # the forkserver, and so every worker, may use all of these
     workers = args.workers or len(cores)
-    subprocess = SoccerVectorEnv(args.envs, backend="subprocess", workers=workers, pin_workers=args.pin_workers,
+    subprocess = VectorEnv(args.envs, backend="subprocess", workers=workers, pin_workers=args.pin_workers,
                                  parent_steps=args.parent_steps, **kwargs)
-    inprocess = SoccerVectorEnv(args.envs, backend="inprocess", **kwargs)
+    inprocess = VectorEnv(args.envs, backend="inprocess", **kwargs)
     context = mp.get_context("forkserver")
     plain = []
     names = ("inprocess", "subprocess", "ceiling")
@@ -117,7 +139,7 @@ def run(args: Any) -> int:
         for w, share in enumerate(shares):
             parent, child = context.Pipe()
             proc = context.Process(target=_plain_batch, daemon=True, args=(
-                child, cores[w % len(cores)], share, kwargs, batches, args.seed))
+                child, cores[w % len(cores)], share, kwargs, batches, args.seed, "driving" if driving else "robocup"))
             proc.start()
             plain.append((parent, proc))
         for env, pinned in ((inprocess, one_core), (subprocess, cores)):
@@ -167,9 +189,13 @@ def run(args: Any) -> int:
         "subprocess_over_ceiling": round(rate["subprocess"] / rate["ceiling"], 3),
         "python": platform.python_version(),
     }
+    if driving:
+        del figures["players_per_team"]
+        figures = {"scenario": "driving", "cars": args.cars, **figures}
     if args.json:
         print(json.dumps(figures))
     else:
-        print_table(f"dynenv-bench vector: {args.envs} worlds {args.players_per_team}v{args.players_per_team} "
-                    f"{args.observation}", [(k, str(v)) for k, v in figures.items()])
+        what = f"driving {args.cars} cars" if driving else f"{args.players_per_team}v{args.players_per_team}"
+        print_table(f"dynenv-bench vector: {args.envs} worlds {what} {args.observation}",
+                    [(k, str(v)) for k, v in figures.items()])
     return 0
