@@ -3,6 +3,7 @@
 
     .venv/bin/python tools/driving_perception_statistics.py            # everything (about a minute)
     .venv/bin/python tools/driving_perception_statistics.py --timing   # only the cost per period
+    .venv/bin/python tools/driving_perception_statistics.py --maxima   # only the padded layout's rows per frame
 """
 from __future__ import annotations
 
@@ -87,10 +88,44 @@ def timing():
         print(f"| {n} | " + " | ".join(cells) + " |")
 
 
+def maxima(periods=1000):
+    """The most rows of each padded stream in one car's frame (every detection of ``periods`` periods), random and
+    scripted play, each preset; beside them the default maxima (envs.driving_observations.default_maxima)."""
+    from dynenv_ros.driving.scripted import ScriptedDriver
+    from dynenv_ros.envs.driving_observations import default_maxima
+    lanes_ids, object_ids = (23, 24), (0, 20, 21, 22)
+    print(f"| cars | play | preset | lanes (SELF + LANE) | objects | of which false positives | default maxima |")
+    print("|---|---|---|---|---|---|---|")
+    for n_cars in (2, 4, 10):
+        for policy in ("random", "scripted"):
+            for preset in ("none", "dynenv", "realistic"):
+                config = DrivingConfig(n_cars=n_cars)
+                world = DrivingWorld(config, seed=11)
+                vision = DrivingVision(world, load_driving_preset(preset))
+                rng, driver = np.random.default_rng(3), ScriptedDriver(config)
+                most = np.zeros(3, np.int64)
+                for _ in range(periods):
+                    if world.done:
+                        world.reset()
+                        vision.reset()
+                    world.step(rng.integers(0, 3, (n_cars, 2)) if policy == "random" else driver.actions(world))
+                    out = vision.perceive()
+                    cls, view = out.detections["class_id"], np.repeat(np.arange(len(out)), np.diff(out.offsets))
+                    for k, chosen in enumerate((np.isin(cls, lanes_ids), np.isin(cls, object_ids),
+                                                out.detections["true_id"] == -1)):
+                        most[k] = max(most[k], np.bincount(view[chosen], minlength=len(out)).max())
+                print(f"| {n_cars} | {policy} | {preset} | {most[0]} | {most[1]} | {most[2]} | "
+                      f"{' / '.join(map(str, default_maxima(config)))} |", flush=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--timing", action="store_true", help="only the cost per period")
+    parser.add_argument("--maxima", action="store_true", help="only the padded layout's most rows per frame")
     args = parser.parse_args()
+    if args.maxima:
+        maxima()
+        return
     if not args.timing:
         counts()
         shares()
