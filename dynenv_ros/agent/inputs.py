@@ -6,6 +6,24 @@ turns it into the two streams of the paper's encoder — landmarks (for localiza
 robots) — with tensor operations only, and ``side_inputs`` into the self-state and previous-action vectors.
 ``collate`` packs variable-length detection rows into that layout first. Padding is explicit (``mask`` True =
 padded slot), so no detection, frame or batch entry ever needs special-casing downstream.
+
+Both scenarios go through the same functions, read through the layout's ``LayoutSpec`` (``spec=``, soccer's by
+default): the stream keys, the class embedding indices and the side inputs. ``agent_inputs(scenario)`` says what a
+scenario's network takes (``AgentInputs``):
+
+- **Class embedding indices, per scenario** (one table each, 0 = padding or a class the scenario does not have): the
+  dynamic stream's classes first, then the static stream's, from 1. Soccer's table is exactly the one soccer
+  checkpoints were trained with (BALL 1, ROBOT 2, GOALPOST 3 … CENTER_CIRCLE 7; 8 embedding blocks per stream);
+  driving's is CAR 1, PEDESTRIAN 2, OBSTACLE 3, UNKNOWN 4, SELF 5, LANE 6 (7 blocks). Why tables, not one list with
+  the driving classes appended: appending would give soccer's network 6 more blocks per stream (its parameter
+  count, its seeded initialisation and every soccer checkpoint's strict load would change) and a driving network 8
+  blocks it never uses; a network only ever sees one scenario's classes.
+- **Previous action**: soccer's ``encode_previous_action`` (12 values); driving's ``encode_driving_action``: [throttle,
+  brake, steering / the steering limit] (3 values in [−1, 1] / [0, 1] / [−1, 1]; the limit is the layout spec's
+  previous-action bound), the command a discrete choice became included.
+- **Self state**: soccer's last-frame proprioception (4) and the GameController's values scaled (3); driving's
+  last-frame ego values scaled by ``DRIVING_EGO_SCALE`` (speed /10 m/s, yaw rate as is, destination /50 m, length
+  and width /5 m, crashed and finished as is: 8) and the seconds remaining over a 60 s episode (1).
 """
 from __future__ import annotations
 
@@ -16,15 +34,30 @@ import numpy as np
 import torch
 
 from dynenv_ros.envs.padded_layout import (FEATURES, GAME_COLUMNS, LANDMARK_CLASSES, OBJECT_CLASSES,
-                                           PROPRIOCEPTION_COLUMNS, PaddedLayout, pack_frames)
+                                           PROPRIOCEPTION_COLUMNS, SOCCER, LayoutSpec, PaddedLayout, pack_frames)
+
+SCENARIOS = ("soccer", "driving")
+
+
+def class_index(spec: LayoutSpec) -> dict[int, int]:
+    """Embedding index of each class of a layout (one MLP per class): the dynamic stream's classes, then the static
+    stream's, from 1; 0 is reserved for padding and classes the layout does not have."""
+    return {int(c): i + 1 for i, c in enumerate(spec.streams[1].classes + spec.streams[0].classes)}
+
+
+def _kind_table(index: Mapping[int, int]) -> torch.Tensor:
+    table = torch.zeros(256, dtype=torch.int64)
+    for cls, position in index.items():
+        table[cls] = position
+    return table
+
 
 DYNAMIC_CLASSES = OBJECT_CLASSES
-# Embedding index of each class (one MLP per class); 0 is reserved for padding and unknown classes.
-CLASS_INDEX = {int(c): i + 1 for i, c in enumerate(DYNAMIC_CLASSES + LANDMARK_CLASSES)}
+# Soccer's table (what every soccer checkpoint was trained with): BALL 1, ROBOT 2, then the landmarks 3..7.
+CLASS_INDEX = class_index(SOCCER)
+assert CLASS_INDEX == {int(c): i + 1 for i, c in enumerate(DYNAMIC_CLASSES + LANDMARK_CLASSES)}
 NUM_CLASSES = len(CLASS_INDEX) + 1
-_KIND = torch.zeros(256, dtype=torch.int64)
-for _cls, _index in CLASS_INDEX.items():
-    _KIND[_cls] = _index
+_KIND = _kind_table(CLASS_INDEX)
 # The GameController's values reach the network scaled to about unit size: ownership relation as is, its seconds
 # over a free kick's length, the game's seconds over a 10-minute half.
 GAME_SCALE = torch.tensor([1.0, 1 / 10.0, 1 / 600.0])
@@ -43,26 +76,38 @@ def _as_tensor(value) -> torch.Tensor:
     return value if isinstance(value, torch.Tensor) else torch.from_numpy(np.asarray(value, np.float32))
 
 
-def stream(features, valid) -> StreamBatch:
-    """One stream from padded rows (B, F, N, FEATURES) and a validity mask (B, F, N), 1 = a detection."""
+def stream(features, valid, kind_table: torch.Tensor | None = None) -> StreamBatch:
+    """One stream from padded rows (B, F, N, FEATURES) and a validity mask (B, F, N), 1 = a detection;
+    ``kind_table``: the scenario's class → embedding index table (``AgentInputs.kind_table``; soccer's by default)."""
     features, valid = _as_tensor(features), _as_tensor(valid)
-    kind = _KIND[features[..., 0].long().clamp(0, 255)]
+    kind = (_KIND if kind_table is None else kind_table)[features[..., 0].long().clamp(0, 255)]
     padded = valid < 0.5
     return StreamBatch(features, kind.masked_fill(padded, 0), padded)
 
 
-def streams_from_padded(observation: Mapping[str, object]) -> tuple[StreamBatch, StreamBatch]:
-    """(landmarks, dynamic objects) of a batch of padded observations (keys of ``PaddedLayout``, robots leading)."""
-    return (stream(observation["landmarks"], observation["landmark_mask"]),
-            stream(observation["objects"], observation["object_mask"]))
+def streams_from_padded(observation: Mapping[str, object], spec: LayoutSpec = SOCCER
+                        ) -> tuple[StreamBatch, StreamBatch]:
+    """(static stream, dynamic stream) of a batch of padded observations (keys of the layout ``spec``, robots
+    leading): soccer's (landmarks, objects), driving's (lanes with the SELF row, objects)."""
+    table = agent_inputs(spec.scenario).kind_table
+    (static, dynamic) = spec.streams
+    return (stream(observation[static.key], observation[static.mask], table),
+            stream(observation[dynamic.key], observation[dynamic.mask], table))
 
 
-def side_inputs(observation: Mapping[str, object], head_max: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """(previous action encoding (B, ACTION_ENCODING), self state (B, SELF_STATE)) of padded observations: the
-    period's last proprioception row and the GameController's values, scaled."""
+def side_inputs(observation: Mapping[str, object], head_max: float | None = None, spec: LayoutSpec = SOCCER
+                ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(previous action encoding (B, action_encoding), self state (B, self_state)) of padded observations: the
+    period's last proprioception row and the game's values, scaled. ``head_max`` (soccer only): the head turn's
+    bound; driving scales the steering by its layout spec's bound."""
     action = _as_tensor(observation["previous_action"])
+    proprioception = _as_tensor(observation["proprioception"])[:, -1]
+    if spec.scenario == "driving":
+        return encode_driving_action(action, spec), driving_self_state(proprioception, observation["game"])
+    if head_max is None:
+        raise ValueError("soccer's side inputs need head_max (the head turn's bound, rad per period)")
     previous = encode_previous_action(action[:, 0], action[:, 1], action[:, 2], action[:, 3], head_max)
-    return previous, self_state(_as_tensor(observation["proprioception"])[:, -1], observation["game"])
+    return previous, self_state(proprioception, observation["game"])
 
 
 def self_state(proprioception, game) -> torch.Tensor:
@@ -71,14 +116,14 @@ def self_state(proprioception, game) -> torch.Tensor:
 
 
 def collate(observations: Sequence[Sequence[np.ndarray]], max_landmarks: int | None = None,
-            max_objects: int | None = None) -> tuple[StreamBatch, StreamBatch]:
+            max_objects: int | None = None, spec: LayoutSpec = SOCCER) -> tuple[StreamBatch, StreamBatch]:
     """(landmarks, dynamic objects) for a batch of robots; each observation is a sequence of frames, each frame a
     (k, FEATURES) float array of detection rows nearest first (``robocup_v0``'s ``obs["detections"]``). Packed
     into the padded layout — with the batch's own maxima where none are given; beyond a fixed maximum the
-    farthest rows are dropped, as everywhere."""
+    farthest rows are dropped, as everywhere. ``spec``: the layout's (driving's: ``driving_layout_spec``)."""
     frames = [[np.asarray(rows, np.float32).reshape(-1, FEATURES) for rows in entry] for entry in observations]
-    arrays, _ = pack_frames(PaddedLayout.fitting(frames, max_landmarks, max_objects), frames)
-    return streams_from_padded(arrays)
+    arrays, _ = pack_frames(PaddedLayout.fitting(frames, max_landmarks, max_objects, spec), frames)
+    return streams_from_padded(arrays, spec)
 
 
 def encode_previous_action(walk: torch.Tensor, turn: torch.Tensor, kick: torch.Tensor, head: torch.Tensor,
@@ -93,3 +138,65 @@ def encode_previous_action(walk: torch.Tensor, turn: torch.Tensor, kick: torch.T
 
 ACTION_ENCODING = 12
 PROPRIOCEPTION = len(PROPRIOCEPTION_COLUMNS) + len(GAME_COLUMNS)      # the network's self-state input
+
+# Driving's ego values (``perception.driving_model.EGO_COLUMNS``: speed, yaw_rate, goal_x, goal_y, length, width,
+# crashed, finished) to about unit size: m/s over a 10 m/s cruise, rad/s as is, the destination over 50 m, the outline
+# over 5 m, flags as is; the seconds remaining over a 60 s episode.
+DRIVING_EGO_SCALE = torch.tensor([0.1, 1.0, 0.02, 0.02, 0.2, 0.2, 1.0, 1.0])
+DRIVING_GAME_SCALE = 1 / 60.0
+DRIVING_ACTION_ENCODING = 3
+DRIVING_SELF_STATE = len(DRIVING_EGO_SCALE) + 1
+
+
+def encode_driving_action(action, spec: LayoutSpec) -> torch.Tensor:
+    """(B, 3) of (B, 3) [throttle, brake, steering rad/s]: throttle and brake as they are, the steering over the
+    layout's steering bound (``spec.action_high[2]``, ``cars.max_yaw_rate``)."""
+    action = _as_tensor(action).float()
+    scale = torch.tensor([1.0, 1.0, 1.0 / spec.action_high[2]])
+    return action * scale
+
+
+def driving_self_state(ego, game) -> torch.Tensor:
+    """(B, 9): the last frame's ego values (B, 8) and the seconds remaining (B, 1), scaled."""
+    return torch.cat([_as_tensor(ego) * DRIVING_EGO_SCALE, _as_tensor(game) * DRIVING_GAME_SCALE], dim=-1)
+
+
+@dataclass(frozen=True)
+class AgentInputs:
+    """What a scenario's network takes: its class table (``kind_table`` (256,) class id → embedding index,
+    ``num_classes`` embedding blocks per stream, padding's included), the width of its previous-action encoding and
+    of its self state, and its stream keys (static, dynamic)."""
+    scenario: str
+    class_index: dict
+    kind_table: torch.Tensor
+    num_classes: int
+    action_encoding: int
+    self_state: int
+    stream_keys: tuple[str, str]
+
+
+def _driving_spec() -> LayoutSpec:
+    from dynenv_ros.driving.config import DrivingConfig
+    from dynenv_ros.envs.driving_observations import driving_layout_spec
+    return driving_layout_spec(DrivingConfig())
+
+
+_AGENT_INPUTS: dict[str, AgentInputs] = {}
+
+
+def agent_inputs(scenario: str) -> AgentInputs:
+    """The ``AgentInputs`` of ``"soccer"`` or ``"driving"`` (driving's classes and widths do not depend on the
+    config: its bounds only scale the steering, which ``side_inputs`` reads from the observation's spec)."""
+    if scenario not in _AGENT_INPUTS:
+        if scenario == "soccer":
+            _AGENT_INPUTS[scenario] = AgentInputs("soccer", CLASS_INDEX, _KIND, NUM_CLASSES, ACTION_ENCODING,
+                                                  PROPRIOCEPTION, ("landmarks", "objects"))
+        elif scenario == "driving":
+            spec = _driving_spec()
+            index = class_index(spec)
+            _AGENT_INPUTS[scenario] = AgentInputs("driving", index, _kind_table(index), len(index) + 1,
+                                                  DRIVING_ACTION_ENCODING, DRIVING_SELF_STATE,
+                                                  (spec.streams[0].key, spec.streams[1].key))
+        else:
+            raise ValueError(f"scenario must be one of {SCENARIOS}, got {scenario!r}")
+    return _AGENT_INPUTS[scenario]

@@ -13,6 +13,23 @@ dense, literal computation): each detection goes through its own class's embeddi
 periods are bucketed by how many slots they use and cut to that, the single-head attentions run in a folded form
 (half the matrix work), and in ``forward_sequence`` the embeddings and the RTA see all T·B periods at once — only
 the LSTM cells step through time. Figures: docs/benchmarks.md, "Agent forward/backward (issue 11)".
+
+Two scenarios (``DynEnvAgent(scenario=…)``), one architecture:
+
+- ``soccer`` (the default; exactly the network above: same parameters, same seeded initialisation, same outputs):
+  landmarks and objects streams over F = 5 frames, the pose head, walk/turn/kick/head actor heads, the
+  reconstruction head.
+- ``driving`` (the paper's Driving agent, facts §9): the static stream takes the car's SELF row and the lanes, the
+  dynamic one cars, pedestrians, obstacles and class-less false positives, each with its own class table
+  (``inputs.agent_inputs``); one frame per period, so there is **no temporal attention** — the RTA is the
+  intratemporal self-attention and the pooling only (the paper's nTime = 1: its temporal loop never runs), and the
+  network has no temporal-attention weights; a period of more than one frame is refused. Actor heads: two
+  categorical heads of 3 (``action_mode='discrete'``, the original's MultiDiscrete([3, 3])) or one clipped 3-d
+  Gaussian over [throttle, brake, steering / limit] (``'continuous'``; ``agent.driving_actions``). **No
+  localization or reconstruction heads**: their targets (the car's map pose; the other road users' positions) are
+  not built for driving (``envs/learning_targets.py`` is soccer's), and an untrained pose head feeding the object
+  stream (the paper's predictor of 4) would be a fixed random projection; the object stream takes the self state
+  only. ``pose``, ``ball`` and ``robots`` of its steps are None.
 """
 from __future__ import annotations
 
@@ -24,7 +41,9 @@ import torch
 from torch import nn
 from torch.distributions import Categorical, Normal
 
-from dynenv_ros.agent.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
+from dynenv_ros.agent import driving_actions
+from dynenv_ros.agent.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, SCENARIOS, StreamBatch,
+                                     agent_inputs)
 
 POSE_SIZE = 6            # [x, y, cos(θ+h), sin(θ+h), cos h, sin h] in the team frame
 State = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
@@ -236,11 +255,14 @@ class RecurrentTemporalAttention(nn.Module):
     Nothing here depends on earlier motion periods, so a whole rollout (T·B periods) goes through in one batch.
     """
 
-    def __init__(self, size: int) -> None:
+    def __init__(self, size: int, temporal: bool = True) -> None:
         super().__init__()
         self.object_attention = SingleHeadAttention(size)
-        self.temporal_attention = SingleHeadAttention(size)
-        self.norm = nn.LayerNorm(size)
+        if temporal:        # (one frame per period, driving: no temporal attention and no weights for it)
+            self.temporal_attention = SingleHeadAttention(size)
+            self.norm = nn.LayerNorm(size)
+        else:
+            self.temporal_attention = self.norm = None
         self.confidence = nn.Linear(size, 1)
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -250,7 +272,8 @@ class RecurrentTemporalAttention(nn.Module):
 
     def folded(self) -> tuple[tuple[torch.Tensor, ...], tuple[torch.Tensor, ...]]:
         """Both attentions' folded weights (``SingleHeadAttention.folded``), to form once per forward pass."""
-        return self.object_attention.folded(), self.temporal_attention.folded()
+        temporal = self.temporal_attention
+        return self.object_attention.folded(), (temporal.folded() if temporal is not None else None)
 
     def frames_first(self, x: torch.Tensor, mask: torch.Tensor,
                      folded: tuple[tuple[torch.Tensor, ...], tuple[torch.Tensor, ...]] | None = None
@@ -258,6 +281,8 @@ class RecurrentTemporalAttention(nn.Module):
         """``forward`` with the frame axis first: x (F, B, N, D), mask (F, B, N) (each frame's rows contiguous);
         ``folded``: ``self.folded()`` where the caller already has it."""
         F, B, N, D = x.shape
+        if self.temporal_attention is None and F != 1:
+            raise ValueError(f"this network has no temporal attention (one vision frame per period); got {F} frames")
         linear = nn.functional.linear
         folded_object, folded_temporal = self.folded() if folded is None else folded
         padded_so_far = (~mask).long().cumsum(0) == 0      # (F, B, N): no frame up to this one filled the slot
@@ -274,8 +299,9 @@ class RecurrentTemporalAttention(nn.Module):
         # filling a zero tensor of the whole stack for every slice)
         frames = attended.unbind(0)
         summary = frames[0]
-        w_query, b_query, w_out, b_out = folded_temporal
-        temporal_masks = key_masks[1].unbind(0)
+        if len(frames) > 1:               # (one frame: nothing to attend over, the summary is the frame itself)
+            w_query, b_query, w_out, b_out = folded_temporal
+            temporal_masks = key_masks[1].unbind(0)
         for t in range(1, len(frames)):   # (not range(1, F): under the ONNX tracer F is a traced size)
             frame = frames[t].reshape(B * N, D)
             read = SingleHeadAttention.attend(linear(frame, w_query, b_query).view(B, N, D + 1),
@@ -326,10 +352,10 @@ def plan_buckets(used: torch.Tensor, max_buckets: int = 3) -> list[tuple[int, in
 class Stream(nn.Module):
     """Embed → RTA → mix in side information → LSTM cell across motion periods → LayerNorm."""
 
-    def __init__(self, size: int, side: int) -> None:
+    def __init__(self, size: int, side: int, classes: int = NUM_CLASSES, temporal: bool = True) -> None:
         super().__init__()
-        self.embed = ClassEmbedding(size)
-        self.rta = RecurrentTemporalAttention(size)
+        self.embed = ClassEmbedding(size, classes)
+        self.rta = RecurrentTemporalAttention(size, temporal)
         self.transform = nn.Sequential(nn.Linear(size + side, size), nn.LeakyReLU(0.1), nn.LayerNorm(size))
         self.lstm = nn.LSTMCell(size, size)
         self.norm = nn.LayerNorm(size)
@@ -427,12 +453,12 @@ class ReconstructionHead(nn.Module):
 
 @dataclass
 class AgentStep:
-    walk: torch.Tensor                 # (B, 5) logits
-    turn: torch.Tensor                 # (B, 3)
-    kick: torch.Tensor                 # (B, 3)
-    head: torch.Tensor                 # (B, 2·units+1) logits, or (B, 2) [mean, log_std] in rad per period
+    walk: torch.Tensor | None          # (B, 5) logits (soccer; None in driving, as turn, kick, head)
+    turn: torch.Tensor | None          # (B, 3)
+    kick: torch.Tensor | None          # (B, 3)
+    head: torch.Tensor | None          # (B, 2·units+1) logits, or (B, 2) [mean, log_std] in rad per period
     value: torch.Tensor                # (B,)
-    pose: torch.Tensor                 # (B, 6) localization estimate
+    pose: torch.Tensor | None          # (B, 6) localization estimate (None in driving)
     phi: torch.Tensor                  # (B, 2D) features for the curiosity heads
     object_features: torch.Tensor      # (B, D) for the reconstruction head
     state: State
@@ -442,6 +468,9 @@ class AgentStep:
     ball_confidence: torch.Tensor | None = None    # (B,) logit
     robots: torch.Tensor | None = None             # (B, S, 6) reconstruction
     robot_confidence: torch.Tensor | None = None   # (B, S) logits
+    acceleration: torch.Tensor | None = None       # driving, discrete: (B, 3) logits (reverse, brake, gas)
+    steering: torch.Tensor | None = None           # driving, discrete: (B, 3) logits (right, straight, left)
+    command: torch.Tensor | None = None            # driving, continuous: (B, 6) [mean × 3, log_std × 3]
 
 
 @dataclass
@@ -451,9 +480,21 @@ class AgentSequence(AgentStep):
 
 
 class DynEnvAgent(nn.Module):
+    """The agent of one scenario (module docstring). Soccer: ``head_mode``/``head_units``/``head_max`` set the head
+    turn's action head. Driving (``scenario='driving'``): ``action_mode`` 'discrete' or 'continuous' sets the actor
+    heads; the head settings do not apply."""
+
     def __init__(self, feature_size: int = 64, head_mode: str = "discrete", head_units: int = 3,
-                 head_max: float = math.radians(37.5)) -> None:
+                 head_max: float = math.radians(37.5), scenario: str = "soccer",
+                 action_mode: str = "discrete") -> None:
         super().__init__()
+        if scenario not in SCENARIOS:
+            raise ValueError(f"scenario must be one of {SCENARIOS}, got {scenario!r}")
+        self.scenario = scenario
+        if scenario == "driving":
+            self._build_driving(feature_size, driving_actions.check_action_mode(action_mode))
+            return
+        self.action_mode = None
         if head_mode not in ("discrete", "continuous"):
             raise ValueError(f"head_mode must be 'discrete' or 'continuous', got {head_mode!r}")
         D = feature_size
@@ -471,6 +512,27 @@ class DynEnvAgent(nn.Module):
             self.head_log_std = nn.Parameter(torch.full((1,), math.log(0.3 * head_max)))
         self.critic = nn.Sequential(nn.Linear(2 * D, D), nn.LeakyReLU(0.1), nn.LayerNorm(D), nn.Linear(D, 1))
         self.reconstruction = ReconstructionHead(D)
+
+    def _build_driving(self, feature_size: int, action_mode: str) -> None:
+        inputs = agent_inputs("driving")
+        D = feature_size
+        self.feature_size, self.action_mode = D, action_mode
+        self.head_mode, self.head_max = None, None
+        self.localization = Stream(D, inputs.action_encoding + inputs.self_state, inputs.num_classes, temporal=False)
+        self.pose_head = None
+        self.objects = Stream(D, inputs.self_state, inputs.num_classes, temporal=False)
+        if action_mode == "discrete":
+            self.acceleration_head = nn.Linear(2 * D, driving_actions.ACCELERATION_CHOICES)
+            self.steering_head = nn.Linear(2 * D, driving_actions.STEERING_CHOICES)
+        else:
+            size = driving_actions.CONTINUOUS_SIZE
+            self.command_head = nn.Linear(2 * D, size)
+            self.command_log_std = nn.Parameter(torch.full((size,), driving_actions.INITIAL_LOG_STD))
+            low, high = torch.tensor(driving_actions.CONTINUOUS_LOW), torch.tensor(driving_actions.CONTINUOUS_HIGH)
+            self.register_buffer("command_centre", (low + high) / 2, persistent=False)
+            self.register_buffer("command_half_range", (high - low) / 2, persistent=False)
+        self.critic = nn.Sequential(nn.Linear(2 * D, D), nn.LeakyReLU(0.1), nn.LayerNorm(D), nn.Linear(D, 1))
+        self.reconstruction = None
 
     def initial_state(self, batch: int) -> State:
         zeros = torch.zeros(batch, self.feature_size)
@@ -502,13 +564,15 @@ class DynEnvAgent(nn.Module):
 
         step = self._periods(flat(landmarks), flat(objects), previous_action.flatten(0, 1),
                              proprioception.flatten(0, 1), state, resets)
-        fields = {name: value.unflatten(0, (T, B)) for name, value in vars(step).items()
-                  if isinstance(value, torch.Tensor)}
+        fields = {name: (value.unflatten(0, (T, B)) if isinstance(value, torch.Tensor) else value)
+                  for name, value in vars(step).items() if name != "state"}
         return AgentSequence(**fields, state=step.state)
 
     def _periods(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                  proprioception: torch.Tensor, state: State, resets: torch.Tensor | None) -> AgentStep:
         """T·B periods, period-major (T = 1 when resets is None), as one flat batch; the LSTMs step through T."""
+        if self.scenario == "driving":
+            return self._driving_periods(landmarks, objects, previous_action, proprioception, state, resets)
         loc_pooled, landmark_confidence = self.localization.encode(landmarks)
         obj_pooled, object_confidence = self.objects.encode(objects)
         loc_in = self.localization.transform(torch.cat([loc_pooled, previous_action, proprioception], dim=-1))
@@ -529,8 +593,32 @@ class DynEnvAgent(nn.Module):
                          self.critic(phi).squeeze(-1), pose, phi, obj, loc_state + obj_state,
                          landmark_confidence, object_confidence, ball, ball_conf, robots, robot_conf)
 
-    def distributions(self, step: AgentStep) -> list[torch.distributions.Distribution]:
-        """One distribution per action dimension: categorical walk, turn, kick; head categorical or Gaussian."""
+    def _driving_periods(self, static: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
+                         self_state: torch.Tensor, state: State, resets: torch.Tensor | None) -> AgentStep:
+        """``_periods`` of the driving network: no pose between the streams, driving's actor heads."""
+        loc_pooled, static_confidence = self.localization.encode(static)
+        obj_pooled, object_confidence = self.objects.encode(objects)
+        loc_in = self.localization.transform(torch.cat([loc_pooled, previous_action, self_state], dim=-1))
+        loc_h, loc_state = self.localization.recur(loc_in, state[:2], resets)
+        loc = self.localization.norm(loc_h)
+        obj_in = self.objects.transform(torch.cat([obj_pooled, self_state], dim=-1))
+        obj_h, obj_state = self.objects.recur(obj_in, state[2:], resets)
+        obj = self.objects.norm(obj_h)
+        phi = torch.cat([loc, obj], dim=-1)
+        heads: dict[str, torch.Tensor] = {}
+        if self.action_mode == "discrete":
+            heads["acceleration"], heads["steering"] = self.acceleration_head(phi), self.steering_head(phi)
+        else:
+            mean = self.command_centre + self.command_half_range * torch.tanh(self.command_head(phi))
+            heads["command"] = torch.cat([mean, self.command_log_std.expand_as(mean)], dim=-1)
+        return AgentStep(None, None, None, None, self.critic(phi).squeeze(-1), None, phi, obj, loc_state + obj_state,
+                         static_confidence, object_confidence, **heads)
+
+    def distributions(self, step: AgentStep) -> list:
+        """One distribution per action dimension: soccer's categorical walk, turn, kick and the head categorical or
+        Gaussian; driving's (``driving_actions.distributions``) two categorical heads or three clipped Gaussians."""
+        if self.scenario == "driving":
+            return driving_actions.distributions(self.action_mode, step.acceleration, step.steering, step.command)
         heads = [Categorical(logits=step.walk), Categorical(logits=step.turn), Categorical(logits=step.kick)]
         if self.head_mode == "discrete":
             heads.append(Categorical(logits=step.head))
@@ -541,10 +629,16 @@ class DynEnvAgent(nn.Module):
     def act(self, step: AgentStep, generator: torch.Generator | None = None, greedy: bool = False
             ) -> torch.Tensor:
         """(B, 4) actions [walk, turn, kick, head] — head an index (discrete) or rad per period (continuous,
-        clipped to the head's limit). Samples carry no gradient (score-function estimators need them fixed)."""
+        clipped to the head's limit). Driving: (B, 2) [acceleration, steering] indices, or (B, 3) the normalised
+        command clipped to its bounds (``driving_actions``). Samples carry no gradient (score-function estimators
+        need them fixed)."""
         columns = []
         for dist in self.distributions(step):
-            if isinstance(dist, Categorical):
+            if isinstance(dist, driving_actions.ClippedNormal):
+                noise = torch.randn(dist.loc.shape, generator=generator)
+                sample = dist.loc if greedy else dist.loc + dist.scale * noise
+                columns.append(sample.clamp(dist.low, dist.high))
+            elif isinstance(dist, Categorical):
                 if greedy:
                     columns.append(dist.probs.argmax(-1).float())
                 else:
