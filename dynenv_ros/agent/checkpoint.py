@@ -44,7 +44,8 @@ _HEADER_LIMIT = 100 * 1024 * 1024      # safetensors' own limit on the JSON head
 MAX_POLICY_BYTES = 256 * 1024 * 1024   # a policy file, safetensors or ONNX (D = 1024 is 163 MB)
 MAX_FEATURE_SIZE = 1024
 MAX_HEAD_UNITS = 64
-CONFIG_KEYS = ("feature_size", "head_mode", "head_units", "head_max")
+CONFIG_KEYS = ("feature_size", "head_mode", "head_units", "head_max", "scenario", "action_mode")
+SOCCER_ONLY_KEYS = ("head_mode", "head_units", "head_max")
 
 
 # -- generic helpers (also used by the training checkpoints) -------------------------------------------------------
@@ -195,13 +196,27 @@ def check_head(head_mode: Any, head_units: Any, head_max: Any) -> None:
 
 
 def check_agent_config(config: Mapping[str, Any]) -> dict[str, Any]:
-    """The ``DynEnvAgent`` arguments of a file's config, bounded (module docstring); ValueError otherwise."""
+    """The ``DynEnvAgent`` arguments of a file's config, bounded (module docstring); ValueError otherwise. A config
+    without ``scenario`` is soccer's (every soccer file; soccer's config keeps its four keys). Driving's names
+    ``scenario`` 'driving' and its ``action_mode``, and has no head settings."""
     unknown = sorted(set(config) - set(CONFIG_KEYS))
     if unknown:
         raise ValueError(f"unknown config keys {unknown}")
     out = dict(config)
     if "feature_size" in config:
         _bounded_int(config, "feature_size", 1, MAX_FEATURE_SIZE)
+    scenario = config.get("scenario", "soccer")
+    if scenario not in ("soccer", "driving"):
+        raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
+    if scenario == "driving":
+        extra = sorted(set(config) & set(SOCCER_ONLY_KEYS))
+        if extra:
+            raise ValueError(f"a driving agent has no head settings, got {extra}")
+        if config.get("action_mode") not in ("discrete", "continuous"):
+            raise ValueError(f"action_mode must be 'discrete' or 'continuous', got {config.get('action_mode')!r}")
+        return out
+    if "action_mode" in config:
+        raise ValueError("action_mode is a driving setting; a soccer agent's head has head_mode")
     check_head(config.get("head_mode", "discrete"), config.get("head_units", 3),
                config.get("head_max", math.radians(37.5)))
     if config.get("head_mode") == "continuous" and "head_units" in config:
@@ -217,7 +232,10 @@ def non_finite_tensors(tensors: Mapping[str, torch.Tensor]) -> list[str]:
 
 # -- policy files --------------------------------------------------------------------------------------------------
 def agent_config(model: DynEnvAgent) -> dict[str, Any]:
-    """The ``DynEnvAgent`` constructor arguments that rebuild ``model``'s architecture."""
+    """The ``DynEnvAgent`` constructor arguments that rebuild ``model``'s architecture (soccer: the four keys it
+    always had, no ``scenario``; driving: feature_size, scenario, action_mode)."""
+    if getattr(model, "scenario", "soccer") == "driving":
+        return {"feature_size": int(model.feature_size), "scenario": "driving", "action_mode": str(model.action_mode)}
     discrete = model.head_mode == "discrete"
     return {"feature_size": int(model.feature_size), "head_mode": str(model.head_mode),
             "head_units": (model.head_head.out_features - 1) // 2 if discrete else 3,

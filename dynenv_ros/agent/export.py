@@ -38,6 +38,16 @@ sizes agree with that metadata — a file whose metadata lies is refused when lo
 weights, and a trial decision whose outputs are finite, of the right shapes, and give actions in the simulator's
 accepted ranges. ``sample_actions`` is the one way both runtimes' outputs become actions.
 
+**Driving** (``DynEnvAgent(scenario='driving')``): the same file format, one frame per period (``frames`` 1). Inputs
+``lane_features``, ``lane_kind``, ``lane_mask`` (the static stream: the SELF row and the lanes, ``max_landmarks``
+slots), ``object_*`` (cars, pedestrians, obstacles, UNKNOWN: ``max_objects`` slots), ``previous_action`` (B, 3)
+(``encode_driving_action``), ``proprioception`` (B, 9) (``driving_self_state``) and the four states; outputs
+``acceleration_logits``, ``steering_logits`` (B, 3) each (discrete) or ``command`` (B, 6) [mean × 3, log_std × 3]
+(continuous), then ``value`` and the four next states — no pose. Both scenarios' metadata name their
+``scenario`` (a file without it is soccer's), the ``layout`` (stream keys and classes, the proprioception, game and
+previous-action columns) and the ``actions`` (heads and sizes; driving's ``action_mode``), so a policy node can
+refuse a file of the other scenario with the reason before it acts.
+
 The graph is the network's own forward pass, traced: it skips work on padded slots (trailing all-padded slots are
 cut, each detection is embedded by its own class's block only) and computes the RTA's single-head attention in its
 folded form (``network.SingleHeadAttention``), so it is a few hundred plain nodes. Outputs agree with the torch
@@ -61,9 +71,11 @@ from torch import nn
 
 from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, _bounded_int, check_file_size, check_head,
                                          non_finite_tensors)
-from dynenv_ros.agent.inputs import ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch
+from dynenv_ros.agent import driving_actions
+from dynenv_ros.agent.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch,
+                                     agent_inputs)
 from dynenv_ros.agent.network import DynEnvAgent, State
-from dynenv_ros.envs.padded_layout import MAX_FRAMES, MAX_SLOTS
+from dynenv_ros.envs.padded_layout import MAX_FRAMES, MAX_SLOTS, SOCCER
 
 INPUT_NAMES = ("landmark_features", "landmark_kind", "landmark_mask", "object_features", "object_kind",
                "object_mask", "previous_action", "proprioception", "h_loc", "c_loc", "h_obj", "c_obj")
@@ -72,19 +84,42 @@ OUTPUT_NAMES = ("walk_logits", "turn_logits", "kick_logits", "head", "value", "p
 METADATA_KEY = "dynenv.policy"
 FORMAT = "dynenv_policy_onnx/1"
 WALK_CHOICES, TURN_CHOICES, KICK_CHOICES = 5, 3, 3
+STATE_NAMES = ("h_loc", "c_loc", "h_obj", "c_obj")
+DRIVING_INPUT_NAMES = ("lane_features", "lane_kind", "lane_mask", "object_features", "object_kind", "object_mask",
+                       "previous_action", "proprioception", *STATE_NAMES)
+DRIVING_DEFAULT_MAXIMA = (11, 52)       # envs.driving_observations.default_maxima of the default 2-car config
+
+
+def io_names(scenario: str, action_mode: str | None = None) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(input names, output names) of a scenario's exported graph (module docstring)."""
+    if scenario != "driving":
+        return INPUT_NAMES, OUTPUT_NAMES
+    heads = (("acceleration_logits", "steering_logits") if action_mode == "discrete" else ("command",))
+    return DRIVING_INPUT_NAMES, (*heads, "value", *(name + "_out" for name in STATE_NAMES))
 
 
 @dataclass
 class PolicyStep:
     """What a policy node needs from one decision; the field names are those of ``AgentStep`` so the code that
     reads a step (``DynEnvAgent.act``/``distributions`` included) does not care which runtime produced it."""
-    walk: torch.Tensor     # (B, 5) logits
-    turn: torch.Tensor     # (B, 3)
-    kick: torch.Tensor     # (B, 3)
-    head: torch.Tensor     # (B, 2·units+1) logits, or (B, 2) [mean, log_std]
-    value: torch.Tensor    # (B,)
-    pose: torch.Tensor     # (B, 6)
+    walk: torch.Tensor | None     # (B, 5) logits (soccer; None in driving, as turn, kick, head, pose)
+    turn: torch.Tensor | None     # (B, 3)
+    kick: torch.Tensor | None     # (B, 3)
+    head: torch.Tensor | None     # (B, 2·units+1) logits, or (B, 2) [mean, log_std]
+    value: torch.Tensor           # (B,)
+    pose: torch.Tensor | None     # (B, 6)
     state: State
+    acceleration: torch.Tensor | None = None    # driving, discrete: (B, 3) logits
+    steering: torch.Tensor | None = None        # driving, discrete: (B, 3) logits
+    command: torch.Tensor | None = None         # driving, continuous: (B, 6) [mean × 3, log_std × 3]
+
+
+def _driving_step(outputs: list[torch.Tensor], action_mode: str) -> PolicyStep:
+    """A driving graph's outputs (``io_names``' order) as a ``PolicyStep``."""
+    heads = ({"acceleration": outputs[0], "steering": outputs[1]} if action_mode == "discrete"
+             else {"command": outputs[0]})
+    rest = outputs[len(heads):]
+    return PolicyStep(None, None, None, None, rest[0], None, tuple(rest[1:5]), **heads)
 
 
 class _ExportWrapper(nn.Module):
@@ -105,6 +140,10 @@ class _ExportWrapper(nn.Module):
         step = self.model(StreamBatch(landmark_features, landmark_kind, landmark_mask),
                           StreamBatch(object_features, object_kind, object_mask),
                           previous_action, proprioception, (h_loc, c_loc, h_obj, c_obj))
+        if self.model.scenario == "driving":
+            heads = ((step.acceleration, step.steering) if self.model.action_mode == "discrete"
+                     else (step.command,))
+            return (*heads, step.value, *step.state)
         return (step.walk, step.turn, step.kick, step.head, step.value, step.pose, *step.state)
 
 
@@ -113,35 +152,79 @@ def _example_inputs(model: DynEnvAgent, batch: int, frames: int, max_landmarks: 
     """Inputs with a batch of 2 and a mixed mask (a batch of 1 risks a trace that bakes in a broadcast valid only
     for one robot: seen with ``nn.MultiheadAttention``, which the network no longer uses)."""
     generator = torch.Generator().manual_seed(0)
+    inputs = agent_inputs(getattr(model, "scenario", "soccer"))
 
     def stream(n: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         features = torch.randn(batch, frames, n, FEATURES, generator=generator)
-        kind = torch.randint(1, NUM_CLASSES, (batch, frames, n), generator=generator)
+        kind = torch.randint(1, inputs.num_classes, (batch, frames, n), generator=generator)
         mask = torch.rand(batch, frames, n, generator=generator) < 0.5
         return features, kind, mask
 
     D = model.feature_size
-    return (*stream(max_landmarks), *stream(max_objects), torch.zeros(batch, ACTION_ENCODING),
-            torch.zeros(batch, PROPRIOCEPTION), *(torch.zeros(batch, D) for _ in range(4)))
+    return (*stream(max_landmarks), *stream(max_objects), torch.zeros(batch, inputs.action_encoding),
+            torch.zeros(batch, inputs.self_state), *(torch.zeros(batch, D) for _ in range(4)))
+
+
+def _layout_metadata(scenario: str) -> dict[str, Any]:
+    """The layout a graph's inputs come from: stream keys and classes, the proprioception, game and previous-action
+    columns (driving's bounds depend on the config and are not part of the network)."""
+    if scenario == "driving":
+        from dynenv_ros.driving.config import DrivingConfig
+        from dynenv_ros.envs.driving_observations import driving_layout_spec
+        spec = driving_layout_spec(DrivingConfig())
+    else:
+        spec = SOCCER
+    return {"streams": [{"key": st.key, "mask": st.mask, "classes": list(st.classes)} for st in spec.streams],
+            "proprioception": list(spec.proprioception_columns), "game": list(spec.game_columns),
+            "previous_action": list(spec.action_columns),
+            "class_index": {str(k): v for k, v in agent_inputs(scenario).class_index.items()}}
 
 
 def _config(model: DynEnvAgent, frames: int, max_landmarks: int, max_objects: int) -> dict[str, Any]:
+    scenario = getattr(model, "scenario", "soccer")
+    if scenario == "driving":
+        heads = ({"acceleration": driving_actions.ACCELERATION_CHOICES, "steering": driving_actions.STEERING_CHOICES}
+                 if model.action_mode == "discrete" else {"command": 2 * driving_actions.CONTINUOUS_SIZE})
+        return {"format": FORMAT, "scenario": "driving", "feature_size": model.feature_size,
+                "action_mode": model.action_mode, "frames": frames, "max_landmarks": max_landmarks,
+                "max_objects": max_objects, "layout": _layout_metadata("driving"),
+                "actions": {"mode": model.action_mode, "heads": heads,
+                            "command": ["throttle", "brake", "steering"],
+                            "continuous_low": list(driving_actions.CONTINUOUS_LOW),
+                            "continuous_high": list(driving_actions.CONTINUOUS_HIGH)}}
+    head_units = (model.head_head.out_features - 1) // 2 if model.head_mode == "discrete" else None
     return {"format": FORMAT, "feature_size": model.feature_size, "head_mode": model.head_mode,
-            "head_units": (model.head_head.out_features - 1) // 2 if model.head_mode == "discrete" else None,
-            "head_max": float(model.head_max), "frames": frames, "max_landmarks": max_landmarks,
-            "max_objects": max_objects}
+            "head_units": head_units, "head_max": float(model.head_max), "frames": frames,
+            "max_landmarks": max_landmarks, "max_objects": max_objects, "scenario": "soccer",
+            "layout": _layout_metadata("soccer"),
+            "actions": {"heads": {"walk": WALK_CHOICES, "turn": TURN_CHOICES, "kick": KICK_CHOICES,
+                                  "head": 2 * head_units + 1 if head_units else 2}}}
 
 
-def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int = 5, max_landmarks: int = 48,
-                max_objects: int = 12, opset: int = 17) -> None:
+def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int | None = None,
+                max_landmarks: int | None = None, max_objects: int | None = None, opset: int = 17) -> None:
     """Write ``model`` to ``path`` as ONNX (via ``path.tmp`` and a rename, so a failed export never leaves a
     half-written file where a node would load it). Uses the TorchScript exporter (``dynamo=False``): it needs only
     ``onnx`` and traces this network (Python loop over frames, data-dependent slot counts) without trouble. The
-    caller's model is not modified, not even its train/eval mode."""
+    caller's model is not modified, not even its train/eval mode. Defaults: soccer 5 frames, 48 landmark and 12
+    object slots; driving 1 frame (the only count it takes), 11 lane and 52 object slots (``default_maxima`` of the
+    default 2-car config: give ``max_objects`` for more cars)."""
     import onnx
 
+    driving = getattr(model, "scenario", "soccer") == "driving"
+    if driving:
+        frames = 1 if frames is None else frames
+        if frames != 1:
+            raise ValueError(f"a driving policy takes one vision frame per period (no temporal attention), not {frames}")
+        max_landmarks = DRIVING_DEFAULT_MAXIMA[0] if max_landmarks is None else max_landmarks
+        max_objects = DRIVING_DEFAULT_MAXIMA[1] if max_objects is None else max_objects
+    else:
+        frames = 5 if frames is None else frames
+        max_landmarks = 48 if max_landmarks is None else max_landmarks
+        max_objects = 12 if max_objects is None else max_objects
     if frames < 1 or max_landmarks < 1 or max_objects < 1:
         raise ValueError("frames, max_landmarks and max_objects must be at least 1")
+    input_names, output_names = io_names("driving" if driving else "soccer", getattr(model, "action_mode", None))
     target = Path(path)
     if not target.parent.is_dir():
         raise ValueError(f"cannot write {target}: folder {target.parent} does not exist")
@@ -158,8 +241,8 @@ def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int
         warnings.filterwarnings("ignore", message="Constant folding - Only steps=1", category=UserWarning)
         warnings.filterwarnings("ignore", category=torch.jit.TracerWarning, module=r"torch\.nn\.functional")
         torch.onnx.export(wrapper, example, buffer, dynamo=False, opset_version=opset,
-                          input_names=list(INPUT_NAMES), output_names=list(OUTPUT_NAMES),
-                          dynamic_axes={name: {0: "robots"} for name in INPUT_NAMES + OUTPUT_NAMES},
+                          input_names=list(input_names), output_names=list(output_names),
+                          dynamic_axes={name: {0: "robots"} for name in input_names + output_names},
                           do_constant_folding=True)
     proto = onnx.load_from_string(buffer.getvalue())
     entry = proto.metadata_props.add()
@@ -191,6 +274,14 @@ def check_onnx_config(config: dict[str, Any]) -> None:
     _bounded_int(config, "frames", 1, MAX_FRAMES)
     _bounded_int(config, "max_landmarks", 1, MAX_SLOTS)
     _bounded_int(config, "max_objects", 1, MAX_SLOTS)
+    scenario = config.get("scenario", "soccer")
+    if scenario == "driving":
+        driving_actions.check_action_mode(config.get("action_mode"))
+        if config["frames"] != 1:
+            raise ValueError(f"a driving policy takes 1 frame per period, the metadata says {config['frames']}")
+        return
+    if scenario != "soccer":
+        raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
     check_head(config.get("head_mode"), config.get("head_units"), config.get("head_max"))
 
 
@@ -217,19 +308,29 @@ def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
     """The first way the session's declared inputs/outputs disagree with the metadata ('' if none). Dimensions the
     file leaves symbolic are not checked here (the robot axis always is); the node's trial decision runs them."""
     F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size
-    head = 2 * policy.head_units + 1 if policy.head_mode == "discrete" else 2
-    inputs = {"landmark_features": ("float", (F, L, FEATURES)), "landmark_kind": ("int64", (F, L)),
-              "landmark_mask": ("bool", (F, L)), "object_features": ("float", (F, O, FEATURES)),
+    input_names, output_names = io_names(policy.scenario, policy.action_mode)
+    static = "lane" if policy.scenario == "driving" else "landmark"
+    widths = agent_inputs(policy.scenario)
+    inputs = {f"{static}_features": ("float", (F, L, FEATURES)), f"{static}_kind": ("int64", (F, L)),
+              f"{static}_mask": ("bool", (F, L)), "object_features": ("float", (F, O, FEATURES)),
               "object_kind": ("int64", (F, O)), "object_mask": ("bool", (F, O)),
-              "previous_action": ("float", (ACTION_ENCODING,)), "proprioception": ("float", (PROPRIOCEPTION,)),
-              **{name: ("float", (D,)) for name in INPUT_NAMES[8:]}}
-    outputs = {"walk_logits": (WALK_CHOICES,), "turn_logits": (TURN_CHOICES,), "kick_logits": (KICK_CHOICES,),
-               "head": (head,), "value": (), "pose": (6,), **{name: (D,) for name in OUTPUT_NAMES[6:]}}
+              "previous_action": ("float", (widths.action_encoding,)),
+              "proprioception": ("float", (widths.self_state,)),
+              **{name: ("float", (D,)) for name in STATE_NAMES}}
+    if policy.scenario == "driving":
+        outputs = {"acceleration_logits": (driving_actions.ACCELERATION_CHOICES,),
+                   "steering_logits": (driving_actions.STEERING_CHOICES,),
+                   "command": (2 * driving_actions.CONTINUOUS_SIZE,)}
+    else:
+        head = 2 * policy.head_units + 1 if policy.head_mode == "discrete" else 2
+        outputs = {"walk_logits": (WALK_CHOICES,), "turn_logits": (TURN_CHOICES,), "kick_logits": (KICK_CHOICES,),
+                   "head": (head,), "pose": (6,)}
+    outputs.update({"value": (), **{name + "_out": (D,) for name in STATE_NAMES}})
     declared_in, declared_out = session.get_inputs(), session.get_outputs()
-    if [i.name for i in declared_in] != list(INPUT_NAMES):
-        return f"inputs {[i.name for i in declared_in]}, expected {list(INPUT_NAMES)}"
-    if [o.name for o in declared_out] != list(OUTPUT_NAMES):
-        return f"outputs {[o.name for o in declared_out]}, expected {list(OUTPUT_NAMES)}"
+    if [i.name for i in declared_in] != list(input_names):
+        return f"inputs {[i.name for i in declared_in]}, expected {list(input_names)}"
+    if [o.name for o in declared_out] != list(output_names):
+        return f"outputs {[o.name for o in declared_out]}, expected {list(output_names)}"
     checks = [(i, *inputs[i.name]) for i in declared_in] + [(o, "float", outputs[o.name]) for o in declared_out]
     for arg, dtype, dims in checks:
         if arg.type != f"tensor({dtype})":
@@ -289,9 +390,15 @@ class OnnxPolicy:
             raise ValueError(f"ONNX policy {source} has bad {METADATA_KEY} metadata: {error}") from None
         self.config: dict[str, Any] = config
         self.feature_size: int = config["feature_size"]
-        self.head_mode: str = config["head_mode"]
-        self.head_units: int | None = config["head_units"] if self.head_mode == "discrete" else None
-        self.head_max: float = float(config["head_max"])
+        self.scenario: str = config.get("scenario", "soccer")
+        if self.scenario == "driving":
+            self.action_mode: str | None = config["action_mode"]
+            self.head_mode, self.head_units, self.head_max = None, None, None
+        else:
+            self.action_mode = None
+            self.head_mode: str = config["head_mode"]
+            self.head_units: int | None = config["head_units"] if self.head_mode == "discrete" else None
+            self.head_max: float = float(config["head_max"])
         self.frames: int = config["frames"]
         self.max_landmarks: int = config["max_landmarks"]
         self.max_objects: int = config["max_objects"]
@@ -328,13 +435,16 @@ class OnnxPolicy:
 
     def __call__(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                  proprioception: torch.Tensor, state: State) -> PolicyStep:
-        feeds = {**self._stream("landmark", landmarks, self.max_landmarks),
+        static = "lane" if self.scenario == "driving" else "landmark"
+        feeds = {**self._stream(static, landmarks, self.max_landmarks),
                  **self._stream("object", objects, self.max_objects),
                  "previous_action": _numpy(previous_action, np.float32),
                  "proprioception": _numpy(proprioception, np.float32)}
-        for name, tensor in zip(INPUT_NAMES[8:], state):
+        for name, tensor in zip(STATE_NAMES, state):
             feeds[name] = _numpy(tensor, np.float32)
         out = [torch.from_numpy(array) for array in self.session.run(None, feeds)]
+        if self.scenario == "driving":
+            return _driving_step(out, self.action_mode)
         return PolicyStep(out[0], out[1], out[2], out[3], out[4], out[5], (out[6], out[7], out[8], out[9]))
 
 
@@ -344,6 +454,8 @@ class TorchPolicy:
 
     def __init__(self, model: DynEnvAgent) -> None:
         self.model = model.eval()
+        self.scenario: str = getattr(model, "scenario", "soccer")
+        self.action_mode: str | None = getattr(model, "action_mode", None)
         self.feature_size, self.head_mode, self.head_max = model.feature_size, model.head_mode, model.head_max
         self.head_units: int | None = ((model.head_head.out_features - 1) // 2 if model.head_mode == "discrete"
                                        else None)
@@ -359,7 +471,8 @@ class TorchPolicy:
                  proprioception: torch.Tensor, state: State) -> PolicyStep:
         with torch.no_grad():
             step = self.model(landmarks, objects, previous_action, proprioception, state)
-        return PolicyStep(step.walk, step.turn, step.kick, step.head, step.value, step.pose, step.state)
+        return PolicyStep(step.walk, step.turn, step.kick, step.head, step.value, step.pose, step.state,
+                          step.acceleration, step.steering, step.command)
 
 
 # -- from outputs to actions, and the check before a policy may act ---------------------------------------------------
@@ -435,7 +548,9 @@ def check_policy(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tenso
     robot cannot execute (``head_max`` beyond ``head_bound``, the simulator's largest head turn per period), a
     fixed frame count other than the graph's ``frames`` (when known), non-finite weights, or a trial decision on
     ``trial`` (landmarks, objects, previous action, self state of B robots) that fails, gives outputs of the
-    wrong shape or non-finite ones, or actions outside the accepted ranges (greedy and sampled)."""
+    wrong shape or non-finite ones, or actions outside the accepted ranges (greedy and sampled). A driving policy
+    is refused here (``check_scenario``); ``check_driving_policy`` checks those."""
+    check_scenario(policy, "soccer")
     check_head(policy.head_mode, policy.head_units, policy.head_max)
     if policy.head_max > head_bound + 1e-6:
         raise ValueError(f"head_max {policy.head_max:.6g} rad is beyond the ±{head_bound:.4f} rad per period the "
@@ -472,3 +587,58 @@ def check_policy(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tenso
             problem = action_problem(action, head_bound)
             if problem:
                 raise ValueError(f"its trial decision gave an action the simulator refuses: {problem}")
+
+
+def check_scenario(policy: Any, scenario: str, action_mode: str | None = None) -> None:
+    """ValueError unless ``policy`` was built for ``scenario`` ('soccer' or 'driving'; a policy node's ``robocup``
+    is soccer) and, in driving, for the simulator's ``action_mode`` (a continuous policy's commands are refused by a
+    discrete simulator; a discrete policy would act but learn about actions it cannot take under the other mode)."""
+    scenario = "soccer" if scenario == "robocup" else scenario
+    have = getattr(policy, "scenario", "soccer")
+    if have != scenario:
+        raise ValueError(f"it is a {have} policy and this node plays {scenario} (its observations, classes and "
+                         f"actions differ); load a {scenario} policy or start the node with scenario "
+                         f"{'robocup' if have == 'soccer' else have}")
+    if scenario == "driving" and action_mode is not None and policy.action_mode != action_mode:
+        raise ValueError(f"it is a {policy.action_mode} driving policy and the simulator's action_mode is "
+                         f"{action_mode}")
+
+
+def check_driving_policy(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tensor, torch.Tensor],
+                         max_yaw_rate: float, frames: int | None = None) -> None:
+    """``check_policy`` for a driving policy: a known action mode, one frame per period (the graph's and the
+    detections'), finite weights, and a trial decision on ``trial`` whose outputs have the right shapes, are finite
+    and give commands (greedy and sampled) the simulator accepts with steering limit ``max_yaw_rate``."""
+    driving_actions.check_action_mode(policy.action_mode)
+    fixed = getattr(policy, "frames", None)
+    if fixed is not None and fixed != 1:
+        raise ValueError(f"it takes {fixed} vision frames per period; a driving policy takes 1")
+    if frames is not None and frames != 1:
+        raise ValueError(f"the detections arriving have {frames} frames per period; a driving policy takes 1")
+    bad = policy.non_finite_weights()
+    if bad:
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise ValueError(f"weight {bad[0]!r}{more} holds NaN or infinite values")
+    static, objects, previous, proprio = trial
+    B = previous.shape[0]
+    try:
+        step = policy(static, objects, previous, proprio, policy.initial_state(B))
+    except Exception as error:
+        raise ValueError(f"its trial decision failed: {type(error).__name__}: {_first_line(error)}") from None
+    for name, shape in driving_actions.output_shapes(policy.action_mode, B).items():
+        have = tuple(torch.as_tensor(getattr(step, name)).shape) if getattr(step, name) is not None else None
+        if have != shape:
+            raise ValueError(f"its trial decision gave {name} of shape {have}, expected {shape}")
+    state = [tuple(torch.as_tensor(s).shape) for s in step.state]
+    if len(state) != 4 or any(s != (B, policy.feature_size) for s in state):
+        raise ValueError(f"its trial decision gave a recurrent state of shapes {state}, expected 4 x "
+                         f"{(B, policy.feature_size)}")
+    for greedy in (True, False):
+        actions, finite = driving_actions.sample_actions(step, policy.action_mode, torch.Generator().manual_seed(0),
+                                                         greedy)
+        if not finite.all():
+            raise ValueError("its trial decision gave NaN or infinite outputs")
+        for command in driving_actions.commands(actions, policy.action_mode, max_yaw_rate):
+            problem = driving_actions.command_problem(command, policy.action_mode, max_yaw_rate)
+            if problem:
+                raise ValueError(f"its trial decision gave a command the simulator refuses: {problem}")

@@ -281,7 +281,7 @@ class RecurrentTemporalAttention(nn.Module):
         """``forward`` with the frame axis first: x (F, B, N, D), mask (F, B, N) (each frame's rows contiguous);
         ``folded``: ``self.folded()`` where the caller already has it."""
         F, B, N, D = x.shape
-        if self.temporal_attention is None and F != 1:
+        if self.temporal_attention is None and not _tracing() and F != 1:     # (export_onnx checks its frames)
             raise ValueError(f"this network has no temporal attention (one vision frame per period); got {F} frames")
         linear = nn.functional.linear
         folded_object, folded_temporal = self.folded() if folded is None else folded
