@@ -50,6 +50,20 @@ class Perception:
         return len(self.offsets) - 1
 
 
+def _kernels():
+    """The compiled kernels (``soccer_kernels``), imported and compiled (or loaded from numba's cache) on the first
+    ``Perceiver``: importing numba costs ≈ 1 s and ≈ 80 MB, which the physics-and-rules path never pays."""
+    global _KERNELS
+    if _KERNELS is None:
+        from dynenv_ros.perception import soccer_kernels
+        soccer_kernels.warm_up()
+        _KERNELS = soccer_kernels
+    return _KERNELS
+
+
+_KERNELS = None
+
+
 def missed_objects(visible: np.ndarray, detections: np.ndarray, object_ids: np.ndarray) -> np.ndarray:
     """(N,) bool: objects geometrically visible in a view that no detection row comes from. A confused object
     has a row (with the wrong class), so it counts as detected here, not as missed."""
@@ -62,6 +76,7 @@ class Perceiver:
     def __init__(self, objects: SceneObjects, params: PerceptionParams) -> None:
         self.objects = objects
         self.params = params
+        self._kernels = _kernels()
         cls = objects.class_id
         table = params.classes
         # Per class id (what a report of that class gets), and per scene object (what the object itself gets).
@@ -509,56 +524,19 @@ class Perceiver:
         V, L = len(ox), self._line_count
         if L == 0:
             return (np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.int64)), np.zeros(V, int)
-        VL = V * L
-        lv = lay.line_view
-        dx, dy = lay.line_x - ox[lv], lay.line_y - oy[lv]
-        cv, sv = c[lv], s[lv]
-        px = cv * dx + sv * dy                                            # camera frame, (2·V·L,)
-        py = cv * dy - sv * dx                                            # (= −s·dx + c·dy, exactly)
-        ax, ay = px[:VL], py[:VL]                                         # first endpoints
-        ex, ey = px[VL:] - ax, py[VL:] - ay                               # directions to the second ones
-        # The two edges of the view wedge, rows of (2 edges, 2·V·L): g ≥ 0 inside; g(t) = ga + t·slope.
-        sp, cq = self._half_sin * px, self._half_cos * py
-        g = np.empty((2, 2 * VL))
-        np.subtract(sp, cq, out=g[0])                                     # sin·x + (−cos)·y
-        np.add(sp, cq, out=g[1])
-        ga = g[:, :VL]
-        slope = g[:, VL:] - ga
-        t = -ga / np.where(slope == 0, 1.0, slope)
-        # [lo, hi]: the part inside both edges. A line with both ends beyond an edge gets lo = 2 (out of view):
-        # one parallel to an edge and beyond it needs that; with any other slope its [lo, hi] is empty anyway.
-        enter, leave = np.where(slope > 0, t, (ga < 0) * 2.0), np.where(slope < 0, t, 1.0)
-        lo = np.maximum(np.maximum(enter[0], enter[1]), 0.0)
-        hi = np.minimum(np.minimum(leave[0], leave[1]), 1.0)
-        if math.isfinite(self.line_max):                                  # and within range of the camera
-            len2 = np.maximum(ex * ex + ey * ey, _EPS)
-            b = ax * ex + ay * ey
-            disc = b * b - len2 * (ax * ax + ay * ay - self.line_max * self.line_max)
-            root = np.sqrt(np.maximum(disc, 0.0))                         # disc < 0 (no part in range): lo = hi
-            lo = np.maximum(lo, (-b - root) / len2)
-            hi = np.minimum(hi, (-b + root) / len2)
-        visible = (hi > lo) & (np.hypot(ex, ey) * (hi - lo) >= MIN_LINE_LENGTH)
-        at = visible.nonzero()[0]                                         # (view, line) pairs in view: v·L + k
-        v = lv[at]
-        k = at - v * L
-        a, e, bounds = np.array((ax, ay)).take(at, axis=1), np.array((ex, ey)).take(at, axis=1), np.array((lo, hi))
-        bounds = bounds.take(at, axis=1)
-        lo, hi = bounds
-        # The clipped ends as (coordinate, start/end, pair) = a + bound·e.
-        ends = a[:, None] + bounds * e[:, None]
-        x, y = ends
+        kern, lv = self._kernels, lay.line_view
+        # Per (view, line): first end, direction, and the part [lo, hi] inside the view wedge (and range).
+        clip = kern.line_clip(lay.line_x, lay.line_y, lv, ox, oy, c, s, self._half_sin, self._half_cos,
+                              self.line_max, math.isfinite(self.line_max))
+        v, k, ends, bits = kern.line_visible(clip, np.hypot(clip[2], clip[3]), lv, L, MIN_LINE_LENGTH, _PARTIAL)
         K = len(v)
-        dist = np.hypot(x, y)
-        bits = ((lo > _EPS) | (hi < 1 - _EPS)) * _PARTIAL
-        bits += np.maximum(dist[0], dist[1]) > self.line_near             # DISTANT
+        dist = np.hypot(ends[0], ends[1])                                 # (start/end, pair)
         pr = self.params
-        if pr.mode != "none" and pr.noise_magnitude > 0.0:
+        noisy = pr.mode != "none" and pr.noise_magnitude > 0.0
+        mult, p_miss = kern.line_miss(dist, bits, self.line_near, pr.mode == "realistic", pr.miss.range_offset,
+                                      pr.miss.range_slope, pr.rho * self.line_scale)
+        if noisy:
             m = pr.noise_magnitude
-            if pr.mode == "realistic":
-                mult = pr.miss.range_offset + pr.miss.range_slope * (dist / self.line_near) ** 2
-            else:
-                mult = np.ones((2, K))
-            p_miss = np.minimum(1.0, pr.rho * self.line_scale * (mult[0] + mult[1]) / 2)
             kept = (rng.random(K) >= p_miss).nonzero()[0]
             if pr.position.model == "uniform":
                 scale = 2 * m * pr.position.uniform_scale
@@ -568,35 +546,15 @@ class Perceiver:
             else:
                 ends = self._polar_point_noise(ends.reshape(2, 2 * K), rng.standard_normal((2, 2 * K)),
                                                dist.reshape(2 * K)).reshape(2, 2, K)
-            v, k, bits = v[kept], k[kept], bits[kept]
-            ends = ends.take(kept, axis=2)
-        x, y = ends
+        else:
+            kept = np.arange(K)
         # Endpoint order by a rule of the observer's frame alone (nearer end first), so a mirrored or rotated
         # situation gives the mirrored or identical report; an order that follows the field would be a compass.
         # Exact ties (a line square to the gaze, clipped by both edges) go right end first: rotations stay
         # consistent; a perfect tie cannot be mirror-symmetric.
-        reach = np.hypot(x, y)
-        gap = reach[1] - reach[0]
-        swap = (gap < -1e-6) | ((np.abs(gap) <= 1e-6) & (y[1] < y[0]))
-        ends = np.where(swap, ends[:, ::-1], ends)                        # (coordinate, start/end, pair)
-        start = ends[:, 0]
-        e = ends[:, 1] - start
-        ee = e * e
-        seg2 = np.maximum(ee[0] + ee[1], _EPS)
-        se = start * e
-        t = clamp(-(se[0] + se[1]) / seg2, 0.0, 1.0)                     # closest point to the camera
-        rows = np.zeros(len(v), DETECTION_DTYPE)
-        rows["class_id"] = _FIELD_LINE
-        runs = rows.view(_ROW_RUNS)
-        runs["line"].reshape(-1, 2, 2)[...] = ends.transpose(2, 1, 0)     # start x, start y, end x, end y
-        runs["position"] = (start + t * e).T
-        rows["yaw"] = (np.arctan2(e[1], e[0]) + math.pi / 2) % math.pi - math.pi / 2   # a line has no arrow
-        rows["size_x"] = np.sqrt(seg2)
-        rows["size_y"] = 0.05
-        rows["sighting"] = bits
-        rows["true_id"] = -2 - k                                          # lines: -2, -3, … (never -1 = FP)
-        rows["true_class"] = _FIELD_LINE
-        return (rows, v), np.bincount(v, minlength=V)
+        rows, v, seen, ex, ey = kern.line_rows(ends, np.hypot(ends[0], ends[1]), kept, v, k, bits, V, _FIELD_LINE)
+        rows["yaw"] = (np.arctan2(ey, ex) + math.pi / 2) % math.pi - math.pi / 2   # a line has no arrow
+        return (rows, v), seen
 
     def _polar_point_noise(self, xy: np.ndarray, g: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Noisy copies of points ``xy`` (2, n) at distances ``d``: polar errors, or (random mode) per-axis ones,
