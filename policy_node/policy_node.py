@@ -10,6 +10,13 @@ or an ONNX file, at start or through the LoadPolicy service; either way the poli
 actions the simulator accepts) and a failing one is refused with the reason — at start a one-line error and exit
 status 2, at run time a refusal that keeps the current policy. Swaps happen between two decisions.
 
+Driving (``scenario:=driving``): the node acts for cars ``car_0`` … ``car_<n_cars-1>`` with a driving policy
+(``DynEnvAgent(scenario='driving')``, a .safetensors or .onnx file): each car's one frame per period is packed into
+driving's padded layout (``driving_layout_spec``), and the action goes out in Action's driving fields (throttle, brake,
+steering; a discrete choice as the command ``driving.cars.discrete_action`` makes it, what the simulator's discrete
+mode accepts); a car whose decision failed brakes. ``action_mode`` must be the simulator's, and the policy's: a
+policy of the other scenario or action mode is refused with the reason (``agent.export.check_scenario``).
+
 Real time degrades gracefully (docs/deploy.md, "Slow policies"): the detection subscriptions keep the last
 ``DETECTION_DEPTH`` messages per robot (bounded), and before each decision the node takes every frame already
 waiting, so it always acts on the newest complete period; older ones are dropped and counted, and the counts go to
@@ -42,11 +49,15 @@ from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, 
 from dynenv_ros.ros.qos import action_stream, latched
 from dynenv_ros.ros.tf import base_frame
 from dynenv_ros.soccer.config import MotionConfig, SoccerConfig, robot_names
+from dynenv_ros.agent import driving_actions
 from dynenv_ros.agent.checkpoint import MAX_POLICY_BYTES, load_policy, policy_from_bytes, sha256
-from dynenv_ros.agent.export import (MAX_FRAMES, TorchPolicy, behaviour_log_probs, check_policy,
-                                     sample_actions)
+from dynenv_ros.agent.export import (MAX_FRAMES, TorchPolicy, behaviour_log_probs, check_driving_policy,
+                                     check_policy, check_scenario, sample_actions)
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.driving.config import MAX_CARS, DrivingConfig, car_names
+from dynenv_ros.envs.driving_observations import driving_layout_spec
+from dynenv_ros.envs.padded_layout import SOCCER
 
 RUNTIMES = ("torch", "onnxruntime")
 # The simulator refuses a head turn beyond this per period (docs/ros_graph.md): a policy must stay inside it.
@@ -59,6 +70,8 @@ DEFAULT_FRAMES = SoccerConfig().rates.frames_per_period      # the trial's frame
 # takes them all and acts on the newest complete period).
 DETECTION_DEPTH = 2 * MAX_FRAMES
 STAND_STILL = (0, 0, 0, 0.0)       # the fallback action of a robot whose decision failed or was not finite
+BRAKE = driving_actions.BRAKE_COMMAND  # driving's: [throttle, brake, steering] (also the previous action at reset)
+SCENARIOS = ("robocup", "driving")
 
 
 def detection_qos() -> QoSProfile:
@@ -70,7 +83,8 @@ def detection_qos() -> QoSProfile:
 class RobotMemory:
     """What the node keeps per robot between periods."""
 
-    def __init__(self) -> None:
+    def __init__(self, idle: tuple = STAND_STILL) -> None:
+        self.idle = idle
         self.episode: int | None = None
         self.period: int | None = None                 # the period whose frames are being collected
         self.frames: dict[int, DetectionArray] = {}
@@ -79,15 +93,31 @@ class RobotMemory:
         self.addressed: int | None = None              # the period its last action was sent for
         self.last: list[DetectionArray] | None = None  # its frames (the trial decision of a new policy)
         self.state: tuple | None = None
-        self.previous = STAND_STILL
+        self.previous = idle                           # soccer: [walk, turn, kick, head]; driving: the command
 
 
 class PolicyNode(Node):
     def __init__(self, **node_options: Any) -> None:
         super().__init__("policy_node", **node_options)
-        players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team in the game.", read_only=True)
-        team = declare_str(self, "team", "", "Control team 'a', team 'b', or both ('').", read_only=True,
+        self.scenario = declare_str(self, "scenario", "robocup", "Which game: robocup (soccer robots) or driving "
+                                    "(cars); the policy must be of the same scenario.", choices=SCENARIOS,
+                                    read_only=True)
+        players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team in the game (robocup).",
+                              read_only=True)
+        team = declare_str(self, "team", "", "Control team 'a', team 'b', or both ('') (robocup).", read_only=True,
                            choices=("", "a", "b"))
+        n_cars = declare_int(self, "n_cars", 2, 1, MAX_CARS, "Cars in the game, all controlled (driving).",
+                             read_only=True)
+        self.action_mode = declare_str(self, "action_mode", "discrete", "The simulator's action_mode (driving): the "
+                                       "policy's must be the same.", choices=("discrete", "continuous"),
+                                       read_only=True)
+        self.driving = self.scenario == "driving"
+        if self.driving and team:
+            raise ParameterException("team applies to robocup; a driving node controls all n_cars cars", ["team"])
+        driving_config = DrivingConfig(n_cars=n_cars, action_mode=self.action_mode)
+        self.spec = driving_layout_spec(driving_config) if self.driving else SOCCER
+        self.max_yaw_rate = driving_config.cars.max_yaw_rate
+        self.idle = BRAKE if self.driving else STAND_STILL
         self.runtime_name = declare_str(self, "runtime", "torch", "Inference runtime.", choices=RUNTIMES,
                                         read_only=True)
         checkpoint = declare_str(self, "checkpoint", "", "Weights: a .safetensors policy file (torch) or .onnx "
@@ -101,10 +131,10 @@ class PolicyNode(Node):
                                     "swapped in between two decisions (torch runtime); empty: never.", read_only=True)
         self.weights_run = declare_str(self, "weights_run_id", "", "Take weights from this trainer run only "
                                        "(PolicyWeights.run_id); empty: any run.", read_only=True)
-        everyone = robot_names(players)
-        self.names = [name for name in everyone if team in ("", name[5])]
+        everyone = car_names(n_cars) if self.driving else robot_names(players)
+        self.names = [name for name in everyone if not team or name[5] == team]
         self.ids = {name: everyone.index(name) for name in self.names}
-        self.memory = {name: RobotMemory() for name in self.names}
+        self.memory = {name: RobotMemory(self.idle) for name in self.names}
         self.graph_frames: int | None = None           # frames per period of the detections arriving
         self.counts: Counter[str] = Counter()
         self.latencies_ms: list[float] = []
@@ -121,7 +151,8 @@ class PolicyNode(Node):
                 self.policy, self.checkpoint_sha256, self.policy_version = self._load(checkpoint, self.runtime_name)
             else:
                 torch.manual_seed(self.seed)
-                policy = TorchPolicy(DynEnvAgent())
+                policy = TorchPolicy(DynEnvAgent(scenario="driving", action_mode=self.action_mode) if self.driving
+                                     else DynEnvAgent())
                 self._validate(policy)
                 self.policy, self.checkpoint_sha256 = policy, ""
                 self.get_logger().warning("no checkpoint: acting with untrained weights")
@@ -176,22 +207,29 @@ class PolicyNode(Node):
         """``check_policy`` on the last frames each robot acted on (a synthetic period with no detections where
         there are none yet), with the frame count the graph sends once known."""
         try:
-            check_policy(policy, self._trial_inputs(policy), HEAD_BOUND, self.graph_frames)
+            check_scenario(policy, self.scenario, self.action_mode if self.driving else None)
+            if self.driving:
+                check_driving_policy(policy, self._trial_inputs(policy), self.max_yaw_rate, self.graph_frames)
+            else:
+                check_policy(policy, self._trial_inputs(policy), HEAD_BOUND, self.graph_frames)
         except ValueError as error:
             raise ValueError(f"policy refused: {_one_line(error)}") from None
 
     def _trial_inputs(self, policy):
-        frames = self.graph_frames or getattr(policy, "frames", None) or DEFAULT_FRAMES
+        frames = self.graph_frames or getattr(policy, "frames", None) or (1 if self.driving else DEFAULT_FRAMES)
         periods = [m.last if m.last is not None and len(m.last) == frames else _empty_period(frames)
                    for m in self.memory.values()]
         recorded = sum(m.last is not None and len(m.last) == frames for m in self.memory.values())
         self._trial_note = (f"the last frames of {recorded} robot{'s' * (recorded != 1)}" if recorded
                             else f"an empty period of {frames} frames (no frames received yet)")
+        observation, _ = pack_messages(periods, [m.previous for m in self.memory.values()],
+                                       getattr(policy, "max_landmarks", None), getattr(policy, "max_objects", None),
+                                       spec=self.spec)
+        if self.driving:
+            return (*streams_from_padded(observation, self.spec), *side_inputs(observation, spec=self.spec))
         head_max = float(policy.head_max)
         if not math.isfinite(head_max) or head_max <= 0:
             head_max = 1.0            # check_policy refuses it with the reason; the trial inputs must stay finite
-        observation, _ = pack_messages(periods, [m.previous for m in self.memory.values()],
-                                       getattr(policy, "max_landmarks", None), getattr(policy, "max_objects", None))
         return (*streams_from_padded(observation), *side_inputs(observation, head_max))
 
     def _on_load(self, request: LoadPolicy.Request, response: LoadPolicy.Response):
@@ -305,7 +343,7 @@ class PolicyNode(Node):
                                       throttle_duration_sec=5.0)
             return
         if memory.episode != msg.episode_id:                 # a new episode: forget everything
-            memory.__init__()
+            memory.__init__(self.idle)
             memory.episode = msg.episode_id
         period = msg.motion_period
         if ((memory.decided is not None and period <= memory.decided)
@@ -369,7 +407,7 @@ class PolicyNode(Node):
             frame = period[-1]
             same_episode = memory.episode == frame.episode_id
             started_since = max(frame.motion_period, memory.period) if same_episode else frame.motion_period
-            action = tuple(actions[b]) if finite[b] else STAND_STILL
+            action = tuple(actions[b]) if finite[b] else self.idle
             target = started_since + 1
             if same_episode and memory.addressed is not None and target <= memory.addressed:
                 # the previous, slower decision already answered that period (first action per period wins):
@@ -378,9 +416,13 @@ class PolicyNode(Node):
             else:
                 if started_since > frame.motion_period:
                     self.counts["actions_delayed"] += 1
-                msg = Action(robot_id=self.ids[name], episode_id=frame.episode_id, motion_period=target,
-                             walk=int(action[0]), turn=int(action[1]), kick=int(action[2]),
-                             head_yaw_delta=float(action[3]))
+                if self.driving:
+                    msg = Action(robot_id=self.ids[name], episode_id=frame.episode_id, motion_period=target,
+                                 throttle=float(action[0]), brake=float(action[1]), steering=float(action[2]))
+                else:
+                    msg = Action(robot_id=self.ids[name], episode_id=frame.episode_id, motion_period=target,
+                                 walk=int(action[0]), turn=int(action[1]), kick=int(action[2]),
+                                 head_yaw_delta=float(action[3]))
                 if finite[b]:                              # the learning fields (docs/interfaces.md)
                     msg.policy_version = self.policy_version
                     msg.log_prob, msg.value = float(log_probs[b]), float(values[b])
@@ -390,7 +432,8 @@ class PolicyNode(Node):
                 self.actions_sent += 1
                 if same_episode:
                     memory.addressed = target
-                    memory.previous = (int(action[0]), int(action[1]), int(action[2]), float(action[3]))
+                    memory.previous = (tuple(float(v) for v in action) if self.driving else
+                                       (int(action[0]), int(action[1]), int(action[2]), float(action[3])))
             if same_episode:                                   # (a new episode's first frames reset the robot)
                 memory.state = tuple(s[b:b + 1] for s in step.state) if finite[b] else None
                 memory.last = period
@@ -408,25 +451,35 @@ class PolicyNode(Node):
         return True
 
     def _run(self, memories: list[RobotMemory], periods: list[list[DetectionArray]]):
-        """(actions (B, 4), finite (B,), step) of one decision; a policy that raises gives every robot the
-        fallback (counted, logged): one bad decision must not stop the node or a stepped game."""
+        """(actions (B, 4), finite (B,), step) of one decision — driving: (B, 3) commands [throttle, brake,
+        steering], the network's own actions (indices or normalised values) kept in ``self._network_actions`` for
+        their log-probabilities; a policy that raises gives every robot the fallback (counted, logged): one bad
+        decision must not stop the node or a stepped game."""
         first = periods[0][-1]
         generator = torch.Generator().manual_seed(_decision_seed(self.seed, first.episode_id, first.motion_period))
         try:
             observation = self._padded(memories, periods)
-            landmarks, objects = streams_from_padded(observation)
-            head_max = float(self.policy.head_max)
-            previous, proprio = side_inputs(observation, head_max)
+            landmarks, objects = streams_from_padded(observation, self.spec)
+            if self.driving:
+                previous, proprio = side_inputs(observation, spec=self.spec)
+            else:
+                head_max = float(self.policy.head_max)
+                previous, proprio = side_inputs(observation, head_max)
             states = [m.state or self.policy.initial_state(1) for m in memories]
             state = tuple(torch.cat([s[i] for s in states]) for i in range(4))
             step = self.policy(landmarks, objects, previous, proprio, state)
-            actions, finite = sample_actions(step, self.policy.head_mode, self.policy.head_units, head_max,
-                                             generator, self.greedy)
+            if self.driving:
+                chosen, finite = driving_actions.sample_actions(step, self.policy.action_mode, generator, self.greedy)
+                self._network_actions = chosen
+                actions = driving_actions.commands(chosen, self.policy.action_mode, self.max_yaw_rate)
+            else:
+                actions, finite = sample_actions(step, self.policy.head_mode, self.policy.head_units, head_max,
+                                                 generator, self.greedy)
         except Exception as error:
             self.counts["failed_decisions"] += 1
-            self.get_logger().error(f"decision failed, robots stand still: {type(error).__name__}: "
-                                    f"{_one_line(error)}", throttle_duration_sec=5.0)
-            return np.zeros((len(memories), 4)), np.zeros(len(memories), bool), None
+            self.get_logger().error(f"decision failed, robots {'brake' if self.driving else 'stand still'}: "
+                                    f"{type(error).__name__}: {_one_line(error)}", throttle_duration_sec=5.0)
+            return np.zeros((len(memories), len(self.idle))), np.zeros(len(memories), bool), None
         if not finite.all():
             self.get_logger().error(f"non-finite outputs for {[n for n, f in zip(self.names, finite) if not f]}: "
                                     "they stand still", throttle_duration_sec=5.0)
@@ -438,8 +491,11 @@ class PolicyNode(Node):
         n = len(actions)
         if step is None or not finite.any():
             return np.full(n, np.nan), np.full(n, np.nan)
-        log_probs = behaviour_log_probs(step, actions, self.policy.head_mode, self.policy.head_units,
-                                        float(self.policy.head_max))
+        if self.driving:
+            log_probs = driving_actions.log_probs(step, self._network_actions, self.policy.action_mode)
+        else:
+            log_probs = behaviour_log_probs(step, actions, self.policy.head_mode, self.policy.head_units,
+                                            float(self.policy.head_max))
         values = np.asarray(torch.as_tensor(step.value), np.float64).reshape(n)
         ok = finite & np.isfinite(log_probs) & np.isfinite(values)
         finite &= ok
@@ -449,7 +505,7 @@ class PolicyNode(Node):
         stats: Counter[str] = Counter()
         observation, dropped = pack_messages(periods, [m.previous for m in memories],
                                              getattr(self.policy, "max_landmarks", None),
-                                             getattr(self.policy, "max_objects", None), stats)
+                                             getattr(self.policy, "max_objects", None), stats, self.spec)
         self.dropped_detections += dropped
         self.counts.update(stats)
         return observation
@@ -463,8 +519,8 @@ class PolicyNode(Node):
                   "robots": str(len(self.names)), "actions_sent": str(self.actions_sent),
                   "detections_dropped": str(self.dropped_detections)}
         for key in ("decisions", "periods_dropped", "actions_delayed", "actions_superseded", "frames_stale",
-                    "frames_malformed", "detections_malformed", "values_malformed", "fallback_actions",
-                    "failed_decisions", "weights_loaded", "weights_refused", "weights_duplicate",
+                    "frames_malformed", "detections_malformed", "values_malformed", "self_missing",
+                    "fallback_actions", "failed_decisions", "weights_loaded", "weights_refused", "weights_duplicate",
                     "weights_other_run"):
             values[key] = str(self.counts.get(key, 0))
         values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"
