@@ -456,12 +456,10 @@ class Perceiver:
         """All rows of all views, each view's rows nearest first, with the sighting bits and confidences every
         report gets by the same rule whether it is real, confused or false."""
         rows, view = _concatenate(parts)
-        distance = np.hypot(rows["x"], rows["y"])
         # Sorted by view, then distance: one stable sort of (view, the distance's bits), which order as the
         # distance does (never negative).
-        order = ((view << 32) | distance.view(np.uint32)).argsort(kind="stable")
-        (rows, view), distance = _take((rows, view), order), distance[order]
-        offsets = view.searchsorted(lay.view_starts)                      # views are sorted: each one's first row
+        rows, view, distance, offsets = self._kernels.sort_rows(rows, view, np.hypot(rows["x"], rows["y"]),
+                                                                len(lay.views))
         self._sighting_bits(rows, view, distance)
         self._confidences(rows, rng)
         return Perception(rows, offsets, seen, lines_seen, visible)
@@ -470,32 +468,14 @@ class Perceiver:
         """DISTANT, PARTIAL and NEARBY of point reports, from the reports themselves — what a real pipeline can
         compute — so no bit tells a false report from a real one: DISTANT beyond the reported class's near range,
         PARTIAL within the class's reach of the view's edge, NEARBY within ``nearby_distance`` of another reported
-        ball or robot of the same frame. Lines keep their clipping bits; the circle its rim test."""
-        cls = rows["class_id"]
-        idx = self._point_class[cls].nonzero()[0]
-        if not len(idx):
-            return
-        c, d = cls[idx], distance[idx]
-        x, y = rows["x"][idx].astype(float), rows["y"][idx].astype(float)
-        reach = np.arcsin(clamp(self.class_reach_radius[c] / np.maximum(d, _EPS), 0.0, 1.0))
-        bits = (np.abs(np.arctan2(y, x)) > self.params.field_of_view / 2 - reach) * _PARTIAL
-        bits += d > self.class_near[c]                                    # DISTANT
-        dynamic = self._dynamic_class[c].nonzero()[0]                     # ball and robot reports
-        if len(dynamic):
-            # Every (report, ball or robot report of the same view) pair: views are sorted, so a view's dynamic
-            # reports are one run of ``dynamic``.
-            pv = view[idx]
-            dv = pv[dynamic]
-            first = dv.searchsorted(pv)
-            count = dv.searchsorted(pv, side="right") - first
-            owner = np.repeat(np.arange(len(idx)), count)
-            other = dynamic[np.arange(len(owner)) - (np.cumsum(count) - count - first)[owner]]
-            gap2 = (x[owner] - x[other]) ** 2 + (y[owner] - y[other]) ** 2
-            near = (gap2 < self.params.miss.nearby_distance ** 2) & (other != owner)
-            nearby = np.zeros(len(idx), bool)
-            nearby[owner[near]] = True
-            bits += nearby * _NEARBY
-        rows["sighting"][idx] = bits
+        ball or robot of the same view (the rows come sorted by view). Lines keep their clipping bits; the circle
+        its rim test."""
+        kern = self._kernels
+        idx, ratio, x, y = kern.sighting_inputs(rows, distance, self._point_class, self.class_reach_radius)
+        if len(idx):
+            kern.sighting_bits(rows, view, distance, idx, np.arcsin(ratio), np.arctan2(y, x), x, y,
+                               self.params.field_of_view / 2, self.class_near, self._dynamic_class,
+                               self.params.miss.nearby_distance ** 2, _PARTIAL, _NEARBY)
 
     def _confidences(self, rows: np.ndarray, rng: np.random.Generator) -> None:
         """Calibrated detector scores. Each report has evidence z ~ N(d', 1) when it is correct (its object exists
@@ -507,12 +487,9 @@ class Perceiver:
         if p.confidence == "none":
             rows["confidence"] = 1.0
             return
-        cls = rows["class_id"]
-        correct = (rows["true_id"] != -1) & (rows["true_class"] == cls)
-        sep = p.confidence_separation
-        z = rng.standard_normal(len(rows)) + sep * correct
-        logit = self.class_prior_logit[cls] + sep * z - sep * sep / 2
-        rows["confidence"] = 1.0 / (1.0 + np.exp(-logit))
+        minus_logit = self._kernels.confidence_exponents(rows, rng.standard_normal(len(rows)),
+                                                         p.confidence_separation, self.class_prior_logit)
+        rows["confidence"] = 1.0 / (1.0 + np.exp(minus_logit))
 
     # -- lines and the centre circle ------------------------------------------------------------------------------
     def _line_rows(self, lay: "_Layout", ox, oy, c, s, rng):

@@ -170,6 +170,104 @@ def warm_up() -> None:
     v, k, ends, bits = line_visible(clip, z[:1], zi[:1], 1, 0.1, 2)
     line_miss(np.zeros((2, 1)), zi[:1], 1.0, True, 1.0, 1.0, 1.0)
     line_rows(np.zeros((2, 2, 1)), np.zeros((2, 1)), zi[:1], zi[:1], zi[:1], zi[:1], 1, 5)
+    rows = np.zeros(1, _DETECTION)
+    rows, view, distance, offsets = sort_rows(rows, zi[:1], np.zeros(1, np.float32), 1)
+    idx, ratio, x, y = sighting_inputs(rows, distance, np.ones(256, np.bool_), np.zeros(256))
+    sighting_bits(rows, view, distance, idx, ratio, ratio, x, y, 0.5, np.ones(256), np.ones(256, np.bool_), 1.0,
+                  2, 4)
+    confidence_exponents(rows, z[:1], 1.5, np.zeros(256))
 
 
-__all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "warm_up"]
+__all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_rows", "sighting_inputs", "sighting_bits",
+           "confidence_exponents", "warm_up"]
+
+
+@numba.njit(cache=True)
+def sighting_inputs(rows, distance, point_class, reach_radius):
+    """The point reports (classes that get their sighting bits from themselves) of the sorted ``rows``: their
+    indices, the arcsin argument of their reach (radius / distance, clamped to [0, 1]) and their x, y."""
+    n = 0
+    for i in range(len(rows)):
+        if point_class[rows[i].class_id]:
+            n += 1
+    idx = np.empty(n, np.int64)
+    ratio, x, y = np.empty(n), np.empty(n), np.empty(n)
+    eps = np.float32(_EPS)
+    r = 0
+    for i in range(len(rows)):
+        c = rows[i].class_id
+        if not point_class[c]:
+            continue
+        idx[r] = i
+        ratio[r] = _minimum(_maximum(reach_radius[c] / np.float64(_maximum(distance[i], eps)), 0.0), 1.0)
+        x[r], y[r] = rows[i].x, rows[i].y
+        r += 1
+    return idx, ratio, x, y
+
+
+@numba.njit(cache=True)
+def sighting_bits(rows, view, distance, idx, reach, bearing, x, y, half, class_near, dynamic_class, nearby2,
+                  partial, nearby):
+    """PARTIAL (|bearing| beyond the half view less the reach), DISTANT (beyond the class's near range) and NEARBY
+    (within the nearby distance of another ball or robot report of the same view) of the point reports ``idx``."""
+    n = len(idx)
+    start = 0
+    while start < n:
+        vv = view[idx[start]]
+        stop = start
+        while stop < n and view[idx[stop]] == vv:
+            stop += 1
+        for p in range(start, stop):
+            i = idx[p]
+            c = rows[i].class_id
+            b = partial if abs(bearing[p]) > half - reach[p] else 0
+            if distance[i] > class_near[c]:
+                b += 1
+            for o in range(start, stop):
+                if o != p and dynamic_class[rows[idx[o]].class_id]:
+                    gx, gy = x[p] - x[o], y[p] - y[o]
+                    if gx * gx + gy * gy < nearby2:
+                        b += nearby
+                        break
+            rows[i].sighting = b
+        start = stop
+
+
+@numba.njit(cache=True)
+def confidence_exponents(rows, z, separation, prior_logit):
+    """−logit of each report's calibrated confidence from its standard normal ``z``: evidence z + d' when it is
+    correct (a real object of its class), z when not."""
+    out = np.empty(len(rows))
+    half_sq = separation * separation / 2
+    for i in range(len(rows)):
+        c = rows[i].class_id
+        correct = rows[i].true_id != -1 and rows[i].true_class == c
+        zz = z[i] + separation * (1.0 if correct else 0.0)
+        out[i] = -(prior_logit[c] + separation * zz - half_sq)
+    return out
+
+
+@numba.njit(cache=True)
+def sort_rows(rows, view, distance, n_views):
+    """Rows view after view, nearest first (one stable sort of (view, the distance's bits), which order as the
+    non-negative float32 distance does); the sorted views and distances, and each view's first row."""
+    M = len(rows)
+    bits = distance.view(np.uint32)
+    key = np.empty(M, np.int64)
+    for i in range(M):
+        key[i] = (view[i] << 32) | np.int64(bits[i])
+    order = np.argsort(key, kind="mergesort")
+    out = np.empty(M, rows.dtype)
+    sorted_view = np.empty(M, np.int64)
+    sorted_distance = np.empty(M, distance.dtype)
+    for i in range(M):
+        out[i] = rows[order[i]]
+        sorted_view[i] = view[order[i]]
+        sorted_distance[i] = distance[order[i]]
+    offsets = np.empty(n_views + 1, np.int64)
+    k = 0
+    for v in range(n_views + 1):
+        while k < M and sorted_view[k] < v:
+            k += 1
+        offsets[v] = k
+    return out, sorted_view, sorted_distance, offsets
