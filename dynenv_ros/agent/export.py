@@ -72,8 +72,7 @@ from torch import nn
 from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, _bounded_int, check_file_size, check_head,
                                          non_finite_tensors)
 from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, StreamBatch,
-                                     agent_inputs)
+from dynenv_ros.agent.inputs import FEATURES, StreamBatch, agent_inputs
 from dynenv_ros.agent.network import DynEnvAgent, State
 from dynenv_ros.envs.padded_layout import MAX_FRAMES, MAX_SLOTS, SOCCER
 
