@@ -277,30 +277,9 @@ class Perceiver:
         within the occluder radius of the sight line through it (``band``, DynEnv's rule, where only robots in the
         field of view occlude). Occluder quantities are (occluders, views), gathered per candidate's view."""
         occlusion = self.params.occlusion
-        occ = lay.occluder_pair                                           # (K, V)
-        dk = d[occ]
-        valid = lay.occluder_not_observer & (np.abs(bearing[occ]) < math.pi / 2)   # in front of the observer
-        if occlusion.model == "band":
-            valid &= in_view[occ]
-        limit = np.where(valid, dk + _EPS, np.inf)        # farther than this behind a valid occluder
-        x, y = cx[at], cy[at]
-        if occlusion.model == "band":
-            inv_k = 1.0 / np.maximum(dk, _EPS)
-            per = np.array((limit, cx[occ] * inv_k, cy[occ] * inv_k)).take(lay.pair_view[at], axis=2)   # (3, K, C)
-            sx, sy = per[1], per[2]                                       # unit sight lines to the occluders
-            along = sx * x + sy * y
-            across = np.abs(sx * y - sy * x)
-            hide = (d[at] > per[0]) & (along > 0) & (across < occlusion.occluder_radius)
-        else:
-            ratio = clamp(occlusion.occluder_radius / np.maximum(dk, _EPS), 0.0, 1.0)
-            cos_width = np.sqrt(1.0 - ratio * ratio)
-            # cos of the angle between the sight lines to target and occluder, without trigonometry
-            inv = 1.0 / np.maximum(d, _EPS)
-            ux, uy = cx * inv, cy * inv                                   # unit sight lines
-            per = np.array((limit, cos_width, ux[occ], uy[occ])).take(lay.pair_view[at], axis=2)   # (4, K, C)
-            hide = (d[at] > per[0]) & (ux[at] * per[2] + uy[at] * per[3] > per[1])
-        hide &= lay.occluder_object != j                                  # nothing hides itself
-        return np.logical_or.reduce(hide, axis=0)
+        return self._kernels.hidden(at, j, lay.pair_view, cx, cy, d, bearing, in_view, lay.occluder_pair,
+                                    lay.occluder_not_observer, lay.occluder_object.ravel(),
+                                    occlusion.model == "band", occlusion.occluder_radius)
 
     def _nearby(self, frames: SceneFrames, lay: "_Layout", at: np.ndarray) -> np.ndarray:
         """For the pairs ``at``: another moving object (not the observer) within ``nearby_distance`` of the object.
@@ -546,15 +525,10 @@ class Perceiver:
     def _circle_rim_in_view(self, lay: "_Layout", fx, fy, c, s) -> np.ndarray:
         """(V,) how many rim samples of the circle lie in the view wedge and range. (view, sample) entries are
         flat (``_Layout.rim_view``), per-view values gathered."""
-        rv = lay.rim_view
-        rx = fx[lay.rim_circle] + lay.rim_x - fx[lay.rim_observer]
-        ry = fy[lay.rim_circle] + lay.rim_y - fy[lay.rim_observer]
-        cr, sr = c[rv], s[rv]
-        px, py = cr * rx + sr * ry, cr * ry - sr * rx                     # (= −s·rx + c·ry, exactly)
-        half = self.params.field_of_view / 2
-        limit = self.params.classes[ObjectClass.CENTER_CIRCLE].max_range
-        inside = (np.abs(np.arctan2(py, px)) <= half) & (px * px + py * py <= limit * limit)
-        return inside.reshape(-1, CIRCLE_SAMPLES).sum(axis=1)
+        kern = self._kernels
+        px, py, in_range = kern.rim_points(fx, fy, lay.rim_circle, lay.rim_observer, lay.rim_x, lay.rim_y,
+                                           lay.rim_view, c, s, self.params.classes[ObjectClass.CENTER_CIRCLE].max_range)
+        return kern.rim_count(np.arctan2(py, px), in_range, self.params.field_of_view / 2, CIRCLE_SAMPLES)
 
 
 _RAW = np.dtype((np.void, DETECTION_DTYPE.itemsize))

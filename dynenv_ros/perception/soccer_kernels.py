@@ -163,6 +163,77 @@ def line_rows(ends, reach, kept, v, k, bits, n_views, line_class):
     return rows, views, seen, exo, eyo
 
 
+@numba.njit(cache=True)
+def hidden(at, j, pair_view, cx, cy, d, bearing, in_view, occluder_pair, not_observer, occluder_object, band,
+           radius):
+    """For the candidate pairs ``at`` (objects ``j``): hidden behind a robot in front of the observer (``band``:
+    DynEnv's rule, one in the view too) — farther than it and in its shadow cone, or (``band``) within ``radius``
+    of the sight line through it. Nothing hides itself."""
+    C, K = len(at), occluder_pair.shape[0]
+    out = np.zeros(C, np.bool_)
+    half_pi = math.pi / 2
+    for q in range(C):
+        a = at[q]
+        vv = pair_view[a]
+        da = d[a]
+        inv = 1.0 / _maximum(da, _EPS)
+        ux, uy = cx[a] * inv, cy[a] * inv
+        for k in range(K):
+            o = occluder_pair[k, vv]
+            if not (not_observer[k, vv] and abs(bearing[o]) < half_pi) or occluder_object[k] == j[q]:
+                continue
+            if band and not in_view[o]:
+                continue
+            dk = d[o]
+            if not da > dk + _EPS:
+                continue
+            if band:
+                inv_k = 1.0 / _maximum(dk, _EPS)
+                sx, sy = cx[o] * inv_k, cy[o] * inv_k
+                x, y = cx[a], cy[a]
+                if sx * x + sy * y > 0 and abs(sx * y - sy * x) < radius:
+                    out[q] = True
+                    break
+            else:
+                ratio = _minimum(_maximum(radius / _maximum(dk, _EPS), 0.0), 1.0)
+                cos_width = math.sqrt(1.0 - ratio * ratio)
+                inv_o = 1.0 / _maximum(dk, _EPS)
+                if ux * (cx[o] * inv_o) + uy * (cy[o] * inv_o) > cos_width:
+                    out[q] = True
+                    break
+    return out
+
+
+@numba.njit(cache=True)
+def rim_points(fx, fy, rim_circle, rim_observer, rim_x, rim_y, rim_view, c, s, limit):
+    """The circle's rim samples of every view in the camera frame (px, py) and whether each is within range."""
+    n = len(rim_view)
+    px, py = np.empty(n), np.empty(n)
+    in_range = np.empty(n, np.bool_)
+    for i in range(n):
+        rx = fx[rim_circle[i]] + rim_x[i] - fx[rim_observer[i]]
+        ry = fy[rim_circle[i]] + rim_y[i] - fy[rim_observer[i]]
+        cr, sr = c[rim_view[i]], s[rim_view[i]]
+        x, y = cr * rx + sr * ry, cr * ry - sr * rx
+        px[i], py[i] = x, y
+        in_range[i] = x * x + y * y <= limit * limit
+    return px, py, in_range
+
+
+@numba.njit(cache=True)
+def rim_count(angle, in_range, half, samples):
+    """Per view: how many rim samples are in range with |angle| within ``half``."""
+    V = len(angle) // samples
+    out = np.zeros(V, np.int64)
+    for v in range(V):
+        n = 0
+        for i in range(v * samples, (v + 1) * samples):
+            if abs(angle[i]) <= half and in_range[i]:
+                n += 1
+        out[v] = n
+    return out
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel once, on tiny inputs."""
     z, zi = np.zeros(2), np.zeros(2, np.int64)
@@ -176,10 +247,16 @@ def warm_up() -> None:
     sighting_bits(rows, view, distance, idx, ratio, ratio, x, y, 0.5, np.ones(256), np.ones(256, np.bool_), 1.0,
                   2, 4)
     confidence_exponents(rows, z[:1], 1.5, np.zeros(256))
+    occ = np.zeros((1, 1), np.int64)
+    for band in (False, True):
+        hidden(zi[:1], zi[:1], zi[:1], z, z, z + 1, z, np.ones(2, np.bool_), occ, np.ones((1, 1), np.bool_), zi[:1],
+               band, 0.2)
+    px, py, in_range = rim_points(z, z, zi, zi, z, z, zi, z + 1, z, 1.0)
+    rim_count(px, in_range, 0.5, 2)
 
 
 __all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_rows", "sighting_inputs", "sighting_bits",
-           "confidence_exponents", "warm_up"]
+           "confidence_exponents", "hidden", "rim_points", "rim_count", "warm_up"]
 
 
 @numba.njit(cache=True)
