@@ -17,6 +17,7 @@ import numba
 import numpy as np
 
 from dynenv_ros.perception.detections import DETECTION_DTYPE as _DETECTION
+from dynenv_ros.perception.row_kernels import sort_by_view
 
 _EPS = 1e-9
 
@@ -317,29 +318,6 @@ def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy
 
 
 @numba.njit(cache=True)
-def sort_reports(rows, view, distance_bits, n_views, self_class):
-    """Rows view after view, each view's SELF row first, then nearest first (stable); the view offsets."""
-    M = len(rows)
-    key = np.empty(M, np.int64)
-    for i in range(M):
-        not_self = 0 if rows[i].class_id == self_class else 1
-        key[i] = (view[i] << 33) | (not_self << 32) | np.int64(distance_bits[i])
-    order = np.argsort(key, kind="mergesort")
-    out = np.empty(M, rows.dtype)
-    sorted_view = np.empty(M, np.int64)
-    for i in range(M):
-        out[i] = rows[order[i]]
-        sorted_view[i] = view[order[i]]
-    offsets = np.empty(n_views + 1, np.int64)
-    k = 0
-    for v in range(n_views + 1):
-        while k < M and sorted_view[k] < v:
-            k += 1
-        offsets[v] = k
-    return out, order, offsets
-
-
-@numba.njit(cache=True)
 def sighting_bits(rows, distance, offsets, class_near, nearby2, car, pedestrian, obstacle, distant, partial, nearby):
     """DISTANT and NEARBY of the sorted reports from the reports themselves, by one rule for real and made-up ones:
     DISTANT beyond the class's near range, NEARBY a pedestrian within the nearby distance of a reported car or
@@ -383,7 +361,7 @@ def warm_up() -> None:
     rows = np.zeros(1, _DETECTION)
     self_rows(rows, np.zeros((1, 8), np.float32), z, z, z, z, z + 1, z, z, z, np.zeros((4, 1)), True, 1.0, 1.0, 1.0,
               1.0, z + 1, z + 1, np.zeros(1, np.bool_), np.zeros(1, np.bool_), 0)
-    rows, order, offsets = sort_reports(rows, zi, np.zeros(1, np.uint32), 1, 0)
+    rows, order, offsets = sort_by_view(rows, zi, np.zeros(1, np.uint32), 1, 0)
     sighting_bits(rows, np.zeros(1, np.float32), offsets, np.ones(256), 1.0, 1, 2, 3, 1, 2, 4)
     f = np.ones(1, np.bool_)
     for noisy, keep, e in ((True, f, z), (False, z, z)):
@@ -391,5 +369,5 @@ def warm_up() -> None:
                   f, z + 1, 1, 0, 0, 0, 0)
 
 
-__all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "pair_rows", "self_rows", "sort_reports", "sighting_bits",
+__all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "pair_rows", "self_rows", "sort_by_view", "sighting_bits",
            "warm_up"]

@@ -415,7 +415,7 @@ class DrivingPerceiver:
         rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
         view = np.concatenate([v for _, v in parts]).astype(np.int64)
         distance = np.hypot(rows["x"], rows["y"]).astype(np.float32)
-        rows, order, offsets = kernels.sort_reports(rows, view, distance.view(np.uint32), self.n, _SELF)
+        rows, order, offsets = kernels.sort_by_view(rows, view, distance.view(np.uint32), self.n, _SELF)
         # DISTANT and NEARBY from the report itself, by one rule for real and made-up reports alike.
         kernels.sighting_bits(rows, distance[order], offsets, self.class_near, self.params.miss.nearby_distance ** 2,
                               _CAR, _PED, _OBST, _DISTANT, _PARTIAL, _NEARBY)

@@ -437,8 +437,9 @@ class Perceiver:
         rows, view = _concatenate(parts)
         # Sorted by view, then distance: one stable sort of (view, the distance's bits), which order as the
         # distance does (never negative).
-        rows, view, distance, offsets = self._kernels.sort_rows(rows, view, np.hypot(rows["x"], rows["y"]),
-                                                                len(lay.views))
+        distance = np.hypot(rows["x"], rows["y"])
+        rows, order, offsets = self._kernels.sort_by_view(rows, view, distance.view(np.uint32), len(lay.views), -1)
+        view, distance = view[order], distance[order]
         self._sighting_bits(rows, view, distance)
         self._confidences(rows, rng)
         return Perception(rows, offsets, seen, lines_seen, visible)

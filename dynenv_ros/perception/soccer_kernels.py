@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from dynenv_ros.perception.detections import DETECTION_DTYPE as _DETECTION
+from dynenv_ros.perception.row_kernels import sort_by_view
 
 _EPS = 1e-9
 
@@ -242,7 +243,9 @@ def warm_up() -> None:
     line_miss(np.zeros((2, 1)), zi[:1], 1.0, True, 1.0, 1.0, 1.0)
     line_rows(np.zeros((2, 2, 1)), np.zeros((2, 1)), zi[:1], zi[:1], zi[:1], zi[:1], 1, 5)
     rows = np.zeros(1, _DETECTION)
-    rows, view, distance, offsets = sort_rows(rows, zi[:1], np.zeros(1, np.float32), 1)
+    distance = np.zeros(1, np.float32)
+    rows, order, offsets = sort_by_view(rows, zi[:1], distance.view(np.uint32), 1, -1)
+    view = zi[:1]
     idx, ratio, x, y = sighting_inputs(rows, distance, np.ones(256, np.bool_), np.zeros(256))
     sighting_bits(rows, view, distance, idx, ratio, ratio, x, y, 0.5, np.ones(256), np.ones(256, np.bool_), 1.0,
                   2, 4)
@@ -255,7 +258,7 @@ def warm_up() -> None:
     rim_count(px, in_range, 0.5, 2)
 
 
-__all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_rows", "sighting_inputs", "sighting_bits",
+__all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_by_view", "sighting_inputs", "sighting_bits",
            "confidence_exponents", "hidden", "rim_points", "rim_count", "warm_up"]
 
 
@@ -322,29 +325,3 @@ def confidence_exponents(rows, z, separation, prior_logit):
         zz = z[i] + separation * (1.0 if correct else 0.0)
         out[i] = -(prior_logit[c] + separation * zz - half_sq)
     return out
-
-
-@numba.njit(cache=True)
-def sort_rows(rows, view, distance, n_views):
-    """Rows view after view, nearest first (one stable sort of (view, the distance's bits), which order as the
-    non-negative float32 distance does); the sorted views and distances, and each view's first row."""
-    M = len(rows)
-    bits = distance.view(np.uint32)
-    key = np.empty(M, np.int64)
-    for i in range(M):
-        key[i] = (view[i] << 32) | np.int64(bits[i])
-    order = np.argsort(key, kind="mergesort")
-    out = np.empty(M, rows.dtype)
-    sorted_view = np.empty(M, np.int64)
-    sorted_distance = np.empty(M, distance.dtype)
-    for i in range(M):
-        out[i] = rows[order[i]]
-        sorted_view[i] = view[order[i]]
-        sorted_distance[i] = distance[order[i]]
-    offsets = np.empty(n_views + 1, np.int64)
-    k = 0
-    for v in range(n_views + 1):
-        while k < M and sorted_view[k] < v:
-            k += 1
-        offsets[v] = k
-    return out, sorted_view, sorted_distance, offsets
