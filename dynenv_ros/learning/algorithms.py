@@ -16,12 +16,17 @@ log-probabilities (DynEnv's PPO had the sign flipped and compared freshly resamp
 −log π(a|s)·A. Both are averaged over the steps where the robot could act (not fallen or penalized: its action had
 no effect there, so those samples only add variance). Entropy is per agent (the sum over the action heads of each
 robot's own policy entropy), not DynEnv's "batch entropy" of the mean policy (§9.4).
+
+Driving (``learner.agent.scenario == 'driving'``): the same update over cars, with driving's heads (two categorical
+or three clipped Gaussians, ``agent.driving_actions``) and inputs (its layout spec); the rollout's ``alive`` mask
+(T+1, B) removes every step after a car's own episode end from every term — value included; the curiosity models
+take the one-hot [3, 3] actions (discrete) or the continuous action vector, whose inverse model regresses it
+(squared error) instead of classifying. No localization or reconstruction (the config refuses them).
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from types import SimpleNamespace
 from typing import Any, Mapping
 
 import numpy as np
@@ -29,10 +34,12 @@ import torch
 from torch import Tensor
 
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded, StreamBatch
-from dynenv_ros.agent.losses import (icm_losses, localization_loss, ltp_loss, masked_mean, one_hot_actions,
+from dynenv_ros.agent.losses import (icm_losses, localization_loss, ltp_loss, masked_mean, rcm_forward_loss,
                                      reconstruction_loss)
+from dynenv_ros.envs.padded_layout import SOCCER, LayoutSpec
 from dynenv_ros.learning.advantages import generalized_advantages
-from dynenv_ros.learning.heads import Learner
+from dynenv_ros.learning.heads import Learner, action_features
+from dynenv_ros.learning.rollout import head_outputs, layout_spec
 
 BALL_ANCHOR = ((0.0, 0.0),)
 
@@ -75,24 +82,25 @@ def _flat(x: Tensor) -> Tensor:
     return x.reshape(-1, *x.shape[2:])
 
 
-def sequence_inputs(obs: Mapping[str, Tensor], head_max: float) -> tuple[StreamBatch, StreamBatch, Tensor, Tensor]:
-    """The network's inputs for observations with (T, B) leading axes."""
+def sequence_inputs(obs: Mapping[str, Tensor], head_max: float | None, spec: LayoutSpec = SOCCER
+                    ) -> tuple[StreamBatch, StreamBatch, Tensor, Tensor]:
+    """The network's inputs for observations with (T, B) leading axes (``spec``: the layout's, soccer's default)."""
     T, B = obs["game"].shape[:2]
     flat = {k: _flat(v) for k, v in obs.items()}
-    previous, self_state = side_inputs(flat, head_max)
-    landmarks, objects = streams_from_padded(obs)
+    previous, self_state = side_inputs(flat, head_max, spec)
+    landmarks, objects = streams_from_padded(obs, spec)
     return landmarks, objects, previous.reshape(T, B, -1), self_state.reshape(T, B, -1)
 
 
 def run_sequence(agent: Any, obs: Mapping[str, Tensor], state: tuple[Tensor, ...], starts: Tensor) -> Any:
-    landmarks, objects, previous, self_state = sequence_inputs(obs, agent.head_max)
+    landmarks, objects, previous, self_state = sequence_inputs(obs, agent.head_max, layout_spec(agent))
     return agent.forward_sequence(landmarks, objects, previous, self_state, state, starts)
 
 
 def log_prob_entropy(agent: Any, out: Any, actions: Tensor) -> tuple[Tensor, Tensor]:
     """log π(a|s) and the policy entropy, each summed over the action heads; (T, B) inputs give (T, B)."""
     T, B = actions.shape[:2]
-    step = SimpleNamespace(walk=_flat(out.walk), turn=_flat(out.turn), kick=_flat(out.kick), head=_flat(out.head))
+    step = head_outputs(out, flat=True)
     dists = agent.distributions(step)
     flat_actions = _flat(actions).unbind(-1)
     log_prob = sum(d.log_prob(a.float() if isinstance(d, torch.distributions.Normal) else a)
@@ -184,7 +192,8 @@ def _intrinsic(learner: Learner, rollout: Mapping[str, Any], s: UpdateSettings) 
     out = run_sequence(learner.agent, rollout["obs"], _initial_state(learner, rollout, rows), rollout["starts"])
     phi = out.phi
     heads = learner.curiosity
-    error = (heads.forward_model(phi[:-1], one_hot_actions(rollout["actions"])) - phi[1:]) ** 2
+    taken = action_features(rollout["actions"], learner.action_heads, learner.continuous_actions)
+    error = (heads.forward_model(phi[:-1], taken) - phi[1:]) ** 2
     if s.use_rcm:
         error = error * heads.rcm_attention(phi[1:])
     ended = rollout["episode_end"]
@@ -205,13 +214,13 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
     out = run_sequence(agent, obs, _initial_state(learner, rollout, rows), rollout["starts"][:, rows])
     actions = rollout["actions"][:, rows]
     acting = rollout["can_act"][:T, rows]
-    everywhere = torch.ones_like(acting)
+    everywhere = rollout["alive"][:T, rows] if "alive" in rollout else torch.ones_like(acting)
     if "teacher_driven" in rollout:       # rows that executed the teacher's actions: off-policy, no RL terms there
         on_policy = ~rollout["teacher_driven"][rows].unsqueeze(0).expand_as(acting)
         imitated, acting, everywhere = acting, acting & on_policy, on_policy
     else:
         imitated = acting
-    step_out = SimpleNamespace(walk=out.walk[:T], turn=out.turn[:T], kick=out.kick[:T], head=out.head[:T])
+    step_out = head_outputs(out, steps=T)
     log_prob, entropy = log_prob_entropy(agent, step_out, actions)
     adv = advantages[:, rows]
     if s.normalize_advantages:
@@ -252,11 +261,14 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
     curious = s.use_forward or s.use_inverse or s.use_ltp
     if curious:
         transition = imitated & ~rollout["episode_end"][:, rows]     # every executed action, whoever chose it
-        onehot = one_hot_actions(actions)
+        onehot = action_features(actions, learner.action_heads, learner.continuous_actions)
         heads = learner.curiosity
         phi = out.phi
-        icm = icm_losses(phi, onehot, actions, heads.forward_model, heads.inverse_model, transition,
-                         attention=heads.rcm_attention if s.use_rcm else None)
+        if learner.continuous_actions:
+            icm = continuous_icm_losses(phi, onehot, heads, transition, s.use_rcm)
+        else:
+            icm = icm_losses(phi, onehot, actions, heads.forward_model, heads.inverse_model, transition,
+                             attention=heads.rcm_attention if s.use_rcm else None)
         if s.use_forward:
             loss = loss + s.forward_coef * icm["forward"]
             log("forward_loss", icm["forward"].detach())
@@ -288,6 +300,23 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
             log(name, value)
     log("loss", loss.detach())
     return loss, float(approx_kl)
+
+
+def continuous_icm_losses(phi: Tensor, actions: Tensor, heads: Any, mask: Tensor, use_rcm: bool
+                          ) -> dict[str, Tensor]:
+    """``icm_losses`` for a continuous action vector (driving's 3 normalised values): the same (RCM-weighted)
+    forward loss on [φ_t, a_t] with φ_{t+1} detached, and an inverse model that regresses a_t from (φ_t, φ_{t+1})
+    — the masked mean over transitions of the mean squared error over the action's dimensions."""
+    phi_t, phi_next = phi[:-1], phi[1:]
+    target = phi_next.detach()
+    pred = heads.forward_model(phi_t, actions)
+    if use_rcm:
+        forward = rcm_forward_loss(pred, target, heads.rcm_attention(target), mask)
+    else:
+        forward = masked_mean(((pred - target) ** 2).mean(-1), mask)
+    (guess,) = heads.inverse_model(phi_t, phi_next)
+    inverse = masked_mean(((guess - actions) ** 2).mean(-1), mask)
+    return {"forward": forward, "inverse": inverse}
 
 
 def imitation_loss(agent: Any, out: Any, teacher: Tensor, acting: Tensor) -> tuple[Tensor, dict[str, Tensor]]:

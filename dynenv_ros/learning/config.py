@@ -16,6 +16,12 @@ Rules worth knowing:
   reconstruction encoder). To train localization + reconstruction from scratch, use ``variant: pred`` with
   ``use_localization: true`` and ``use_reconstruction: true``. The path's existence is checked by the trainer when it
   loads it, not here (a config read back from a checkpoint may name a file of another machine).
+* ``scenario: driving`` trains the driving agent (``DynEnvAgent(scenario='driving', action_mode)``) on
+  ``DrivingVectorEnv`` with ``n_cars`` cars per world, every car learning with the shared network. Soccer-only
+  settings are refused there with the key named: ``teacher`` (and the imitation settings), ``opponent`` other than
+  ``self``, ``variant: recon``, ``use_localization`` / ``use_reconstruction``, ``pretrained_encoder``,
+  ``privileged_pose_seeding`` (driving has no learning targets: no pose, no reconstruction). ``action_mode`` and
+  ``n_cars`` other than their defaults are refused for ``scenario: robocup``.
 * ``ltp_horizon <= rollout_length`` is required only when the LTP loss is on; ``ppo_minibatches`` may not exceed
   the number of learning robot sequences (``learning_robots``) only when ``algorithm`` is ppo.
 """
@@ -38,6 +44,9 @@ BACKENDS = ("auto", "inprocess", "subprocess")
 TEACHER_KINDS = ("chaser",)     # one shared network has no slot input, so it cannot imitate a keeper in one slot
 HEAD_MODES = ("discrete", "continuous")
 PERCEPTIONS = ("realistic", "dynenv", "none")        # the presets of dynenv_ros.perception (config/perception/)
+SCENARIOS = ("robocup", "driving")
+ACTION_MODES = ("discrete", "continuous")           # driving's actor heads (agent/driving_actions.py)
+MAX_CARS = 10
 MAX_PLAYERS_PER_TEAM = 5
 _DEVICE = re.compile(r"^(cpu|cuda(:\d+)?|mps)$")
 
@@ -113,6 +122,11 @@ class TrainConfig:
                                                "variant.")
 
     # -- environment -------------------------------------------------------------------------------------------
+    scenario: str = _f("robocup", "World: 'robocup' (2 teams of players_per_team robots) or 'driving' (n_cars cars, "
+                                  "every car learning; docs/training.md 'Driving').")
+    n_cars: int = _f(2, f"Driving: cars per world, 1..{MAX_CARS} (paper: 2).")
+    action_mode: str = _f("discrete", "Driving: 'discrete' (two categorical heads [3, 3], paper) or 'continuous' "
+                                      "(a clipped 3-d Gaussian over [throttle, brake, steering / limit]).")
     players_per_team: int = _f(2, f"Robots per team, 1..{MAX_PLAYERS_PER_TEAM} (paper: 2, i.e. 2v2).")
     num_envs: int = _f(8, "Parallel worlds (paper: 8).")
     perception: str = _f("realistic", f"Perception preset: one of {PERCEPTIONS}.")
@@ -210,8 +224,15 @@ class TrainConfig:
             reconstruction=row.reconstruction if self.use_reconstruction is None else self.use_reconstruction)
 
     @property
+    def driving(self) -> bool:
+        return self.scenario == "driving"
+
+    @property
     def learning_robots(self) -> int:
-        """Robot sequences per rollout that are learned from: both teams in self-play, team A otherwise."""
+        """Robot sequences per rollout that are learned from: both teams in self-play, team A otherwise; driving:
+        every car."""
+        if self.driving:
+            return self.num_envs * self.n_cars
         return self.num_envs * self.players_per_team * (2 if self.opponent == "self" else 1)
 
     @property
@@ -224,6 +245,29 @@ class TrainConfig:
             return self.imitation_coef
         done = min(1.0, env_steps / self.imitation_decay_env_steps)
         return self.imitation_coef + done * (self.imitation_final_coef - self.imitation_coef)
+
+    def _validate_driving(self) -> None:
+        """Soccer-only settings refused for driving, each with its key (module docstring)."""
+        why = "is soccer-only; scenario 'driving' "
+        if self.teacher is not None:
+            raise ConfigError("teacher", why + "has no scripted teacher labels (set teacher: null)")
+        if self.imitation_coef > 0.0 or self.imitation_final_coef > 0.0:
+            raise ConfigError("imitation_coef", why + "has no imitation loss (no teacher)")
+        if self.teacher_driven_worlds:
+            raise ConfigError("teacher_driven_worlds", why + "has no teacher")
+        if self.opponent != "self":
+            raise ConfigError("opponent", why + "has no opponent team: every car of every world is driven and "
+                                                "trained by the policy (keep opponent: self)")
+        if self.variant == "recon":
+            raise ConfigError("variant", "'recon' " + why + "has no localization or reconstruction targets; "
+                                                            "use baseline, icm, rcm or pred")
+        for key in ("use_localization", "use_reconstruction"):
+            if getattr(self, key):
+                raise ConfigError(key, why + "has no learning targets (no pose, no reconstruction heads)")
+        if self.pretrained_encoder:
+            raise ConfigError("pretrained_encoder", why + "has no reconstruction encoder to load")
+        if self.privileged_pose_seeding:
+            raise ConfigError("privileged_pose_seeding", why + "has no pose")
 
     # -- JSON --------------------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -263,6 +307,16 @@ class TrainConfig:
                               "and the curiosity heads one-hot encode the 7 head choices (the continuous head runs "
                               "in the policy node and the env, not in the trainer yet)")
         _choice("perception", self.perception, PERCEPTIONS)
+        _choice("scenario", self.scenario, SCENARIOS)
+        _choice("action_mode", self.action_mode, ACTION_MODES)
+        if not 1 <= self.n_cars <= MAX_CARS:
+            raise ConfigError("n_cars", f"must be in 1..{MAX_CARS}, got {self.n_cars}")
+        if self.driving:
+            self._validate_driving()
+        else:
+            for key, default in (("n_cars", 2), ("action_mode", "discrete")):
+                if getattr(self, key) != default:
+                    raise ConfigError(key, f"applies to scenario 'driving' only (scenario is {self.scenario!r})")
         if not _DEVICE.match(self.device):
             raise ConfigError("device", f"expected 'cpu', 'cuda', 'cuda:N' or 'mps', got {self.device!r}")
         for key in ("num_envs", "rollout_length", "total_env_steps", "ppo_epochs", "ppo_minibatches", "ltp_horizon",
@@ -301,8 +355,9 @@ class TrainConfig:
         if self.algorithm == "ppo" and self.ppo_minibatches > self.learning_robots:
             raise ConfigError("ppo_minibatches", f"{self.ppo_minibatches} minibatches of robot sequences, but a "
                                                  f"rollout has only {self.learning_robots} learning robots "
-                                                 f"(num_envs x players_per_team"
-                                                 f"{' x 2 teams' if self.opponent == 'self' else ''})")
+                                                 + ("(num_envs x n_cars)" if self.driving else
+                                                    f"(num_envs x players_per_team"
+                                                    f"{' x 2 teams' if self.opponent == 'self' else ''})"))
         if self.variant == "recon" and not self.pretrained_encoder:
             raise ConfigError("pretrained_encoder", "variant 'recon' requires the pretrained reconstruction "
                                                     "encoder; to train localization + reconstruction from scratch "

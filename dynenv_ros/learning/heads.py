@@ -1,13 +1,37 @@
 """The learner's modules beside the policy network: the paper's curiosity heads (ICM forward and inverse models,
 the RCM attention, the LTP predictors and their attention), an optional intrinsic critic and the privileged pose
-seeder. Only the policy network (``DynEnvAgent``) ships; these exist for training and are checkpointed with it."""
+seeder. Only the policy network (``DynEnvAgent``) ships; these exist for training and are checkpointed with it.
+
+The curiosity models' action input follows the agent's action heads (``action_heads``): soccer's one-hot walk, turn,
+kick, head (5 + 3 + 3 + 7 = 18); driving's discrete one-hot acceleration and steering (3 + 3 = 6, as the paper); driving's
+continuous action vector itself (the normalised [throttle, brake, steering / limit], 3 values), whose inverse model
+regresses the 3 values (squared error) instead of classifying."""
 from __future__ import annotations
 
 import torch
 from torch import Tensor, nn
 
-from dynenv_ros.agent.losses import (ROBOCUP_HEADS, ForwardModel, InverseModel, LongTermPredictor, RCMAttention)
+from dynenv_ros.agent import driving_actions
+from dynenv_ros.agent.losses import (ROBOCUP_HEADS, ForwardModel, InverseModel, LongTermPredictor, RCMAttention,
+                                     one_hot_actions)
 from dynenv_ros.agent.network import POSE_SIZE, DynEnvAgent
+
+DRIVING_HEADS: tuple[int, ...] = (driving_actions.ACCELERATION_CHOICES, driving_actions.STEERING_CHOICES)
+
+
+def action_heads(agent: DynEnvAgent) -> tuple[tuple[int, ...], bool]:
+    """(head sizes, continuous) of an agent's actions as the curiosity models take them: soccer (5, 3, 3, 7) and
+    driving discrete (3, 3) one-hot; driving continuous (3,) the action vector as it is (continuous True)."""
+    if agent.scenario != "driving":
+        return ROBOCUP_HEADS, False
+    if agent.action_mode == "continuous":
+        return (driving_actions.CONTINUOUS_SIZE,), True
+    return DRIVING_HEADS, False
+
+
+def action_features(actions: Tensor, heads: tuple[int, ...], continuous: bool) -> Tensor:
+    """The curiosity models' action input of (…, H) stored actions: one-hot blocks, or the continuous vector."""
+    return actions.float() if continuous else one_hot_actions(actions, heads)
 
 
 class CuriosityHeads(nn.Module):
@@ -32,7 +56,8 @@ class Learner(nn.Module):
         super().__init__()
         phi = 2 * agent.feature_size
         self.agent = agent
-        self.curiosity = CuriosityHeads(phi, horizon)
+        self.action_heads, self.continuous_actions = action_heads(agent)
+        self.curiosity = CuriosityHeads(phi, horizon, self.action_heads)
         self.intrinsic_critic = nn.Sequential(nn.Linear(phi, agent.feature_size), nn.LeakyReLU(0.1),
                                               nn.Linear(agent.feature_size, 1))
         self.pose_seeder = nn.Linear(POSE_SIZE, agent.feature_size)

@@ -22,6 +22,17 @@ by world, ``(E, A_learning) -> B``):
   worlds, ``drive_with_teacher``); its steps are off-policy, so the learner leaves them out of the policy, entropy
   and value terms and learns from them only by imitation and the auxiliary losses.
 
+Driving (``DrivingVectorEnv``, ``agent.scenario == 'driving'``): every car of every world learns; ``actions`` are
+(T, B, 2) int64 [acceleration, steering] or (T, B, 3) float32 normalised [throttle, brake, steering / limit] (the
+env gets the steering times its limit), ``reward_terms`` keep the env's four terms. Per-car termination
+(``BatchStep.agents_terminated``): a car's episode ends at the step it crashed or got home with its team's bonus
+decided — ``episode_end`` True, ``truncated`` False there (terminated: no bootstrap); the steps after it, until its
+world's episode ends, are *dead*: ``alive`` (T+1, B) False, ``can_act`` False, reward 0, ``episode_end`` True (so no
+return flows across them) — the learner takes no sample of any kind from them (policy, value, entropy, curiosity).
+A car still driving when its world hits the time limit ends truncated (bootstrapped from its final observation). The
+recurrent state restarts with the world's next episode. Finished episodes are reported per car with ``home`` and
+``crashed``.
+
 Everything is numpy until ``as_tensors``; nothing per detection is ever a Python object.
 """
 from __future__ import annotations
@@ -36,7 +47,7 @@ from torch import Tensor
 
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.agent.network import DynEnvAgent, State
-from dynenv_ros.envs.padded_layout import PROPRIOCEPTION_COLUMNS
+from dynenv_ros.envs.padded_layout import PROPRIOCEPTION_COLUMNS, SOCCER, LayoutSpec
 from dynenv_ros.envs.vector import SoccerVectorEnv
 
 FALLEN = PROPRIOCEPTION_COLUMNS.index("fallen")
@@ -60,11 +71,65 @@ def device_of(module: torch.nn.Module) -> torch.device:
     return next(module.parameters()).device
 
 
+_DRIVING_SPEC: list[LayoutSpec] = []
+
+# driving's ego columns (perception.driving_model.EGO_COLUMNS) in the proprioception rows
+EGO_CRASHED, EGO_FINISHED = 6, 7
+
+
+def layout_spec(agent: Any) -> LayoutSpec:
+    """The padded layout's spec an agent reads: soccer's, or driving's of the default ``DrivingConfig`` (its only
+    config-dependent value is the steering limit, which scales the previous action; ``agent.layout_spec`` set by
+    the trainer from its env overrides it)."""
+    spec = getattr(agent, "layout_spec", None)
+    if spec is not None:
+        return spec
+    if getattr(agent, "scenario", "soccer") != "driving":
+        return SOCCER
+    if not _DRIVING_SPEC:
+        from dynenv_ros.driving.config import DrivingConfig
+        from dynenv_ros.envs.driving_observations import driving_layout_spec
+        _DRIVING_SPEC.append(driving_layout_spec(DrivingConfig()))
+    return _DRIVING_SPEC[0]
+
+
+def action_width(agent: Any) -> tuple[int, Any]:
+    """(columns, dtype) of one stored action: soccer 4 int64; driving discrete 2 int64, continuous 3 float32."""
+    if getattr(agent, "scenario", "soccer") != "driving":
+        return 4, np.int64
+    return (2, np.int64) if agent.action_mode == "discrete" else (3, np.float32)
+
+
+def head_outputs(step: Any, steps: int | None = None, flat: bool = False) -> SimpleNamespace:
+    """The action-head outputs of an acting step or a sequence (the fields ``agent.distributions`` reads): soccer's
+    walk, turn, kick, head; driving's acceleration and steering, or command. ``steps``: keep the first T periods of a
+    sequence; ``flat``: merge its (T, B) leading axes. Tensors stay on their device."""
+    names = ("acceleration", "steering", "command") if getattr(step, "walk", None) is None else \
+        ("walk", "turn", "kick", "head")
+    out = {}
+    for name in names:
+        value = getattr(step, name, None)
+        if value is None:               # driving's heads of the other action mode
+            out[name] = None
+            continue
+        if steps is not None:
+            value = value[:steps]
+        if flat:
+            value = value.reshape(-1, *value.shape[2:])
+        out[name] = value
+    return SimpleNamespace(**out)
+
+
+def _cpu(value: Tensor | None) -> Tensor | None:
+    return None if value is None else value.cpu()
+
+
 def policy_step(agent: DynEnvAgent, obs: Mapping[str, Any], state: State):
     """One acting forward on padded observations with robots leading (numpy or torch), on the agent's device."""
     device = device_of(agent)
-    landmarks, objects = streams_from_padded(obs)
-    previous, self_state = side_inputs(obs, agent.head_max)
+    spec = layout_spec(agent)
+    landmarks, objects = streams_from_padded(obs, spec)
+    previous, self_state = side_inputs(obs, agent.head_max, spec)
     if device.type != "cpu":
         landmarks, objects = (type(b)(b.features.to(device), b.kind.to(device), b.mask.to(device))
                               for b in (landmarks, objects))
@@ -80,9 +145,10 @@ def reset_state(state: State, starts: Tensor) -> State:
 
 def sample_actions(agent: DynEnvAgent, step: Any, generator: torch.Generator | None, greedy: bool = False
                    ) -> tuple[Tensor, Tensor]:
-    """(actions (B, 4), their log-probabilities (B,)) on the CPU — the sum over the action heads. Sampling is on
-    the CPU whatever the learner's device, so one CPU generator makes runs reproducible on any device."""
-    heads = SimpleNamespace(walk=step.walk.cpu(), turn=step.turn.cpu(), kick=step.kick.cpu(), head=step.head.cpu())
+    """(actions (B, 4) — driving (B, 2) or (B, 3) —, their log-probabilities (B,)) on the CPU — the sum over the
+    action heads. Sampling is on the CPU whatever the learner's device, so one CPU generator makes runs
+    reproducible on any device."""
+    heads = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
     actions = agent.act(heads, generator=generator, greedy=greedy)
     log_prob = sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
     return actions, log_prob
@@ -90,7 +156,7 @@ def sample_actions(agent: DynEnvAgent, step: Any, generator: torch.Generator | N
 
 def action_log_prob(agent: DynEnvAgent, step: Any, actions: Tensor) -> Tensor:
     """(B,) log-probability of given (B, 4) actions under an acting step's distributions, on the CPU."""
-    heads = SimpleNamespace(walk=step.walk.cpu(), turn=step.turn.cpu(), kick=step.kick.cpu(), head=step.head.cpu())
+    heads = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
     return sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
 
 
@@ -119,6 +185,7 @@ class Rollout(StepArrays):
     seed_pose: np.ndarray | None = None     # (B, 6) privileged seeding only: the noisy true pose at step 0
     teacher_actions: np.ndarray | None = None   # (T, B, 4) teacher labels (SoccerVectorEnv(teacher=...)) or None
     teacher_driven: np.ndarray | None = None    # (B,) bool: executed the teacher's actions (off-policy rows)
+    alive: np.ndarray | None = None             # (T+1, B) bool, driving: the car's episode had not ended yet
 
     @property
     def steps(self) -> int:
@@ -137,6 +204,8 @@ class Rollout(StepArrays):
             extra["teacher_actions"] = self.teacher_actions
         if self.teacher_driven is not None and self.teacher_driven.any():
             extra["teacher_driven"] = self.teacher_driven
+        if self.alive is not None:
+            extra["alive"] = self.alive
         arrays = {name: getattr(self, name) for name in STEP_ARRAYS}
         return arrays_as_tensors({**arrays, **extra, "obs": self.obs, "targets": self.targets},
                                  self.initial_state, device)
@@ -177,8 +246,14 @@ class RolloutCollector:
                  pose_seeder: Callable[[Tensor], State] | None = None, seed_noise: np.ndarray | None = None,
                  rng: np.random.Generator | None = None) -> None:
         self.env, self.agent = env, agent
+        self.driving = getattr(agent, "scenario", "soccer") == "driving"
+        if self.driving != (getattr(env.config, "n_cars", None) is not None):
+            raise ValueError("the agent's scenario and the env's differ (a driving agent needs DrivingVectorEnv)")
         self.learning_robots = np.asarray(learning_robots, np.int64)
-        self.other_robots = np.setdiff1d(np.arange(env.config.n_robots), self.learning_robots)
+        n_agents = env.config.n_cars if self.driving else env.config.n_robots
+        self.other_robots = np.setdiff1d(np.arange(n_agents), self.learning_robots)
+        if self.driving and len(self.other_robots):
+            raise ValueError("driving: every car learns (learning_robots must be all cars)")
         if len(self.other_robots) and opponent is None:
             raise ValueError("robots outside learning_robots need an opponent")
         self.opponent = opponent
@@ -207,6 +282,7 @@ class RolloutCollector:
         self.episode_terms = np.zeros((batch, 4))
         self.episode_positive = np.zeros(batch)
         self.finished: list[dict[str, float]] = []     # finished episodes since the caller last cleared it
+        self._done = np.zeros(batch, bool)             # driving: the car's episode ended, its world's has not
 
     def drive_with_teacher(self, worlds: int) -> None:
         """From the next step on, the learning robots of the first ``worlds`` worlds execute the teacher's actions
@@ -233,7 +309,7 @@ class RolloutCollector:
         """The next ``steps`` periods of every world. Acting runs under ``torch.inference_mode`` (cheaper than
         no_grad); the start state the learner re-runs from is copied out of it into an ordinary tensor."""
         with torch.inference_mode():
-            rollout = self._collect(steps)
+            rollout = self._collect_driving(steps) if self.driving else self._collect(steps)
         rollout.initial_state = tuple(s.clone() for s in rollout.initial_state)   # type: ignore[assignment]
         return rollout
 
@@ -311,6 +387,77 @@ class RolloutCollector:
         return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
                        starts, acting, initial_state, targets, seed_pose, teacher,
                        self.teacher_driven.copy() if self.with_teacher else None)
+
+    def _collect_driving(self, steps: int) -> Rollout:
+        """``_collect`` for driving worlds: every car learns; per-car termination (module docstring)."""
+        E, k = self.env.num_envs, len(self.learning_robots)
+        B = E * k
+        first = self._learning_obs(self._obs)
+        obs = {key: np.empty((steps + 1, *v.shape), v.dtype) for key, v in first.items()}
+        width, dtype = action_width(self.agent)
+        actions = np.zeros((steps, B, width), dtype)
+        log_probs, values = np.zeros((steps, B), np.float32), np.zeros((steps + 1, B), np.float32)
+        rewards, terms = np.zeros((steps, B), np.float32), np.zeros((steps, B, 4), np.float32)
+        episode_end, truncated = np.zeros((steps, B), bool), np.zeros((steps, B), bool)
+        final_values = np.zeros((steps, B), np.float32)
+        starts, alive = np.zeros((steps + 1, B), bool), np.zeros((steps + 1, B), bool)
+        scale = np.ones(width)
+        if dtype != np.int64:              # normalised steering → rad/s
+            scale[2] = self.env.config.cars.max_yaw_rate
+        initial_state = tuple(s.clone() for s in reset_state(self.state, torch.from_numpy(self._starts)))
+        current = first
+        for t in range(steps + 1):
+            for key, v in current.items():
+                obs[key][t] = v
+            starts[t], alive[t] = self._starts, ~self._done
+            state = reset_state(self.state, torch.from_numpy(self._starts))
+            step = policy_step(self.agent, current, state)
+            values[t] = step.value.cpu().numpy()
+            if t == steps:
+                break
+            sampled, log_prob = sample_actions(self.agent, step, self.generator)
+            actions[t], log_probs[t] = sampled.numpy().astype(dtype), log_prob.numpy()
+            self.state = step.state
+            sent = actions[t].reshape(E, k, width)
+            result = self.env.step(sent if dtype == np.int64 else sent.astype(np.float64) * scale)
+            live = alive[t]
+            step_terms = flatten_robots(result.reward_terms.transpose(0, 2, 1), self.learning_robots)
+            step_terms = np.where(live[:, None], step_terms, 0.0)          # a finished car earns nothing
+            terms[t] = step_terms
+            rewards[t] = step_terms.sum(-1) if self.reward_transform is None else self.reward_transform(step_terms)
+            world_end = np.repeat(result.terminated | result.truncated, k)
+            car_done = flatten_robots(result.agents_terminated, self.learning_robots)
+            ended = live & (car_done | world_end)                            # this car's episode ends here
+            episode_end[t] = ended | ~live                                   # dead steps: no return across them
+            truncated[t] = live & ~car_done & np.repeat(result.truncated & ~result.terminated, k)
+            if truncated[t].any():
+                final_values[t] = self._final_values(result, truncated[t])
+            self._account_driving(step_terms, ended, world_end, result)
+            self._obs = result.observations
+            self._done = (self._done | car_done) & ~world_end
+            self._starts = world_end.copy()          # the recurrent state restarts with the world's next episode
+            current = self._learning_obs(self._obs)
+        return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
+                       starts, alive.copy(), initial_state, alive=alive)
+
+    def _account_driving(self, terms: np.ndarray, ended: np.ndarray, world_end: np.ndarray, result: Any) -> None:
+        """Per-car episode sums; a finished car's record with ``home`` (finished, not crashed) and ``crashed``,
+        read from its ego flags after its last step (the world's final observation when the world ended)."""
+        self.episode_terms += terms
+        self.episode_returns += terms.sum(-1)
+        k = len(self.learning_robots)
+        for r in np.flatnonzero(ended):
+            e, car = int(r // k), int(self.learning_robots[r % k])
+            source = result.final_observations[e] if world_end[r] else \
+                {key: v[e] for key, v in result.observations.items()}
+            ego = source["proprioception"][car, -1]
+            crashed = bool(ego[EGO_CRASHED] > 0.5)
+            t = self.episode_terms[r]
+            self.finished.append({"return": float(self.episode_returns[r]), "primary": float(t[0]),
+                                  "rule": float(t[1]), "auxiliary": float(t[2]), "observation": float(t[3]),
+                                  "home": float(ego[EGO_FINISHED] > 0.5 and not crashed), "crashed": float(crashed)})
+        self.episode_returns[ended] = 0.0
+        self.episode_terms[ended] = 0.0
 
     def _final_values(self, result: Any, truncated: np.ndarray) -> np.ndarray:
         """V(final observation) for the robots of truncated worlds, from the state the episode left them in."""
