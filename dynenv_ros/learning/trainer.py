@@ -8,6 +8,10 @@ A run directory holds: ``config.json`` (the resolved config), ``metrics.csv`` an
 optimiser, the step counters and the random generators from the latest checkpoint; the worlds restart with fresh
 episodes seeded from (seed, update), since a world's physics state is not checkpointed — an episode cut by a kill
 is simply not counted.
+
+``scenario: driving``: the driving agent (``DynEnvAgent(scenario='driving', action_mode)``) on ``DrivingVectorEnv``
+with ``n_cars`` cars per world, every car learning (no opponent); the same run directory. Episode scalars are per
+car: return, its terms, ``home`` and ``crashed`` (fractions of finished car-episodes).
 """
 from __future__ import annotations
 
@@ -21,7 +25,7 @@ import numpy as np
 import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.envs.vector import SoccerVectorEnv
+from dynenv_ros.envs.vector import DrivingVectorEnv, SoccerVectorEnv
 from dynenv_ros.learning import checkpoints
 from dynenv_ros.learning.algorithms import UpdateSettings, update
 from dynenv_ros.learning.config import TrainConfig
@@ -38,7 +42,9 @@ SEED_NOISE = np.array([0.26, 0.26, 0.05, 0.05, 0.05, 0.05], np.float32)
 
 
 def update_settings(cfg: TrainConfig) -> UpdateSettings:
-    """The variant's loss switches and the config's numbers, in the form ``update`` takes."""
+    """The variant's loss switches and the config's numbers, in the form ``update`` takes. ``use_forward`` is on
+    for ICM's plain forward model *and* RCM's attention-weighted one (``use_rcm`` picks the weighting): ``update``
+    adds the forward loss only under ``use_forward``."""
     losses = cfg.losses()
     ppo = cfg.algorithm == "ppo"
     return UpdateSettings(
@@ -48,7 +54,7 @@ def update_settings(cfg: TrainConfig) -> UpdateSettings:
         target_kl=cfg.target_kl, value_coef=cfg.value_coef, entropy_coef=cfg.entropy_coef,
         max_grad_norm=cfg.max_grad_norm, forward_coef=cfg.forward_coef, inverse_coef=cfg.inverse_coef,
         ltp_coef=cfg.ltp_coef, self_supervised_coef=cfg.self_supervised_coef,
-        use_forward=losses.icm_forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
+        use_forward=losses.forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
         use_localization=losses.localization, use_reconstruction=losses.reconstruction,
         intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0))
 
@@ -66,7 +72,11 @@ class Trainer:
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
         self.rng = np.random.default_rng(seeds[1])
         self.env_seed = int(seeds[2].generate_state(1)[0])
-        agent = DynEnvAgent(cfg.feature_size, cfg.head_mode, soccer.motion.head_units, soccer.motion.head_max_delta)
+        if cfg.driving:
+            agent = DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
+        else:
+            agent = DynEnvAgent(cfg.feature_size, cfg.head_mode, soccer.motion.head_units,
+                                soccer.motion.head_max_delta)
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only; no global RNG use after this
         self.learner = Learner(agent, cfg.ltp_horizon).to(self.device)
         # fused: one kernel over all 200-odd parameter tensors (CPU and CUDA) — 8x cheaper than the per-tensor loop
@@ -81,12 +91,19 @@ class Trainer:
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
         needs_targets = self.settings.use_localization or self.settings.use_reconstruction \
             or cfg.privileged_pose_seeding
-        self.env = SoccerVectorEnv(cfg.num_envs, backend=cfg.backend, config=soccer, observation="padded",
-                                   perception=cfg.perception, targets=needs_targets,
-                                   scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None,
-                                   teacher=cfg.teacher)
-        n = cfg.players_per_team
-        learning = np.arange(2 * n) if cfg.opponent == "self" else np.arange(n)
+        if cfg.driving:
+            self.env: Any = DrivingVectorEnv(cfg.num_envs, backend=cfg.backend, observation="padded",
+                                             config={"n_cars": cfg.n_cars, "action_mode": cfg.action_mode},
+                                             perception=cfg.perception)
+            agent.layout_spec = self.env.layout.spec
+            learning = np.arange(cfg.n_cars)
+        else:
+            self.env = SoccerVectorEnv(cfg.num_envs, backend=cfg.backend, config=soccer, observation="padded",
+                                       perception=cfg.perception, targets=needs_targets,
+                                       scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None,
+                                       teacher=cfg.teacher)
+            n = cfg.players_per_team
+            learning = np.arange(2 * n) if cfg.opponent == "self" else np.arange(n)
         self.opponent: Any = None
         if cfg.opponent == "random":
             self.opponent = RandomOpponent(self.rng, 2 * soccer.motion.head_units + 1)
