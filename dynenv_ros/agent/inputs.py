@@ -46,7 +46,9 @@ def class_index(spec: LayoutSpec) -> dict[int, int]:
 
 
 def _kind_table(index: Mapping[int, int]) -> torch.Tensor:
-    table = torch.zeros(256, dtype=torch.int64)
+    # on the CPU explicitly: the cached table may first be built inside a torch.device("meta") context (a policy
+    # file's model is constructed there before its weights are loaded)
+    table = torch.zeros(256, dtype=torch.int64, device="cpu")
     for cls, position in index.items():
         table[cls] = position
     return table

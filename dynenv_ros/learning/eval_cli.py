@@ -1,8 +1,17 @@
-"""dynenv-eval: evaluate a soccer team policy over seeds, and compare two evaluations with BEST.
+"""dynenv-eval: evaluate a soccer team policy or a driving policy over seeds, and compare two evaluations with BEST.
 
     dynenv-eval CHECKPOINT --opponent scripted --episodes 10 --seeds 0 1 2 3 4 --out agent.json
     dynenv-eval random --opponent scripted --episodes 10 --seeds 0 1 2 3 4 --out random.json
     dynenv-eval compare random.json agent.json --metric paper_metric --png best.png
+
+    dynenv-eval --scenario driving CHECKPOINT --episodes 4 --seeds 0 1 2 --out pred.json
+    dynenv-eval --scenario driving random --episodes 4 --seeds 0 1 2 --out random.json
+    dynenv-eval --scenario driving scripted --episodes 4 --seeds 0 1 2 --out scripted.json
+    dynenv-eval compare random.json pred.json --metric total
+
+Driving: the policy ("random", "scripted" or a driving checkpoint) drives every car (--cars) of the same seeded
+episodes; there is no opponent (--opponent is refused): "against random / scripted" is the comparison of the
+evaluations of the same episodes (learning/driving_evaluation.py).
 
 The evaluated team and the opponent are each a checkpoint path, "random", "scripted" (= keeper_and_chasers),
 "chaser" or "keeper_and_chasers". The evaluated team plays team A in the even episodes of each seed and team B in
@@ -31,9 +40,16 @@ class _Parser(argparse.ArgumentParser):
 
 def _eval_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("policy", help="checkpoint path, or random / scripted / chaser / keeper_and_chasers")
-    parser.add_argument("--opponent", default="scripted",
-                        help="checkpoint path, or random / scripted / chaser / keeper_and_chasers (default scripted)")
+    parser.add_argument("policy", help="checkpoint path, or random / scripted / chaser / keeper_and_chasers "
+                                       "(driving: random / scripted / a driving checkpoint)")
+    parser.add_argument("--scenario", choices=("robocup", "driving"), default="robocup",
+                        help="robocup (default) or driving (the policy drives every car; no opponent)")
+    parser.add_argument("--opponent", default=None,
+                        help="checkpoint path, or random / scripted / chaser / keeper_and_chasers (default scripted; "
+                             "robocup only)")
+    parser.add_argument("--cars", type=int, default=2, help="driving: cars per world (default 2)")
+    parser.add_argument("--action-mode", choices=("discrete", "continuous"),
+                        help="driving: the env's action mode for random / scripted (a checkpoint brings its own)")
     parser.add_argument("--episodes", type=int, default=4, help="episodes per seed (default 4)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds (default 0 1 2)")
     parser.add_argument("--players-per-team", type=int, default=2)
@@ -76,6 +92,29 @@ def _check_folder(path: Path | None, flag: str) -> None:
         raise ValueError(f"{flag} {path}: folder {path.parent} does not exist")
 
 
+def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
+    from dynenv_ros.learning.driving_evaluation import evaluate_driving, format_driving_table
+    from dynenv_ros.learning.evaluation import write_json
+    if args.opponent is not None:
+        return _fail("--opponent: driving has no opponent; the policy drives every car. Evaluate random and "
+                     "scripted the same way and compare the files")
+    if not 1 <= args.cars <= 10:
+        return _fail(f"--cars must be in 1..10, got {args.cars}")
+    env_config = {} if args.episode_seconds is None else {"episode_seconds": args.episode_seconds}
+    try:
+        _check_folder(args.out, "--out")
+        result = evaluate_driving(args.policy, episodes=args.episodes, seeds=args.seeds, n_cars=args.cars,
+                                  perception=perception, action_mode=args.action_mode, greedy=args.greedy,
+                                  env_config=env_config, progress=progress, torch_threads=args.torch_threads)
+    except (ValueError, OSError) as error:
+        return _fail(str(error))
+    print(format_driving_table(result))
+    if args.out is not None:
+        write_json(result, args.out)
+        print(f"wrote {args.out}")
+    return 0
+
+
 def run_eval(args: argparse.Namespace) -> int:
     from dynenv_ros.learning.evaluation import evaluate, format_table, write_json
     if args.episodes < 1:
@@ -86,11 +125,15 @@ def run_eval(args: argparse.Namespace) -> int:
         return _fail(f"--seeds must be non-negative, got {args.seeds}")
     perception = args.perception if args.noise_magnitude is None else {
         "preset": args.perception, "noise_magnitude": args.noise_magnitude}
-    env_config = {} if args.episode_seconds is None else {"episode_seconds": args.episode_seconds}
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
+    if args.scenario == "driving":
+        return run_driving_eval(args, perception, progress)
+    if args.action_mode is not None:
+        return _fail("--action-mode applies to --scenario driving only")
+    env_config = {} if args.episode_seconds is None else {"episode_seconds": args.episode_seconds}
     try:
         _check_folder(args.out, "--out")
-        result = evaluate(args.policy, args.opponent, episodes=args.episodes, seeds=args.seeds,
+        result = evaluate(args.policy, args.opponent or "scripted", episodes=args.episodes, seeds=args.seeds,
                           players_per_team=args.players_per_team, perception=perception, sides=args.sides,
                           greedy=args.greedy, env_config=env_config, progress=progress,
                           torch_threads=args.torch_threads)

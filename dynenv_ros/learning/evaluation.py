@@ -226,6 +226,9 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
         return ScriptedTeam(spec)
     from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
     model = load_checkpoint(spec)
+    if getattr(model, "scenario", "soccer") == "driving":
+        raise ValueError(f"{spec} is a driving policy; evaluate it with --scenario driving "
+                         f"(learning/driving_evaluation.py)")
     return AgentTeam(model, greedy=greedy, path=str(spec), sha256=sha256(spec))
 
 
