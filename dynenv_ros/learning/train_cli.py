@@ -1,8 +1,10 @@
-"""dynenv-train: train the DynEnv agent in-process (no ROS) on the soccer world.
+"""dynenv-train: train the DynEnv agent in-process (no ROS) on the soccer world or (scenario=driving) the driving
+world.
 
     dynenv-train --config paper_a2c --run-dir runs/pred_s0 --seed 0
     dynenv-train --config quick --set num_envs=2 --set variant=baseline
     dynenv-train --resume runs/pred_s0
+    dynenv-train --config driving_pred --set max_minutes=15 --run-dir runs/driving/pred_s0
     dynenv-train --from-bag bags/sample_2v2_realistic_30s --run-dir runs/bc_sample --epochs 5
 
 ``--config`` takes a preset name from config/train/ or a YAML path; ``--set key=value`` overrides any field of
