@@ -3,9 +3,9 @@ the RCM attention, the LTP predictors and their attention), an optional intrinsi
 seeder. Only the policy network (``DynEnvAgent``) ships; these exist for training and are checkpointed with it.
 
 The curiosity models' action input follows the agent's action heads (``action_heads``): soccer's one-hot walk, turn,
-kick, head (5 + 3 + 3 + 7 = 18); driving's discrete one-hot acceleration and steering (3 + 3 = 6, as the paper); driving's
-continuous action vector itself (the normalised [throttle, brake, steering / limit], 3 values), whose inverse model
-regresses the 3 values (squared error) instead of classifying."""
+kick, head (5 + 3 + 3 + 7 = 18); driving's discrete one-hot acceleration and steering (3 + 3 = 6, as the paper);
+driving's continuous action vector itself (the normalised [throttle, brake, steering / limit], 3 values), whose
+inverse model regresses the 3 values (squared error) instead of classifying."""
 from __future__ import annotations
 
 import torch
