@@ -83,3 +83,13 @@ def test_cli_refusals(tmp_path, capsys):
     assert "soccer policy" in capsys.readouterr().err
     assert main(["random", "--action-mode", "continuous"]) == 2
     assert "--scenario driving" in capsys.readouterr().err
+
+
+def test_cli_refuses_the_other_scenarios_flags(capsys):
+    """A flag that means nothing for the chosen scenario is refused, not silently ignored."""
+    for argv, flag in ((["random", "--scenario", "driving", "--sides", "a"], "--sides"),
+                       (["random", "--scenario", "driving", "--players-per-team", "3"], "--players-per-team"),
+                       (["random", "--cars", "3"], "--cars")):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert flag in err and "only" in err

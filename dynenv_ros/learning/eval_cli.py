@@ -47,17 +47,17 @@ def _eval_parser() -> argparse.ArgumentParser:
     parser.add_argument("--opponent", default=None,
                         help="checkpoint path, or random / scripted / chaser / keeper_and_chasers (default scripted; "
                              "robocup only)")
-    parser.add_argument("--cars", type=int, default=2, help="driving: cars per world (default 2)")
+    parser.add_argument("--cars", type=int, help="driving: cars per world (default 2)")
     parser.add_argument("--action-mode", choices=("discrete", "continuous"),
                         help="driving: the env's action mode for random / scripted (a checkpoint brings its own)")
     parser.add_argument("--episodes", type=int, default=4, help="episodes per seed (default 4)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds (default 0 1 2)")
-    parser.add_argument("--players-per-team", type=int, default=2)
+    parser.add_argument("--players-per-team", type=int, help="robocup: robots per team (default 2)")
     parser.add_argument("--perception", choices=PERCEPTIONS, default="realistic")
     parser.add_argument("--noise-magnitude", type=float, help="perception noise 0..5 (default: the preset's)")
     parser.add_argument("--episode-seconds", type=float, help="episode length (default: the env's 120 s)")
-    parser.add_argument("--sides", choices=("alternate", "a", "b"), default="alternate",
-                        help="the evaluated team's side (default: alternate, A in even episodes)")
+    parser.add_argument("--sides", choices=("alternate", "a", "b"),
+                        help="robocup: the evaluated team's side (default: alternate, A in even episodes)")
     parser.add_argument("--greedy", action="store_true", help="checkpoints take their most likely action")
     parser.add_argument("--out", type=Path, help="write the full result (JSON) here")
     parser.add_argument("--torch-threads", type=int, default=1,
@@ -98,12 +98,16 @@ def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
     if args.opponent is not None:
         return _fail("--opponent: driving has no opponent; the policy drives every car. Evaluate random and "
                      "scripted the same way and compare the files")
-    if not 1 <= args.cars <= 10:
-        return _fail(f"--cars must be in 1..10, got {args.cars}")
+    for flag, value in (("--players-per-team", args.players_per_team), ("--sides", args.sides)):
+        if value is not None:
+            return _fail(f"{flag} applies to --scenario robocup only (driving: --cars)")
+    cars = 2 if args.cars is None else args.cars
+    if not 1 <= cars <= 10:
+        return _fail(f"--cars must be in 1..10, got {cars}")
     env_config = {} if args.episode_seconds is None else {"episode_seconds": args.episode_seconds}
     try:
         _check_folder(args.out, "--out")
-        result = evaluate_driving(args.policy, episodes=args.episodes, seeds=args.seeds, n_cars=args.cars,
+        result = evaluate_driving(args.policy, episodes=args.episodes, seeds=args.seeds, n_cars=cars,
                                   perception=perception, action_mode=args.action_mode, greedy=args.greedy,
                                   env_config=env_config, progress=progress, torch_threads=args.torch_threads)
     except (ValueError, OSError) as error:
@@ -128,13 +132,15 @@ def run_eval(args: argparse.Namespace) -> int:
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     if args.scenario == "driving":
         return run_driving_eval(args, perception, progress)
-    if args.action_mode is not None:
-        return _fail("--action-mode applies to --scenario driving only")
+    for flag, value in (("--action-mode", args.action_mode), ("--cars", args.cars)):
+        if value is not None:
+            return _fail(f"{flag} applies to --scenario driving only")
     env_config = {} if args.episode_seconds is None else {"episode_seconds": args.episode_seconds}
     try:
         _check_folder(args.out, "--out")
         result = evaluate(args.policy, args.opponent or "scripted", episodes=args.episodes, seeds=args.seeds,
-                          players_per_team=args.players_per_team, perception=perception, sides=args.sides,
+                          players_per_team=2 if args.players_per_team is None else args.players_per_team,
+                          perception=perception, sides=args.sides or "alternate",
                           greedy=args.greedy, env_config=env_config, progress=progress,
                           torch_threads=args.torch_threads)
     except (ValueError, OSError) as error:     # a missing or corrupt checkpoint, a bad setting
