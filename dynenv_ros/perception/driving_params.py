@@ -9,15 +9,14 @@ Presets: ``config/perception/driving_<name>.yaml`` with a top-level ``driving_pe
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
-
 from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.core.settings import check_numbers
-from dynenv_ros.perception.params import parse_class, parse_section, preset_dir
+from dynenv_ros.perception.params import (load_section_yaml, parse_class, parse_class_sections, parse_confusions,
+                                          parse_section, preset_dir, top_level_settings)
 
 MODES = ("realistic", "random", "none")
 CONFIDENCE_MODELS = ("calibrated", "none")
@@ -207,25 +206,10 @@ def driving_params_from_mapping(values: Mapping[str, Any]) -> DrivingPerceptionP
     if not isinstance(values, Mapping):
         raise ValueError(f"driving perception settings must be a mapping, got {values!r}")
     values = dict(values)
-    known = {f.name for f in fields(DrivingPerceptionParams)}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ValueError(f"unknown driving perception setting(s) {unknown}; known: {sorted(known)}")
-    kwargs: dict[str, Any] = {}
-    for key in ("mode", "confidence"):
-        if key in values:
-            kwargs[key] = values[key]
-    for key in ("noise_magnitude", "view_range", "confidence_separation"):
-        if key in values:
-            if isinstance(values[key], bool) or not isinstance(values[key], (int, float)):
-                raise ValueError(f"{key} must be a number, got {values[key]!r}")
-            kwargs[key] = float(values[key])
+    kwargs = top_level_settings(values, DrivingPerceptionParams, "driving perception",
+                                ("noise_magnitude", "view_range", "confidence_separation"))
     if "classes" in values:
-        if not isinstance(values["classes"], Mapping):
-            raise ValueError("classes must map class names to their settings")
-        kwargs["classes"] = {parse_class(name, "classes", CLASS_NAMES):
-                             parse_section(DrivingClassParams, v, f"classes.{name}")
-                             for name, v in values["classes"].items()}
+        kwargs["classes"] = parse_class_sections(values["classes"], DrivingClassParams, CLASS_NAMES)
     for key, cls in (("miss", DrivingMissParams), ("position", DrivingPositionParams), ("lanes", DrivingLaneParams),
                      ("self_state", DrivingSelfParams)):
         if key in values:
@@ -242,31 +226,12 @@ def driving_params_from_mapping(values: Mapping[str, Any]) -> DrivingPerceptionP
             fp["classes"] = _class_list(fp["classes"], "false_positives.classes")
         kwargs["false_positives"] = parse_section(DrivingFalsePositiveParams, fp, "false_positives")
     if "confusions" in values:
-        rules = []
-        for i, rule in enumerate(values["confusions"] or ()):
-            where = f"confusions[{i}]"
-            rule = dict(rule)
-            for key in ("source", "target"):
-                rule[key] = parse_class(rule.get(key), f"{where}.{key}", CLASS_NAMES)
-            rules.append(parse_section(DrivingConfusion, rule, where))
-        kwargs["confusions"] = tuple(rules)
+        kwargs["confusions"] = parse_confusions(values["confusions"], DrivingConfusion, CLASS_NAMES)
     return DrivingPerceptionParams(**kwargs)
 
 
 def load_driving_yaml(path: str | Path, **overrides: Any) -> DrivingPerceptionParams:
-    path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ValueError(f"cannot read driving perception parameters from {path}: {exc}") from None
-    if not isinstance(data, dict) or "driving_perception" not in data:
-        raise ValueError(f"{path}: expected a mapping with a top-level 'driving_perception' key")
-    values = dict(data["driving_perception"])
-    values.update(overrides)
-    try:
-        return driving_params_from_mapping(values)
-    except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
+    return load_section_yaml(path, "driving_perception", "driving perception", driving_params_from_mapping, overrides)
 
 
 def load_driving_preset(name: str, **overrides: Any) -> DrivingPerceptionParams:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping, TypeVar
 
 import yaml
 
@@ -19,6 +19,7 @@ MODES = ("realistic", "random", "none")
 CONFIDENCE_MODELS = ("calibrated", "none")
 OCCLUSION_MODELS = ("cone", "band")
 PRESETS = ("realistic", "dynenv", "none")
+T = TypeVar("T")
 CLASS_NAMES = {"ball": ObjectClass.BALL, "robot": ObjectClass.ROBOT, "goalpost": ObjectClass.GOALPOST,
                "penalty_cross": ObjectClass.PENALTY_CROSS, "line_crossing": ObjectClass.LINE_CROSSING,
                "field_line": ObjectClass.FIELD_LINE, "center_circle": ObjectClass.CENTER_CIRCLE,
@@ -168,20 +169,27 @@ def load_preset(name: str, **overrides: Any) -> PerceptionParams:
     return load_yaml(preset_dir() / f"{name}.yaml", **overrides)
 
 
-def load_yaml(path: str | Path, **overrides: Any) -> PerceptionParams:
+def load_section_yaml(path: str | Path, key: str, what: str, parse: Callable[[Mapping[str, Any]], T],
+                      overrides: Mapping[str, Any]) -> T:
+    """``parse`` of the top-level ``key`` mapping of a YAML file, ``overrides`` replacing its settings; every error a
+    ValueError naming the file. Shared by the soccer and driving perception presets (``what`` names which)."""
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:
-        raise ValueError(f"cannot read perception parameters from {path}: {exc}") from None
-    if not isinstance(data, dict) or "perception" not in data:
-        raise ValueError(f"{path}: expected a mapping with a top-level 'perception' key")
-    values = dict(data["perception"])
+        raise ValueError(f"cannot read {what} parameters from {path}: {exc}") from None
+    if not isinstance(data, dict) or key not in data:
+        raise ValueError(f"{path}: expected a mapping with a top-level '{key}' key")
+    values = dict(data[key])
     values.update(overrides)
     try:
-        return from_mapping(values)
+        return parse(values)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
+
+
+def load_yaml(path: str | Path, **overrides: Any) -> PerceptionParams:
+    return load_section_yaml(path, "perception", "perception", from_mapping, overrides)
 
 
 def parse_class(name: Any, where: str, allowed: Mapping[str, ObjectClass] = CLASS_NAMES) -> ObjectClass:
@@ -206,27 +214,53 @@ def parse_section(cls: type, values: Any, where: str) -> Any:
         raise ValueError(f"{where}: {exc}") from None
 
 
-def from_mapping(values: Mapping[str, Any]) -> PerceptionParams:
-    """Parameters from plain values (a preset's ``perception`` mapping); unknown keys are refused by name."""
-    values = dict(values)
-    known = {f.name for f in fields(PerceptionParams)}
+def top_level_settings(values: Mapping[str, Any], params_cls: type, what: str,
+                       number_keys: tuple[str, ...]) -> dict[str, Any]:
+    """The plain top-level settings (``mode``, ``confidence`` and the numbers ``number_keys``) as keyword arguments of
+    ``params_cls``, after refusing unknown keys by name. Shared by the soccer and driving perception settings."""
+    known = {f.name for f in fields(params_cls)}
     unknown = sorted(set(values) - known)
     if unknown:
-        raise ValueError(f"unknown perception setting(s) {unknown}; known: {sorted(known)}")
+        raise ValueError(f"unknown {what} setting(s) {unknown}; known: {sorted(known)}")
     kwargs: dict[str, Any] = {}
     for key in ("mode", "confidence"):
         if key in values:
             kwargs[key] = values[key]
-    for key in ("noise_magnitude", "field_of_view", "confidence_separation"):
+    for key in number_keys:
         if key in values:
             if isinstance(values[key], bool) or not isinstance(values[key], (int, float)):
                 raise ValueError(f"{key} must be a number, got {values[key]!r}")
             kwargs[key] = float(values[key])
+    return kwargs
+
+
+def parse_class_sections(values: Any, cls: type, allowed: Mapping[str, ObjectClass]) -> dict[ObjectClass, Any]:
+    """The ``classes`` setting: class name → its ``cls`` settings, keyed by class."""
+    if not isinstance(values, Mapping):
+        raise ValueError("classes must map class names to their settings")
+    return {parse_class(name, "classes", allowed): parse_section(cls, v, f"classes.{name}")
+            for name, v in values.items()}
+
+
+def parse_confusions(values: Any, cls: type, allowed: Mapping[str, ObjectClass]) -> tuple:
+    """The ``confusions`` setting: a list of ``cls`` rules whose ``source`` and ``target`` name classes."""
+    rules = []
+    for i, rule in enumerate(values or ()):
+        where = f"confusions[{i}]"
+        rule = dict(rule)
+        for key in ("source", "target"):
+            rule[key] = parse_class(rule.get(key), f"{where}.{key}", allowed)
+        rules.append(parse_section(cls, rule, where))
+    return tuple(rules)
+
+
+def from_mapping(values: Mapping[str, Any]) -> PerceptionParams:
+    """Parameters from plain values (a preset's ``perception`` mapping); unknown keys are refused by name."""
+    values = dict(values)
+    kwargs = top_level_settings(values, PerceptionParams, "perception",
+                                ("noise_magnitude", "field_of_view", "confidence_separation"))
     if "classes" in values:
-        if not isinstance(values["classes"], Mapping):
-            raise ValueError("classes must map class names to their settings")
-        kwargs["classes"] = {parse_class(name, "classes"): parse_section(ClassParams, v, f"classes.{name}")
-                             for name, v in values["classes"].items()}
+        kwargs["classes"] = parse_class_sections(values["classes"], ClassParams, CLASS_NAMES)
     for key, cls in (("miss", MissParams), ("position", PositionParams), ("occlusion", OcclusionParams)):
         if key in values:
             kwargs[key] = parse_section(cls, values[key], key)
@@ -236,12 +270,5 @@ def from_mapping(values: Mapping[str, Any]) -> PerceptionParams:
             fp["classes"] = tuple(parse_class(c, "false_positives.classes") for c in fp["classes"])
         kwargs["false_positives"] = parse_section(FalsePositiveParams, fp, "false_positives")
     if "confusions" in values:
-        rules = []
-        for i, rule in enumerate(values["confusions"] or ()):
-            where = f"confusions[{i}]"
-            rule = dict(rule)
-            for key in ("source", "target"):
-                rule[key] = parse_class(rule.get(key), f"{where}.{key}")
-            rules.append(parse_section(Confusion, rule, where))
-        kwargs["confusions"] = tuple(rules)
+        kwargs["confusions"] = parse_confusions(values["confusions"], Confusion, CLASS_NAMES)
     return PerceptionParams(**kwargs)
