@@ -541,6 +541,31 @@ def action_problem(action: np.ndarray, head_bound: float) -> str:
     return ""
 
 
+def _trial_decision(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tensor, torch.Tensor]
+                    ) -> tuple[Any, int]:
+    """The policy's decision on ``trial`` and its batch size B, after refusing non-finite weights; a failing
+    decision is a ValueError. Shared by the soccer and driving checks, which then judge the outputs."""
+    bad = policy.non_finite_weights()
+    if bad:
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise ValueError(f"weight {bad[0]!r}{more} holds NaN or infinite values")
+    static, objects, previous, proprio = trial  # static: soccer's landmarks, driving's static streams
+    B = previous.shape[0]
+    try:
+        step = policy(static, objects, previous, proprio, policy.initial_state(B))
+    except Exception as error:
+        raise ValueError(f"its trial decision failed: {type(error).__name__}: {_first_line(error)}") from None
+    return step, B
+
+
+def _check_recurrent_state(step: Any, B: int, feature_size: int) -> None:
+    """ValueError unless a trial decision's recurrent state is 4 tensors of shape (B, feature_size)."""
+    state = [tuple(torch.as_tensor(s).shape) for s in step.state]
+    if len(state) != 4 or any(s != (B, feature_size) for s in state):
+        raise ValueError(f"its trial decision gave a recurrent state of shapes {state}, expected 4 x "
+                         f"{(B, feature_size)}")
+
+
 def check_policy(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tensor, torch.Tensor],
                  head_bound: float, frames: int | None = None) -> None:
     """ValueError with the first reason ``policy`` (``TorchPolicy`` or ``OnnxPolicy``) must not act: head settings a
@@ -557,26 +582,14 @@ def check_policy(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tenso
     fixed = getattr(policy, "frames", None)
     if frames is not None and fixed is not None and fixed != frames:
         raise ValueError(f"it takes {fixed} vision frames per period, the detections arriving have {frames}")
-    bad = policy.non_finite_weights()
-    if bad:
-        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
-        raise ValueError(f"weight {bad[0]!r}{more} holds NaN or infinite values")
-    landmarks, objects, previous, proprio = trial
-    B = previous.shape[0]
-    try:
-        step = policy(landmarks, objects, previous, proprio, policy.initial_state(B))
-    except Exception as error:
-        raise ValueError(f"its trial decision failed: {type(error).__name__}: {_first_line(error)}") from None
+    step, B = _trial_decision(policy, trial)
     head = 2 * policy.head_units + 1 if policy.head_mode == "discrete" else 2
     shapes = {"walk": (B, WALK_CHOICES), "turn": (B, TURN_CHOICES), "kick": (B, KICK_CHOICES), "head": (B, head)}
     for name, shape in shapes.items():
         have = tuple(torch.as_tensor(getattr(step, name)).shape)
         if have != shape:
             raise ValueError(f"its trial decision gave {name} of shape {have}, expected {shape}")
-    state = [tuple(torch.as_tensor(s).shape) for s in step.state]
-    if len(state) != 4 or any(s != (B, policy.feature_size) for s in state):
-        raise ValueError(f"its trial decision gave a recurrent state of shapes {state}, expected 4 x "
-                         f"{(B, policy.feature_size)}")
+    _check_recurrent_state(step, B, policy.feature_size)
     for greedy in (True, False):
         actions, finite = sample_actions(step, policy.head_mode, policy.head_units, policy.head_max,
                                          torch.Generator().manual_seed(0), greedy)
@@ -614,24 +627,12 @@ def check_driving_policy(policy: Any, trial: tuple[StreamBatch, StreamBatch, tor
         raise ValueError(f"it takes {fixed} vision frames per period; a driving policy takes 1")
     if frames is not None and frames != 1:
         raise ValueError(f"the detections arriving have {frames} frames per period; a driving policy takes 1")
-    bad = policy.non_finite_weights()
-    if bad:
-        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
-        raise ValueError(f"weight {bad[0]!r}{more} holds NaN or infinite values")
-    static, objects, previous, proprio = trial
-    B = previous.shape[0]
-    try:
-        step = policy(static, objects, previous, proprio, policy.initial_state(B))
-    except Exception as error:
-        raise ValueError(f"its trial decision failed: {type(error).__name__}: {_first_line(error)}") from None
+    step, B = _trial_decision(policy, trial)
     for name, shape in driving_actions.output_shapes(policy.action_mode, B).items():
         have = tuple(torch.as_tensor(getattr(step, name)).shape) if getattr(step, name) is not None else None
         if have != shape:
             raise ValueError(f"its trial decision gave {name} of shape {have}, expected {shape}")
-    state = [tuple(torch.as_tensor(s).shape) for s in step.state]
-    if len(state) != 4 or any(s != (B, policy.feature_size) for s in state):
-        raise ValueError(f"its trial decision gave a recurrent state of shapes {state}, expected 4 x "
-                         f"{(B, policy.feature_size)}")
+    _check_recurrent_state(step, B, policy.feature_size)
     for greedy in (True, False):
         actions, finite = driving_actions.sample_actions(step, policy.action_mode, torch.Generator().manual_seed(0),
                                                          greedy)
