@@ -40,6 +40,7 @@ from dynenv_ros.driving.cars import ACCELERATION_CHOICES, BRAKE, STEERING_CHOICE
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.world import DrivingWorld
 from dynenv_ros.envs.driving_observations import DrivingGroundTruth, observation_builder
+from dynenv_ros.envs.step_checks import check_step_actions
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.sim.seeding import checked_seed
 
@@ -110,16 +111,7 @@ class DrivingParallelEnv(ParallelEnv):
         return {a: observations[i] for i, a in enumerate(self.agents)}, infos
 
     def step(self, actions: dict[str, Any]):
-        if not self.agents:
-            raise RuntimeError("driving_v0: the episode is over (or reset() was never called); call reset()")
-        if not isinstance(actions, dict):
-            raise ValueError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
-        for agent in actions:
-            if agent not in self._index:
-                raise ValueError(f"unknown agent {agent!r} in actions; agents are {', '.join(self.agents)}")
-        missing = [a for a in self.agents if a not in actions]
-        if missing:
-            raise ValueError(f"no action for {', '.join(missing)}")
+        check_step_actions("driving_v0", self.agents, self._index, actions)
         live = set(self.agents)
         raw = [actions[a] if a in live else BRAKE for a in self.possible_agents]
         result = self.world.step(raw, on_frame=self.observations.on_frame, names=self.possible_agents)

@@ -34,6 +34,7 @@ from pettingzoo import ParallelEnv
 from dynenv_ros.envs.soccer_observations import SoccerObservations
 from dynenv_ros.envs.soccer_session import kickoff_team
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder, action_space
+from dynenv_ros.envs.step_checks import check_step_actions
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.sim.seeding import checked_seed
 from dynenv_ros.soccer.config import SoccerConfig
@@ -102,16 +103,7 @@ class RoboCupParallelEnv(ParallelEnv):
                 {a: {"reward_terms": dict(zero_terms)} for a in self.agents})
 
     def step(self, actions: dict[str, Any]):
-        if not self.agents:
-            raise RuntimeError("robocup_v0: the episode is over (or reset() was never called); call reset()")
-        if not isinstance(actions, dict):
-            raise ValueError(f"actions must be a dict agent -> action, got {type(actions).__name__}")
-        for agent in actions:
-            if agent not in self._index:
-                raise ValueError(f"unknown agent {agent!r} in actions; agents are {', '.join(self.agents)}")
-        missing = [a for a in self.agents if a not in actions]
-        if missing:
-            raise ValueError(f"no action for {', '.join(missing)}")
+        check_step_actions("robocup_v0", self.agents, self._index, actions)
         result = self.world.step([actions[a] for a in self.possible_agents], on_frame=self.observations.on_frame,
                                  names=self.possible_agents)
         observations, seen_rewards = self.observations.build()
