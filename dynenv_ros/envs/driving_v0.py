@@ -40,7 +40,7 @@ from dynenv_ros.driving.cars import ACCELERATION_CHOICES, BRAKE, STEERING_CHOICE
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.world import DrivingWorld
 from dynenv_ros.envs.driving_observations import DrivingGroundTruth, observation_builder
-from dynenv_ros.envs.step_checks import check_step_actions
+from dynenv_ros.envs.parallel_agents import AgentSpaces, check_step_actions
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.sim.seeding import checked_seed
 
@@ -55,7 +55,7 @@ def action_space(config: DrivingConfig) -> spaces.Space:
     return spaces.Box(np.array([-1.0, 0.0, -w], np.float32), np.array([1.0, 1.0, w], np.float32), dtype=np.float32)
 
 
-class DrivingParallelEnv(ParallelEnv):
+class DrivingParallelEnv(AgentSpaces, ParallelEnv):
     metadata = {"name": "driving_v0", "render_modes": ["rgb_array"], "render_fps": 10, "is_parallelizable": True}
 
     def __init__(self, render_mode: str | None = None, observation: str = "full", perception: Any = None,
@@ -80,17 +80,6 @@ class DrivingParallelEnv(ParallelEnv):
         self._observation_spaces = {a: self.observations.space for a in self.possible_agents}
         self.state_space = self.ground_truth.state_space
         self._view = None
-
-    def observation_space(self, agent: str) -> spaces.Space:
-        return self._observation_spaces[self._known(agent)]
-
-    def action_space(self, agent: str) -> spaces.Space:
-        return self._action_spaces[self._known(agent)]
-
-    def _known(self, agent: str) -> str:
-        if agent not in self._index:
-            raise ValueError(f"unknown agent {agent!r}; agents are {', '.join(self.possible_agents)}")
-        return agent
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
         """``seed``: None or a whole number in [0, 2^64 - 1] (the world's one generator is re-seeded with it);

@@ -34,7 +34,7 @@ from pettingzoo import ParallelEnv
 from dynenv_ros.envs.soccer_observations import SoccerObservations
 from dynenv_ros.envs.soccer_session import kickoff_team
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder, action_space
-from dynenv_ros.envs.step_checks import check_step_actions
+from dynenv_ros.envs.parallel_agents import AgentSpaces, check_step_actions
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.sim.seeding import checked_seed
 from dynenv_ros.soccer.config import SoccerConfig
@@ -44,7 +44,7 @@ RESET_OPTIONS = ("kickoff_team",)
 _TERM_NAMES = tuple(term.name.lower() for term in sorted(RewardTerm))   # rows of a period's rewards
 
 
-class RoboCupParallelEnv(ParallelEnv):
+class RoboCupParallelEnv(AgentSpaces, ParallelEnv):
     metadata = {"name": "robocup_v0", "render_modes": ["rgb_array"], "render_fps": 2, "is_parallelizable": True}
 
     def __init__(self, render_mode: str | None = None, observation: str = "partial",
@@ -65,17 +65,6 @@ class RoboCupParallelEnv(ParallelEnv):
         self._action_spaces = {a: self._action_space for a in self.possible_agents}
         self._observation_spaces = {a: self.observations.space for a in self.possible_agents}
         self.state_space = self.encoder.state_space
-
-    def observation_space(self, agent: str):
-        return self._observation_spaces[self._known(agent)]
-
-    def action_space(self, agent: str):
-        return self._action_spaces[self._known(agent)]
-
-    def _known(self, agent: str) -> str:
-        if agent not in self._index:
-            raise ValueError(f"unknown agent {agent!r}; agents are {', '.join(self.possible_agents)}")
-        return agent
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
         """``seed``: None or a whole number in [0, 2^64 - 1]; ``options``: None or a mapping, ``kickoff_team`` 'a' or
