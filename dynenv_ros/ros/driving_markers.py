@@ -17,7 +17,6 @@ from collections.abc import Iterable
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Quaternion
 from visualization_msgs.msg import Marker, MarkerArray
 
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
@@ -26,9 +25,8 @@ from dynenv_ros.render.detections import ERROR, MISSED, camera_to_field
 from dynenv_ros.render.driving import (ASPHALT, BUILDING, CENTRE_LINE, EDGE_LINE, GROUND, INNER_LINE, OBSTACLE,
                                        PEDESTRIAN, WALKWAY, car_colour)
 from dynenv_ros.render.topdown import HEADING, TEAM_COLOURS
-from dynenv_ros.ros.conversions import WORLD_FRAME
-from dynenv_ros.ros.markers import (_circle_points, _fp_label, _Ids, _marker, _mix, _quaternion, _rgba, _scale,
-                                    _segment_points, detection_namespaces)
+from dynenv_ros.ros.markers import (_circle_points, _delete_all, _fp_label, _Ids, _marker, _mix, _quaternion, _rgba,
+                                    _scale, _segment_points, detection_namespaces)
 from dynenv_ros.sim.ground_truth import WorldSnapshot
 
 MAP_NS = "map"
@@ -130,13 +128,7 @@ def detection_markers(rows: np.ndarray, observer_pose: tuple[float, float, float
                       missed: Iterable[tuple[float, float]] = (), car_name: str = "car_0") -> MarkerArray:
     """One car's detections drawn in "map"; ``observer_pose`` = the car's (x, y, yaw) in the map frame."""
     ns_det, ns_fp, ns_conf, ns_missed = detection_namespaces(car_name)
-    markers: list[Marker] = []
-    for ns in (ns_det, ns_fp, ns_conf, ns_missed):
-        clear = Marker(ns=ns, id=0, action=Marker.DELETEALL, scale=_scale(1.0), color=_rgba(MISSED, 0.0))
-        clear.header.stamp = stamp
-        clear.header.frame_id = WORLD_FRAME
-        clear.pose.orientation = Quaternion(w=1.0)
-        markers.append(clear)
+    markers = _delete_all((ns_det, ns_fp, ns_conf, ns_missed), stamp)
     ids = _Ids()
     red = _rgba(ERROR)
     d = np.asarray(rows)

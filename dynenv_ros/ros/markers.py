@@ -232,6 +232,19 @@ class _Ids:
         return value
 
 
+def _delete_all(namespaces: Iterable[str], stamp: Time) -> list[Marker]:
+    """One DELETEALL per namespace in "map": detection arrays change size every frame, so each opens with these
+    to wipe the last frame's markers (shared by the soccer and driving detection markers)."""
+    markers: list[Marker] = []
+    for ns in namespaces:
+        clear = Marker(ns=ns, id=0, action=Marker.DELETEALL, scale=_scale(1.0), color=_rgba(MISSED, 0.0))
+        clear.header.stamp = stamp
+        clear.header.frame_id = WORLD_FRAME
+        clear.pose.orientation = Quaternion(w=1.0)
+        markers.append(clear)
+    return markers
+
+
 def detection_markers(rows: np.ndarray, observer_pose: tuple[float, float, float], stamp: Time, *,
                       missed: Iterable[tuple[float, float]] = (), robot_name: str = "team_a_0",
                       observer_team: int | None = None, center_circle_radius: float = 0.75) -> MarkerArray:
@@ -254,13 +267,7 @@ def detection_markers(rows: np.ndarray, observer_pose: tuple[float, float, float
     if observer_team not in (1, -1):
         raise ValueError(f"observer_team must be +1 or -1, got {observer_team!r}")
     ns_det, ns_fp, ns_conf, ns_missed = detection_namespaces(robot_name)
-    markers: list[Marker] = []
-    for ns in (ns_det, ns_fp, ns_conf, ns_missed):
-        clear = Marker(ns=ns, id=0, action=Marker.DELETEALL, scale=_scale(1.0), color=_rgba(MISSED, 0.0))
-        clear.header.stamp = stamp
-        clear.header.frame_id = WORLD_FRAME
-        clear.pose.orientation = Quaternion(w=1.0)
-        markers.append(clear)
+    markers = _delete_all((ns_det, ns_fp, ns_conf, ns_missed), stamp)
     ids = _Ids()
     red = _rgba(ERROR)
 
