@@ -25,8 +25,8 @@ from dynenv_ros.render.detections import ERROR, MISSED, camera_to_field
 from dynenv_ros.render.driving import (ASPHALT, BUILDING, CENTRE_LINE, EDGE_LINE, GROUND, INNER_LINE, OBSTACLE,
                                        PEDESTRIAN, WALKWAY, car_colour)
 from dynenv_ros.render.topdown import HEADING, TEAM_COLOURS
-from dynenv_ros.ros.markers import (_circle_points, _delete_all, _fp_label, _Ids, _marker, _mix, _quaternion, _rgba,
-                                    _scale, _segment_points, detection_namespaces)
+from dynenv_ros.ros.markers import (_circle_points, _classify_rows, _delete_all, _fp_label, _Ids, _marker, _mix,
+                                    _quaternion, _rgba, _scale, _segment_points, detection_namespaces)
 from dynenv_ros.sim.ground_truth import WorldSnapshot
 
 MAP_NS = "map"
@@ -135,11 +135,7 @@ def detection_markers(rows: np.ndarray, observer_pose: tuple[float, float, float
     if len(d):
         d = d[d["class_id"] != ObjectClass.SELF]
     if len(d):
-        cls = d["class_id"].astype(int)
-        fx, fy = (np.atleast_1d(v) for v in camera_to_field(observer_pose, d["x"], d["y"]))
-        false_positive = d["true_id"] == -1
-        true_class = d["true_class"].astype(int)
-        confused = ~false_positive & (true_class != 0) & (true_class != cls)
+        cls, fx, fy, false_positive, confused = _classify_rows(d, observer_pose)
         lanes = cls == ObjectClass.LANE
         if lanes.any():
             sx, sy = camera_to_field(observer_pose, d["line_start_x"][lanes], d["line_start_y"][lanes])

@@ -245,6 +245,19 @@ def _delete_all(namespaces: Iterable[str], stamp: Time) -> list[Marker]:
     return markers
 
 
+def _classify_rows(d: np.ndarray, observer_pose: tuple[float, float, float]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per detection row (non-empty): reported class, field x and y, false positive (true_id -1) and confused
+    (a real object reported as another class); what the soccer and driving detection markers draw from."""
+    cls = d["class_id"].astype(int)
+    fx, fy = camera_to_field(observer_pose, d["x"], d["y"])
+    fx, fy = np.atleast_1d(fx), np.atleast_1d(fy)
+    false_positive = d["true_id"] == -1
+    true_class = d["true_class"].astype(int)
+    confused = ~false_positive & (true_class != 0) & (true_class != cls)
+    return cls, fx, fy, false_positive, confused
+
+
 def detection_markers(rows: np.ndarray, observer_pose: tuple[float, float, float], stamp: Time, *,
                       missed: Iterable[tuple[float, float]] = (), robot_name: str = "team_a_0",
                       observer_team: int | None = None, center_circle_radius: float = 0.75) -> MarkerArray:
@@ -273,12 +286,7 @@ def detection_markers(rows: np.ndarray, observer_pose: tuple[float, float, float
 
     d = np.asarray(rows)
     if len(d):
-        cls = d["class_id"].astype(int)
-        fx, fy = camera_to_field(observer_pose, d["x"], d["y"])
-        fx, fy = np.atleast_1d(fx), np.atleast_1d(fy)
-        false_positive = d["true_id"] == -1
-        true_class = d["true_class"].astype(int)
-        confused = ~false_positive & (true_class != 0) & (true_class != cls)
+        cls, fx, fy, false_positive, confused = _classify_rows(d, observer_pose)
         lines = cls == ObjectClass.FIELD_LINE
         for fp in (False, True):
             chosen = lines & (false_positive == fp)
