@@ -45,11 +45,10 @@ def perception_setting(args: Any) -> Any:
     return {"preset": args.preset, "mode": args.noise, "noise_magnitude": args.noise_magnitude}
 
 
-def _pettingzoo_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
-    from dynenv_ros.envs.robocup_v0 import parallel_env
-    env = parallel_env(players_per_team=args.players_per_team, observation=args.observation,
-                       perception=perception_setting(args), image_size=_image_size(args.image_size))
-    env.reset(seed=args.seed)
+def _parallel_env_runner(env: Any, seed: int, pool: np.ndarray) -> Callable[[int], None]:
+    """Steps of a PettingZoo parallel env (soccer's or driving's) with the pool's actions, one row per step, a new
+    episode when no agent is left; the env is reset with ``seed`` first."""
+    env.reset(seed=seed)
     names = env.possible_agents
     actions = [dict(zip(names, row)) for row in pool]
 
@@ -59,6 +58,13 @@ def _pettingzoo_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[i
             if not env.agents:
                 env.reset()
     return run
+
+
+def _pettingzoo_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[int], None]:
+    from dynenv_ros.envs.robocup_v0 import parallel_env
+    env = parallel_env(players_per_team=args.players_per_team, observation=args.observation,
+                       perception=perception_setting(args), image_size=_image_size(args.image_size))
+    return _parallel_env_runner(env, args.seed, pool)
 
 
 def _vector_stepper(args: Any, config: Any, pool: np.ndarray) -> tuple[Callable[[int], None], Any]:
@@ -100,16 +106,7 @@ def _driving_env_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[
     from dynenv_ros.envs.driving_v0 import parallel_env
     perception = args.perception if args.observation == "partial" else None
     env = parallel_env(n_cars=args.cars, observation=args.observation, perception=perception)
-    env.reset(seed=args.seed)
-    names = env.possible_agents
-    actions = [dict(zip(names, row)) for row in pool]
-
-    def run(steps: int) -> None:
-        for k in range(steps):
-            env.step(actions[k % ACTION_POOL])
-            if not env.agents:
-                env.reset()
-    return run
+    return _parallel_env_runner(env, args.seed, pool)
 
 
 DRIVING_OBSERVATIONS = ("none", "full", "partial")
