@@ -27,11 +27,11 @@ fractions of cars; the summary: mean, sd and n over seeds.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from dynenv_ros.learning.evaluation import FORMAT, TERMS, episode_seeds, sample_space
+from dynenv_ros.learning.evaluation import FORMAT, TERMS, episode_seeds, float_mean, sample_space, summarize
 
 SEED_METRICS = ("total", "paper_metric", *TERMS, "cars_home", "crashes", "home_rate", "crash_rate", "periods")
 DRIVER_KINDS = ("random", "scripted")
@@ -211,29 +211,18 @@ def evaluate_driving(driver: str | Driver, *, episodes: int = 4, seeds: Sequence
             "settings": {"episodes": int(episodes), "seeds": seeds, "n_cars": n_cars, "perception": perception,
                          "action_mode": action_mode, "greedy": greedy, "env_config": config},
             "evaluated": {"spec": spec, **ours.describe()},
-            "episodes": records, "per_seed": per_seed, "summary": summarize_driving(per_seed)}
+            "episodes": records, "per_seed": per_seed, "summary": summarize(per_seed, SEED_METRICS)}
 
 
 def driving_seed_means(seed: int, records: Sequence[Mapping[str, Any]], n_cars: int) -> dict[str, Any]:
-    def mean(values: Iterable[float]) -> float:
-        return float(np.mean([float(v) for v in values]))
     row: dict[str, Any] = {"seed": seed, "episodes": len(records)}
     for key in ("total", "paper_metric", "cars_home", "crashes", "periods"):
-        row[key] = mean(r[key] for r in records)
+        row[key] = float_mean(r[key] for r in records)
     for term in TERMS:
-        row[term] = mean(r["terms"][term] for r in records)
+        row[term] = float_mean(r["terms"][term] for r in records)
     row["home_rate"] = row["cars_home"] / n_cars
     row["crash_rate"] = row["crashes"] / n_cars
     return row
-
-
-def summarize_driving(per_seed: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
-    out = {}
-    for metric in SEED_METRICS:
-        values = np.array([row[metric] for row in per_seed], float)
-        out[metric] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
-                       "n": int(len(values))}
-    return out
 
 
 def format_driving_table(result: Mapping[str, Any]) -> str:

@@ -384,32 +384,37 @@ def _spec_name(spec: str | TeamPolicy) -> str:
     return spec if isinstance(spec, str) else type(spec).__name__
 
 
+def float_mean(values: Iterable[float]) -> float:
+    """The mean as a plain float (JSON-ready) of numbers or bools; shared with the driving evaluation."""
+    return float(np.mean([float(v) for v in values]))
+
+
 def seed_means(seed: int, records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """One seed's numbers (``SEED_METRICS``), each the mean over its episode records."""
-    def mean(values: Iterable[float]) -> float:
-        return float(np.mean([float(v) for v in values]))
     row: dict[str, Any] = {"seed": seed, "episodes": len(records)}
-    row["total"] = mean(r["total"] for r in records)
-    row["paper_metric"] = mean(r["paper_metric"] for r in records)
-    row["positive"] = mean(r["positive"] for r in records)
+    row["total"] = float_mean(r["total"] for r in records)
+    row["paper_metric"] = float_mean(r["paper_metric"] for r in records)
+    row["positive"] = float_mean(r["positive"] for r in records)
     for term in TERMS:
-        row[term] = mean(r["terms"][term] for r in records)
-    row["goals_for"] = mean(r["goals_for"] for r in records)
-    row["goals_against"] = mean(r["goals_against"] for r in records)
-    row["goal_difference"] = mean(r["goals_for"] - r["goals_against"] for r in records)
+        row[term] = float_mean(r["terms"][term] for r in records)
+    row["goals_for"] = float_mean(r["goals_for"] for r in records)
+    row["goals_against"] = float_mean(r["goals_against"] for r in records)
+    row["goal_difference"] = float_mean(r["goals_for"] - r["goals_against"] for r in records)
     for result in RESULTS:
-        row[f"{result}_rate"] = mean(r["result"] == result for r in records)
-    row["falls"] = mean(r["falls"] for r in records)
-    row["penalties"] = mean(r["penalties"] for r in records)
-    row["opponent_total"] = mean(r["opponent"]["total"] for r in records)
-    row["opponent_paper_metric"] = mean(r["opponent"]["paper_metric"] for r in records)
+        row[f"{result}_rate"] = float_mean(r["result"] == result for r in records)
+    row["falls"] = float_mean(r["falls"] for r in records)
+    row["penalties"] = float_mean(r["penalties"] for r in records)
+    row["opponent_total"] = float_mean(r["opponent"]["total"] for r in records)
+    row["opponent_paper_metric"] = float_mean(r["opponent"]["paper_metric"] for r in records)
     return row
 
 
-def summarize(per_seed: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
-    """Mean, sample standard deviation (0 for one seed) and n over seeds of every per-seed number."""
+def summarize(per_seed: Sequence[Mapping[str, Any]],
+              metrics: Sequence[str] = SEED_METRICS) -> dict[str, dict[str, float]]:
+    """Mean, sample standard deviation (0 for one seed) and n over seeds of every per-seed number in ``metrics``
+    (soccer's by default; the driving evaluation passes its own)."""
     out = {}
-    for metric in SEED_METRICS:
+    for metric in metrics:
         values = np.array([row[metric] for row in per_seed], float)
         out[metric] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
                        "n": int(len(values))}
