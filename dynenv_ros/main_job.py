@@ -352,7 +352,7 @@ def summarise_driving(outcome: GraphOutcome, run_dir: Path, config: MainJobConfi
 
 
 def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
-    from dynenv_ros.bags.inspect import bag_info, render
+    from dynenv_ros.bags.inspect import render
     if config.scenario == "driving":
         return summarise_driving(outcome, run_dir, config)
     report = read_report(run_dir / "sim_report.json", "simulator")
@@ -368,18 +368,10 @@ def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig
     print(f"  stepped-mode real-time factor {diag['real_time_factor_running']}x "
           f"({diag['real_time_factor_since_start']}x with start-up); actions accepted "
           f"{diag['accepted']}, missing {diag['missing']}, rejected {rejected}")
-    ok = rejected == 0 and bool(scores)
-    bag = run_dir / "bag"
+    complete, bag = check_bag(report, run_dir)
     if not bag.exists():
-        print(f"  no bag was recorded in {bag}")
         return False
-    info = bag_info(bag)
-    lost = {**missing_from_bag(report, info), **actions_not_recorded(report, bag)}
-    counts = {t["name"]: t["count"] for t in info["topics"]}
-    total = sum(counts.values())
-    print(f"  bag {bag}: {total} messages on {len(counts)} topics, {info['duration_s']:.1f} s; "
-          + ("every published message recorded" if not lost else f"LOST (published or accepted, recorded): {lost}"))
-    ok = ok and not lost
+    ok = rejected == 0 and bool(scores) and complete
     if config.gif:
         target = run_dir / "game.gif"
         frames = render(bag, target, robot="team_a_0", fps=10.0, pixels_per_metre=40.0)
