@@ -25,7 +25,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import NoReturn, Sequence
+from typing import Any, Callable, Mapping, NoReturn, Sequence
 
 PROG = "dynenv-eval"
 PERCEPTIONS = ("realistic", "dynenv", "none")
@@ -92,9 +92,25 @@ def _check_folder(path: Path | None, flag: str) -> None:
         raise ValueError(f"{flag} {path}: folder {path.parent} does not exist")
 
 
+def _evaluate_and_report(out: Path | None, evaluate: Callable[[], Mapping[str, Any]],
+                         table: Callable[[Mapping[str, Any]], str]) -> int:
+    """Run ``evaluate`` (after checking ``--out``'s folder, so a long run cannot end unwritable), print its
+    ``table`` and write the result to ``out``; shared by the soccer and driving evaluations. Exit status."""
+    from dynenv_ros.learning.evaluation import write_json
+    try:
+        _check_folder(out, "--out")
+        result = evaluate()
+    except (ValueError, OSError) as error:     # a missing or corrupt checkpoint, a bad setting
+        return _fail(str(error))
+    print(table(result))
+    if out is not None:
+        write_json(result, out)
+        print(f"wrote {out}")
+    return 0
+
+
 def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
     from dynenv_ros.learning.driving_evaluation import evaluate_driving, format_driving_table
-    from dynenv_ros.learning.evaluation import write_json
     if args.opponent is not None:
         return _fail("--opponent: driving has no opponent; the policy drives every car. Evaluate random and "
                      "scripted the same way and compare the files")
@@ -105,22 +121,14 @@ def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
     if not 1 <= cars <= 10:
         return _fail(f"--cars must be in 1..10, got {cars}")
     env_config = {} if args.episode_seconds is None else {"episode_seconds": args.episode_seconds}
-    try:
-        _check_folder(args.out, "--out")
-        result = evaluate_driving(args.policy, episodes=args.episodes, seeds=args.seeds, n_cars=cars,
-                                  perception=perception, action_mode=args.action_mode, greedy=args.greedy,
-                                  env_config=env_config, progress=progress, torch_threads=args.torch_threads)
-    except (ValueError, OSError) as error:
-        return _fail(str(error))
-    print(format_driving_table(result))
-    if args.out is not None:
-        write_json(result, args.out)
-        print(f"wrote {args.out}")
-    return 0
+    return _evaluate_and_report(args.out, lambda: evaluate_driving(
+        args.policy, episodes=args.episodes, seeds=args.seeds, n_cars=cars, perception=perception,
+        action_mode=args.action_mode, greedy=args.greedy, env_config=env_config, progress=progress,
+        torch_threads=args.torch_threads), format_driving_table)
 
 
 def run_eval(args: argparse.Namespace) -> int:
-    from dynenv_ros.learning.evaluation import evaluate, format_table, write_json
+    from dynenv_ros.learning.evaluation import evaluate, format_table
     if args.episodes < 1:
         return _fail(f"--episodes must be at least 1, got {args.episodes}")
     if args.torch_threads < 1:
@@ -136,20 +144,11 @@ def run_eval(args: argparse.Namespace) -> int:
         if value is not None:
             return _fail(f"{flag} applies to --scenario driving only")
     env_config = {} if args.episode_seconds is None else {"episode_seconds": args.episode_seconds}
-    try:
-        _check_folder(args.out, "--out")
-        result = evaluate(args.policy, args.opponent or "scripted", episodes=args.episodes, seeds=args.seeds,
-                          players_per_team=2 if args.players_per_team is None else args.players_per_team,
-                          perception=perception, sides=args.sides or "alternate",
-                          greedy=args.greedy, env_config=env_config, progress=progress,
-                          torch_threads=args.torch_threads)
-    except (ValueError, OSError) as error:     # a missing or corrupt checkpoint, a bad setting
-        return _fail(str(error))
-    print(format_table(result))
-    if args.out is not None:
-        write_json(result, args.out)
-        print(f"wrote {args.out}")
-    return 0
+    return _evaluate_and_report(args.out, lambda: evaluate(
+        args.policy, args.opponent or "scripted", episodes=args.episodes, seeds=args.seeds,
+        players_per_team=2 if args.players_per_team is None else args.players_per_team, perception=perception,
+        sides=args.sides or "alternate", greedy=args.greedy, env_config=env_config, progress=progress,
+        torch_threads=args.torch_threads), format_table)
 
 
 def run_compare(args: argparse.Namespace) -> int:
