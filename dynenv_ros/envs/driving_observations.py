@@ -35,6 +35,7 @@ from gymnasium import spaces
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.roads import DrivingMap
+from dynenv_ros.perception.params import resolve_setting
 from dynenv_ros.sim.ground_truth import WorldSnapshot
 
 SELF_COLUMNS = ("x", "y", "cos_yaw", "sin_yaw", "speed", "lateral_speed", "yaw_rate", "length", "width", "goal_x",
@@ -307,17 +308,8 @@ def driving_perception_params(setting: Any) -> Any:
     """A preset name (``realistic``, ``dynenv``, ``none``), a mapping ``{"preset": name, **overrides}``, ready
     ``DrivingPerceptionParams``, or None (``realistic``)."""
     from dynenv_ros.perception.driving_params import DrivingPerceptionParams, load_driving_preset
-    if setting is None:
-        return load_driving_preset("realistic")
-    if isinstance(setting, DrivingPerceptionParams):
-        return setting
-    if isinstance(setting, str):
-        return load_driving_preset(setting)
-    if isinstance(setting, Mapping):
-        values = dict(setting)
-        return load_driving_preset(values.pop("preset", "realistic"), **values)
-    raise ValueError(f"perception must be a driving preset name, a mapping or DrivingPerceptionParams, "
-                     f"got {setting!r}")
+    return resolve_setting("realistic" if setting is None else setting, DrivingPerceptionParams, load_driving_preset,
+                           "a driving preset name, a mapping or DrivingPerceptionParams")
 
 
 class PartialObservation:

@@ -27,7 +27,7 @@ from dynenv_ros.envs.padded_layout import (ACTION_COLUMNS, FEATURE_BOUND, GAME_C
 from dynenv_ros.envs.learning_targets import LearningTargets
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder
 from dynenv_ros.perception.detections import FEATURE_COLUMNS, as_features
-from dynenv_ros.perception.params import PerceptionParams, load_preset
+from dynenv_ros.perception.params import PerceptionParams, load_preset, resolve_setting
 from dynenv_ros.soccer.actions import SoccerAction
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.vision import SoccerVision
@@ -45,14 +45,7 @@ def previous_actions(actions: list[SoccerAction]) -> np.ndarray:
 
 def perception_params(setting: str | Mapping[str, Any] | PerceptionParams) -> PerceptionParams:
     """A preset name, a mapping {"preset": name, **overrides}, or ready parameters."""
-    if isinstance(setting, PerceptionParams):
-        return setting
-    if isinstance(setting, str):
-        return load_preset(setting)
-    if isinstance(setting, Mapping):
-        values = dict(setting)
-        return load_preset(values.pop("preset", "realistic"), **values)
-    raise ValueError(f"perception must be a preset name or a mapping, got {setting!r}")
+    return resolve_setting(setting, PerceptionParams, load_preset, "a preset name or a mapping")
 
 
 class SoccerObservations:

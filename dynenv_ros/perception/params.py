@@ -169,6 +169,19 @@ def load_preset(name: str, **overrides: Any) -> PerceptionParams:
     return load_yaml(preset_dir() / f"{name}.yaml", **overrides)
 
 
+def resolve_setting(setting: Any, params_cls: type[T], load: Callable[..., T], expected: str) -> T:
+    """Perception parameters from what a user passes an env: ready ``params_cls``, a preset name, or a mapping
+    ``{"preset": name, **overrides}`` (preset ``realistic`` when left out). ``expected`` names them for the error."""
+    if isinstance(setting, params_cls):
+        return setting
+    if isinstance(setting, str):
+        return load(setting)
+    if isinstance(setting, Mapping):
+        values = dict(setting)
+        return load(values.pop("preset", "realistic"), **values)
+    raise ValueError(f"perception must be {expected}, got {setting!r}")
+
+
 def load_section_yaml(path: str | Path, key: str, what: str, parse: Callable[[Mapping[str, Any]], T],
                       overrides: Mapping[str, Any]) -> T:
     """``parse`` of the top-level ``key`` mapping of a YAML file, ``overrides`` replacing its settings; every error a
