@@ -109,12 +109,12 @@ class DrivingParallelEnv(AgentSpaces, ParallelEnv):
         totals = result.rewards.sum(axis=0)
         events: dict[int, list[str]] = {}
         for e in result.events:
-            if e.robot is not None:
-                events.setdefault(e.robot, []).append(f"{e.kind}: {e.detail}" if e.detail else e.kind)
-            elif e.team:   # a team's event (the bonus) goes to each of its cars
-                for car in self.world.cars:
-                    if car.team == e.team:
-                        events.setdefault(car.index, []).append(f"{e.kind}: {e.detail}" if e.detail else e.kind)
+            text = f"{e.kind}: {e.detail}" if e.detail else e.kind
+            # a car's event goes to that car; a team's event (the bonus) to each of its cars
+            owners = ([e.robot] if e.robot is not None
+                      else [c.index for c in self.world.cars if e.team and c.team == e.team])
+            for i in owners:
+                events.setdefault(i, []).append(text)
         ended = self.world.cars_done()
         obs, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
         for agent in self.agents:
