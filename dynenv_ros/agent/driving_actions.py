@@ -63,7 +63,7 @@ class ClippedNormal:
             return self.normal.sample(sample_shape).clamp(self.low, self.high)
 
     def log_prob(self, value: torch.Tensor) -> torch.Tensor:
-        value = torch.as_tensor(value, dtype=self.loc.dtype)
+        value = torch.as_tensor(value, dtype=self.loc.dtype, device=self.loc.device)
         inside = self.normal.log_prob(value.clamp(self.low, self.high))
         below = torch.special.log_ndtr((self.low - self.loc) / self.scale)     # P(sample ≤ low)
         above = torch.special.log_ndtr((self.loc - self.high) / self.scale)    # P(sample ≥ high)

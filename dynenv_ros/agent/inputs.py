@@ -82,7 +82,8 @@ def stream(features, valid, kind_table: torch.Tensor | None = None) -> StreamBat
     """One stream from padded rows (B, F, N, FEATURES) and a validity mask (B, F, N), 1 = a detection;
     ``kind_table``: the scenario's class → embedding index table (``AgentInputs.kind_table``; soccer's by default)."""
     features, valid = _as_tensor(features), _as_tensor(valid)
-    kind = (_KIND if kind_table is None else kind_table)[features[..., 0].long().clamp(0, 255)]
+    table = (_KIND if kind_table is None else kind_table).to(features.device)     # the tables live on the CPU
+    kind = table[features[..., 0].long().clamp(0, 255)]
     padded = valid < 0.5
     return StreamBatch(features, kind.masked_fill(padded, 0), padded)
 
@@ -114,7 +115,8 @@ def side_inputs(observation: Mapping[str, object], head_max: float | None = None
 
 def self_state(proprioception, game) -> torch.Tensor:
     """(B, SELF_STATE): the last frame's proprioception (B, 4) and the GameController's values (B, 3), scaled."""
-    return torch.cat([_as_tensor(proprioception), _as_tensor(game) * GAME_SCALE], dim=-1)
+    game = _as_tensor(game)
+    return torch.cat([_as_tensor(proprioception), game * GAME_SCALE.to(game.device)], dim=-1)
 
 
 def collate(observations: Sequence[Sequence[np.ndarray]], max_landmarks: int | None = None,
@@ -154,13 +156,14 @@ def encode_driving_action(action, spec: LayoutSpec) -> torch.Tensor:
     """(B, 3) of (B, 3) [throttle, brake, steering rad/s]: throttle and brake as they are, the steering over the
     layout's steering bound (``spec.action_high[2]``, ``cars.max_yaw_rate``)."""
     action = _as_tensor(action).float()
-    scale = torch.tensor([1.0, 1.0, 1.0 / spec.action_high[2]])
+    scale = torch.tensor([1.0, 1.0, 1.0 / spec.action_high[2]], device=action.device)
     return action * scale
 
 
 def driving_self_state(ego, game) -> torch.Tensor:
     """(B, 9): the last frame's ego values (B, 8) and the seconds remaining (B, 1), scaled."""
-    return torch.cat([_as_tensor(ego) * DRIVING_EGO_SCALE, _as_tensor(game) * DRIVING_GAME_SCALE], dim=-1)
+    ego = _as_tensor(ego)
+    return torch.cat([ego * DRIVING_EGO_SCALE.to(ego.device), _as_tensor(game) * DRIVING_GAME_SCALE], dim=-1)
 
 
 @dataclass(frozen=True)

@@ -128,9 +128,9 @@ def trim(batch: StreamBatch) -> StreamBatch:
     mask = batch.mask
     slots = mask.shape[-1]
     if _tracing():
-        position = torch.arange(1, slots + 1, dtype=torch.int64)
+        position = torch.arange(1, slots + 1, dtype=torch.int64, device=mask.device)
         used = torch.clamp((position * (~mask).to(torch.int64)).amax(), min=1)
-        keep = torch.arange(used)
+        keep = torch.arange(used, device=mask.device)
         last = mask.dim() - 1
         return StreamBatch(batch.features.index_select(last, keep), batch.kind.index_select(last, keep),
                            mask.index_select(last, keep))
@@ -207,7 +207,7 @@ class SingleHeadAttention(nn.Module):
         """(..., 1, N + 1) additive mask of key_padding_mask (..., N): −inf on padded keys, 0 on the others and on
         the bias slot (never padded, so no query has all its keys masked)."""
         padded = torch.cat([key_padding_mask, torch.zeros_like(key_padding_mask[..., :1])], dim=-1)
-        additive = torch.zeros(padded.shape, dtype=self.bias_k.dtype).masked_fill(padded, float("-inf"))
+        additive = torch.zeros(padded.shape, dtype=self.bias_k.dtype, device=padded.device).masked_fill(padded, float("-inf"))
         return additive.unsqueeze(-2)
 
     @staticmethod
@@ -222,7 +222,7 @@ class SingleHeadAttention(nn.Module):
         (S, L, D), what ``nn.MultiheadAttention`` gives (its first output)."""
         key = query if key is None else key
         if key_padding_mask is None:
-            key_padding_mask = torch.zeros(key.shape[:2], dtype=torch.bool)
+            key_padding_mask = torch.zeros(key.shape[:2], dtype=torch.bool, device=key.device)
         w_query, b_query, w_out, b_out = self.folded()
         attended = self.attend(nn.functional.linear(query, w_query, b_query), _with_bias_slot(key),
                                self.key_mask(key_padding_mask))
@@ -327,8 +327,8 @@ def plan_buckets(used: torch.Tensor, max_buckets: int = 3) -> list[tuple[int, in
     contiguous buckets, each padded to its last (longest) period: [(periods, slots), ...], the cheapest split
     under the cost model above (dynamic programme over the distinct lengths, at most N of them)."""
     values, counts = torch.unique_consecutive(used, return_counts=True)
-    v = values.numpy().astype(np.float64)
-    ends = np.concatenate([[0], np.cumsum(counts.numpy())])
+    v = values.cpu().numpy().astype(np.float64)      # a few dozen values: the plan is made on the CPU
+    ends = np.concatenate([[0], np.cumsum(counts.cpu().numpy())])
     V = len(v)
     first, last = np.arange(V)[:, None], np.arange(V)[None, :]
     cost = (ends[last + 1] - ends[first]) * v[last] * (v[last] + _SLOT_WORK) + _BUCKET_WORK
@@ -376,16 +376,16 @@ class Stream(nn.Module):
             return self.rta.frames_first(self.embed(batch.features, batch.kind, batch.mask), batch.mask)
         if B == 0:
             return batch.features.new_zeros(0, self.embed.size), batch.features.new_zeros(0, N)
-        used = ((~batch.mask).any(1) * torch.arange(1, N + 1)).amax(-1).clamp(min=1)       # (B,)
+        used = ((~batch.mask).any(1) * torch.arange(1, N + 1, device=batch.mask.device)).amax(-1).clamp(min=1)       # (B,)
         used, order = torch.sort(used, stable=True)
         plan = plan_buckets(used)
         # one gather of every bucket's rows: bucket by bucket, frames first (each frame's rows contiguous for the
         # RTA), each cut to its bucket's slots
-        frame_offsets = (torch.arange(F) * N).view(F, 1, 1)
+        frame_offsets = (torch.arange(F, device=used.device) * N).view(F, 1, 1)
         index, start = [], 0
         for count, slots in plan:
             periods = (order[start:start + count] * (F * N)).view(1, count, 1)
-            index.append((periods + frame_offsets + torch.arange(slots).view(1, 1, slots)).reshape(-1))
+            index.append((periods + frame_offsets + torch.arange(slots, device=used.device).view(1, 1, slots)).reshape(-1))
             start += count
         index = torch.cat(index)
         sizes = [F * count * slots for count, slots in plan]
@@ -402,7 +402,7 @@ class Stream(nn.Module):
         else:
             pooled, confidence = torch.cat(pooled), torch.cat(confidence)
         inverse = torch.empty_like(order)
-        inverse[order] = torch.arange(B)
+        inverse[order] = torch.arange(B, device=order.device)
         return pooled.index_select(0, inverse), confidence.index_select(0, inverse)
 
     def recur(self, x: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor], resets: torch.Tensor | None = None
@@ -535,7 +535,7 @@ class DynEnvAgent(nn.Module):
         self.reconstruction = None
 
     def initial_state(self, batch: int) -> State:
-        zeros = torch.zeros(batch, self.feature_size)
+        zeros = torch.zeros(batch, self.feature_size, device=next(self.parameters()).device)
         return (zeros, zeros.clone(), zeros.clone(), zeros.clone())
 
     def forward(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
@@ -555,7 +555,7 @@ class DynEnvAgent(nn.Module):
         periods), only the two LSTM cells step through the periods."""
         T, B = previous_action.shape[:2]
         if resets is None:
-            resets = torch.zeros(T, B, dtype=torch.bool)
+            resets = torch.zeros(T, B, dtype=torch.bool, device=previous_action.device)
         if resets.shape != (T, B):
             raise ValueError(f"resets must have shape {(T, B)}, got {tuple(resets.shape)}")
 
@@ -635,7 +635,7 @@ class DynEnvAgent(nn.Module):
         columns = []
         for dist in self.distributions(step):
             if isinstance(dist, driving_actions.ClippedNormal):
-                noise = torch.randn(dist.loc.shape, generator=generator)
+                noise = torch.randn(dist.loc.shape, generator=generator, device=dist.loc.device)
                 sample = dist.loc if greedy else dist.loc + dist.scale * noise
                 columns.append(sample.clamp(dist.low, dist.high))
             elif isinstance(dist, Categorical):
@@ -644,7 +644,7 @@ class DynEnvAgent(nn.Module):
                 else:
                     columns.append(torch.multinomial(dist.probs, 1, generator=generator).squeeze(-1).float())
             else:
-                noise = torch.randn(dist.mean.shape, generator=generator)
+                noise = torch.randn(dist.mean.shape, generator=generator, device=dist.mean.device)
                 sample = dist.mean if greedy else dist.mean + dist.stddev * noise
                 columns.append(sample.clamp(-self.head_max, self.head_max))
         return torch.stack(columns, dim=-1).detach()

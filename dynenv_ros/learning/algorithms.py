@@ -150,7 +150,8 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
     timing = {"forward_backward": 0.0, "optimizer": 0.0}
     stop = False
     for epoch in range(epochs):
-        order = torch.randperm(B, generator=generator) if minibatches > 1 else torch.arange(B)
+        # row indices on the CPU (the CPU generator draws them); they index tensors on any device
+        order = torch.randperm(B, generator=generator, device="cpu") if minibatches > 1 else torch.arange(B, device="cpu")
         for chunk in order.chunk(minibatches):
             started = time.perf_counter()
             loss, kl = _minibatch_loss(learner, rollout, chunk, advantages, returns, s, log, intrinsic_returns)
@@ -188,7 +189,7 @@ def _intrinsic(learner: Learner, rollout: Mapping[str, Any], s: UpdateSettings) 
     (attention-weighted under RCM), scaled by ``intrinsic_reward_coef``, with its own critic and advantage —
     added to the extrinsic advantage. An episode's last transition has no successor and earns nothing."""
     T, B = rollout["actions"].shape[:2]
-    rows = torch.arange(B)
+    rows = torch.arange(B, device="cpu")
     out = run_sequence(learner.agent, rollout["obs"], _initial_state(learner, rollout, rows), rollout["starts"])
     phi = out.phi
     heads = learner.curiosity
@@ -209,7 +210,7 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
                     ) -> tuple[Tensor, float]:
     agent = learner.agent
     T = rollout["actions"].shape[0]
-    every_row = len(rows) == rollout["actions"].shape[1] and bool((rows == torch.arange(len(rows))).all())
+    every_row = len(rows) == rollout["actions"].shape[1] and bool((rows == torch.arange(len(rows), device=rows.device)).all())
     obs = rollout["obs"] if every_row else {k: v[:, rows] for k, v in rollout["obs"].items()}   # A2C: no copy
     out = run_sequence(agent, obs, _initial_state(learner, rollout, rows), rollout["starts"][:, rows])
     actions = rollout["actions"][:, rows]

@@ -146,8 +146,8 @@ def reset_state(state: State, starts: Tensor) -> State:
 def sample_actions(agent: DynEnvAgent, step: Any, generator: torch.Generator | None, greedy: bool = False
                    ) -> tuple[Tensor, Tensor]:
     """(actions (B, 4) — driving (B, 2) or (B, 3) —, their log-probabilities (B,)) on the CPU — the sum over the
-    action heads. Sampling is on the CPU whatever the learner's device, so one CPU generator makes runs
-    reproducible on any device."""
+    action heads. Sampling is on the CPU whatever the learner's device, with one CPU generator: the draws are the
+    same on any device, the actions only where the device's logits agree to the last bit (docs/benchmarks.md)."""
     heads = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
     actions = agent.act(heads, generator=generator, greedy=greedy)
     log_prob = sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
