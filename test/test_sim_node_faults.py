@@ -11,6 +11,7 @@ from rclpy.parameter import Parameter
 
 from dynenv_ros.envs.robocup_v0 import parallel_env
 from dynenv_ros.envs.soccer_session import SoccerSession
+from dynenv_ros.nodes import sim_node as sim_node_module
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.perception.params import load_preset
 from dynenv_ros.ros import topics
@@ -158,28 +159,41 @@ def test_realtime_actions_are_read_on_a_participant_of_their_own(make_node, exec
 
 
 class _RefusingPublisher:
-    """Stands in for a publisher whose DDS writer refuses every sample (a reader that stopped acknowledging)."""
+    """Stands in for a publisher whose DDS writer refuses samples (a reader that stopped acknowledging): every one,
+    or for the first ``refuse_s`` seconds only (a killed reader until DDS unmatches it)."""
     topic_name = "/stuck"
 
-    def __init__(self) -> None:
-        self.attempts = 0
+    def __init__(self, refuse_s: float = float("inf")) -> None:
+        self.attempts, self.delivered = 0, []
+        self.until = time.monotonic() + refuse_s
 
     def publish(self, message) -> None:
         from rclpy._rclpy_pybind11 import RCLError
         self.attempts += 1
-        raise RCLError("cannot publish data")
+        if time.monotonic() < self.until:
+            raise RCLError("cannot publish data")
+        self.delivered.append(message)
 
 
-def test_a_refused_publish_costs_realtime_one_attempt_and_stepped_mode_retries(make_node, executor):
+def test_a_refused_publish_costs_realtime_one_attempt_and_stepped_mode_retries(make_node, executor, monkeypatch):
     sim, _ = _sim(make_node, executor, mode="realtime")
     stuck = _RefusingPublisher()
     sim._publish(stuck, object())
     assert stuck.attempts == 1                                    # no retry loop in real time
     assert sim.session.counts["publish_failed"] == 1
-    stepped, _ = _sim(make_node, executor)               # stepped mode stays lossless: it retries for up to 1 s
+    # stepped mode stays lossless past a killed reader: a writer refusing for 1.5 s (the old patience was 1 s)
+    stepped, _ = _sim(make_node, executor)
+    recovering, message = _RefusingPublisher(refuse_s=1.5), object()
+    stepped._publish(recovering, message)
+    assert recovering.delivered == [message] and recovering.attempts > 10
+    assert stepped.session.counts["publish_failed"] == 0
+    # a reader that never acknowledges: given up after the patience (shortened here), counted
+    monkeypatch.setattr(sim_node_module, "STEPPED_PUBLISH_PATIENCE_S", 0.2)
     stuck = _RefusingPublisher()
+    started = time.monotonic()
     stepped._publish(stuck, object())
-    assert stuck.attempts == 100 and stepped.session.counts["publish_failed"] == 1
+    assert time.monotonic() - started >= 0.2 and stuck.attempts > 1 and not stuck.delivered
+    assert stepped.session.counts["publish_failed"] == 1
 
 
 def test_a_flood_of_refused_actions_is_counted_cheaply_and_logged_once_per_report(make_node, executor, capfd):

@@ -63,6 +63,10 @@ SCENARIO_DEFAULTS = {"robocup": dict(rates=(100.0, 10, 50), episode_seconds=120.
 MAX_STEP_PERIODS = 100   # /sim/step: at most this many motion periods per call, so services stay answered
 MAX_OPTIONS_CHARS = 4096  # /sim/reset: options_yaml longer than this is refused before parsing
 
+# Stepped mode's patience with a refused publish: longer than Fast DDS's default participant lease (20 s), after
+# which a killed reader is unmatched and the writer accepts samples again (``SimNode._publish``).
+STEPPED_PUBLISH_PATIENCE_S = 30.0
+
 
 class SimNode(Node):
     def __init__(self, **node_options: Any) -> None:
@@ -416,18 +420,30 @@ class SimNode(Node):
         self._publish_feedback(output)
 
     def _publish(self, publisher, message) -> None:
-        """Publish on a KEEP_ALL topic: if a slow reader filled the queue, Fast DDS refuses after its blocking
-        time; try again for up to a second (the reader drains meanwhile) rather than lose the message. In real
-        time one attempt only: a frame that cannot go out now is counted and dropped, the clock does not wait."""
-        for attempt in range(100 if self.mode == "stepped" else 1):
+        """Publish on a KEEP_ALL topic. In stepped mode nothing is lost: if Fast DDS refuses after its blocking
+        time, try again for up to ``STEPPED_PUBLISH_PATIENCE_S``. Why that long: a reader killed without goodbye
+        (SIGKILL) stays matched until its participant's lease runs out (Fast DDS: 20 s by default) and its
+        unacknowledged samples fill the writer's history meanwhile; a one-second patience dropped frames then and
+        stalled the game. A reader that is alive but never reads is a fault of its own: after the patience the
+        message is counted in ``publish_failed`` and dropped. In real time one attempt only: a frame that cannot
+        go out now is counted and dropped, the clock does not wait."""
+        deadline = time.monotonic() + (STEPPED_PUBLISH_PATIENCE_S if self.mode == "stepped" else 0.0)
+        waited = False
+        while True:
             try:
                 publisher.publish(message)
                 return
             except Exception as error:          # rclpy's RCLError: "cannot publish data"
                 if type(error).__name__ != "RCLError":
                     raise
-                if self.mode == "stepped":
-                    time.sleep(0.01)
+            if time.monotonic() >= deadline:
+                break
+            if not waited:
+                waited = True
+                self.get_logger().warning(f"{publisher.topic_name}: a reader does not acknowledge (killed?); "
+                                          f"waiting up to {STEPPED_PUBLISH_PATIENCE_S:.0f} s for DDS to drop it",
+                                          throttle_duration_sec=5.0)
+            time.sleep(0.01)
         self.session.counts["publish_failed"] += 1
         self.get_logger().error(f"could not publish on {publisher.topic_name}: its readers are stuck",
                                 throttle_duration_sec=1.0)
