@@ -172,3 +172,17 @@ def test_sampled_driving_actions_become_commands_the_simulator_accepts(action_mo
     assert driving_actions.command_problem((0.5, 0.0, 0.0), "discrete", w)          # not one of the nine
     assert driving_actions.command_problem((0.0, 1.0, 2 * w), "continuous", w).startswith("steering")
     assert math.isclose(w, spec.action_high[2], rel_tol=1e-6)
+
+
+def test_an_untrained_continuous_head_starts_with_the_brake_released():
+    """Its mean brake starts near 0.02 and the brake's spread at 0.2 (``driving_actions.INITIAL_COMMAND``,
+    ``INITIAL_STD``): a head starting at the bounds' centre pressed the brake half down, which stops any throttle
+    (full brake = 2 x full traction), and PPO learnt nothing in the tiny driving task from there."""
+    torch.manual_seed(5)
+    model = DynEnvAgent(feature_size=64, scenario="driving", action_mode="continuous")
+    batch, spec = driving_batch(n_cars=8)
+    with torch.no_grad():
+        step = model(*streams_from_padded(batch, spec), *side_inputs(batch, spec=spec), model.initial_state(8))
+    mean, std = step.command[:, :3], step.command[:, 3:].exp()
+    assert float(mean[:, 1].max()) < 0.1                        # brake released wherever the car looks
+    np.testing.assert_allclose(std[0].numpy(), [0.5, 0.2, 0.5], rtol=1e-6)

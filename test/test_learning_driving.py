@@ -284,7 +284,8 @@ def test_ppo_learns_to_drive_towards_the_destination_within_seconds():
     """One car on empty roads, 5 s episodes, rewarded only by progress (0.2 per metre closer to its destination):
     from its spawn spot at a road end, facing in, pressing the gas is the best action from the start. A uniform
     random driver (reverse, brake, gas each a third) hardly moves; 30 PPO updates of 8 worlds x 16 periods must
-    beat it by far more than the standard errors of both (measured here)."""
+    beat it by far more than the standard errors of both (measured here). The continuous head does not pass this yet
+    (≈ 1 m per episode after 60 updates, not reliably above chance: docs/driving.md, "Learning")."""
     env = DrivingVectorEnv(8, backend="inprocess", perception="none",
                            config={"n_cars": 1, "episode_seconds": 5.0, **EMPTY_ROADS})
     torch.manual_seed(0)

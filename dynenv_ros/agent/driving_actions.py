@@ -31,7 +31,12 @@ ACCELERATION_CHOICES, STEERING_CHOICES = 3, 3
 CONTINUOUS_LOW = (-1.0, 0.0, -1.0)             # normalised [throttle, brake, steering / limit]
 CONTINUOUS_HIGH = (1.0, 1.0, 1.0)
 CONTINUOUS_SIZE = 3
-INITIAL_LOG_STD = math.log(0.5)
+INITIAL_STD = (0.5, 0.2, 0.5)
+# Where an untrained continuous head's mean starts (normalised): no throttle, brake almost released, straight. A head
+# starting at its bounds' centre (brake 0.5) brakes as hard as full throttle drives (``cars.brake_factor`` = 2), so a
+# car hardly ever moves and no reward reaches the learner: PPO learnt nothing in the tiny driving task from there
+# (test_learning_driving), and learns it from here.
+INITIAL_COMMAND = (0.0, 0.02, 0.0)
 BRAKE_COMMAND = (0.0, 1.0, 0.0)                 # what a car does without an action, and the fallback
 BOUND_TOLERANCE = 1e-5
 

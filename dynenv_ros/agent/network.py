@@ -527,10 +527,13 @@ class DynEnvAgent(nn.Module):
         else:
             size = driving_actions.CONTINUOUS_SIZE
             self.command_head = nn.Linear(2 * D, size)
-            self.command_log_std = nn.Parameter(torch.full((size,), driving_actions.INITIAL_LOG_STD))
+            self.command_log_std = nn.Parameter(torch.tensor(driving_actions.INITIAL_STD).log())
             low, high = torch.tensor(driving_actions.CONTINUOUS_LOW), torch.tensor(driving_actions.CONTINUOUS_HIGH)
             self.register_buffer("command_centre", (low + high) / 2, persistent=False)
             self.register_buffer("command_half_range", (high - low) / 2, persistent=False)
+            with torch.no_grad():       # start near INITIAL_COMMAND (brake released): driving_actions says why
+                start = (torch.tensor(driving_actions.INITIAL_COMMAND) - self.command_centre) / self.command_half_range
+                self.command_head.bias.copy_(torch.atanh(start))
         self.critic = nn.Sequential(nn.Linear(2 * D, D), nn.LeakyReLU(0.1), nn.LayerNorm(D), nn.Linear(D, 1))
         self.reconstruction = None
 
