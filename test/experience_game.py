@@ -1,6 +1,6 @@
-"""A short game played through ``SoccerSession`` (no ROS graph) with random actions carrying learning fields, as
-the messages a trainer would receive — and the record of what was sent and what the game answered, to check the
-experience assembled from those messages against."""
+"""A short game played through ``SoccerSession`` (``play``) or ``DrivingSession`` (``play_driving``), no ROS graph,
+with actions carrying learning fields, as the messages a trainer would receive — and the record of what was sent and
+what the game answered, to check the experience assembled from those messages against."""
 from __future__ import annotations
 
 import math
@@ -76,6 +76,103 @@ def play(episodes: int = 3, players: int = 1, seed: int = 0, episode_seconds: fl
 
     for _ in range(episodes):
         session.reset(seed=int(rng.integers(0, 2**31)))
+        output = session.initial()
+        emit(output)
+        while True:
+            answer(output.episode_id, output.motion_period + 1, submit=True)
+            output = session.step()
+            emit(output)
+            if output.terminated or output.truncated:
+                answer(output.episode_id, output.motion_period + 1, submit=False)    # the ignored final answer
+                break
+    return game
+
+
+# -- driving ----------------------------------------------------------------------------------------------------------
+W = 0.3490658503988659          # the default steering limit, rad/s (2° per 100 ms)
+RECKLESS = (2, 0)               # car 0: full gas, steering right: off the road at period 20 with the seeds below
+CRASH_SEEDS = (0, 2)            # world seeds where RECKLESS car 0 crashes at period 20 of 40
+
+
+@dataclass
+class DrivingGame:
+    n_cars: int
+    action_mode: str
+    messages: list[tuple[str, str, object]] = field(default_factory=list)   # (kind, car, message)
+    actions: dict[tuple[str, int, int], Action] = field(default_factory=dict)   # (car, episode, addressed period)
+    chosen: dict[tuple[str, int, int], tuple] = field(default_factory=dict)     # the same key → the agent's action
+    rewards: dict[tuple[str, int, int], float] = field(default_factory=dict)    # (car, episode, period)
+    ends: dict[tuple[str, int, int], tuple[bool, bool]] = field(default_factory=dict)  # per car: term., trunc.
+    seconds: dict[tuple[str, int, int], float] = field(default_factory=dict)    # game seconds remaining
+
+
+def play_driving(action_mode: str = "discrete", episodes: int = 2, version: int = 3,
+                 episode_seconds: float = 4.0) -> DrivingGame:
+    """Two cars through ``DrivingSession``: car 0 drives off the road (its own episode ends at period 20, the game
+    goes on to 40), car 1 at random until the time limit. Every action carries learning fields, including the
+    answers to a finished car's periods (a policy node answers every car it sees) and to the final observation.
+    ``chosen`` holds what the agent chose — discrete [acceleration, steering], continuous the normalised
+    [throttle, brake, steering / limit] (some exactly on their bounds) — as the learner should store it."""
+    from dynenv_ros.driving.cars import discrete_action
+    from dynenv_ros.driving.config import DrivingConfig
+    from dynenv_ros.envs.driving_session import DrivingSession
+
+    config = DrivingConfig(n_cars=2, action_mode=action_mode, episode_seconds=episode_seconds)
+    assert config.cars.max_yaw_rate == W
+    session = DrivingSession(config, "realistic")
+    rng = np.random.default_rng(11)
+    game = DrivingGame(2, action_mode)
+    names = config.car_names
+
+    def emit(output) -> None:
+        for frame in output.frames:
+            stamp = sim_time(frame.tick, frame.snapshot.tick_period)
+            for i, seen in enumerate(frame.robots):
+                game.messages.append(("frame", names[i], detection_array(
+                    seen.detections, robot_id=i, robot_name=names[i], episode_id=output.episode_id,
+                    motion_period=output.motion_period, frame_index=frame.frame_index,
+                    frames_per_period=len(output.frames), head_yaw=0.0, fallen=seen.fallen,
+                    penalized=seen.penalized, kicking=False, ball_owner=0, ball_owner_seconds=0.0,
+                    game_seconds_remaining=seen.game_seconds_remaining, stamp=stamp)))
+                game.seconds[(names[i], output.episode_id, output.motion_period)] = seen.game_seconds_remaining
+        end = sim_time(output.frames[-1].tick, 0.01)
+        for i, feedback in enumerate(output.feedback):
+            game.messages.append(("feedback", names[i], step_feedback(
+                robot_id=i, episode_id=output.episode_id, motion_period=output.motion_period,
+                rewards=feedback.rewards, terminated=feedback.terminated, truncated=feedback.truncated,
+                seen_object_ids=feedback.seen_object_ids, landmarks_seen=feedback.landmarks_seen, stamp=end)))
+            key = (names[i], output.episode_id, output.motion_period)
+            game.rewards[key] = sum(feedback.rewards.values())
+            game.ends[key] = (feedback.terminated, feedback.truncated)
+
+    def choose(car: int) -> tuple[tuple, tuple]:
+        """(the agent's action, the command [throttle, brake, steering] it becomes)."""
+        if action_mode == "discrete":
+            a, s = RECKLESS if car == 0 else (int(rng.integers(0, 3)), int(rng.integers(0, 3)))
+            command = discrete_action(a, s, W)
+            return (a, s), (command.throttle, command.brake, command.steering)
+        if car == 0:
+            u = (1.0, 0.0, -1.0)                                  # every value on a bound
+        else:
+            u = (float(rng.uniform(-1, 1)), float(rng.choice([0.0, rng.uniform(0, 1)])),
+                 float(rng.choice([1.0, rng.uniform(-1, 1)])))
+        return u, (u[0], u[1], u[2] * W)
+
+    def answer(episode: int, period: int, submit: bool) -> None:
+        for i, name in enumerate(names):
+            chosen, (throttle, brake, steering) = choose(i)
+            msg = Action(robot_id=i, episode_id=episode, motion_period=period, throttle=throttle, brake=brake,
+                         steering=steering, policy_version=version, log_prob=float(-rng.uniform(0.5, 6.0)),
+                         value=float(rng.normal()))
+            game.actions[(name, episode, period)] = msg
+            game.chosen[(name, episode, period)] = chosen
+            game.messages.append(("action", name, msg))
+            if submit:
+                ok, reason = session.submit(i, episode, period, msg.throttle, msg.brake, msg.steering)
+                assert ok, reason
+
+    for e in range(episodes):
+        session.reset(seed=CRASH_SEEDS[e % len(CRASH_SEEDS)])
         output = session.initial()
         emit(output)
         while True:

@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 
 from dynenv_ros.learning.experience import ExperienceAssembler, batch
+from dynenv_ros.learning.experience_scenarios import SoccerExperience
 from experience_game import HEAD_MAX, HEAD_UNITS, play
 
 T = 4
 
 
 def _assembler(game, steps=T, **kwargs) -> ExperienceAssembler:
-    return ExperienceAssembler(steps, game.players, game.frames, HEAD_MAX, HEAD_UNITS, **kwargs)
+    return ExperienceAssembler(steps, SoccerExperience(game.players, game.frames, HEAD_MAX, HEAD_UNITS), **kwargs)
 
 
 def _feed(assembler, messages, source="game"):

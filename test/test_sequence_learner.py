@@ -12,6 +12,7 @@ import torch
 from dynenv_ros.agent.checkpoint import policy_from_bytes
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.experience import ExperienceAssembler
+from dynenv_ros.learning.experience_scenarios import SoccerExperience
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from experience_game import HEAD_MAX, HEAD_UNITS, play
 from policy_node.policy_node import version_of
@@ -23,7 +24,7 @@ T = 4
 @pytest.fixture(scope="module")
 def sequences():
     game = play(episodes=3, players=1, seed=0, episode_seconds=3.0, version=1)
-    assembler = ExperienceAssembler(T, 1, game.frames, HEAD_MAX, HEAD_UNITS)
+    assembler = ExperienceAssembler(T, SoccerExperience(1, game.frames, HEAD_MAX, HEAD_UNITS))
     return _feed(assembler, game.messages)          # 4 sequences per robot, 2 robots
 
 

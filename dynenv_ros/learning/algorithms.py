@@ -322,13 +322,23 @@ def continuous_icm_losses(phi: Tensor, actions: Tensor, heads: Any, mask: Tensor
 
 def imitation_loss(agent: Any, out: Any, teacher: Tensor, acting: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
     """−log π(teacher's action | s) summed over the heads, averaged over the steps where the robot could act; and
-    agreement fractions over those steps: the policy's most likely action equals the teacher's on every head
-    (``teacher_agreement``) and on each head (``teacher_agreement_<head>``)."""
+    agreement over those steps. Categorical heads (soccer's walk, turn, kick, head; driving's acceleration,
+    steering): the fraction where the policy's most likely action equals the teacher's on every head
+    (``teacher_agreement``) and on each head (``teacher_agreement_<head>``). Driving's continuous head: the mean
+    absolute difference between the policy's mean command and the teacher's (normalised units,
+    ``teacher_command_error``) — there is no most likely value to agree on."""
     log_prob, _ = log_prob_entropy(agent, out, teacher)
+    driving = getattr(agent, "scenario", "soccer") == "driving"
     with torch.no_grad():
-        heads = ("walk", "turn", "kick", "head")
-        same = torch.stack([getattr(out, h).argmax(-1) for h in heads], -1) == teacher
-        agreement = {"teacher_agreement": masked_mean(same.all(-1).float(), acting)}
-        agreement.update({f"teacher_agreement_{h}": masked_mean(same[..., i].float(), acting)
-                          for i, h in enumerate(heads)})
+        if driving and agent.action_mode == "continuous":
+            T, B = teacher.shape[:2]
+            means = torch.stack([d.mean for d in agent.distributions(head_outputs(out, flat=True))], -1)
+            error = (means.reshape(T, B, -1) - teacher).abs().mean(-1)
+            agreement = {"teacher_command_error": masked_mean(error, acting)}
+        else:
+            heads = ("acceleration", "steering") if driving else ("walk", "turn", "kick", "head")
+            same = torch.stack([getattr(out, h).argmax(-1) for h in heads], -1) == teacher
+            agreement = {"teacher_agreement": masked_mean(same.all(-1).float(), acting)}
+            agreement.update({f"teacher_agreement_{h}": masked_mean(same[..., i].float(), acting)
+                              for i, h in enumerate(heads)})
     return -masked_mean(log_prob, acting), agreement

@@ -1,7 +1,9 @@
-"""Experience from messages: each robot's detections, actions, step feedback and (for the self-supervised losses)
-ground truth, assembled into fixed-length sequences the learner's ``update`` takes — with no ROS import (messages
-are read by attribute: rclpy's, rosbags' and plain objects alike). The trainer node feeds it from live topics,
-``dynenv-train --from-bag`` from recorded bags.
+"""Experience from messages: each robot's (or car's) detections, actions, step feedback and (for the self-supervised
+losses) ground truth, assembled into fixed-length sequences the learner's ``update`` takes — with no ROS import
+(messages are read by attribute: rclpy's, rosbags' and plain objects alike). The trainer node feeds it from live
+topics, ``dynenv-train --from-bag`` from recorded bags. What differs between soccer and driving (agent names, the
+padded layout, how an Action becomes the learnt action and the previous action shown, per-agent episode ends) is the
+scenario's (``learning.experience_scenarios``); everything below holds for both.
 
 The alignment (docs/ros_graph.md, "Training over ROS"). Per stream — one robot of one game (``source``, e.g. the
 game's namespace) — an *observation slot* (episode e, period p) gathers:
@@ -22,14 +24,23 @@ node that already sees the next episode skips it), with the value of the last ob
 (``bootstrap_estimated``). A sequence of T steps needs T + 1 slots:
 the last one is the next sequence's first (they overlap by one observation, like rollouts).
 
+Per-agent ends (driving): a car's feedback says ``terminated`` from the period it crashed or got home (with its
+team's bonus decided) until its game's episode ends, while the simulator keeps publishing its frames and the policy
+keeps answering. As in the in-process rollouts (``Rollout.alive``), those periods are no experience: the stream's
+episode ends at the first terminated feedback, its later periods' messages are dropped (``after_end``), and the
+stream goes on with the game's next episode. So that such a period never starts a chain (a stream that starts, or
+restarts after a cut, mid-episode), a chain's first slot after period 0 waits for its own feedback.
+
 Everything that can go wrong with messages is counted, never raised: ``late`` (for a slot already passed),
 ``duplicate`` (a second frame index, answer or feedback for a slot: the first wins), ``out_of_order`` (arrived after a
-newer slot's messages; still used), ``malformed`` (fields out of range, non-finite learning fields), ``not_learning``
-(an answer without learning fields: a scripted or foreign policy — its steps cannot be corrected off-policy), and
-``missing``: a slot that never completes (a lost message, a killed node) once the stream has moved ``patience``
-periods past it. A missing slot *cuts* the sequence: the steps gathered since the last emitted sequence are
-discarded (``steps_discarded``) and the stream restarts at its next complete slot as if an episode started there
-(recurrent state zeroed: the learner cannot know the state the policy had).
+newer slot's messages; still used), ``malformed`` (fields out of range, non-finite learning fields),
+``actions_rounded`` (a learnt action the learner's action space holds only approximately — a head turn between the
+discrete head's steps, a driving command that is not one of the nine discrete ones — taken to the nearest),
+``not_learning`` (an answer without learning fields: a scripted or foreign policy — its steps cannot be corrected
+off-policy), and ``missing``: a slot that never completes (a lost message, a killed node) once the stream has
+moved ``patience`` periods past it. A missing slot *cuts* the sequence: the steps gathered since the last emitted
+sequence are discarded (``steps_discarded``) and the stream restarts at its next complete slot as if an episode
+started there (recurrent state zeroed: the learner cannot know the state the policy had).
 """
 from __future__ import annotations
 
@@ -42,12 +53,11 @@ import numpy as np
 
 from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.envs.learning_targets import LearningTargets, empty_targets
-from dynenv_ros.envs.padded_layout import PaddedLayout
-from dynenv_ros.learning.rollout import STEP_ARRAYS, StepArrays, can_act
+from dynenv_ros.learning.experience_scenarios import ExperienceScenario
+from dynenv_ros.learning.rollout import STEP_ARRAYS, StepArrays
 
-STAND_STILL = (0.0, 0.0, 0.0, 0.0)
 STATUS_FALLEN = 1                 # ObjectState.STATUS_FALLEN
-WALKS, TURNS, KICKS = 5, 3, 3     # Action.msg's choices
+KEPT_ENDS = 8                     # per stream: the last episodes whose per-agent end is remembered
 
 
 def version(action: Any) -> int:
@@ -80,7 +90,8 @@ class Slot:
 @dataclass(eq=False)
 class Sequence(StepArrays):
     """T steps of one stream, in the arrays of ``learning.rollout.Rollout`` for one robot (no robot axis):
-    obs (T+1, ...), actions (T, 4) int64 (head as its discrete index), log_probs (T,), values (T+1,), rewards (T,),
+    obs (T+1, ...), actions (T, width) as the scenario stores them (soccer (T, 4) int64, the head as its discrete
+    index; driving (T, 2) int64 or (T, 3) float32), log_probs (T,), values (T+1,), rewards (T,),
     reward_terms (T, 4), episode_end, truncated, final_values (T,), starts, can_act (T+1,), targets (T+1, ...) or
     empty, versions (T,) int64 (Action.policy_version of each step), ``continues``: it follows the stream's previous
     sequence without a cut (the learner carries that sequence's final recurrent state into it)."""
@@ -102,23 +113,24 @@ class _Stream:
     newest: tuple[int, int] = (-1, -1)
     emitted: int = 0
     restart_after: tuple[int, int] | None = None   # after a cut: restart at the first observed slot after this
+    ends: dict[int, int] = field(default_factory=dict)   # episode -> the first period its feedback ended (driving)
 
 
 class ExperienceAssembler:
-    """Sequences of ``steps`` periods from the messages of any number of streams. ``players_per_team`` and
-    ``frames`` fix the observation layout (``PaddedLayout.for_players``); ``head_max``, ``head_units`` convert a
-    head turn (rad) to its discrete index; ``with_targets`` builds the self-supervised targets from ground truth.
-    ``learns(robot_name)`` picks which robots' experience is kept (all by default)."""
+    """Sequences of ``steps`` periods from the messages of any number of streams. ``scenario`` (e.g.
+    ``SoccerExperience(players_per_team, frames, head_max, head_units)`` or ``DrivingExperience(config)``, module
+    ``learning.experience_scenarios``) names the agents, fixes the observation layout and converts actions;
+    ``with_targets`` builds the self-supervised targets from ground truth (soccer). ``learns(robot_name)`` picks
+    which agents' experience is kept (all by default)."""
 
-    def __init__(self, steps: int, players_per_team: int, frames: int, head_max: float, head_units: int,
-                 with_targets: bool = False, patience: int = 8, learns=None, max_slots: int = 256,
-                 require_learning_fields: bool = True) -> None:
+    def __init__(self, steps: int, scenario: ExperienceScenario, with_targets: bool = False, patience: int = 8,
+                 learns=None, max_slots: int = 256, require_learning_fields: bool = True) -> None:
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
-        self.steps, self.players, self.frames = steps, players_per_team, frames
-        self.layout = PaddedLayout.for_players(players_per_team, frames)
-        self.head_step, self.head_units = head_max / head_units, head_units
-        self.head_bound = head_max + 1e-6
+        if with_targets and not scenario.supports_targets:
+            raise ValueError(f"scenario {scenario.scenario!r} has no self-supervised targets (with_targets=False)")
+        self.steps, self.scenario, self.frames = steps, scenario, scenario.frames
+        self.layout = scenario.layout
         self.with_targets, self.patience, self.max_slots = with_targets, patience, max_slots
         self.learns = learns or (lambda name: True)
         # False: every answer is a step, whoever chose it (behaviour cloning from bags; an Action recorded before
@@ -126,8 +138,10 @@ class ExperienceAssembler:
         self.require_learning_fields = require_learning_fields
         self.streams: dict[tuple[str, str], _Stream] = {}
         self.truth: dict[str, dict[tuple[int, int], Any]] = {}     # source -> (episode, stamp ns) -> WorldState
-        self.targets = LearningTargets(players_per_team)
-        self.names = [f"team_{t}_{i}" for t in "ab" for i in range(players_per_team)]
+        self.names = list(scenario.names)
+        if with_targets:
+            self.players = scenario.players
+            self.targets = LearningTargets(scenario.players)
         self.counts: Counter[str] = Counter()
         self.ready: list[Sequence] = []
         self._known: dict[tuple[str, str], tuple] = {}     # per stream: seen-since-episode-start, carried over
@@ -143,7 +157,12 @@ class ExperienceAssembler:
         return self.streams.setdefault((source, robot), _Stream())
 
     def _slot(self, stream: _Stream, key: tuple[int, int]) -> Slot | None:
-        """The slot for ``key``, or None (counted late) when the stream has passed it."""
+        """The slot for ``key``, or None when the stream has passed it (counted late) or the agent's episode ended
+        before it (``after_end``)."""
+        end = stream.ends.get(key[0])
+        if end is not None and key[1] > end:
+            self.counts["after_end"] += 1
+            return None
         if stream.cursor is not None and key < stream.cursor:
             self.counts["late"] += 1
             return None
@@ -205,7 +224,26 @@ class ExperienceAssembler:
             self.counts["duplicate"] += 1
             return
         setattr(slot, field_name, msg)
+        if field_name == "feedback" and self.scenario.per_agent_ends and (msg.terminated or msg.truncated):
+            self._end_episode(stream, key)
         self._advance(source, robot, stream)
+
+    def _end_episode(self, stream: _Stream, key: tuple[int, int]) -> None:
+        """The agent's episode ended at period ``key[1]`` (per-agent ends): its later periods are no experience —
+        their slots go (their messages counted ``after_end``), and a chain that would start in them restarts with
+        the next episode."""
+        episode, period = key
+        if stream.ends.get(episode, period + 1) <= period:
+            return
+        stream.ends[episode] = period
+        while len(stream.ends) > KEPT_ENDS:
+            del stream.ends[min(stream.ends)]
+        for k in [k for k in stream.slots if k[0] == episode and k[1] > period]:
+            slot = stream.slots.pop(k)
+            self.counts["after_end"] += len(slot.frames) + (slot.answer is not None) + (slot.feedback is not None)
+        if not stream.chain and stream.cursor is not None and stream.cursor[0] == episode \
+                and stream.cursor[1] > period:
+            stream.restart_after = key
 
     def add_world_state(self, source: str, msg: Any) -> None:
         """Ground truth of one frame (kept only when targets are built, for ``patience`` periods' worth)."""
@@ -218,10 +256,9 @@ class ExperienceAssembler:
             del store[next(iter(store))]
 
     def _action_problem(self, msg: Any) -> str:
-        if not (0 <= msg.walk < WALKS and 0 <= msg.turn < TURNS and 0 <= msg.kick < KICKS):
-            return "choice out of range"
-        if not math.isfinite(msg.head_yaw_delta) or abs(msg.head_yaw_delta) > self.head_bound:
-            return "head turn out of range"
+        problem = self.scenario.action_problem(msg)
+        if problem:
+            return problem
         if version(msg) and not (math.isfinite(msg.log_prob) and msg.log_prob <= 1e-4 and math.isfinite(msg.value)):
             return "learning fields not finite"
         return ""
@@ -277,6 +314,13 @@ class ExperienceAssembler:
             if not stream.chain and self._final(stream, key):   # an episode's final observation: not a step
                 stream.restart_after = key
                 continue
+            if not stream.chain and self._awaits_own_feedback(stream, key):
+                if not self._give_up(stream, key):
+                    return
+                self.counts["missing"] += 1
+                self.last_missing = f"{source or '/'} {robot} episode {key[0]} period {key[1]}: its own feedback"
+                self._cut(stream, key)
+                continue
             if len(stream.chain) == self.steps:               # the chain has its T steps; key is slot T
                 slot = stream.slots.get(key)
                 if slot is not None and slot.observed and slot.answer is not None:
@@ -306,6 +350,14 @@ class ExperienceAssembler:
             self.counts["missing"] += 1
             self.last_missing = f"{source or '/'} {robot} episode {key[0]} period {key[1]}: {self._lacks(stream, key)}"
             self._cut(stream, key)
+
+    def _awaits_own_feedback(self, stream: _Stream, key: tuple[int, int]) -> bool:
+        """Per-agent ends: a chain's first slot after period 0 is a step only once its own feedback says the agent's
+        episode goes on (module docstring)."""
+        if not self.scenario.per_agent_ends or key[1] == 0:
+            return False
+        slot = stream.slots.get(key)
+        return slot is None or slot.feedback is None
 
     def _lacks(self, stream: _Stream, key: tuple[int, int]) -> str:
         """What a step still lacks (diagnostics: ``last_missing``)."""
@@ -349,13 +401,16 @@ class ExperienceAssembler:
                 starts[t] = True
             before = stream.slots.get((key[0], key[1] - 1))
             answer = before.answer if before is not None and key[1] > 0 else None
-            previous.append(STAND_STILL if answer is None else self._action_row(answer, radians=True))
+            previous.append(self.scenario.idle if answer is None else self.scenario.previous_row(answer))
         periods = [[s.frames[k] for k in range(s.frames_per_period)] for s in slots]
         stats: Counter[str] = Counter()
-        obs, dropped = pack_messages(periods, previous, self.layout.max_landmarks, self.layout.max_objects, stats)
+        obs, dropped = pack_messages(periods, previous, self.layout.max_landmarks, self.layout.max_objects, stats,
+                                     self.layout.spec)
         self.counts["detections_dropped"] += dropped
         self.counts.update(stats)
-        actions = np.array([self._action_row(s.answer) for s in slots[:T]], np.int64)
+        kind = self.scenario
+        actions = np.array([kind.action_row(s.answer) for s in slots[:T]], kind.action_dtype)
+        self.counts["actions_rounded"] += sum(kind.off_grid(s.answer) for s in slots[:T])
         log_probs = np.array([getattr(s.answer, "log_prob", 0.0) for s in slots[:T]], np.float32)
         values = np.array([getattr(s.answer, "value", 0.0) for s in slots], np.float32)
         versions = np.array([version(s.answer) for s in slots[:T]], np.int64)
@@ -375,7 +430,7 @@ class ExperienceAssembler:
         targets = self._targets(source, robot, keys, slots) if self.with_targets else {}
         sequence = Sequence(obs=obs, actions=actions, log_probs=log_probs, values=values, rewards=terms.sum(-1),
                             reward_terms=terms, episode_end=episode_end, truncated=truncated,
-                            final_values=final_values, starts=starts, can_act=can_act(obs["proprioception"]),
+                            final_values=final_values, starts=starts, can_act=kind.can_act(obs["proprioception"]),
                             stream=(source, robot), targets=targets, versions=versions, continues=stream.continues,
                             index=stream.emitted, keys=keys)
         self.ready.append(sequence)
@@ -389,13 +444,6 @@ class ExperienceAssembler:
             del stream.slots[old]
         stream.cursor, stream.chain = last, []
         stream.chain_starts_episode, stream.continues = bool(starts[-1]), True
-
-    def _action_row(self, msg: Any, radians: bool = False) -> tuple:
-        """[walk, turn, kick, head]: the head as rad (an observation's previous action) or as its index."""
-        if radians:
-            return (float(msg.walk), float(msg.turn), float(msg.kick), float(msg.head_yaw_delta))
-        index = int(np.clip(round(msg.head_yaw_delta / self.head_step) + self.head_units, 0, 2 * self.head_units))
-        return (int(msg.walk), int(msg.turn), int(msg.kick), index)
 
     def _targets(self, source: str, robot: str, keys: list, slots: list[Slot]) -> dict[str, np.ndarray]:
         """The self-supervised targets of each observation (``envs.learning_targets``), from the ground truth at

@@ -2,14 +2,22 @@
 sequences as the live trainer node (``learning.experience``, fed from the bag in time order), and the learner trains
 offline on them:
 
-- **behaviour cloning** of whoever chose the recorded actions (a scripted team, a robot's own stack): the
-  imitation loss −log π(recorded action | observation) (``algorithms.imitation_loss``), a warm start;
-- **the self-supervised heads**: localization (pose) and reconstruction (ball, robots) from the ground truth the
-  bag holds (``/world_state`` and the feedback's seen objects) — the paper's pretraining, from real recordings.
+- **behaviour cloning** of whoever chose the recorded actions (a scripted team, a robot's own stack, the scripted
+  drivers): the imitation loss −log π(recorded action | observation) (``algorithms.imitation_loss``), a warm start;
+- **the self-supervised heads** (soccer): localization (pose) and reconstruction (ball, robots) from the ground
+  truth the bag holds (``/world_state`` and the feedback's seen objects) — the paper's pretraining, from real
+  recordings.
 
 No reward term is learnt (the recorded actions are not the learner's: no importance ratio applies). Sequences
 start from a zero recurrent state (``starts[0]``): offline, nothing is known of the state the recording policy had.
 A recorded head turn is mapped to the nearest of the discrete head's steps.
+
+The bags say which scenario they hold: soccer robots (``team_a_<k>`` …) or driving cars (``car_<k>``); the config
+must name the same ``scenario`` (a driving bag with ``--config driving_quick`` or ``--set scenario=driving``), and the
+agent count (``players_per_team``, ``n_cars``) is taken from the bags. A driving bag clones the cars' recorded
+commands into the agent of the config's ``action_mode`` (discrete: the nearest of the nine commands; continuous:
+the normalised command) and each car's sequences end where its own episode ended; driving has no self-supervised
+heads.
 
 The run directory holds what ``dynenv-train`` writes: ``config.json``, ``metrics.csv``, ``tensorboard/``, a
 training checkpoint, ``policy.safetensors`` (a policy file for the policy node, ``pretrained_encoder`` of
@@ -32,28 +40,57 @@ from dynenv_ros.learning import checkpoints
 from dynenv_ros.learning.algorithms import UpdateSettings, update
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.experience import ExperienceAssembler, Sequence, batch
+from dynenv_ros.learning.experience_scenarios import DRIVING_AGENT, SOCCER_AGENT, experience_scenario
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import arrays_as_tensors
 from dynenv_ros.learning.run_log import RunLogger
 from dynenv_ros.learning.trainer import VERSION
 from dynenv_ros.soccer.config import SoccerConfig
 
-ROBOT_TOPIC = re.compile(r"^(?P<source>(/[A-Za-z0-9_]+)*)/(?P<robot>team_[ab]_(?P<slot>[0-9]+))/"
-                         r"(?P<kind>detections|action|feedback)$")
+
+def agent_topic(agent_pattern: str) -> re.Pattern[str]:
+    """``<game>/<agent>/detections|action|feedback`` for the agents ``agent_pattern`` names."""
+    return re.compile(rf"^(?P<source>(/[A-Za-z0-9_]+)*)/(?P<robot>{agent_pattern})/"
+                      r"(?P<kind>detections|action|feedback)$")
+
+
+# The agents' topics of each scenario, as ``learning.experience_scenarios`` names the agents.
+AGENT_TOPICS = {"robocup": agent_topic(SOCCER_AGENT), "driving": agent_topic(DRIVING_AGENT)}
 WORLD_TOPIC = re.compile(r"^(?P<source>(/[A-Za-z0-9_]+)*)/world_state$")
 
 
-def bag_layout(paths: Seq[str | Path]) -> tuple[int, int]:
-    """(players per team, frames per period) of the games in the bags: the robots' names and the detections."""
+def bag_scenario(paths: Seq[str | Path]) -> str:
+    """The scenario the bags record ('robocup' or 'driving'), from their agents' topics; ValueError for bags with
+    no agent, or with both kinds (one run learns one agent)."""
     from dynenv_ros.bags.inspect import open_bag
+    found: dict[str, str] = {}
+    for path in paths:
+        with open_bag(path) as bag:
+            for connection in bag.connections:
+                for scenario, pattern in AGENT_TOPICS.items():
+                    if pattern.match(connection.topic):
+                        found.setdefault(scenario, f"{path}: {connection.topic}")
+    if not found:
+        raise ValueError(f"no robot detections in {', '.join(map(str, paths))}: not a recording of a game")
+    if len(found) > 1:
+        raise ValueError(f"the bags record both soccer and driving games ({found['robocup']}, {found['driving']}); "
+                         "learn from one scenario's bags at a time")
+    return next(iter(found))
+
+
+def bag_layout(paths: Seq[str | Path], scenario: str = "robocup") -> tuple[int, int]:
+    """(players per team — driving: cars —, frames per period) of the games in the bags: the agents' names and the
+    detections."""
+    from dynenv_ros.bags.inspect import open_bag
+    topic = AGENT_TOPICS[scenario]
     players, frames = 0, 0
     for path in paths:
         with open_bag(path) as bag:
             for connection in bag.connections:
-                match = ROBOT_TOPIC.match(connection.topic)
-                if match:
-                    players = max(players, int(match["slot"]) + 1)
-            first = [c for c in bag.connections if ROBOT_TOPIC.match(c.topic) and c.topic.endswith("/detections")]
+                match = topic.match(connection.topic)
+                if match:       # team_a_<k>, car_<k>: k + 1 agents (per team) at least
+                    players = max(players, int(match["robot"].rsplit("_", 1)[1]) + 1)
+            first = [c for c in bag.connections if topic.match(c.topic) and c.topic.endswith("/detections")]
             for connection, _, raw in bag.messages(first[:1]):
                 frames = max(frames, int(bag.deserialize(raw, connection.msgtype).frames_per_period))
                 break
@@ -63,17 +100,20 @@ def bag_layout(paths: Seq[str | Path]) -> tuple[int, int]:
 
 
 def bag_sequences(paths: Seq[str | Path], steps: int, players: int, frames: int, with_targets: bool,
-                  learns=None) -> tuple[list[Sequence], Counter[str]]:
-    """Every sequence of ``steps`` periods in the bags (each bag's games kept apart), and the assembler's counts."""
+                  learns=None, scenario: str = "robocup", action_mode: str = "discrete"
+                  ) -> tuple[list[Sequence], Counter[str]]:
+    """Every sequence of ``steps`` periods in the bags (each bag's games kept apart), and the assembler's counts.
+    ``players``: per team, or (driving) cars; ``action_mode``: driving's, how the recorded commands are learnt."""
     from dynenv_ros.bags.inspect import open_bag
-    motion = SoccerConfig.from_mapping({"players_per_team": players}).motion
-    assembler = ExperienceAssembler(steps, players, frames, motion.head_max_delta, motion.head_units,
-                                    with_targets=with_targets, learns=learns, require_learning_fields=False)
+    agents = experience_scenario(scenario, players, frames, action_mode)
+    assembler = ExperienceAssembler(steps, agents, with_targets=with_targets, learns=learns,
+                                    require_learning_fields=False)
+    topic = AGENT_TOPICS[scenario]
     out: list[Sequence] = []
     for index, path in enumerate(paths):
         with open_bag(path) as bag:
             for connection, _, raw in bag.messages():
-                robot = ROBOT_TOPIC.match(connection.topic)
+                robot = topic.match(connection.topic)
                 world = WORLD_TOPIC.match(connection.topic)
                 if robot is None and (world is None or not with_targets):
                     continue
@@ -104,22 +144,36 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
     """Train a fresh agent on the bags' sequences for ``epochs`` passes; returns the summary (also written)."""
     if epochs < 1 or batch_sequences < 1:
         raise ValueError(f"epochs and batch_sequences must be >= 1, got {epochs}, {batch_sequences}")
+    scenario = bag_scenario(paths)
+    if scenario != cfg.scenario:
+        hint = "--config driving_quick or --set scenario=driving" if scenario == "driving" else \
+            "a soccer config (e.g. --config quick)"
+        raise ValueError(f"the bags record {'driving' if scenario == 'driving' else 'soccer'} games and the config's "
+                         f"scenario is {cfg.scenario!r}: use {hint}")
+    if scenario == "driving" and learns is not None:
+        raise ValueError("--team applies to soccer bags; every car of a driving bag is cloned")
+    players, frames = bag_layout(paths, scenario)
+    if cfg.head_mode != "discrete":
+        raise ValueError("head_mode: learning from bags supports the discrete head only")
+    driving = scenario == "driving"
+    with_targets = with_targets and not driving          # driving has no self-supervised heads
+    cfg = cfg.replace(n_cars=players) if driving else cfg.replace(players_per_team=players)
     run = Path(run_dir)
     run.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    players, frames = bag_layout(paths)
-    if cfg.head_mode != "discrete":
-        raise ValueError("head_mode: learning from bags supports the discrete head only")
-    cfg = cfg.replace(players_per_team=players)
-    sequences, counts = bag_sequences(paths, cfg.rollout_length, players, frames, with_targets, learns)
+    sequences, counts = bag_sequences(paths, cfg.rollout_length, players, frames, with_targets, learns, scenario,
+                                      cfg.action_mode)
     if not sequences:
         raise ValueError(f"no whole sequence of {cfg.rollout_length} periods in the bags ({dict(counts)})")
     torch.set_num_threads(cfg.torch_threads)
     seeds = np.random.SeedSequence(cfg.seed).spawn(2)
     generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
-    motion = SoccerConfig.from_mapping({"players_per_team": players}).motion
     torch.manual_seed(int(seeds[1].generate_state(1)[0]))          # parameter init only
-    agent = DynEnvAgent(cfg.feature_size, "discrete", motion.head_units, motion.head_max_delta)
+    if driving:
+        agent = DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
+    else:
+        motion = SoccerConfig.from_mapping({"players_per_team": players}).motion
+        agent = DynEnvAgent(cfg.feature_size, "discrete", motion.head_units, motion.head_max_delta)
     learner = Learner(agent, cfg.ltp_horizon)
     optimizer = torch.optim.Adam(learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
     settings = clone_settings(cfg, with_targets)
@@ -151,10 +205,11 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
     save_policy(agent, str(run / "policy.safetensors"), {k: v for k, v in meta.items() if k != "config"})
     if logger is not None:
         logger.close()
-    keys = ("imitation_loss", "teacher_agreement", "localization_loss", "reconstruction_loss",
-            "localization_within_50cm")
-    summary = {"sequences": len(sequences), "robot_periods": len(sequences) * cfg.rollout_length,
-               "players_per_team": players, "frames_per_period": frames, "epochs": epochs, "updates": updates,
+    keys = ("imitation_loss", "teacher_agreement", "teacher_command_error", "localization_loss",
+            "reconstruction_loss", "localization_within_50cm")
+    summary = {"scenario": scenario, "sequences": len(sequences), "robot_periods": len(sequences) * cfg.rollout_length,
+               "n_cars" if driving else "players_per_team": players, "frames_per_period": frames, "epochs": epochs,
+               "updates": updates,
                "counts": dict(counts), "first_epoch": {k: history[0][k] for k in keys if k in history[0]},
                "last_epoch": {k: history[-1][k] for k in keys if k in history[-1]},
                "wall_seconds": time.perf_counter() - started}

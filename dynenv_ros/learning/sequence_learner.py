@@ -7,6 +7,9 @@ behaviour log-probabilities the policy nodes sent (``Action.log_prob``), with a 
 step of which was chosen more than ``max_policy_lag`` versions ago is dropped (counted). Advantages use the values
 the behaviour policy sent (``Action.value``), as PPO does with its rollout values.
 
+Both scenarios: ``cfg.scenario`` 'driving' learns the driving agent (``cfg.action_mode``) from the cars' sequences;
+they hold no step after a car's own episode end (``learning.experience``), so no alive mask is needed.
+
 Recurrent state: a sequence that ``continues`` its stream's previous one starts from the state the learner's
 network reached at the end of that one (computed after each update, no gradient — R2D2's "stored state", stale
 by at most one update); a stream's first sequence, one after a cut, and one whose predecessor was dropped start from
@@ -67,11 +70,14 @@ class SequenceLearner:
             raise ConfigError("reward_weights", f"must be 4 finite numbers, got {list(reward_weights)}")
         torch.set_num_threads(cfg.torch_threads)
         self.settings = update_settings(cfg)
-        soccer = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode})
-        self.soccer = soccer
         seeds = np.random.SeedSequence(cfg.seed).spawn(4)
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
-        agent = DynEnvAgent(cfg.feature_size, cfg.head_mode, soccer.motion.head_units, soccer.motion.head_max_delta)
+        if cfg.driving:           # the driving agent of cfg.action_mode (its heads and padded layout)
+            agent = DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
+        else:
+            motion = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team,
+                                                "head_mode": cfg.head_mode}).motion
+            agent = DynEnvAgent(cfg.feature_size, cfg.head_mode, motion.head_units, motion.head_max_delta)
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only
         self.learner = Learner(agent, cfg.ltp_horizon).eval()
         self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)

@@ -6,6 +6,7 @@ world.
     dynenv-train --resume runs/pred_s0
     dynenv-train --config driving_pred --set max_minutes=15 --run-dir runs/driving/pred_s0
     dynenv-train --from-bag bags/sample_2v2_realistic_30s --run-dir runs/bc_sample --epochs 5
+    dynenv-train --from-bag runs/drive_demo/bag --config driving_quick --run-dir runs/bc_driving --epochs 5
 
 ``--config`` takes a preset name from config/train/ or a YAML path; ``--set key=value`` overrides any field of
 ``TrainConfig`` (values in YAML syntax). Bad configs are refused with the key and the reason before any work.
@@ -57,11 +58,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its last checkpoint")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (logs still written)")
     parser.add_argument("--from-bag", nargs="+", metavar="BAG", help="learn offline from recorded bags: behaviour "
-                        "cloning of the recorded actions and the localization/reconstruction heads "
-                        "(learning/from_bag.py); rollout_length sets the sequence length")
+                        "cloning of the recorded actions and (soccer) the localization/reconstruction heads "
+                        "(learning/from_bag.py); rollout_length sets the sequence length; a driving bag needs a "
+                        "driving config (--config driving_quick)")
     parser.add_argument("--epochs", type=int, default=10, help="--from-bag: passes over the sequences")
     parser.add_argument("--batch-sequences", type=int, default=16, help="--from-bag: sequences per update")
-    parser.add_argument("--team", choices=("a", "b"), help="--from-bag: clone this team's robots only")
+    parser.add_argument("--team", choices=("a", "b"), help="--from-bag (soccer): clone this team's robots only")
     return parser.parse_args(argv)
 
 
@@ -118,7 +120,8 @@ def _from_bags(args: argparse.Namespace) -> int:
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
     first, last = summary["first_epoch"], summary["last_epoch"]
-    print(f"dynenv-train: {summary['sequences']} sequences ({summary['robot_periods']} robot-periods) from "
+    agents = "car" if summary["scenario"] == "driving" else "robot"
+    print(f"dynenv-train: {summary['sequences']} sequences ({summary['robot_periods']} {agents}-periods) from "
           f"{len(args.from_bag)} bag(s), {summary['epochs']} epochs, {summary['updates']} updates -> {run_dir}")
     for key in first:
         print(f"  {key}: {first[key]:.4f} (first epoch) -> {last[key]:.4f} (last)")

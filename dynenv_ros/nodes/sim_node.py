@@ -39,7 +39,8 @@ from dynenv_ros.ros.cdr import detection_array_cdr
 from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
 from dynenv_ros.ros.node_runner import run_node
-from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list)
+from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list,
+                                       refuse_other_scenario)
 from dynenv_ros.ros.qos import (REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, action_queue, latched,
                                 realtime_stream, sim_stream)
 from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, robot_transforms, static_transforms, tf_qos, tf_static_qos
@@ -76,12 +77,7 @@ class SimNode(Node):
         self.scenario = declare_str(self, "scenario", "robocup", "Which world: robocup (soccer) or driving (urban "
                                     "driving); read-only.", choices=SCENARIOS, **fixed)
         driving = self.scenario == "driving"
-        other = SCENARIOS[1 - SCENARIOS.index(self.scenario)]
-        given = sorted(set(SCENARIO_PARAMETERS[other]) & set(getattr(self, "_parameter_overrides", {}) or {}))
-        if given:
-            raise ParameterException(f"{', '.join(given)}: a parameter of scenario '{other}', not of "
-                                     f"'{self.scenario}' (it uses {', '.join(SCENARIO_PARAMETERS[self.scenario])})",
-                                     given)
+        refuse_other_scenario(self, self.scenario, SCENARIO_PARAMETERS)
         defaults = SCENARIO_DEFAULTS[self.scenario]
         # Both scenarios' parameters are declared (so --help and `ros2 param` list them all); a value given for the
         # other scenario's was refused above.

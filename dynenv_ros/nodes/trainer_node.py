@@ -1,11 +1,17 @@
 """The trainer node (``ros2 run dynenv_ros trainer_node``): learns from the experience of every simulator game and
 policy node it finds on the ROS graph, and streams new weights back to the policy nodes.
 
-- Experience: for each robot it discovers (``<game namespace>/<robot>/detections`` of type DetectionArray, e.g.
-  ``/game_1/team_a_0/detections``; the root namespace is a game too) it subscribes to the robot's detections,
-  actions (with the behaviour policy's learning fields) and step feedback, and to the game's ``world_state`` when
-  the variant learns localization or reconstruction. ``learning.experience`` assembles per-robot sequences aligned
-  by episode and motion period, counting what is late, duplicated, out of order, missing or malformed.
+- Scenario (``scenario``, read-only): ``robocup`` learns the soccer agent from robots ``team_a_<k>`` /
+  ``team_b_<k>`` (``players_per_team``, ``learning_team``); ``driving`` the driving agent (``action_mode``, the
+  simulator's and the policy node's) from cars ``car_<k>`` (``n_cars``), each car's episode ending where its
+  feedback says it ended (crashed, or home with its team's bonus decided). A parameter of the other scenario is
+  refused, as the simulator node refuses it.
+- Experience: for each robot (car) it discovers (``<game namespace>/<robot>/detections`` of type DetectionArray,
+  e.g. ``/game_1/team_a_0/detections``, ``/game_1/car_0/detections``; the root namespace is a game too) it
+  subscribes to the robot's detections, actions (with the behaviour policy's learning fields) and step feedback,
+  and to the game's ``world_state`` when the variant learns localization or reconstruction (soccer).
+  ``learning.experience`` assembles per-robot sequences aligned by episode and motion period, counting what is
+  late, duplicated, out of order, missing or malformed.
 - Learning: ``learning.sequence_learner`` in a thread of its own, so no callback waits for a gradient step; PPO
   against the stored behaviour log-probabilities, sequences older than ``max_policy_lag`` versions dropped
   (docs/decisions.md). Run directory, logs (CSV, TensorBoard) and checkpoints as ``dynenv-train`` writes them.
@@ -35,22 +41,30 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from dynenv_ros.learning.config import VARIANTS, ConfigError, TrainConfig
+from dynenv_ros.driving.config import MAX_CARS, DrivingConfig
+from dynenv_ros.learning.config import ACTION_MODES, SCENARIOS, VARIANTS, ConfigError, TrainConfig
 from dynenv_ros.learning.experience import ExperienceAssembler
+from dynenv_ros.learning.experience_scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.drain import take
 from dynenv_ros.ros.node_runner import NodeExit, run_node
-from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str
+from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, refuse_other_scenario
 from dynenv_ros.ros.qos import latched
 from dynenv_ros.soccer.config import SoccerConfig
 
-DETECTIONS = re.compile(r"^(?P<source>(/[A-Za-z0-9_]+)*)/(?P<robot>team_[ab]_[0-9]+)/detections$")
 DETECTION_TYPE = "dynenv_msgs/msg/DetectionArray"
 # Keep-last depths of the experience readers: deep enough that a stepped game's burst (an episode's last period and
 # the next one's first) and a learner holding the GIL for a moment lose nothing; bounded so a trainer that cannot
 # keep up falls behind in its own memory, never the games' (a reliable keep-last reader never blocks a writer).
 FRAME_DEPTH, MESSAGE_DEPTH = 400, 100
+# The parameters only one scenario uses (a value given for the other scenario is refused).
+SCENARIO_PARAMETERS = {"robocup": ("players_per_team", "learning_team"), "driving": ("n_cars", "action_mode")}
+
+
+def detections_pattern(agent_pattern: str) -> re.Pattern[str]:
+    """``<game namespace>/<agent>/detections`` for agents named by ``agent_pattern`` (the scenario's)."""
+    return re.compile(rf"^(?P<source>(/[A-Za-z0-9_]+)*)/(?P<robot>{agent_pattern})/detections$")
 
 
 def experience_qos(depth: int, latched: bool = False) -> QoSProfile:
@@ -66,9 +80,18 @@ class TrainerNode(Node):
     def __init__(self, **node_options: Any) -> None:
         super().__init__("trainer_node", **node_options)
         fixed = {"read_only": True}
-        players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team in the games.", **fixed)
+        self.scenario = declare_str(self, "scenario", "robocup", "Which games it learns from: robocup (soccer "
+                                    "robots) or driving (cars); the simulator's and the policy nodes'.",
+                                    choices=SCENARIOS, **fixed)
+        refuse_other_scenario(self, self.scenario, SCENARIO_PARAMETERS)
+        driving = self.scenario == "driving"
+        players = declare_int(self, "players_per_team", 2, 1, 5, "Robots per team in the games (robocup).", **fixed)
+        n_cars = declare_int(self, "n_cars", 2, 1, MAX_CARS, "Cars in each game, all learning (driving).", **fixed)
+        action_mode = declare_str(self, "action_mode", "discrete", "The cars' actions (driving): the simulator's "
+                                  "and the policy nodes' action_mode.", choices=ACTION_MODES, **fixed)
         variant = declare_str(self, "variant", "pred", "Paper row of losses (dynenv-train's variant; 'recon' needs "
-                              "pretrained_encoder, not available here).", choices=VARIANTS, **fixed)
+                              "pretrained_encoder, not available here; driving: baseline, icm, rcm or pred).",
+                              choices=VARIANTS, **fixed)
         learning_rate = declare_float(self, "learning_rate", 1e-4, 1e-7, 1.0, "Adam learning rate (settable).")
         entropy = declare_float(self, "entropy_coef", 0.01, 0.0, 10.0, "Weight of the entropy bonus (settable).")
         steps = declare_int(self, "sequence_length", 6, 1, 256, "Motion periods per sequence (T).", **fixed)
@@ -101,9 +124,9 @@ class TrainerNode(Node):
                               "--from-bag's policy.safetensors); ignored when resuming.", **fixed)
         resume = declare_bool(self, "resume", False, "Resume from run_dir's latest checkpoint (dynenv-train "
                               "--resume reads the same directory).", **fixed)
-        self.team = declare_str(self, "learning_team", "", "Robots whose experience is learnt: team 'a', 'b', or "
-                                "both ('': self-play with shared weights). Opponents are whoever controls the other "
-                                "team (a scripted node, a frozen policy node with weights_topic:='').",
+        self.team = declare_str(self, "learning_team", "", "Robots whose experience is learnt (robocup): team 'a', "
+                                "'b', or both ('': self-play with shared weights). Opponents are whoever controls "
+                                "the other team (a scripted node, a frozen policy node with weights_topic:='').",
                                 choices=("", "a", "b"), **fixed)
         patience = declare_int(self, "patience", 32, 1, 1000, "Periods a stream moves on before an incomplete one "
                                "counts as missing.", **fixed)
@@ -111,9 +134,10 @@ class TrainerNode(Node):
         threads = declare_int(self, "torch_threads", 1, 1, 256, "torch threads of the learner.", **fixed)
         diagnostics_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.",
                                       **fixed)
-        soccer = SoccerConfig.from_mapping({"players_per_team": players})
+        game = ({"scenario": "driving", "n_cars": n_cars, "action_mode": action_mode} if driving
+                else {"players_per_team": players})
         try:
-            self.cfg = TrainConfig(algorithm="ppo", variant=variant, players_per_team=players, rollout_length=steps,
+            self.cfg = TrainConfig(algorithm="ppo", variant=variant, **game, rollout_length=steps,
                                    ltp_horizon=min(6, steps), learning_rate=learning_rate, entropy_coef=entropy,
                                    feature_size=feature_size, gamma=gamma, normalize_advantages=normalize,
                                    ppo_epochs=epochs, ppo_minibatches=minibatches, gae_lambda=0.95,
@@ -130,10 +154,17 @@ class TrainerNode(Node):
         except ConfigError as error:            # every refusal names its parameter
             raise ParameterException(str(error), [error.key]) from None
         self.run_id = self.run_dir.resolve().name
-        motion = soccer.motion
-        self.assembler = ExperienceAssembler(steps, players, soccer.rates.frames_per_period, motion.head_max_delta,
-                                             motion.head_units, with_targets=self._needs_targets(),
-                                             patience=patience, learns=lambda name: self.team in ("", name[5]))
+        if driving:
+            agents: ExperienceScenario = DrivingExperience(DrivingConfig(n_cars=n_cars, action_mode=action_mode))
+            learns = None
+        else:
+            soccer = SoccerConfig.from_mapping({"players_per_team": players})
+            agents = SoccerExperience(players, soccer.rates.frames_per_period, soccer.motion.head_max_delta,
+                                      soccer.motion.head_units)
+            learns = self._learns
+        self.detections = detections_pattern(agents.agent_pattern)
+        self.assembler = ExperienceAssembler(steps, agents, with_targets=self._needs_targets(), patience=patience,
+                                             learns=learns)
         self.weights_pub = self.create_publisher(PolicyWeights, topics.WEIGHTS, latched(1))
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.TRAINER_DIAGNOSTICS,
                                                      QoSProfile(depth=10))
@@ -156,8 +187,14 @@ class TrainerNode(Node):
         if self.deadline is not None:
             self.budget_timer = self.create_timer(1.0, self._check_budget, clock=wall)
         self._discover()
-        self.get_logger().info(f"learning {variant} (PPO) from {'both teams' if not self.team else 'team ' + self.team}"
-                               f" into {self.run_dir}, version {self.learner.version}")
+        who = (f"{n_cars} cars ({action_mode})" if driving else
+               "both teams" if not self.team else "team " + self.team)
+        self.get_logger().info(f"learning {variant} (PPO) from {who} into {self.run_dir}, version "
+                               f"{self.learner.version}")
+
+    def _learns(self, robot: str) -> bool:
+        """Soccer: the robot is of ``learning_team`` (both teams when it is empty)."""
+        return self.team in ("", robot[5])
 
     def _needs_targets(self) -> bool:
         losses = self.cfg.losses()
@@ -173,7 +210,7 @@ class TrainerNode(Node):
     def _discover(self) -> None:
         """Subscribe to every robot that has appeared (names and types from the graph, no configuration)."""
         for name, types in self.get_topic_names_and_types():
-            match = DETECTIONS.match(name)
+            match = self.detections.match(name)
             if match is None or DETECTION_TYPE not in types:
                 continue
             source, robot = match["source"], match["robot"]
@@ -281,7 +318,7 @@ class TrainerNode(Node):
                   "learner_error": self.background.error, "last_missing": self.assembler.last_missing}
         for key in ("steps", "sequences", "late", "duplicate", "out_of_order", "missing", "malformed",
                     "not_learning", "cuts", "steps_discarded", "unknown_robot", "targets_missing",
-                    "bootstrap_estimated"):
+                    "bootstrap_estimated", "after_end", "actions_rounded"):
             values[key] = str(counts.get(key, 0))
         for key, value in list(self.learner.counts.items()) + list(self.background.counts.items()):
             values[key] = str(value)

@@ -47,6 +47,19 @@ def declare_str_list(node: Node, name: str, default: list[str], description: str
     return [v for v in value if v]
 
 
+def refuse_other_scenario(node: Node, scenario: str, parameters: dict[str, tuple[str, ...]]) -> None:
+    """Refuse (ParameterException naming them) the parameters given to ``node`` (``-p``, a params file,
+    ``parameter_overrides``) that belong to a scenario other than ``scenario``: each scenario's are declared so
+    ``--help`` lists them all, but one set for the other scenario would silently change nothing."""
+    given = set(getattr(node, "_parameter_overrides", {}) or {})
+    for other, names in parameters.items():
+        wrong = sorted(given & (set(names) - set(parameters.get(scenario, ()))))
+        if other != scenario and wrong:
+            from rclpy.exceptions import ParameterException
+            raise ParameterException(f"{', '.join(wrong)}: a parameter of scenario '{other}', not of '{scenario}' "
+                                     f"(it uses {', '.join(parameters.get(scenario, ())) or 'none of them'})", wrong)
+
+
 def _integer_override_to_double(node: Node, name: str) -> None:
     """``-p rate:=2`` arrives as an integer and rclpy refuses it for a double parameter; take it as 2.0."""
     from rclpy.parameter import Parameter
