@@ -74,8 +74,15 @@ def play(episodes: int = 3, players: int = 1, seed: int = 0, episode_seconds: fl
                 ok, reason = session.submit(i, episode, period, msg.walk, msg.turn, msg.kick, msg.head_yaw_delta)
                 assert ok, reason
 
-    for _ in range(episodes):
-        session.reset(seed=int(rng.integers(0, 2**31)))
+    _play_episodes(session, emit, answer, (int(rng.integers(0, 2**31)) for _ in range(episodes)))
+    return game
+
+
+def _play_episodes(session, emit, answer, seeds) -> None:
+    """One episode per world seed (drawn lazily, in turn with the answers' draws): every period's frames and
+    feedback through ``emit``, the answers for the next period through ``answer``, and the ignored final answer."""
+    for seed in seeds:
+        session.reset(seed=seed)
         output = session.initial()
         emit(output)
         while True:
@@ -85,7 +92,6 @@ def play(episodes: int = 3, players: int = 1, seed: int = 0, episode_seconds: fl
             if output.terminated or output.truncated:
                 answer(output.episode_id, output.motion_period + 1, submit=False)    # the ignored final answer
                 break
-    return game
 
 
 # -- driving ----------------------------------------------------------------------------------------------------------
@@ -171,15 +177,17 @@ def play_driving(action_mode: str = "discrete", episodes: int = 2, version: int 
                 ok, reason = session.submit(i, episode, period, msg.throttle, msg.brake, msg.steering)
                 assert ok, reason
 
-    for e in range(episodes):
-        session.reset(seed=CRASH_SEEDS[e % len(CRASH_SEEDS)])
-        output = session.initial()
-        emit(output)
-        while True:
-            answer(output.episode_id, output.motion_period + 1, submit=True)
-            output = session.step()
-            emit(output)
-            if output.terminated or output.truncated:
-                answer(output.episode_id, output.motion_period + 1, submit=False)    # the ignored final answer
-                break
+    _play_episodes(session, emit, answer, (CRASH_SEEDS[e % len(CRASH_SEEDS)] for e in range(episodes)))
     return game
+
+
+def shuffled_in_windows(messages: list, window: int, seed: int) -> list:
+    """The messages with their order shuffled inside consecutive windows of ``window`` (the disorder a transport
+    may bring within a period or so)."""
+    rng = np.random.default_rng(seed)
+    out = list(messages)
+    for start in range(0, len(out), window):
+        part = out[start:start + window]
+        rng.shuffle(part)
+        out[start:start + window] = part
+    return out

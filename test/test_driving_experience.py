@@ -13,7 +13,7 @@ import pytest
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.learning.experience import ExperienceAssembler
 from dynenv_ros.learning.experience_scenarios import DrivingExperience
-from experience_game import W, play_driving
+from experience_game import W, play_driving, shuffled_in_windows
 from test_experience import _feed
 
 T = 4
@@ -112,12 +112,7 @@ def test_each_cars_steps_are_what_it_chose_and_end_with_its_own_episode(game):
 def test_disorder_within_the_patience_window_changes_nothing(game):
     in_order = _assembler(game)
     expected = _feed(in_order, game.messages)
-    rng = np.random.default_rng(5)
-    shuffled = list(game.messages)
-    for start in range(0, len(shuffled), 9):            # 9 messages: one and a half periods of 2 cars
-        window = shuffled[start:start + 9]
-        rng.shuffle(window)
-        shuffled[start:start + 9] = window
+    shuffled = shuffled_in_windows(game.messages, 9, seed=5)     # 9 messages: one and a half periods of 2 cars
     assembler = _assembler(game)
     out = _feed(assembler, shuffled)
     assert assembler.counts["out_of_order"] > 0 and assembler.counts["missing"] == 0

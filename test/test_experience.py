@@ -11,7 +11,7 @@ import pytest
 
 from dynenv_ros.learning.experience import ExperienceAssembler, batch
 from dynenv_ros.learning.experience_scenarios import SoccerExperience
-from experience_game import HEAD_MAX, HEAD_UNITS, play
+from experience_game import HEAD_MAX, HEAD_UNITS, play, shuffled_in_windows
 
 T = 4
 
@@ -102,12 +102,7 @@ def test_targets_come_from_the_ground_truth_of_each_observations_last_frame(game
 
 def test_disorder_within_the_patience_window_changes_nothing(game):
     in_order = _feed(_assembler(game), game.messages)
-    rng = np.random.default_rng(3)
-    shuffled = list(game.messages)
-    for start in range(0, len(shuffled), 12):          # shuffled in windows of 12 messages (< 1 period of 2 robots)
-        window = shuffled[start:start + 12]
-        rng.shuffle(window)
-        shuffled[start:start + 12] = window
+    shuffled = shuffled_in_windows(game.messages, 12, seed=3)    # windows of 12 messages (< 1 period of 2 robots)
     assembler = _assembler(game)
     out = _feed(assembler, shuffled)
     assert assembler.counts["out_of_order"] > 0 and assembler.counts["missing"] == 0
