@@ -221,7 +221,7 @@ def test_shared_memory_is_released_on_close_collection_and_errors(monkeypatch):
     env.close()
     assert not ours & _shm_blocks()
     # Interrupted while waiting for the workers (Ctrl-C): the env refuses to go on out of step, close() cleans up.
-    env = SoccerVectorEnv(2, backend="subprocess", config=SHORT, parent_steps=False)
+    env = SoccerVectorEnv(2, backend="subprocess", workers=2, config=SHORT, parent_steps=False)
     env.reset(seed=0)
     ours = _blocks_of(env)
     conn = env._batch._conns[1]
