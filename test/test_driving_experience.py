@@ -182,7 +182,7 @@ def test_late_duplicate_lost_and_malformed_messages_are_counted_and_cut_cleanly(
     feedback = next(m for kind, car, m in messages if kind == "feedback" and car == "car_0")
     bad = []
     for message, changes in ((action, {"throttle": 1.5}), (action, {"brake": -0.2}), (action, {"steering": 2 * W}),
-                             (action, {"throttle": math.nan}), (action, {"log_prob": math.nan}),
+                             (action, {"throttle": math.nan}), (action, {"log_prob": math.nan}), (action, {"log_prob": 0.5}),
                              (action, {"value": math.inf}), (action, {"robot_id": 1}), (action, {"motion_period": 0}),
                              (frame, {"frames_per_period": 5}), (frame, {"frame_index": 1}), (frame, {"robot_id": 7}),
                              (feedback, {"reward_auxiliary": math.nan}), (feedback, {"robot_id": 1})):
@@ -207,3 +207,16 @@ def test_late_duplicate_lost_and_malformed_messages_are_counted_and_cut_cleanly(
 def test_a_driving_assembler_refuses_targets():
     with pytest.raises(ValueError, match="no self-supervised targets"):
         ExperienceAssembler(T, DrivingExperience(DrivingConfig(n_cars=2)), with_targets=True)
+
+
+def test_a_continuous_actions_log_density_may_exceed_zero():
+    """A clipped Gaussian's log-density is above 0 where its spread is below ≈ 0.4 (the brake starts at 0.2): such an
+    answer is learnt as it is, while a discrete answer's log-probability above 0 is malformed (the test above)."""
+    game = play_driving("continuous")
+    for kind, _, message in game.messages:
+        if kind == "action":
+            message.log_prob = 1.25
+    assembler = _assembler(game, patience=3)
+    sequences = _feed(assembler, game.messages)
+    assert assembler.counts["malformed"] == 0 and sequences
+    assert all(np.all(sequence.log_probs == np.float32(1.25)) for sequence in sequences)

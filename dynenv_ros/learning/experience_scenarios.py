@@ -47,6 +47,7 @@ class ExperienceScenario(Protocol):
     action_dtype: Any
     per_agent_ends: bool          # an agent's episode may end before its game's
     supports_targets: bool        # the self-supervised targets can be built from its ground truth
+    probability_actions: bool     # log_prob is a log-probability (≤ 0), not a log-density (continuous heads)
 
     def action_problem(self, msg: Any) -> str: ...
 
@@ -68,6 +69,7 @@ class SoccerExperience:
     action_width, action_dtype = 4, np.int64
     per_agent_ends = False
     supports_targets = True
+    probability_actions = True        # the trainer learns the discrete head only
 
     def __init__(self, players_per_team: int, frames: int, head_max: float, head_units: int) -> None:
         self.players, self.frames = players_per_team, frames
@@ -121,6 +123,8 @@ class DrivingExperience:
         self.idle = tuple(float(v) for v in BRAKE_COMMAND)
         discrete = self.action_mode == "discrete"
         self.action_width, self.action_dtype = (2, np.int64) if discrete else (3, np.float32)
+        # the clipped Gaussian's log-density exceeds 0 where its spread is below ≈ 0.4 (the brake starts at 0.2)
+        self.probability_actions = discrete
         # the nine commands, normalised [throttle, brake, steering / limit], index = 3 * acceleration + steering
         self._nine = np.array([(c.throttle, c.brake, c.steering / self.limit) for c in
                                (discrete_action(a, s, self.limit) for a in range(3) for s in range(3))])
