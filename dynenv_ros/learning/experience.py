@@ -259,8 +259,10 @@ class ExperienceAssembler:
         problem = self.scenario.action_problem(msg)
         if problem:
             return problem
+        if not version(msg):                # recorded before the learning fields existed: none to check
+            return ""
         at_most_zero = msg.log_prob <= 1e-4 or not self.scenario.probability_actions
-        if version(msg) and not (math.isfinite(msg.log_prob) and at_most_zero and math.isfinite(msg.value)):
+        if not (math.isfinite(msg.log_prob) and at_most_zero and math.isfinite(msg.value)):
             return "learning fields not finite"
         return ""
 
