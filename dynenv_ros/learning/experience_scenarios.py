@@ -24,12 +24,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from dynenv_ros.agent.driving_actions import BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.learning.rollout import can_act
 
 WALKS, TURNS, KICKS = 5, 3, 3     # Action.msg's soccer choices
 STAND_STILL = (0.0, 0.0, 0.0, 0.0)
-BOUND_TOLERANCE = 1e-5            # as agent.driving_actions and the simulator: float32 fields round off
 SOCCER_AGENT = r"team_[ab]_[0-9]+"
 DRIVING_AGENT = r"car_[0-9]+"
 
@@ -111,7 +111,6 @@ class DrivingExperience:
     supports_targets = False
 
     def __init__(self, config: Any, frames: int | None = None) -> None:
-        from dynenv_ros.agent.driving_actions import BRAKE_COMMAND, check_action_mode
         from dynenv_ros.driving.cars import discrete_action
         from dynenv_ros.envs.driving_observations import driving_layout
         self.action_mode = check_action_mode(config.action_mode)
@@ -133,13 +132,8 @@ class DrivingExperience:
         return np.array([float(msg.throttle), float(msg.brake), float(msg.steering) / self.limit])
 
     def action_problem(self, msg: Any) -> str:
-        values = self._normalised(msg)
-        if not np.isfinite(values).all():
-            return "command not finite"
-        if ((values < np.array([-1.0, 0.0, -1.0]) - BOUND_TOLERANCE).any()
-                or (values > 1.0 + BOUND_TOLERANCE).any()):
-            return "command out of range"
-        return ""
+        """Within the bounds (the policy node's own check); off the discrete grid is ``off_grid``'s, not a fault."""
+        return command_problem((msg.throttle, msg.brake, msg.steering), "continuous", self.limit)
 
     def _nearest(self, msg: Any) -> tuple[int, float]:
         distances = np.abs(self._nine - self._normalised(msg)).max(axis=1)
