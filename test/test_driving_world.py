@@ -177,13 +177,14 @@ def test_sim_benchmark_runs_the_driving_world():
     assert result.returncode == 0, result.stderr
     figures = json.loads(result.stdout)
     assert figures["scenario"] == "driving" and figures["cars"] == 3 and figures["env_steps_per_s"] > 0
-    assert figures["physics_ticks_per_s"] == round(figures["env_steps_per_s"] * 10)
+    # env_steps_per_s is printed to 0.1 and the derived rates are rounded from the unrounded figure: within 1
+    assert abs(figures["physics_ticks_per_s"] - figures["env_steps_per_s"] * 10) <= 1
     perceived = subprocess.run(command + ["--observation", "partial", "--perception", "dynenv"], capture_output=True,
                                text=True, timeout=120, cwd=REPO)
     assert perceived.returncode == 0, perceived.stderr
     figures = json.loads(perceived.stdout)
     assert figures["observation"] == "partial" and figures["perception"] == "dynenv"
-    assert figures["car_frames_per_s"] == round(figures["env_steps_per_s"] * 3)
+    assert abs(figures["car_frames_per_s"] - figures["env_steps_per_s"] * 3) <= 1
     refused = subprocess.run(command[:-1] + ["--observation", "padded"], capture_output=True, text=True,
                              timeout=120, cwd=REPO)
     assert refused.returncode == 2 and "none / full / partial" in refused.stderr
