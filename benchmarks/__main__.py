@@ -12,7 +12,7 @@ from collections.abc import Sequence
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
           "policy": "policy", "train": "train", "soak": "soak",
-          "flood": "flood", "ros-train": "ros_train"}
+          "flood": "flood", "ros-train": "ros_train", "cores": "cores"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -42,6 +42,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "flood":
             from benchmarks.flood import add_arguments as add_flood_arguments
             add_flood_arguments(sub)
+        if name == "cores":   # numpy only, in its worker processes
+            from benchmarks.cores import add_arguments as add_cores_arguments
+            add_cores_arguments(sub)
         if name == "ros-train":
             from benchmarks.ros_train import add_arguments as add_ros_train_arguments
             add_ros_train_arguments(sub)
