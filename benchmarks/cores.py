@@ -6,7 +6,7 @@ This suite measures it directly: each workload runs alone in a process pinned to
 started together, pinned to the first two cores; the scaling is ``2 x alone's time / the slower copy's time`` (2.0:
 independent cores). The workloads differ only in their working set:
 
-- ``python``: an interpreter loop on a few integers (no memory traffic);
+- ``interpreter``: a Python loop on a few integers (no memory traffic);
 - ``numpy-l2`` / ``numpy-l3`` / ``numpy-dram``: an elementwise multiply over 256 KiB, 8 MiB and 160 MiB arrays
   (inside a core's L2 on common x86 servers, inside a shared L3, beyond every cache).
 
@@ -26,8 +26,8 @@ from typing import Any
 from benchmarks.timing import print_table
 
 # workload -> number of float64 elements it sweeps (0: the interpreter loop)
-WORKLOADS = {"python": 0, "numpy-l2": 32 * 1024, "numpy-l3": 1024 * 1024, "numpy-dram": 20 * 1024 * 1024}
-PYTHON_LOOP = 100_000       # interpreter iterations in one repetition of ``python``
+WORKLOADS = {"interpreter": 0, "numpy-l2": 32 * 1024, "numpy-l3": 1024 * 1024, "numpy-dram": 20 * 1024 * 1024}
+PYTHON_LOOP = 100_000       # interpreter iterations in one repetition of ``interpreter``
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
