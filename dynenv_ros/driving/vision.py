@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pymunk
+import pymunk.batch
 
 from dynenv_ros.driving.roads import DrivingMap
 from dynenv_ros.driving.world import DrivingWorld
@@ -51,21 +53,63 @@ def driving_scene(world: DrivingWorld) -> DrivingScene:
         buildings=map_buildings(world.map), lanes=lanes, lane_kind=kinds, lane_width=cfg.map.lane_width)
 
 
-def driving_state(world: DrivingWorld) -> DrivingState:
-    """The world now, as perception's arrays (cars that left the world are marked absent)."""
-    values = []
-    for car in world.cars:
-        body = car.body
-        (x, y), (vx, vy), angle = body.position, body.velocity, body.angle
-        values += (x, y, angle, vx * math.cos(angle) + vy * math.sin(angle), body.angular_velocity, car.in_space,
-                   car.crashed, car.finished, car.goal_xy[0], car.goal_xy[1])
-    table = np.array(values, float).reshape(-1, 10)
-    peds = world.pedestrians
-    xy = np.array([tuple(b.position) for b in peds.bodies], float).reshape(-1, 2)
-    return DrivingState(x=table[:, 0], y=table[:, 1], yaw=np.remainder(table[:, 2] + math.pi, 2 * math.pi) - math.pi,
-                        speed=table[:, 3], yaw_rate=table[:, 4], present=table[:, 5] > 0, crashed=table[:, 6] > 0,
-                        finished=table[:, 7] > 0, goal_x=table[:, 8], goal_y=table[:, 9], pedestrian_x=xy[:, 0],
-                        pedestrian_y=xy[:, 1], pedestrian_alive=peds.alive.copy())
+_BODY_FIELDS = (pymunk.batch.BodyFields.BODY_ID | pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
+                | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
+
+
+class BodyTable:
+    """The pose and velocity of every car and pedestrian of one world, read from pymunk in one batch call.
+
+    Why: reading them body by body through pymunk's Python properties cost ≈ 28 µs per frame for 2 cars and 19
+    pedestrians, ≈ 7 % of a driving env step; ``pymunk.batch`` copies the whole space's bodies in ≈ 3 µs. Bodies
+    out of the space (a car that left at its destination, a pedestrian that was hit) are read one by one, as before.
+    Rows: cars first, then pedestrians; columns x, y, angle, vx, vy, angular velocity (map frame).
+    """
+
+    def __init__(self, world: DrivingWorld) -> None:
+        self.bodies = [car.body for car in world.cars] + list(world.pedestrians.bodies)
+        ids = np.array([body.id for body in self.bodies], np.int64)
+        self._order = np.argsort(ids)
+        self._sorted_ids = ids[self._order]
+        self._buffer = pymunk.batch.Buffer()
+        self.table = np.empty((len(self.bodies), 6))
+        self._ids: np.ndarray | None = None          # the batch's body ids at the last read, and their rows
+        self._mine = self._rows = self._absent = np.zeros(0, np.intp)
+
+    def read(self, space: pymunk.Space) -> np.ndarray:
+        self._buffer.clear()
+        pymunk.batch.get_space_bodies(space, _BODY_FIELDS, self._buffer)
+        ids = np.frombuffer(self._buffer.int_buf(), np.int64)
+        if self._ids is None or not np.array_equal(ids, self._ids):   # bodies left or joined: map the rows anew
+            self._ids = ids.copy()
+            at = np.minimum(np.searchsorted(self._sorted_ids, ids), len(self._sorted_ids) - 1)
+            self._mine = (self._sorted_ids[at] == ids).nonzero()[0]  # the space's other bodies (a car's controls)
+            self._rows = self._order[at[self._mine]]
+            self._absent = np.setdiff1d(np.arange(len(self.bodies)), self._rows)
+        values = np.frombuffer(self._buffer.float_buf(), np.float64).reshape(-1, 6)
+        self.table[self._rows] = values[self._mine]
+        for i in self._absent:
+            body = self.bodies[i]
+            (x, y), (vx, vy) = body.position, body.velocity
+            self.table[i] = (x, y, body.angle, vx, vy, body.angular_velocity)
+        return self.table
+
+
+def driving_state(world: DrivingWorld, bodies: BodyTable | None = None) -> DrivingState:
+    """The world now, as perception's arrays (cars that left the world are marked absent). ``bodies``: a
+    ``BodyTable`` of this world to read it with (made here when not given)."""
+    table = (bodies or BodyTable(world)).read(world.physics.space)
+    n = len(world.cars)
+    cars = np.array([(car.in_space, car.crashed, car.finished, car.goal_xy[0], car.goal_xy[1]) for car in world.cars],
+                    float).reshape(-1, 5)
+    angle = table[:n, 2]
+    return DrivingState(x=table[:n, 0].copy(), y=table[:n, 1].copy(),
+                        yaw=np.remainder(angle + math.pi, 2 * math.pi) - math.pi,
+                        speed=table[:n, 3] * np.cos(angle) + table[:n, 4] * np.sin(angle),
+                        yaw_rate=table[:n, 5].copy(), present=cars[:, 0] > 0, crashed=cars[:, 1] > 0,
+                        finished=cars[:, 2] > 0, goal_x=cars[:, 3], goal_y=cars[:, 4],
+                        pedestrian_x=table[n:, 0].copy(), pedestrian_y=table[n:, 1].copy(),
+                        pedestrian_alive=world.pedestrians.alive.copy())
 
 
 class DrivingVision:
@@ -88,10 +132,11 @@ class DrivingVision:
             self._rng = rng
         self.scene = driving_scene(self.world)
         self.perceiver = DrivingPerceiver(self.scene, self.params)
+        self.bodies = BodyTable(self.world)
 
     def perceive(self) -> DrivingPerception:
         """Every car's reports of the world as it is now (view v = car v; object ids = the snapshot's ids)."""
-        return self.perceiver.perceive(driving_state(self.world), self.rng)
+        return self.perceiver.perceive(driving_state(self.world, self.bodies), self.rng)
 
 
-__all__ = ["DrivingVision", "driving_scene", "driving_state", "map_lanes", "map_buildings"]
+__all__ = ["BodyTable", "DrivingVision", "driving_scene", "driving_state", "map_lanes", "map_buildings"]
