@@ -287,6 +287,46 @@ def pair_rows(kept, reported, true_class, xk, yk, size_factor, yaw_noise, v, j, 
     return rows
 
 
+@numba.njit(cache=True)
+def lane_reports(lv, k, bits, g, noisy, realistic, uniform, u, n2, m, miss_rate, range_offset, range_slope,
+                 range_reference, lateral_uniform, angle_uniform, lateral_base, lateral_per_m2, angle_std,
+                 lane_heading, oyaw, centre, size_y, n_views, lane_class, same_subtype, opposing_subtype,
+                 edge_subtype):
+    """The lane reports of ``clip_lanes``' segments in one call: when ``noisy`` each one missed (``u[0]``) at the
+    lane class's rate (``miss_rate`` = ρ x its scale, x the range factor when ``realistic``), shifted and turned
+    (from ``u[1:3]`` when ``uniform``, else the normal draws ``n2``), then ``lane_rows``, the yaw of each report's
+    direction (a painted line has no arrow: within ±π/2) and the view of each report."""
+    K = len(lv)
+    keep = np.ones(K, np.bool_)
+    shift, ct, st = np.zeros(K), np.ones(K), np.zeros(K)
+    if noisy:
+        for i in range(K):
+            dn = g[7, i]
+            mult = range_offset + range_slope * (dn / range_reference) ** 2 if realistic else 1.0
+            keep[i] = u[0, i] >= miss_rate * mult
+            if uniform:
+                shift[i] = (u[1, i] - 0.5) * m * lateral_uniform * mult
+                turn = (u[2, i] - 0.5) * m * angle_uniform * mult
+            else:
+                shift[i] = n2[0, i] * m * (lateral_base + lateral_per_m2 * dn * dn)
+                turn = n2[1, i] * m * angle_std
+            ct[i], st[i] = math.cos(turn), math.sin(turn)
+    same = np.empty(K, np.bool_)
+    for i in range(K):
+        same[i] = math.cos(lane_heading[k[i]] - oyaw[lv[i]]) >= 0
+    rows, gx, gy, seen = lane_rows(lv, k, bits, g, noisy, keep, shift, ct, st, same, centre, size_y, n_views,
+                                   lane_class, same_subtype, opposing_subtype, edge_subtype)
+    views = np.empty(len(rows), np.int64)
+    r = 0
+    for i in range(K):
+        if keep[i]:
+            views[r] = lv[i]
+            r += 1
+    for r in range(len(rows)):
+        rows[r].yaw = (math.atan2(gy[r], gx[r]) + math.pi / 2) % math.pi - math.pi / 2
+    return rows, views, seen
+
+
 # -- records (DETECTION_DTYPE rows written field by field; ``rows`` come zeroed) -------------------------------------
 @numba.njit(cache=True)
 def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy, m, speed_std, yaw_rate_std,
@@ -344,6 +384,29 @@ def sighting_bits(rows, distance, offsets, class_near, nearby2, car, pedestrian,
                     break
 
 
+@numba.njit(cache=True)
+def finish_rows(rows, view, distance, n_views, self_class, class_near, nearby2, car, pedestrian, obstacle, distant,
+                partial, nearby, z, separation, prior_logit, calibrated):
+    """The frame's last pass in one call: rows sorted view after view (``sort_by_view``), their DISTANT and NEARBY
+    bits (``sighting_bits``) and their confidence: the calibrated detector score of docs/perception.md from the
+    standard normal draws ``z`` (one per sorted row, drawn by the caller), 1 for SELF rows or when not
+    ``calibrated``. Returns the sorted rows and each view's first row (n_views + 1)."""
+    rows, order, offsets = sort_by_view(rows, view, distance.view(np.uint32), n_views, self_class)
+    sighting_bits(rows, distance[order], offsets, class_near, nearby2, car, pedestrian, obstacle, distant, partial,
+                  nearby)
+    half = separation * separation / 2
+    for i in range(len(rows)):
+        cls = rows[i].class_id
+        if not calibrated or cls == self_class:
+            rows[i].confidence = 1.0
+            continue
+        score = z[i]
+        if rows[i].true_id != -1 and rows[i].true_class == cls:
+            score += separation
+        rows[i].confidence = 1.0 / (1.0 + math.exp(-(prior_logit[cls] + separation * score - half)))
+    return rows, offsets
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel once, on tiny inputs."""
     z = np.zeros(1)
@@ -363,11 +426,17 @@ def warm_up() -> None:
               1.0, z + 1, z + 1, np.zeros(1, np.bool_), np.zeros(1, np.bool_), 0)
     rows, order, offsets = sort_by_view(rows, zi, np.zeros(1, np.uint32), 1, 0)
     sighting_bits(rows, np.zeros(1, np.float32), offsets, np.ones(256), 1.0, 1, 2, 3, 1, 2, 4)
+    finish_rows(rows, zi, np.zeros(1, np.float32), 1, 0, np.ones(256), 1.0, 1, 2, 3, 1, 2, 4, z, 1.0, np.zeros(256),
+                True)
     f = np.ones(1, np.bool_)
+    for noisy in (True, False):
+        for uniform in (True, False):
+            lane_reports(zi, zi, zi, np.ones((8, 1)), noisy, True, uniform, np.ones((3, 1)), np.ones((2, 1)), 1.0,
+                         0.1, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, z, z, f, z + 1, 1, 0, 0, 0, 0)
     for noisy, keep, e in ((True, f, z), (False, z, z)):
         lane_rows(zi, zi, zi, np.ones((8, 2))[:, :1], noisy, keep, e if noisy else z, e + 1 if noisy else z, e, f,
                   f, z + 1, 1, 0, 0, 0, 0)
 
 
 __all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "pair_rows", "self_rows", "sort_by_view", "sighting_bits",
-           "warm_up"]
+           "finish_rows", "lane_reports", "warm_up"]

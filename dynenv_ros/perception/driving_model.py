@@ -142,6 +142,7 @@ class DrivingPerceiver:
         self.lanes, self.lane_kind = lanes, np.asarray(scene.lane_kind, int)
         self.lane_heading = np.arctan2(lanes[:, 3] - lanes[:, 1], lanes[:, 2] - lanes[:, 0])
         self.lane_size_y = np.where(self.lane_kind == LANE_CENTRE, scene.lane_width, EDGE_WIDTH)
+        self._lane_centre = self.lane_kind == LANE_CENTRE
         miss = params.miss
         self._factor = np.array([miss.partial_factor if bits & _PARTIAL else miss.distant_factor
                                  if bits & _DISTANT else miss.nearby_factor if bits & _NEARBY else 1.0
@@ -163,6 +164,7 @@ class DrivingPerceiver:
         self._nearby2 = params.miss.nearby_distance ** 2
         self._no_self_noise = np.zeros((4, n))
         self._no_lane_noise = np.zeros(0)
+        self._no_draws = np.zeros(0)
         self._lane_len2 = np.maximum((lanes[:, 2] - lanes[:, 0]) ** 2 + (lanes[:, 3] - lanes[:, 1]) ** 2, _EPS)
 
     # ------------------------------------------------------------------------------------------------------------
@@ -367,32 +369,22 @@ class DrivingPerceiver:
             return (np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.intp)), np.zeros(V, int)
         R = p.classes[ObjectClass.LANE].max_range
         lv, k, bits, g = kernels.clip_lanes(self.lanes, self._lane_len2, ox, oy, c, s, R, p.lanes.min_length)
-        dn = g[7]
-        keep = shift = ct = st_ = self._no_lane_noise
+        u = n2 = self._no_lane_noise.reshape(0, 0)
+        lp = p.lanes
         if self.noisy:
-            m, lp = p.noise_magnitude, p.lanes
-            realistic = p.mode == "realistic"
-            mult = (p.miss.range_offset + p.miss.range_slope * (dn / p.miss.range_reference) ** 2 if realistic
-                    else np.ones(len(lv)))
             u = rng.random((3, len(lv)))
-            keep = u[0] >= p.rho * self.class_scale[_LANE] * mult
-            if lp.model == "uniform":
-                shift = (u[1] - 0.5) * m * lp.lateral_uniform * mult
-                turn = (u[2] - 0.5) * m * lp.angle_uniform * mult
-            else:
+            if lp.model != "uniform":
                 n2 = rng.standard_normal((2, len(lv)))
-                shift = n2[0] * m * (lp.lateral_base + lp.lateral_per_m2 * dn * dn)
-                turn = n2[1] * m * lp.angle_std
-            ct, st_ = np.cos(turn), np.sin(turn)           # turned about the nearest point, shifted along the normal
-        # Endpoint order by a rule of the observer's frame alone: nearer end first; equally far ends (both
-        # clipped at the range) rear end first, which a mirror image keeps; then the right end first. Never the map's
-        # direction of the line.
-        same = np.cos(self.lane_heading[k] - oyaw[lv]) >= 0
-        rows, gx, gy, lanes_seen = kernels.lane_rows(lv, k, bits, g, self.noisy, keep, shift, ct, st_, same,
-                                                     self.lane_kind == LANE_CENTRE, self.lane_size_y, V, _LANE, _SAME,
-                                                     _OPPOSING, _EDGE)
-        rows["yaw"] = (np.arctan2(gy, gx) + math.pi / 2) % math.pi - math.pi / 2     # a painted line has no arrow
-        return (rows, lv[keep] if self.noisy else lv), lanes_seen
+        # Missed, shifted along the normal and turned about the nearest point when noisy. Endpoint order by a rule
+        # of the observer's frame alone: nearer end first; equally far ends (both clipped at the range) rear end
+        # first, which a mirror image keeps; then the right end first. Never the map's direction of the line.
+        rows, views, lanes_seen = kernels.lane_reports(
+            lv, k, bits, g, self.noisy, p.mode == "realistic", lp.model == "uniform", u, n2, p.noise_magnitude,
+            p.rho * self.class_scale[_LANE], p.miss.range_offset, p.miss.range_slope, p.miss.range_reference,
+            lp.lateral_uniform, lp.angle_uniform, lp.lateral_base, lp.lateral_per_m2, lp.angle_std,
+            self.lane_heading, oyaw, self._lane_centre, self.lane_size_y, V, _LANE, _SAME, _OPPOSING,
+            _EDGE)
+        return (rows, views), lanes_seen
 
     # -- the observer itself -------------------------------------------------------------------------------------------
     def _self_rows(self, st: DrivingState, ox, oy, c, s, rng):
@@ -415,21 +407,15 @@ class DrivingPerceiver:
         rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
         view = np.concatenate([v for _, v in parts]).astype(np.int64)
         distance = np.hypot(rows["x"], rows["y"]).astype(np.float32)
-        rows, order, offsets = kernels.sort_by_view(rows, view, distance.view(np.uint32), self.n, _SELF)
-        # DISTANT and NEARBY from the report itself, by one rule for real and made-up reports alike.
-        kernels.sighting_bits(rows, distance[order], offsets, self.class_near, self.params.miss.nearby_distance ** 2,
-                              _CAR, _PED, _OBST, _DISTANT, _PARTIAL, _NEARBY)
-        cls = rows["class_id"]
-        # Confidence: the calibrated detector score of perception/model.py (docs/perception.md); SELF rows 1.
+        # Sorted, DISTANT and NEARBY from the report itself (one rule for real and made-up reports alike), and the
+        # confidence: the calibrated detector score of perception/model.py (docs/perception.md); SELF rows 1.
         p = self.params
-        if p.confidence == "none":
-            rows["confidence"] = 1.0
-        else:
-            sep = p.confidence_separation
-            correct = (rows["true_id"] != -1) & (rows["true_class"] == cls)
-            z = rng.standard_normal(len(rows)) + sep * correct
-            conf = 1.0 / (1.0 + np.exp(-(self.class_prior_logit[cls] + sep * z - sep * sep / 2)))
-            rows["confidence"] = np.where(cls == _SELF, 1.0, conf)
+        calibrated = p.confidence != "none"
+        z = rng.standard_normal(len(rows)) if calibrated else self._no_draws
+        rows, offsets = kernels.finish_rows(rows, view, distance, self.n, _SELF, self.class_near,
+                                            p.miss.nearby_distance ** 2, _CAR, _PED, _OBST, _DISTANT, _PARTIAL,
+                                            _NEARBY, z, float(p.confidence_separation), self.class_prior_logit,
+                                            calibrated)
         return DrivingPerception(rows, offsets, visible, seen, lanes_seen, ego)
 
 
