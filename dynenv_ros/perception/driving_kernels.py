@@ -327,6 +327,71 @@ def lane_reports(lv, k, bits, g, noisy, realistic, uniform, u, n2, m, miss_rate,
     return rows, views, seen
 
 
+UNIFORM_POSITION, GAUSSIAN_POSITION, POLAR_POSITION = 0, 1, 2     # ``pair_reports``' position error models
+
+
+@numba.njit(cache=True)
+def pair_reports(at, v, j, xk, yk, dk, bits, mult, ck, noisy, realistic, confusions, position_model, uniform_yaw,
+                 u, pos, g, yu, m, rho, class_scale, confusion_rate, confusion_target, uniform_scale, random_std,
+                 radial_base, radial_per_m2, bearing_std, size_std, yaw_std, near_car_range, near_car_probability,
+                 distant, partial, seen, hx, hy, rr, yaw, oyaw, team, n_cars, car):
+    """The reports of ``visible_pairs``' pairs in one call. When ``noisy``: each pair missed (``u[0]``) at its
+    class's rate, confused (``u[1]``, ``realistic`` with ``confusions``) into its class's target, moved by the
+    position error (``pos``: uniform draws for ``UNIFORM_POSITION``, normal ones otherwise), its size and heading
+    errored (normal ``g``; the heading from the uniform ``yu`` when ``uniform_yaw``) and, ``realistic``, chosen
+    (``u[2]``) to get a made-up pedestrian next to it when it is a nearby, unhidden car reported as a car. Marks
+    ``seen`` (the flat (view, object) pairs reported as their own class); returns the rows (``pair_rows``), the
+    kept pairs' indices, and per pair: confused, the near-car choice, and the errored position."""
+    K = len(at)
+    keep = np.ones(K, np.bool_)
+    confused = np.zeros(K, np.bool_)
+    near_car = np.zeros(K, np.bool_)
+    reported = ck.copy()
+    x, y = xk.copy(), yk.copy()
+    size_factor, yaw_noise = np.ones(K), np.zeros(K)
+    if noisy:
+        for i in range(K):
+            c = ck[i]
+            f = mult[i] if realistic else 1.0
+            keep[i] = u[0, i] >= rho * class_scale[c] * f
+            if realistic and confusions:
+                confused[i] = keep[i] and u[1, i] < confusion_rate[c + (bits[i] & distant) * 256] * f
+                if confused[i]:
+                    reported[i] = confusion_target[c]
+            if position_model == UNIFORM_POSITION:
+                scale = m * uniform_scale * f
+                x[i] = xk[i] + (pos[0, i] - 0.5) * scale
+                y[i] = yk[i] + (pos[1, i] - 0.5) * scale
+            elif position_model == GAUSSIAN_POSITION:
+                x[i] = xk[i] + pos[0, i] * m * random_std
+                y[i] = yk[i] + pos[1, i] * m * random_std
+            else:
+                d = dk[i]
+                r = max(0.0, d + pos[0, i] * m * (radial_base + radial_per_m2 * d * d))
+                b = math.atan2(yk[i], xk[i]) + pos[1, i] * m * bearing_std
+                x[i], y[i] = r * math.cos(b), r * math.sin(b)
+            size_factor[i] = max(0.2, 1.0 + m * size_std * g[0, i])
+            yaw_noise[i] = (yu[i] - 0.5) * m * yaw_std if uniform_yaw else g[1, i] * m * yaw_std
+            if realistic:
+                near_car[i] = (c == car and reported[i] == car and keep[i] and dk[i] < near_car_range
+                               and (bits[i] & (distant | partial)) == 0 and u[2, i] < near_car_probability * m)
+    n_kept = 0
+    for i in range(K):
+        if keep[i]:
+            n_kept += 1
+            if not confused[i]:
+                seen[at[i]] = True
+    kept = np.empty(n_kept, np.int64)
+    r = 0
+    for i in range(K):
+        if keep[i]:
+            kept[r] = i
+            r += 1
+    rows = pair_rows(kept, reported, ck, x, y, size_factor, yaw_noise, v, j, bits, hx, hy, rr, yaw, oyaw, team,
+                     n_cars, car)
+    return rows, kept, confused, near_car, x, y
+
+
 # -- records (DETECTION_DTYPE rows written field by field; ``rows`` come zeroed) -------------------------------------
 @numba.njit(cache=True)
 def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy, m, speed_std, yaw_rate_std,
@@ -421,6 +486,12 @@ def warm_up() -> None:
     clip_lanes(np.zeros((1, 4)), z + 1, z, z, z + 1, z, 1.0, 0.0)
     u8 = np.zeros(1, np.uint8)
     pair_rows(zi, u8, u8, z, z, z + 1, z, zi, zi, zi, z, z, z, z, z, np.zeros(1, np.int8), 1, 1)
+    for model in (UNIFORM_POSITION, GAUSSIAN_POSITION, POLAR_POSITION):
+        for flag in (True, False):
+            pair_reports(zi, zi, zi, z, z, z + 1, zi, z + 1, u8, flag, flag, flag, model, flag, np.ones((4, 1)),
+                         np.ones((2, 1)), np.ones((2, 1)), z, 1.0, 0.1, np.ones(256), np.zeros(512),
+                         np.arange(256, dtype=np.uint8), 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.1, 1, 2,
+                         np.zeros(1, np.bool_), z, z, z, z, z, np.zeros(1, np.int8), 1, 1)
     rows = np.zeros(1, _DETECTION)
     self_rows(rows, np.zeros((1, 8), np.float32), z, z, z, z, z + 1, z, z, z, np.zeros((4, 1)), True, 1.0, 1.0, 1.0,
               1.0, z + 1, z + 1, np.zeros(1, np.bool_), np.zeros(1, np.bool_), 0)
@@ -439,4 +510,5 @@ def warm_up() -> None:
 
 
 __all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "pair_rows", "self_rows", "sort_by_view", "sighting_bits",
-           "finish_rows", "lane_reports", "warm_up"]
+           "finish_rows", "lane_reports", "pair_reports",
+           "UNIFORM_POSITION", "GAUSSIAN_POSITION", "POLAR_POSITION", "warm_up"]

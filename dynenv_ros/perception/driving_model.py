@@ -165,6 +165,9 @@ class DrivingPerceiver:
         self._no_self_noise = np.zeros((4, n))
         self._no_lane_noise = np.zeros(0)
         self._no_draws = np.zeros(0)
+        self._no_pair_noise = np.zeros((4, 0))
+        self._position_model = (kernels.UNIFORM_POSITION if params.position.model == "uniform" else
+                                kernels.GAUSSIAN_POSITION if params.mode == "random" else kernels.POLAR_POSITION)
         self._lane_len2 = np.maximum((lanes[:, 2] - lanes[:, 0]) ** 2 + (lanes[:, 3] - lanes[:, 1]) ** 2, _EPS)
 
     # ------------------------------------------------------------------------------------------------------------
@@ -189,35 +192,29 @@ class DrivingPerceiver:
             miss.range_reference, visible)
         ck = self.cls[j]
         K = len(at)
-        reported, confused, keep = ck, np.zeros(K, bool), np.ones(K, bool)
-        size_factor, yaw_noise = np.ones(K), np.zeros(K)
         made_up = []
-        m, rho = p.noise_magnitude, p.rho
-        if self.noisy:
-            if p.mode != "realistic":
-                mult = np.ones(K)
+        m = p.noise_magnitude
+        u = pos = g = self._no_pair_noise
+        yu = self._no_draws
+        position = self._position_model
+        if self.noisy:      # the draws in their fixed order: miss/confusion/near-car, position, size and yaw, yaw
             u = rng.random((4, K))
-            keep = u[0] >= rho * self.class_scale[ck] * mult
-            if p.mode == "realistic" and p.confusions:
-                confused = keep & (u[1] < self._confusion_rate[ck + (bits & _DISTANT) * 256] * mult)
-                reported = np.where(confused, self._confusion_target[ck], ck)
-            xk, yk = self._position_noise(xk, yk, dk, mult, rng)
+            pos = rng.random((2, K)) if position == kernels.UNIFORM_POSITION else rng.standard_normal((2, K))
             g = rng.standard_normal((2, K))
-            size_factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
-            yaw_noise = self._yaw_noise(g[1], rng)
-            if p.mode == "realistic":
-                fp = p.false_positives
-                near_car = ((ck == _CAR) & (reported == _CAR) & keep & (dk < fp.near_car_range)
-                            & ((bits & (_DISTANT | _PARTIAL)) == 0) & (u[2] < fp.near_car_probability * m))
-                if near_car.any():
-                    w = near_car.nonzero()[0]
-                    made_up.append(self._near_car_pedestrians(v[w], xk[w], yk[w], YAW[j[w]] - oyaw[v[w]],
-                                                              self.hx[j[w]], self.hy[j[w]], rng))
+            if position == kernels.UNIFORM_POSITION:
+                yu = rng.random(K)
         seen = np.zeros(n * N, bool)
-        seen[at[keep & ~confused]] = True
-        kept = keep.nonzero()[0]
-        rows = kernels.pair_rows(kept, reported, ck, xk, yk, size_factor, yaw_noise, v, j, bits, self.hx, self.hy,
-                                 self.rr, YAW, oyaw, self.team, n, _CAR)
+        pp, fp = p.position, p.false_positives
+        rows, kept, confused, near_car, xk, yk = kernels.pair_reports(
+            at, v, j, xk, yk, dk, bits, mult, ck, self.noisy, realistic, bool(p.confusions), position,
+            position == kernels.UNIFORM_POSITION, u, pos, g, yu, m, p.rho, self.class_scale, self._confusion_rate,
+            self._confusion_target, pp.uniform_scale, pp.random_std, pp.radial_base, pp.radial_per_m2, pp.bearing_std,
+            pp.size_std, pp.yaw_std, fp.near_car_range, fp.near_car_probability, _DISTANT, _PARTIAL, seen, self.hx,
+            self.hy, self.rr, YAW, oyaw, self.team, n, _CAR)
+        if self.noisy and realistic and near_car.any():
+            w = near_car.nonzero()[0]
+            made_up.append(self._near_car_pedestrians(v[w], xk[w], yk[w], YAW[j[w]] - oyaw[v[w]], self.hx[j[w]],
+                                                      self.hy[j[w]], rng))
         v, confused = v[kept], confused[kept]
         parts = [(rows, v)]
         if self.noisy:
@@ -238,19 +235,6 @@ class DrivingPerceiver:
         return self._assemble(parts, visible.reshape(n, N), seen.reshape(n, N), lanes_seen, ego, rng)
 
     # -- noise -----------------------------------------------------------------------------------------------------
-    def _position_noise(self, x, y, d, mult, rng):
-        p, m = self.params.position, self.params.noise_magnitude
-        if p.model == "uniform":
-            scale = m * p.uniform_scale * (mult if self.params.mode == "realistic" else 1.0)
-            u = rng.random((2, len(x))) - 0.5
-            return x + u[0] * scale, y + u[1] * scale
-        g = rng.standard_normal((2, len(x)))
-        if self.params.mode == "random":
-            return x + g[0] * m * p.random_std, y + g[1] * m * p.random_std
-        r = np.maximum(0.0, d + g[0] * m * (p.radial_base + p.radial_per_m2 * d * d))
-        b = np.arctan2(y, x) + g[1] * m * p.bearing_std
-        return r * np.cos(b), r * np.sin(b)
-
     def _yaw_noise(self, g, rng):
         """Heading error: Gaussian σ = m·yaw_std (polar), uniform ± 0.5·m·yaw_std (uniform, the original)."""
         p, m = self.params.position, self.params.noise_magnitude
