@@ -367,7 +367,7 @@ class PartialObservation:
     def _gather(self) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray, np.ndarray]:
         """The period's frames: per frame its clipped feature rows and view offsets, the ego values (n, F, 8) and the
         previous actions (n, 3), clipped to their spaces; the infos' counts updated."""
-        from dynenv_ros.perception.detections import as_features
+        from dynenv_ros.perception.row_kernels import clipped_features
         n, b = self.config.n_cars, self.bound
         frames = self._perceptions
         features, offsets = [], []
@@ -375,9 +375,7 @@ class PartialObservation:
         counts = self._counts
         counts[:] = 0
         for f, p in enumerate(frames):
-            rows = as_features(p.detections)
-            np.minimum(np.maximum(rows, -b, out=rows), b, out=rows)
-            features.append(rows)
+            features.append(clipped_features(p.detections, b))
             offsets.append(p.offsets)
             ego[:, f] = p.ego
             counts[:, 0] += p.visible.sum(axis=1)

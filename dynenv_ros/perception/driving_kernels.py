@@ -392,6 +392,90 @@ def pair_reports(at, v, j, xk, yk, dk, bits, mult, ck, noisy, realistic, confusi
     return rows, kept, confused, near_car, x, y
 
 
+@numba.njit(cache=True)
+def dress_rows(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team, single_team, uniform_yaw, m,
+               size_std, yaw_std, pedestrian_radius, obstacle_half, car, pedestrian):
+    """Give reports that no object of their class stands behind (false positives, confusions) what a real report of
+    that class has (``DrivingPerceiver._dress`` says how), from the caller's draws: ``g`` (2, K) normal (size and
+    heading error), ``ur`` (rows, cars) uniform — per car report: the other car it copies, the car type when there
+    is none, the heading when there is none, then the heading error when ``uniform_yaw``, then the team when not
+    ``single_team``."""
+    present_cars = np.flatnonzero(present)
+    P = len(present_cars)
+    yaw_row = 3
+    team_row = 4 if uniform_yaw else 3
+    c = 0                                                      # the car reports' running index (ur's column)
+    for i in range(len(rows)):
+        r = rows[i]
+        f = max(0.2, 1.0 + m * size_std * g[0, i])
+        r.yaw = np.nan
+        r.team = 0
+        r.subtype = 0
+        size = (2 * pedestrian_radius if r.class_id == pedestrian else 2 * obstacle_half) * f
+        r.size_x = size
+        r.size_y = r.size_x
+        if r.class_id != car:
+            continue
+        vc = v[i]
+        own = present[vc]
+        choices = P - (1 if own else 0)
+        pick = np.int64(ur[0, c] * max(choices, 1))
+        if own and pick >= np.searchsorted(present_cars, vc):
+            pick += 1
+        none = choices <= 0
+        other = present_cars[min(pick, max(P - 1, 0))] if P else 0
+        src = np.int64(ur[1, c] * len(half_length)) if none else other
+        r.size_x = 2 * half_length[src] * f
+        r.size_y = 2 * half_width[src] * f
+        rel = (ur[2, c] * 2 - 1) * math.pi if none else yaw[src] - oyaw[vc]
+        noise = (ur[yaw_row, c] - 0.5) * m * yaw_std if uniform_yaw else g[1, i] * m * yaw_std
+        r.yaw = (rel + noise + math.pi) % (2 * math.pi) - math.pi
+        relation = team[src] * team[vc]
+        if not single_team and none:
+            relation = -1 if ur[team_row, c] < 0.5 else 1
+        r.team = relation
+        c += 1
+
+
+@numba.njit(cache=True)
+def place_made_up(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team, single_team, uniform_yaw, m,
+                  size_std, yaw_std, pedestrian_radius, obstacle_half, car, pedestrian, ox, oy, c, s, occ_x, occ_y,
+                  occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B, any_hides, class_max, partial):
+    """Made-up reports dressed (``dress_rows``, same draws), then only those a real object of their class could be
+    seen at (within its range, fewer than three sight lines blocked), PARTIAL when any is: the rows and their views."""
+    dress_rows(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team, single_team, uniform_yaw, m,
+               size_std, yaw_std, pedestrian_radius, obstacle_half, car, pedestrian)
+    K = len(rows)
+    blocked = np.zeros(K, np.int64)
+    ok = np.zeros(K, np.bool_)
+    for i in range(K):
+        r = rows[i]
+        x, y = np.float64(r.x), np.float64(r.y)
+        d = math.hypot(x, y)
+        vv = v[i]
+        wx, wy = c[vv] * x - s[vv] * y, s[vv] * x + c[vv] * y       # world offsets
+        if any_hides:
+            yaw_world = 0.0
+            if r.class_id == car:
+                ry = np.float64(r.yaw)
+                yaw_world = (0.0 if np.isnan(ry) else ry) + oyaw[vv]
+            hx, hy = np.float64(r.size_x) / 2, np.float64(r.size_y) / 2
+            ped = r.class_id == pedestrian
+            blocked[i] = _sight_lines_blocked(vv, -1, ox[vv] + wx, oy[vv] + wy, math.cos(yaw_world),
+                                              math.sin(yaw_world), 0.0 if ped else hx, 0.0 if ped else hy,
+                                              hx if ped else 0.0, r.class_id, wx, wy, d, ox, oy, present, occ_x,
+                                              occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B)
+        ok[i] = blocked[i] < 3 and d <= class_max[r.class_id]
+    keep = np.flatnonzero(ok)
+    out = np.empty(len(keep), rows.dtype)
+    views = np.empty(len(keep), np.int64)
+    for k in range(len(keep)):
+        out[k] = rows[keep[k]]
+        out[k].sighting = partial if blocked[keep[k]] > 0 else 0
+        views[k] = v[keep[k]]
+    return out, views
+
+
 # -- records (DETECTION_DTYPE rows written field by field; ``rows`` come zeroed) -------------------------------------
 @numba.njit(cache=True)
 def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy, m, speed_std, yaw_rate_std,
@@ -493,6 +577,11 @@ def warm_up() -> None:
                          np.arange(256, dtype=np.uint8), 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.1, 1, 2,
                          np.zeros(1, np.bool_), z, z, z, z, z, np.zeros(1, np.int8), 1, 1)
     rows = np.zeros(1, _DETECTION)
+    dressing = (zi, np.ones((2, 1)), np.ones((5, 1)), z, z, np.ones(1, np.bool_), z + 1, z + 1, np.ones(1, np.int8))
+    for flag in (True, False):
+        dress_rows(rows, *dressing, flag, flag, 1.0, 1.0, 1.0, 1.0, 1.0, 1, 2)
+        place_made_up(rows, *dressing, flag, flag, 1.0, 1.0, 1.0, 1.0, 1.0, 1, 2, z, z, z + 1, z, *occ, hides, 1,
+                      flag, np.ones(256), 2)
     self_rows(rows, np.zeros((1, 8), np.float32), z, z, z, z, z + 1, z, z, z, np.zeros((4, 1)), True, 1.0, 1.0, 1.0,
               1.0, z + 1, z + 1, np.zeros(1, np.bool_), np.zeros(1, np.bool_), 0)
     rows, order, offsets = sort_by_view(rows, zi, np.zeros(1, np.uint32), 1, 0)
@@ -511,4 +600,5 @@ def warm_up() -> None:
 
 __all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "pair_rows", "self_rows", "sort_by_view", "sighting_bits",
            "finish_rows", "lane_reports", "pair_reports",
+           "dress_rows", "place_made_up",
            "UNIFORM_POSITION", "GAUSSIAN_POSITION", "POLAR_POSITION", "warm_up"]

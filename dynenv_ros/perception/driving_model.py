@@ -166,6 +166,8 @@ class DrivingPerceiver:
         self._no_lane_noise = np.zeros(0)
         self._no_draws = np.zeros(0)
         self._no_pair_noise = np.zeros((4, 0))
+        # uniform draws per dressed car report: other car, car type, heading; heading error (uniform model); team
+        self._dress_draws_per_car = 3 + (params.position.model == "uniform") + (not self.single_team)
         self._position_model = (kernels.UNIFORM_POSITION if params.position.model == "uniform" else
                                 kernels.GAUSSIAN_POSITION if params.mode == "random" else kernels.POLAR_POSITION)
         self._lane_len2 = np.maximum((lanes[:, 2] - lanes[:, 0]) ** 2 + (lanes[:, 3] - lanes[:, 1]) ** 2, _EPS)
@@ -221,7 +223,7 @@ class DrivingPerceiver:
             if confused.any():       # re-dressed as a real report of the class it is given as
                 w = confused.nonzero()[0]
                 rows_c = rows.view(_RAW)[w].view(DETECTION_DTYPE)
-                self._dress(rows_c, v[w], oyaw, st, rng)
+                kernels.dress_rows(rows_c, v[w], *self._dressing(rows_c, oyaw, st, rng), _CAR, _PED)
                 keep_rows = (~confused).nonzero()[0]
                 parts = [(rows.view(_RAW)[keep_rows].view(DETECTION_DTYPE), v[keep_rows]), (rows_c, v[w])]
             made_up.append(self._uniform_false_positives(rng))
@@ -235,51 +237,20 @@ class DrivingPerceiver:
         return self._assemble(parts, visible.reshape(n, N), seen.reshape(n, N), lanes_seen, ego, rng)
 
     # -- noise -----------------------------------------------------------------------------------------------------
-    def _yaw_noise(self, g, rng):
-        """Heading error: Gaussian σ = m·yaw_std (polar), uniform ± 0.5·m·yaw_std (uniform, the original)."""
-        p, m = self.params.position, self.params.noise_magnitude
-        if p.model == "uniform":
-            return (rng.random(len(g)) - 0.5) * m * p.yaw_std
-        return g * m * p.yaw_std
-
     # -- made-up reports ---------------------------------------------------------------------------------------------
-    def _dress(self, rows, v, oyaw, st: DrivingState, rng):
-        """Give reports that no object of their class stands behind (false positives, confusions) what a real report
-        of that class has: a car the outline, heading (relative, with the heading error) and team of a randomly
-        chosen other car in the world (a random car type and heading when there is none); an obstacle or
-        pedestrian its class's size. Sizes get the same size error as real reports."""
-        cls = rows["class_id"]
-        K = len(rows)
-        p, m = self.params, self.params.noise_magnitude
-        g = rng.standard_normal((2, K))
-        f = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
-        rows["yaw"] = np.nan
-        rows["team"] = 0
-        rows["subtype"] = 0
-        ped, obst = cls == _PED, cls == _OBST
-        rows["size_x"] = np.where(ped, 2 * self.scene.pedestrian_radius, 2 * self.scene.obstacle_half) * f
-        rows["size_y"] = rows["size_x"]
-        car = (cls == _CAR).nonzero()[0]
-        if len(car):
-            vc = v[car]
-            pc = np.asarray(st.present, bool).nonzero()[0]
-            own = np.asarray(st.present, bool)[vc]
-            choices = len(pc) - own
-            pick = (rng.random(len(car)) * np.maximum(choices, 1)).astype(np.intp)
-            pick += own & (pick >= np.searchsorted(pc, vc))
-            none = choices <= 0
-            other = pc[np.minimum(pick, max(len(pc) - 1, 0))] if len(pc) else np.zeros(len(car), np.intp)
-            hl, hw = self.scene.car_half_length, self.scene.car_half_width
-            typ = (rng.random(len(car)) * len(hl)).astype(np.intp)       # no other car: one of the scene's outlines
-            src = np.where(none, typ, other)
-            rows["size_x"][car] = 2 * hl[src] * f[car]
-            rows["size_y"][car] = 2 * hw[src] * f[car]
-            rel = np.where(none, (rng.random(len(car)) * 2 - 1) * math.pi, np.asarray(st.yaw)[src] - oyaw[vc])
-            rows["yaw"][car] = _wrap(rel + self._yaw_noise(g[1, car], rng))
-            team = self.team[src] * self.team[vc]
-            if not self.single_team:
-                team = np.where(none, np.where(rng.random(len(car)) < 0.5, -1, 1), team)
-            rows["team"][car] = team
+    def _dressing(self, rows, oyaw, st: DrivingState, rng) -> tuple:
+        """The draws and scene arrays ``kernels.dress_rows`` needs to dress ``rows``: reports that no object of
+        their class stands behind (false positives, confusions) get what a real report of that class has — a car
+        the outline, heading (relative, with the heading error) and team of a randomly chosen other car in the
+        world (a random car type and heading when there is none); an obstacle or pedestrian its class's size; sizes
+        the same size error as real reports. Draws, in this order: (2, K) normal, then (rows, cars) uniform."""
+        p = self.params
+        g = rng.standard_normal((2, len(rows)))
+        ur = rng.random((self._dress_draws_per_car, int(np.count_nonzero(rows["class_id"] == _CAR))))
+        return (g, ur, oyaw, np.asarray(st.yaw, float), np.asarray(st.present, bool), self.scene.car_half_length,
+                self.scene.car_half_width, self.team, self.single_team, p.position.model == "uniform",
+                p.noise_magnitude, p.position.size_std, p.position.yaw_std, self.scene.pedestrian_radius,
+                self.scene.obstacle_half)
 
     def _uniform_false_positives(self, rng):
         """``trials`` chances per view, uniform in distance up to ``max_distance`` (and the class's range) and in
@@ -316,33 +287,13 @@ class DrivingPerceiver:
         """Dress the false positives, then keep only those a real object of their class could be seen at (within
         its range, not hidden) with the PARTIAL bit the same occlusion test gives a real one."""
         rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
-        v = np.concatenate([vv for _, vv in parts])
+        v = np.concatenate([vv for _, vv in parts]).astype(np.int64)
         if not len(rows):
             return None
         rows["true_id"] = -1
         rows["true_class"] = _UNKNOWN
-        self._dress(rows, v, oyaw, st, rng)
-        x, y = rows["x"].astype(float), rows["y"].astype(float)
-        cls = rows["class_id"]
-        d = np.hypot(x, y)
-        cv, sv = c[v], s[v]
-        wx, wy = cv * x - sv * y, sv * x + cv * y                            # world offsets
-        car = cls == _CAR
-        yaw_world = np.where(car, np.nan_to_num(rows["yaw"].astype(float)) + oyaw[v], 0.0)
-        half_x = rows["size_x"].astype(float) / 2
-        half_y = rows["size_y"].astype(float) / 2
-        ped = cls == _PED
-        if self._any_hides:
-            blocked = kernels.blocked_reports(v, ox[v] + wx, oy[v] + wy, np.cos(yaw_world), np.sin(yaw_world),
-                                              np.where(ped, 0.0, half_x), np.where(ped, 0.0, half_y),
-                                              np.where(ped, half_x, 0.0), cls, wx, wy, d, ox, oy,
-                                              np.asarray(st.present, bool), *self._occluders, self.hides, self.B)
-        else:
-            blocked = np.zeros(len(v), np.int64)
-        ok = ((blocked < 3) & (d <= self.class_max[cls])).nonzero()[0]
-        rows = rows.view(_RAW)[ok].view(DETECTION_DTYPE)
-        rows["sighting"] = (blocked[ok] > 0) * _PARTIAL
-        return rows, v[ok]
+        return kernels.place_made_up(rows, v, *self._dressing(rows, oyaw, st, rng), _CAR, _PED, ox, oy, c, s,
+                                     *self._occluders, self.hides, self.B, self._any_hides, self.class_max, _PARTIAL)
 
     # -- lanes -------------------------------------------------------------------------------------------------------
     def _lanes(self, ox, oy, oyaw, c, s, rng):
