@@ -72,11 +72,11 @@ class BodyTable:
         self._order = np.argsort(ids)
         self._sorted_ids = ids[self._order]
         self._buffer = pymunk.batch.Buffer()
-        self.table = np.empty((len(self.bodies), 6))
         self._ids: np.ndarray | None = None          # the batch's body ids at the last read, and their rows
         self._mine = self._rows = self._absent = np.zeros(0, np.intp)
 
     def read(self, space: pymunk.Space) -> np.ndarray:
+        """A new (bodies, 6) table of the bodies now (a new array each call: states made from it stay as they were)."""
         self._buffer.clear()
         pymunk.batch.get_space_bodies(space, _BODY_FIELDS, self._buffer)
         ids = np.frombuffer(self._buffer.int_buf(), np.int64)
@@ -87,12 +87,13 @@ class BodyTable:
             self._rows = self._order[at[self._mine]]
             self._absent = np.setdiff1d(np.arange(len(self.bodies)), self._rows)
         values = np.frombuffer(self._buffer.float_buf(), np.float64).reshape(-1, 6)
-        self.table[self._rows] = values[self._mine]
+        table = np.empty((len(self.bodies), 6))
+        table[self._rows] = values[self._mine]
         for i in self._absent:
             body = self.bodies[i]
             (x, y), (vx, vy) = body.position, body.velocity
-            self.table[i] = (x, y, body.angle, vx, vy, body.angular_velocity)
-        return self.table
+            table[i] = (x, y, body.angle, vx, vy, body.angular_velocity)
+        return table
 
 
 def driving_state(world: DrivingWorld, bodies: BodyTable | None = None) -> DrivingState:
@@ -103,12 +104,10 @@ def driving_state(world: DrivingWorld, bodies: BodyTable | None = None) -> Drivi
     cars = np.array([(car.in_space, car.crashed, car.finished, car.goal_xy[0], car.goal_xy[1]) for car in world.cars],
                     float).reshape(-1, 5)
     angle = table[:n, 2]
-    return DrivingState(x=table[:n, 0].copy(), y=table[:n, 1].copy(),
-                        yaw=np.remainder(angle + math.pi, 2 * math.pi) - math.pi,
-                        speed=table[:n, 3] * np.cos(angle) + table[:n, 4] * np.sin(angle),
-                        yaw_rate=table[:n, 5].copy(), present=cars[:, 0] > 0, crashed=cars[:, 1] > 0,
-                        finished=cars[:, 2] > 0, goal_x=cars[:, 3], goal_y=cars[:, 4],
-                        pedestrian_x=table[n:, 0].copy(), pedestrian_y=table[n:, 1].copy(),
+    return DrivingState(x=table[:n, 0], y=table[:n, 1], yaw=np.remainder(angle + math.pi, 2 * math.pi) - math.pi,
+                        speed=table[:n, 3] * np.cos(angle) + table[:n, 4] * np.sin(angle), yaw_rate=table[:n, 5],
+                        present=cars[:, 0] > 0, crashed=cars[:, 1] > 0, finished=cars[:, 2] > 0, goal_x=cars[:, 3],
+                        goal_y=cars[:, 4], pedestrian_x=table[n:, 0], pedestrian_y=table[n:, 1],
                         pedestrian_alive=world.pedestrians.alive.copy())
 
 

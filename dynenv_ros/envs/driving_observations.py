@@ -381,9 +381,9 @@ class PartialObservation:
             counts[:, 0] += p.visible.sum(axis=1)
             counts[:, 1] += p.seen.sum(axis=1)
             counts[:, 2] += p.lanes_seen
-        np.clip(ego, self._ego_low[:len(frames)], self._ego_high[:len(frames)], out=ego)
+        np.minimum(np.maximum(ego, self._ego_low[:len(frames)], out=ego), self._ego_high[:len(frames)], out=ego)
         actions = np.array([(a.throttle, a.brake, a.steering) for a in self.world.last_actions], np.float32)
-        np.clip(actions, self._action_low, self._action_high, out=actions)
+        np.minimum(np.maximum(actions, self._action_low, out=actions), self._action_high, out=actions)
         return features, offsets, ego, actions
 
     def build(self) -> tuple[list[Any], np.ndarray]:

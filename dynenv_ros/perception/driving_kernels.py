@@ -476,6 +476,42 @@ def place_made_up(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, t
     return out, views
 
 
+@numba.njit(cache=True)
+def uniform_false_positives(counts, u, classes, max_range, unknown):
+    """The uniform false positives of each view (``counts[v]`` chances that came up): class ``classes[u[0]]`` (an
+    ``unknown`` one is dropped), distance ``u[1]`` x the class's ``max_range``, bearing from ``u[2]`` all round; the
+    rows (class and position only) and their views."""
+    total = 0
+    for v in range(len(counts)):
+        total += counts[v]
+    cls = np.empty(total, np.uint8)
+    views = np.empty(total, np.int64)
+    M = 0
+    k = 0
+    for v in range(len(counts)):
+        for _ in range(counts[v]):
+            c = classes[np.int64(u[0, k] * len(classes))]
+            if c != unknown:
+                cls[k], views[k] = c, v
+                M += 1
+            else:
+                cls[k], views[k] = unknown, -1
+            k += 1
+    rows = np.zeros(M, _DETECTION)
+    out_views = np.empty(M, np.int64)
+    r = 0
+    for k in range(total):
+        if views[k] < 0:
+            continue
+        radius = u[1, k] * max_range[cls[k]]
+        bearing = (u[2, k] * 2 - 1) * math.pi
+        rows[r].class_id = cls[k]
+        rows[r].x, rows[r].y = radius * math.cos(bearing), radius * math.sin(bearing)
+        out_views[r] = views[k]
+        r += 1
+    return rows, out_views
+
+
 # -- records (DETECTION_DTYPE rows written field by field; ``rows`` come zeroed) -------------------------------------
 @numba.njit(cache=True)
 def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy, m, speed_std, yaw_rate_std,
@@ -576,6 +612,7 @@ def warm_up() -> None:
                          np.ones((2, 1)), np.ones((2, 1)), z, 1.0, 0.1, np.ones(256), np.zeros(512),
                          np.arange(256, dtype=np.uint8), 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.1, 1, 2,
                          np.zeros(1, np.bool_), z, z, z, z, z, np.zeros(1, np.int8), 1, 1)
+    uniform_false_positives(zi + 1, np.ones((3, 1)) / 2, np.ones(1, np.uint8), np.ones(256), 0)
     rows = np.zeros(1, _DETECTION)
     dressing = (zi, np.ones((2, 1)), np.ones((5, 1)), z, z, np.ones(1, np.bool_), z + 1, z + 1, np.ones(1, np.int8))
     for flag in (True, False):
@@ -600,5 +637,5 @@ def warm_up() -> None:
 
 __all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "pair_rows", "self_rows", "sort_by_view", "sighting_bits",
            "finish_rows", "lane_reports", "pair_reports",
-           "dress_rows", "place_made_up",
+           "dress_rows", "place_made_up", "uniform_false_positives",
            "UNIFORM_POSITION", "GAUSSIAN_POSITION", "POLAR_POSITION", "warm_up"]

@@ -256,19 +256,8 @@ class DrivingPerceiver:
         """``trials`` chances per view, uniform in distance up to ``max_distance`` (and the class's range) and in
         bearing all round; ``none`` draws nothing."""
         counts = rng.binomial(self.params.false_positives.trials, self._fp_probability, size=self.n)
-        v = np.repeat(np.arange(self.n), counts)
-        if not len(v):
-            return np.zeros(0, DETECTION_DTYPE), v
-        u = rng.random((3, len(v)))
-        cls = self._fp_classes[(u[0] * len(self._fp_classes)).astype(np.intp)]
-        real = (cls != _UNKNOWN).nonzero()[0]
-        v, cls, u = v[real], cls[real], u[:, real]
-        r = u[1] * self._fp_range[cls]
-        b = (u[2] * 2 - 1) * math.pi
-        rows = np.zeros(len(v), DETECTION_DTYPE)
-        rows["class_id"] = cls
-        rows["x"], rows["y"] = r * np.cos(b), r * np.sin(b)
-        return rows, v
+        u = rng.random((3, int(counts.sum())))
+        return kernels.uniform_false_positives(counts, u, self._fp_classes, self._fp_range, _UNKNOWN)
 
     def _near_car_pedestrians(self, v, cx, cy, yaw, hx, hy, rng):
         """Rule 4 of the paper for driving: a pedestrian reported next to a nearby car (the original: 10ρ per car

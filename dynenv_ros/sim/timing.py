@@ -5,6 +5,7 @@ Sim time is kept as an integer tick count and converted exactly (``fractions.Fra
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from fractions import Fraction
@@ -48,12 +49,12 @@ class Rates:
             ticks[name] = round(ratio)
         return cls(physics_hz, ticks["vision_hz"], ticks["motion_hz"])
 
-    @property
+    @functools.cached_property
     def tick_period(self) -> Fraction:
-        """Seconds per physics tick, exactly."""
+        """Seconds per physics tick, exactly (computed once: worlds ask for it every period)."""
         return 1 / Fraction(self.physics_hz).limit_denominator(10**9)
 
-    @property
+    @functools.cached_property
     def tick_seconds(self) -> float:
         return float(self.tick_period)
 
