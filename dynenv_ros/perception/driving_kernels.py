@@ -1,10 +1,14 @@
 """Compiled geometry of the driving perception (``driving_model.py``): the per-pair visibility, occlusion by
 rotated boxes along three sight lines, and lane clipping, as numba kernels (``@njit(cache=True)``).
 
-Each kernel does, pair by pair, exactly the floating-point operations the numpy expressions they replace did, in
-the same order, so the outputs are bit-identical (hypot, sqrt and the arithmetic are IEEE-exact or the same libm
-calls; angles are turned into cos/sin, and arctan2 taken, in numpy by the caller). No kernel draws random numbers:
-every draw stays in the caller's seeded ``numpy.random.Generator``, same draws in the same order.
+Each kernel does, pair by pair, the floating-point operations the numpy expressions they replace did, in the same
+order. The noise, dressing, placing and assembling kernels (``pair_reports``, ``dress_rows``, ``place_made_up``,
+``uniform_false_positives``, ``lane_reports``, ``finish_rows``) take cos, sin, atan2 and exp from libm where numpy
+used its own; their outputs were compared with the numpy code's over 1,050 frames (2-10 cars, the three presets,
+one and two teams, noise magnitudes 1-5) and were bit-identical. No kernel draws random numbers: every draw stays
+in the caller's seeded ``numpy.random.Generator``; the caller draws each block (a (rows, count) uniform block is
+the same numbers as that many row-long draws in turn) before the kernel that uses it, so a seed gives the same
+reports as before.
 
 The first call of each kernel compiles it (or loads it from ``__pycache__``, numba's cache, keyed on this file's
 contents and the CPU), which ``warm_up()`` does once per process.
