@@ -241,14 +241,17 @@ def test_each_driving_loss_reaches_its_parameters(mode, name):
 
 
 # -- the trainer -----------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("algorithm, mode", [("a2c", "discrete"), ("ppo", "continuous")])
-def test_trainer_writes_a_driving_run(tmp_path, algorithm, mode):
+@pytest.mark.parametrize("algorithm, mode, teacher", [("a2c", "discrete", False), ("ppo", "continuous", True),
+                                                      ("a2c", "discrete", True)])
+def test_trainer_writes_a_driving_run(tmp_path, algorithm, mode, teacher):
     from dynenv_ros.agent.checkpoint import load_policy
     from dynenv_ros.learning.trainer import Trainer
+    imitation = ["teacher=scripted", "imitation_coef=1"] if teacher else []
     cfg = load_config("config/train/driving_quick.yaml", [f"algorithm={algorithm}", f"action_mode={mode}",
                                                          "num_envs=1", "total_env_steps=24", "rollout_length=6",
                                                          "ppo_minibatches=1", "perception=none", "feature_size=16",
-                                                         "log_every_updates=2", "variant=pred", "ltp_horizon=3"])
+                                                         "log_every_updates=2", "variant=pred", "ltp_horizon=3",
+                                                         *imitation])
     summary = Trainer(cfg, tmp_path / "run", progress=False).run()
     run = tmp_path / "run"
     assert summary["env_steps"] == 24
@@ -257,7 +260,10 @@ def test_trainer_writes_a_driving_run(tmp_path, algorithm, mode):
     assert json.loads((run / "config.json").read_text())["scenario"] == "driving"
     agent, meta = load_policy(run / "policy.safetensors")
     assert agent.scenario == "driving" and agent.action_mode == mode
-    assert ",train/forward_loss," in (run / "metrics.csv").read_text()
+    metrics = (run / "metrics.csv").read_text()
+    assert ",train/forward_loss," in metrics
+    measure = ",train/teacher_agreement," if mode == "discrete" else ",train/teacher_command_error,"
+    assert (",train/imitation_loss," in metrics and measure in metrics) == teacher
 
 
 # -- a tiny task ------------------------------------------------------------------------------------------------------

@@ -7,16 +7,24 @@ truth lives, and cross the process boundary as four integers per robot.
 
 A teacher row is ``[walk, turn, kick, head]`` in the discrete action encoding (``soccer.actions.parse_action``):
 the head index is the scripted head turn rounded to the nearest of the 2·units + 1 discrete steps.
+
+Driving (``DrivingTeacher``, kind ``"scripted"``): the scripted driver (``driving.scripted.ScriptedDriver``: lane
+keeping along a route to the car's destination, yielding) labels every car, as the agent's action row: discrete
+``[acceleration, steering]`` indices, or continuous ``[throttle, brake, steering / max_yaw_rate]`` — the
+normalised units the learner stores its own continuous actions in.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from dynenv_ros.driving.config import DrivingConfig
+from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.soccer.actions import SoccerAction
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.scripted import act_all, team_policies
 
 TEACHERS = ("chaser", "keeper_and_chasers")
+DRIVING_TEACHERS = ("scripted",)
 
 
 def action_indices(action: SoccerAction, head_step: float, head_units: int) -> tuple[int, int, int, int]:
@@ -41,3 +49,19 @@ class Teacher:
         """Write the (A, 4) labels of ``world``'s current state into ``out``."""
         for i, action in enumerate(act_all(self.policies, world.snapshot())):
             out[i] = action_indices(action, self.head_step, self.head_units)
+
+
+class DrivingTeacher:
+    """Labels every car of a driving world with the scripted driver's action for the current state."""
+
+    def __init__(self, config: DrivingConfig, kind: str = "scripted") -> None:
+        if kind not in DRIVING_TEACHERS:
+            raise ValueError(f"a driving teacher must be one of {DRIVING_TEACHERS}, got {kind!r}")
+        self.driver = ScriptedDriver(config)
+        self.scale = None if config.action_mode == "discrete" else \
+            np.array([1.0, 1.0, 1.0 / config.cars.max_yaw_rate])
+
+    def label(self, world, out: np.ndarray) -> None:
+        """Write the (n_cars, width) labels of ``world``'s current state into ``out``."""
+        actions = np.asarray(self.driver.actions(world))
+        out[:] = actions if self.scale is None else actions * self.scale

@@ -46,7 +46,7 @@ from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.envs.learning_targets import target_shapes
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.envs.soccer_observations import SoccerObservations, perception_params
-from dynenv_ros.envs.teacher import TEACHERS, Teacher
+from dynenv_ros.envs.teacher import DRIVING_TEACHERS, TEACHERS, DrivingTeacher, Teacher
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.actions import Kick, Turn, Walk, parse_action
@@ -77,8 +77,8 @@ class BatchStep:
     # {key: (E, A, ...)} float32, and those of each finished episode's last observation; else None and {}.
     targets: dict[str, np.ndarray] | None = None
     final_targets: dict[int, dict[str, np.ndarray]] = field(default_factory=dict)
-    # teacher=KIND: (E, A, 4) int64, the scripted teacher's action for each robot at ``observations``' instant
-    # (envs.teacher); else None.
+    # teacher=KIND: (E, A, width), the scripted teacher's action for each robot or car at ``observations``' instant
+    # (envs.teacher): soccer (E, A, 4) int64; driving (E, A, 2) int64 or, continuous, (E, A, 3) float32; else None.
     teacher_actions: np.ndarray | None = None
     # Driving: (E, A) bool, the car can earn nothing more this episode (driving_v0's per-car termination: crashed, or
     # home with its team's bonus decided; every car when the episode ended by itself); else None.
@@ -103,6 +103,10 @@ class _Settings:
     teacher: str | None = None
     scenario = "soccer"
     action_width = 4             # [walk, turn, kick, head]
+    teacher_dtype = np.dtype(np.int64)
+
+    def make_teacher(self) -> Teacher | None:
+        return Teacher(self.config, self.teacher) if self.teacher is not None else None
 
     @property
     def n_agents(self) -> int:
@@ -130,9 +134,9 @@ class _DrivingSettings:
     perception: Any                      # DrivingPerceptionParams (padded) or None (full)
     max_lanes: int | None
     max_objects: int | None
+    teacher: str | None = None
     targets = False
     scripted_team_b = None
-    teacher = None
     scenario = "driving"
 
     @property
@@ -142,6 +146,13 @@ class _DrivingSettings:
     @property
     def action_width(self) -> int:       # discrete [acceleration, steering]; continuous [throttle, brake, steering]
         return 2 if self.config.action_mode == "discrete" else 3
+
+    @property
+    def teacher_dtype(self) -> np.dtype:
+        return np.dtype(np.int64 if self.config.action_mode == "discrete" else np.float32)
+
+    def make_teacher(self) -> DrivingTeacher | None:
+        return DrivingTeacher(self.config, self.teacher) if self.teacher is not None else None
 
     def observations(self) -> Any:
         from dynenv_ros.envs.driving_observations import observation_builder
@@ -178,7 +189,7 @@ def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, .
             spec.update({prefix + key: ((E, A) + shape, np.dtype(np.float32))
                          for key, shape in target_shapes(settings.config.players_per_team).items()})
     if settings.teacher is not None:
-        spec["teacher"] = ((E, A, 4), np.dtype(np.int64))
+        spec["teacher"] = ((E, A, settings.action_width), settings.teacher_dtype)
     spec["reward_terms"] = ((E, N_TERMS, A), np.dtype(np.float64))
     spec["terminated"] = ((E,), np.dtype(bool))
     spec["truncated"] = ((E,), np.dtype(bool))
@@ -206,7 +217,7 @@ class InProcessBatch:
             self._scripted = team_policies(n, settings.scripted_team_b, field=self.config.field,
                                            head_mode=self.config.head_mode, motion=self.config.motion)
             self._scripted_robots = range(n, 2 * n)
-        self._teacher = Teacher(self.config, settings.teacher) if settings.teacher is not None else None
+        self._teacher = settings.make_teacher()
         self.worlds = [settings.make_world() for _ in range(num_envs)]
         self.observers = [settings.observations() for _ in range(num_envs)]
         if arrays is None:
@@ -301,6 +312,8 @@ class InProcessBatch:
                     final[...] = self._obs[e][key]
                 world.reset(seed=int(world.rng.integers(2**63)))
                 self._observe_initial(e)
+            elif self._teacher is not None:
+                self._teacher.label(world, self.arrays["teacher"][e])
 
     def close(self) -> None:
         pass
@@ -641,7 +654,7 @@ class VectorEnv:
 
     @property
     def teacher_actions(self) -> np.ndarray:
-        """The teacher's (E, A, 4) labels of the observations returned last, copied."""
+        """The teacher's (E, A, width) labels of the observations returned last, copied (``BatchStep``)."""
         self._check_open()
         if self.teacher is None:
             raise RuntimeError(f"this {type(self).__name__} was made without a teacher")
@@ -763,14 +776,20 @@ class DrivingVectorEnv(VectorEnv):
     as a mapping. Actions (E, A, 2) discrete indices or (E, A, 3) [throttle, brake, steering] by
     ``config.action_mode``. ``BatchStep.agents_terminated`` (E, A): the car can earn nothing more this episode
     (driving_v0's per-car termination); its later actions are ignored by its world and its transitions until the
-    episode ends carry no reward. Backends, shards, ``copy`` and automatic resets as ``SoccerVectorEnv``."""
+    episode ends carry no reward. Backends, shards, ``copy`` and automatic resets as ``SoccerVectorEnv``.
+    ``teacher="scripted"``: every world also labels each car with the scripted driver's action for the state its
+    observation shows (``envs.teacher.DrivingTeacher``; (E, A, 2) indices, or (E, A, 3) normalised commands when
+    continuous): ``BatchStep.teacher_actions`` and ``self.teacher_actions``."""
 
     def __init__(self, num_envs: int, backend: str = "auto", workers: int | None = None,
                  config: DrivingConfig | Mapping[str, Any] | None = None, observation: str = "padded",
                  perception: Any = None, max_lanes: int | None = None, max_objects: int | None = None,
-                 copy: bool = True, pin_workers: bool = False, parent_steps: bool = True) -> None:
+                 copy: bool = True, pin_workers: bool = False, parent_steps: bool = True,
+                 teacher: str | None = None) -> None:
         from dynenv_ros.envs.driving_observations import driving_perception_params
         self.config = config if isinstance(config, DrivingConfig) else DrivingConfig.from_mapping(config or {})
+        if teacher is not None and teacher not in DRIVING_TEACHERS:
+            raise ValueError(f"teacher must be None or one of {DRIVING_TEACHERS}, got {teacher!r}")
         if observation not in VECTOR_OBSERVATIONS:
             raise ValueError(f"observation must be one of {VECTOR_OBSERVATIONS}, got {observation!r}")
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
@@ -781,7 +800,7 @@ class DrivingVectorEnv(VectorEnv):
             raise ValueError("observation='full' is noise-free ground truth: perception, max_lanes and max_objects "
                              "apply to observation='padded'")
         params = driving_perception_params(perception) if observation == "padded" else None
-        settings = _DrivingSettings(self.config, observation, params, max_lanes, max_objects)
+        settings = _DrivingSettings(self.config, observation, params, max_lanes, max_objects, teacher)
         observations = settings.observations()      # checks the layout maxima; gives the spaces
         self._start(settings, observations, int(num_envs), backend, workers, pin_workers, parent_steps, copy)
 

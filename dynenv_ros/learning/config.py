@@ -17,8 +17,9 @@ Rules worth knowing:
   ``use_localization: true`` and ``use_reconstruction: true``. The path's existence is checked by the trainer when it
   loads it, not here (a config read back from a checkpoint may name a file of another machine).
 * ``scenario: driving`` trains the driving agent (``DynEnvAgent(scenario='driving', action_mode)``) on
-  ``DrivingVectorEnv`` with ``n_cars`` cars per world, every car learning with the shared network. Soccer-only
-  settings are refused there with the key named: ``teacher`` (and the imitation settings), ``opponent`` other than
+  ``DrivingVectorEnv`` with ``n_cars`` cars per world, every car learning with the shared network. Its teacher is
+  ``scripted`` (the scripted driver; soccer's is ``chaser``), without teacher-driven worlds. Soccer-only settings
+  are refused there with the key named: ``teacher: chaser``, ``teacher_driven_worlds``, ``opponent`` other than
   ``self``, ``variant: recon``, ``use_localization`` / ``use_reconstruction``, ``pretrained_encoder``,
   ``privileged_pose_seeding`` (driving has no learning targets: no pose, no reconstruction). ``action_mode`` and
   ``n_cars`` other than their defaults are refused for ``scenario: robocup``.
@@ -42,6 +43,7 @@ VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
 OPPONENTS = ("self", "snapshot", "scripted", "random")
 BACKENDS = ("auto", "inprocess", "subprocess")
 TEACHER_KINDS = ("chaser",)     # one shared network has no slot input, so it cannot imitate a keeper in one slot
+DRIVING_TEACHER_KINDS = ("scripted",)   # the scripted driver (driving.scripted.ScriptedDriver)
 HEAD_MODES = ("discrete", "continuous")
 PERCEPTIONS = ("realistic", "dynenv", "none")        # the presets of dynenv_ros.perception (config/perception/)
 SCENARIOS = ("robocup", "driving")
@@ -181,7 +183,7 @@ class TrainConfig:
     teacher: str | None = _f(None, "Scripted teacher whose actions label every learning robot's states for an "
                                    "imitation loss (DAgger: the learner acts, the teacher labels): 'chaser' "
                                    "(every robot a chaser: one shared network cannot tell a keeper slot from a "
-                                   "chaser slot); null = none (paper).")
+                                   "chaser slot); driving: 'scripted' (the scripted driver); null = none (paper).")
     imitation_coef: float = _f(0.0, "Weight of the imitation loss −log π(teacher's action | s) at the start of "
                                     "training; needs a teacher.")
     imitation_decay_env_steps: int = _f(0, "Env steps over which imitation_coef falls linearly to "
@@ -249,12 +251,9 @@ class TrainConfig:
     def _validate_driving(self) -> None:
         """Soccer-only settings refused for driving, each with its key (module docstring)."""
         why = "is soccer-only; scenario 'driving' "
-        if self.teacher is not None:
-            raise ConfigError("teacher", why + "has no scripted teacher labels (set teacher: null)")
-        if self.imitation_coef > 0.0 or self.imitation_final_coef > 0.0:
-            raise ConfigError("imitation_coef", why + "has no imitation loss (no teacher)")
         if self.teacher_driven_worlds:
-            raise ConfigError("teacher_driven_worlds", why + "has no teacher")
+            raise ConfigError("teacher_driven_worlds", why + "has no teacher-driven worlds (the teacher labels, "
+                                                             "the learner drives)")
         if self.opponent != "self":
             raise ConfigError("opponent", why + "has no opponent team: every car of every world is driven and "
                                                 "trained by the policy (keep opponent: self)")
@@ -300,7 +299,7 @@ class TrainConfig:
         _choice("opponent", self.opponent, OPPONENTS)
         _choice("backend", self.backend, BACKENDS)
         if self.teacher is not None:
-            _choice("teacher", self.teacher, TEACHER_KINDS)
+            _choice("teacher", self.teacher, DRIVING_TEACHER_KINDS if self.driving else TEACHER_KINDS)
         _choice("head_mode", self.head_mode, HEAD_MODES)
         if self.head_mode != "discrete":
             raise ConfigError("head_mode", "only 'discrete' can be trained so far: the rollout stores integer actions "
@@ -366,7 +365,7 @@ class TrainConfig:
         if self.imitation_decay_env_steps < 0:
             raise ConfigError("imitation_decay_env_steps", f"must be >= 0, got {self.imitation_decay_env_steps}")
         if (self.imitation_coef > 0.0 or self.imitation_final_coef > 0.0) and self.teacher is None:
-            raise ConfigError("imitation_coef", "an imitation loss needs a teacher (set teacher: chaser)")
+            raise ConfigError("imitation_coef", "an imitation loss needs a teacher (set teacher: chaser; driving: scripted)")
         if self.teacher_driven_env_steps < 0:
             raise ConfigError("teacher_driven_env_steps", f"must be >= 0, got {self.teacher_driven_env_steps}")
         if self.teacher_driven_worlds:

@@ -15,9 +15,10 @@ by world, ``(E, A_learning) -> B``):
   with ``ball_known`` / ``robots_known``: seen at least once since the episode began (DynEnv wiped this memory
   every 6-step rollout, §12.18; here it lasts the episode).
 - ``initial_state``: the recurrent state before step 0, so the learner re-runs whole sequences from it.
-- ``teacher_actions`` (T, B, 4) int64 (``SoccerVectorEnv(teacher=...)`` only): the scripted teacher's action in
-  the state of observation t (``envs.teacher``), the imitation loss's label; the learner's own action is executed
-  (except in teacher-driven worlds).
+- ``teacher_actions`` (T, B, width) (a vector env made with ``teacher=...`` only): the scripted teacher's action in
+  the state of observation t (``envs.teacher``), the imitation loss's label, in the dtype and units of ``actions``
+  (soccer (T, B, 4) int64; driving its action mode's); the learner's own action is executed (except in
+  teacher-driven worlds, soccer only).
 - ``teacher_driven`` (B,) bool: the robot executed the teacher's actions in this rollout (DAgger's β share of the
   worlds, ``drive_with_teacher``); its steps are off-policy, so the learner leaves them out of the policy, entropy
   and value terms and learns from them only by imitation and the auxiliary losses.
@@ -183,7 +184,7 @@ class Rollout(StepArrays):
     initial_state: State
     targets: dict[str, np.ndarray] = field(default_factory=dict)
     seed_pose: np.ndarray | None = None     # (B, 6) privileged seeding only: the noisy true pose at step 0
-    teacher_actions: np.ndarray | None = None   # (T, B, 4) teacher labels (SoccerVectorEnv(teacher=...)) or None
+    teacher_actions: np.ndarray | None = None   # (T, B, width) teacher labels (a vector env's teacher=...) or None
     teacher_driven: np.ndarray | None = None    # (B,) bool: executed the teacher's actions (off-policy rows)
     alive: np.ndarray | None = None             # (T+1, B) bool, driving: the car's episode had not ended yet
 
@@ -404,6 +405,7 @@ class RolloutCollector:
         scale = np.ones(width)
         if dtype != np.int64:              # normalised steering → rad/s
             scale[2] = self.env.config.cars.max_yaw_rate
+        teacher = np.zeros((steps, B, width), dtype) if self.with_teacher else None
         initial_state = tuple(s.clone() for s in reset_state(self.state, torch.from_numpy(self._starts)))
         current = first
         for t in range(steps + 1):
@@ -417,6 +419,8 @@ class RolloutCollector:
                 break
             sampled, log_prob = sample_actions(self.agent, step, self.generator)
             actions[t], log_probs[t] = sampled.numpy().astype(dtype), log_prob.numpy()
+            if teacher is not None:
+                teacher[t] = flatten_robots(self._teacher, self.learning_robots)
             self.state = step.state
             sent = actions[t].reshape(E, k, width)
             result = self.env.step(sent if dtype == np.int64 else sent.astype(np.float64) * scale)
@@ -434,11 +438,13 @@ class RolloutCollector:
                 final_values[t] = self._final_values(result, truncated[t])
             self._account_driving(step_terms, ended, world_end, result)
             self._obs = result.observations
+            if self.with_teacher:
+                self._teacher = result.teacher_actions
             self._done = (self._done | car_done) & ~world_end
             self._starts = world_end.copy()          # the recurrent state restarts with the world's next episode
             current = self._learning_obs(self._obs)
         return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
-                       starts, alive.copy(), initial_state, alive=alive)
+                       starts, alive.copy(), initial_state, teacher_actions=teacher, alive=alive)
 
     def _account_driving(self, terms: np.ndarray, ended: np.ndarray, world_end: np.ndarray, result: Any) -> None:
         """Per-car episode sums; a finished car's record with ``home`` (finished, not crashed) and ``crashed``,

@@ -94,7 +94,7 @@ class Trainer:
         if cfg.driving:
             self.env: Any = DrivingVectorEnv(cfg.num_envs, backend=cfg.backend, observation="padded",
                                              config={"n_cars": cfg.n_cars, "action_mode": cfg.action_mode},
-                                             perception=cfg.perception)
+                                             perception=cfg.perception, teacher=cfg.teacher)
             agent.layout_spec = self.env.layout.spec
             learning = np.arange(cfg.n_cars)
         else:
