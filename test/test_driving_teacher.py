@@ -1,7 +1,7 @@
 """Imitation of the scripted driver (driving's teacher): every car labelled with the driver's action for the state its
 observation shows, in the agent's action units; labels stored by the collector; the imitation loss reaches the actor
 and, on its own, makes the policy agree with the driver; config refusals."""
-from types import SimpleNamespace
+import math
 
 import numpy as np
 import pytest
@@ -12,12 +12,13 @@ from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.driving.world import DrivingWorld
 from dynenv_ros.envs.vector import DrivingVectorEnv, _seeds
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, head_outputs, imitation_loss, run_sequence
 from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import RolloutCollector
+from imitation_helpers import imitate, imitation_measures, touched_by_imitation
 
-MAX_YAW_RATE = DrivingConfig().cars.max_yaw_rate     # the continuous steering label is the command / this limit
+# docs/driving.md: the steering limit is 2° per 100 ms (0.349 rad/s); a continuous label's steering is the command / it
+MAX_YAW_RATE = math.radians(2.0) / 0.1
 
 
 @pytest.mark.parametrize("mode", ["discrete", "continuous"])
@@ -93,13 +94,6 @@ def _setup(mode, seed=1):
     return env, Learner(agent, horizon=2), collector
 
 
-def _settings(**on):
-    base = dict(policy_coef=0.0, value_coef=0.0, entropy_coef=0.0, use_forward=False, use_rcm=False,
-                use_inverse=False, use_ltp=False)
-    base.update(on)
-    return UpdateSettings(**base)
-
-
 @pytest.mark.parametrize("mode", ["discrete", "continuous"])
 def test_the_labels_are_stored_and_imitation_alone_brings_the_policy_to_the_driver(mode):
     env, learner, collector = _setup(mode)
@@ -112,35 +106,13 @@ def test_the_labels_are_stored_and_imitation_alone_brings_the_policy_to_the_driv
     assert rollout.teacher_actions.shape == (12, 4, width)
     np.testing.assert_array_equal(rollout.teacher_actions[0], first.reshape(4, width))
     tensors = rollout.as_tensors()
-    T, B = rollout.steps, rollout.robots
-    zeros = torch.zeros(T, B)
-
-    learner.zero_grad(set_to_none=True)
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, _settings(imitation_coef=1.0),
-                              lambda *a: None)
-    loss.backward()
-    touched = {n for n, p in learner.named_parameters() if p.grad is not None and p.grad.abs().sum() > 0}
+    touched = touched_by_imitation(learner, tensors)
     assert not any(n.startswith("agent.critic") for n in touched) and touched
-
-    def measure():
-        with torch.no_grad():
-            out = run_sequence(learner.agent, tensors["obs"], tensors["initial_state"], tensors["starts"])
-            step = head_outputs(out, steps=T)
-            acting = torch.ones(T, B, dtype=torch.bool)
-            loss, agree = imitation_loss(learner.agent, step, tensors["teacher_actions"], acting)
-        return float(loss), agree
-
-    loss0, agree0 = measure()
-    optimizer = torch.optim.Adam(learner.parameters(), lr=3e-3)
-    for _ in range(80):
-        loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, _settings(imitation_coef=1.0),
-                                  lambda *a: None)
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
-    loss1, agree1 = measure()
+    loss0, agree0 = imitation_measures(learner, tensors)
+    imitate(learner, tensors, 80)
+    loss1, agree1 = imitation_measures(learner, tensors)
     assert loss1 < loss0 - 0.5
     if mode == "discrete":          # an untrained policy picks the driver's row of 3 x 3 by chance: ~1/9 of the time
-        assert float(agree0["teacher_agreement"]) < 0.5 and float(agree1["teacher_agreement"]) > 0.9
+        assert agree0["teacher_agreement"] < 0.5 and agree1["teacher_agreement"] > 0.9
     else:                           # the mean command's distance to the driver's, in normalised units
-        assert float(agree1["teacher_command_error"]) < 0.5 * float(agree0["teacher_command_error"])
+        assert agree1["teacher_command_error"] < 0.5 * agree0["teacher_command_error"]

@@ -10,7 +10,7 @@ import torch
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.teacher import action_indices
 from dynenv_ros.envs.vector import SoccerVectorEnv, _seeds
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, imitation_loss
+from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss
 from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import RolloutCollector
@@ -18,6 +18,7 @@ from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk, parse_acti
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.scripted import act_all, team_policies
 from dynenv_ros.soccer.world import SoccerWorld
+from imitation_helpers import imitate, imitation_measures, imitation_update_loss, touched_by_imitation
 
 HEAD_STEP = math.radians(12.5)     # MotionConfig: one discrete head unit
 HEAD_UNITS = 3                     # indices 0..6, 3 = no turn
@@ -118,58 +119,28 @@ def test_the_collector_stores_the_labels_of_each_acting_observation(teacher_roll
     assert "teacher_actions" in rollout.as_tensors()
 
 
-def _settings(**on):
-    base = dict(policy_coef=0.0, value_coef=0.0, entropy_coef=0.0, use_forward=False, use_rcm=False,
-                use_inverse=False, use_ltp=False)
-    base.update(on)
-    return UpdateSettings(**base)
-
-
 def test_imitation_loss_reaches_the_actor_and_encoder_not_the_critic(teacher_rollout):
     learner, rollout, _ = teacher_rollout
     tensors = rollout.as_tensors()
-    T, B = rollout.steps, rollout.robots
-    zeros = torch.zeros(T, B)
-    learner.zero_grad(set_to_none=True)
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, _settings(imitation_coef=1.0),
-                              lambda *a: None)
-    loss.backward()
-    touched = {n for n, p in learner.named_parameters() if p.grad is not None and p.grad.abs().sum() > 0}
+    touched = touched_by_imitation(learner, tensors)
     assert any(n.startswith("agent.walk") for n in touched), sorted(touched)[:5]
     assert any(n.startswith("agent.objects") for n in touched)
     assert not any(n.startswith("agent.critic") for n in touched)
     learner.zero_grad(set_to_none=True)
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, _settings(imitation_coef=0.0),
-                              lambda *a: None)
-    assert float(loss.detach()) == 0.0          # every other term is off: no imitation without its weight
+    assert float(imitation_update_loss(learner, tensors, coef=0.0).detach()) == 0.0   # every other term is off too
 
 
 def test_imitation_alone_makes_the_policy_agree_with_the_teacher(teacher_rollout):
     learner, rollout, _ = teacher_rollout
     tensors = rollout.as_tensors()
-    T, B = rollout.steps, rollout.robots
-    from dynenv_ros.learning.algorithms import run_sequence
-    from types import SimpleNamespace
 
     def agreement():
-        with torch.no_grad():
-            out = run_sequence(learner.agent, tensors["obs"], tensors["initial_state"], tensors["starts"])
-            step = SimpleNamespace(walk=out.walk[:T], turn=out.turn[:T], kick=out.kick[:T], head=out.head[:T])
-            acting = torch.ones(T, B, dtype=torch.bool)
-            loss, agree = imitation_loss(learner.agent, step, tensors["teacher_actions"], acting)
-            assert float(agree["teacher_agreement"]) <= min(float(agree[f"teacher_agreement_{h}"])
-                                                             for h in ("walk", "turn", "kick", "head"))
-            return float(loss), float(agree["teacher_agreement"])
+        loss, agree = imitation_measures(learner, tensors)
+        assert agree["teacher_agreement"] <= min(agree[f"teacher_agreement_{h}"] for h in ("walk", "turn", "kick", "head"))
+        return loss, agree["teacher_agreement"]
 
     loss0, agree0 = agreement()
-    optimizer = torch.optim.Adam(learner.parameters(), lr=3e-3)
-    zeros = torch.zeros(T, B)
-    for _ in range(60):
-        loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, _settings(imitation_coef=1.0),
-                                  lambda *a: None)
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
+    imitate(learner, tensors, 60)
     loss1, agree1 = agreement()
     assert agree0 < 0.5 and loss0 > 2.0          # an untrained policy: ~ log(5·3·3·7) ≈ 5.75 nats
     assert agree1 > 0.9 and loss1 < 0.5 * loss0

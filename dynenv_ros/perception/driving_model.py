@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynenv_ros.core.arrays import clamp
 from dynenv_ros.core.object_classes import ObjectClass, Sighting, Subtype
 from dynenv_ros.perception import driving_kernels as kernels
 from dynenv_ros.perception.detections import DETECTION_DTYPE
