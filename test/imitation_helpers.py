@@ -2,6 +2,7 @@
 imitation loss on, which parameters it reaches, a few optimiser steps of it, and the policy's agreement."""
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, head_outputs, imitation_loss, run_sequence
@@ -49,3 +50,22 @@ def imitation_measures(learner, tensors) -> tuple[float, dict[str, float]]:
         acting = torch.ones(T, B, dtype=torch.bool)
         loss, agree = imitation_loss(learner.agent, head_outputs(out, steps=T), tensors["teacher_actions"], acting)
     return float(loss), {k: float(v) for k, v in agree.items()}
+
+
+def follow_labels(make_env, periods: int, seed: int, to_actions=lambda labels: labels):
+    """Step a vector env made by ``make_env(backend)`` with its own teacher labels for ``periods`` periods, in the
+    in-process and the subprocess backend; both must give the same labels and rewards. Returns the labels
+    (periods + 1, E, A, width) and reward terms (periods, E, T, A) of the in-process run."""
+    runs = []
+    for backend in ("inprocess", "subprocess"):
+        with make_env(backend) as env:
+            env.reset(seed=seed)
+            labels, terms = [env.teacher_actions], []
+            for _ in range(periods):
+                step = env.step(to_actions(labels[-1]))
+                labels.append(step.teacher_actions)
+                terms.append(step.reward_terms)
+            runs.append((np.stack(labels), np.stack(terms)))
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])
+    return runs[0]

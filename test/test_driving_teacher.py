@@ -15,7 +15,7 @@ from dynenv_ros.envs.vector import DrivingVectorEnv, _seeds
 from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import RolloutCollector
-from imitation_helpers import imitate, imitation_measures, touched_by_imitation
+from imitation_helpers import follow_labels, imitate, imitation_measures, touched_by_imitation
 
 # docs/driving.md: the steering limit is 2° per 100 ms (0.349 rad/s); a continuous label's steering is the command / it
 MAX_YAW_RATE = math.radians(2.0) / 0.1
@@ -28,19 +28,9 @@ def test_following_the_labels_replays_the_scripted_driver_and_backends_agree(mod
     config = {"n_cars": 3, "action_mode": mode}
     worlds, periods, seed = 2, 40, 4
     unit = np.array([1.0, 1.0, MAX_YAW_RATE]) if mode == "continuous" else 1
-    runs = []
-    for backend in ("inprocess", "subprocess"):
-        with DrivingVectorEnv(worlds, backend=backend, config=config, perception="none", teacher="scripted") as env:
-            env.reset(seed=seed)
-            labels, terms = [env.teacher_actions], []
-            for _ in range(periods):
-                step = env.step(labels[-1] * unit if mode == "continuous" else labels[-1])
-                labels.append(step.teacher_actions)
-                terms.append(step.reward_terms)
-            runs.append((np.stack(labels), np.stack(terms)))
-    np.testing.assert_array_equal(runs[0][0], runs[1][0])
-    np.testing.assert_array_equal(runs[0][1], runs[1][1])
-    labels, terms = runs[0]
+    labels, terms = follow_labels(
+        lambda backend: DrivingVectorEnv(worlds, backend=backend, config=config, perception="none", teacher="scripted"),
+        periods, seed, lambda labels: labels * unit)
     width, dtype = (2, np.int64) if mode == "discrete" else (3, np.float32)
     assert labels.shape == (periods + 1, worlds, 3, width) and labels.dtype == dtype
 

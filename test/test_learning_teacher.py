@@ -18,7 +18,7 @@ from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk, parse_acti
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.scripted import act_all, team_policies
 from dynenv_ros.soccer.world import SoccerWorld
-from imitation_helpers import imitate, imitation_measures, imitation_update_loss, touched_by_imitation
+from imitation_helpers import follow_labels, imitate, imitation_measures, imitation_update_loss, touched_by_imitation
 
 HEAD_STEP = math.radians(12.5)     # MotionConfig: one discrete head unit
 HEAD_UNITS = 3                     # indices 0..6, 3 = no turn
@@ -37,19 +37,9 @@ def test_following_the_labels_replays_the_scripted_team_and_backends_agree():
     team (its head turns rounded the same way), and the two backends give the same labels."""
     config = SoccerConfig.from_mapping({"players_per_team": 1, "episode_seconds": 30.0})
     worlds, periods, seed = 2, 40, 5
-    runs = []
-    for backend in ("inprocess", "subprocess"):
-        with SoccerVectorEnv(worlds, backend=backend, config=config, perception="none", teacher="chaser") as env:
-            env.reset(seed=seed)
-            labels, terms = [env.teacher_actions], []
-            for _ in range(periods):
-                step = env.step(labels[-1])
-                labels.append(step.teacher_actions)
-                terms.append(step.reward_terms)
-            runs.append((np.stack(labels), np.stack(terms)))
-    np.testing.assert_array_equal(runs[0][0], runs[1][0])
-    np.testing.assert_array_equal(runs[0][1], runs[1][1])
-    labels, terms = runs[0]
+    labels, terms = follow_labels(
+        lambda backend: SoccerVectorEnv(worlds, backend=backend, config=config, perception="none", teacher="chaser"),
+        periods, seed)
     assert labels.dtype == np.int64 and labels.shape == (periods + 1, worlds, 2, 4)
     assert (labels[..., 0] == Walk.FORWARD).any() and (labels[..., 3] != HEAD_UNITS).any()   # it moves and looks
 
