@@ -235,7 +235,6 @@ class DrivingPerceiver:
         parts.append(self_rows)
         return self._assemble(parts, visible.reshape(n, N), seen.reshape(n, N), lanes_seen, ego, rng)
 
-    # -- noise -----------------------------------------------------------------------------------------------------
     # -- made-up reports ---------------------------------------------------------------------------------------------
     def _dressing(self, rows, oyaw, st: DrivingState, rng) -> tuple:
         """The draws and scene arrays ``kernels.dress_rows`` needs to dress ``rows``: reports that no object of
