@@ -93,3 +93,40 @@ def test_cli_refuses_the_other_scenarios_flags(capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert flag in err and "only" in err
+
+
+def test_merge_makes_each_run_one_unit_and_refuses_what_does_not_fit(tmp_path, capsys):
+    """dynenv-eval merge: one row per input file, each the mean of that file's per-seed numbers; compare reads it."""
+    common = ["--scenario", "driving", "--episodes", "1", "--perception", "none", "--episode-seconds", "3", "--quiet"]
+    runs = []
+    for k in range(3):                           # three "training runs", each evaluated on the same two seeds
+        out = tmp_path / f"run{k}.json"
+        torch.manual_seed(k)
+        policy = tmp_path / f"policy{k}.safetensors"
+        save_policy(DynEnvAgent(16, scenario="driving"), str(policy))
+        assert main([str(policy), *common, "--seeds", "0", "1", "--out", str(out)]) == 0
+        runs.append(out)
+    merged_path = tmp_path / "merged.json"
+    assert main(["merge", *map(str, runs), "--out", str(merged_path)]) == 0
+    merged = load_evaluation(merged_path)
+    assert [row["seed"] for row in merged["per_seed"]] == [0, 1, 2]
+    for row, path in zip(merged["per_seed"], runs):
+        seeds = json.loads(path.read_text())["per_seed"]
+        assert row["unit"] == str(path) and row["episodes"] == 2
+        for metric in ("total", "home_rate", "crash_rate", "auxiliary"):
+            assert row[metric] == pytest.approx(sum(s[metric] for s in seeds) / len(seeds))
+    assert len(merged["episodes"]) == 6 and merged["summary"]["total"]["n"] == 3
+    capsys.readouterr()
+    assert main(["compare", str(runs[0]), str(merged_path), "--draws", "100", "--tune", "100"]) == 0
+    assert "(n=3) vs run0 (n=2)" in capsys.readouterr().out
+
+    other = tmp_path / "other_seeds.json"        # evaluated on other seeds: not the same settings
+    assert main(["random", *common, "--seeds", "5", "--out", str(other)]) == 0
+    assert main(["merge", str(runs[0]), str(other), "--out", str(tmp_path / "bad.json")]) == 2
+    error = capsys.readouterr().err
+    assert "settings differ" in error and "seeds" in error
+    assert not (tmp_path / "bad.json").exists()
+    (tmp_path / "broken.json").write_text("{not json")
+    assert main(["merge", str(runs[0]), str(tmp_path / "broken.json"), "--out", str(tmp_path / "bad.json")]) == 2
+    assert "not readable JSON" in capsys.readouterr().err
+    assert main(["merge", str(runs[0]), "--out", str(tmp_path / "no_folder" / "m.json")]) == 2

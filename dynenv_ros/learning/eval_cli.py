@@ -8,6 +8,7 @@
     dynenv-eval --scenario driving random --episodes 4 --seeds 0 1 2 --out random.json
     dynenv-eval --scenario driving scripted --episodes 4 --seeds 0 1 2 --out scripted.json
     dynenv-eval compare random.json pred.json --metric total
+    dynenv-eval merge pred_s0.json pred_s1.json pred_s2.json --out pred.json   # the runs as BEST's units
 
 Driving: the policy ("random", "scripted" or a driving checkpoint) drives every car (--cars) of the same seeded
 episodes; there is no opponent (--opponent is refused): "against random / scripted" is the comparison of the
@@ -80,6 +81,30 @@ def _compare_parser() -> argparse.ArgumentParser:
     parser.add_argument("--chains", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0, help="sampler seed")
     return parser
+
+
+def _merge_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=f"{PROG} merge", description="One result whose per-seed rows are training runs: each "
+                     "input's mean over its seeds (BEST with the run as the unit, when every run was evaluated on "
+                     "several seeds).")
+    parser.add_argument("results", type=Path, nargs="+", help="dynenv-eval result JSONs, one per training run")
+    parser.add_argument("--out", type=Path, required=True, help="write the merged result (JSON) here")
+    return parser
+
+
+def run_merge(args: argparse.Namespace) -> int:
+    from dynenv_ros.learning.evaluation import load_evaluation, merge_runs, write_json
+    try:
+        _check_folder(args.out, "--out")
+        results = [load_evaluation(path) for path in args.results]
+        merged = merge_runs(results, [str(path) for path in args.results])
+        write_json(merged, args.out)
+    except (ValueError, OSError) as error:
+        return _fail(str(error))
+    for row in merged["per_seed"]:
+        print(f"unit {row['seed']}: {row['unit']} ({row['episodes']} episodes), total {row['total']:.4g}")
+    print(f"wrote {args.out}")
+    return 0
 
 
 def _fail(message: str) -> int:
@@ -174,6 +199,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "compare":
         return run_compare(_compare_parser().parse_args(argv[1:]))
+    if argv and argv[0] == "merge":
+        return run_merge(_merge_parser().parse_args(argv[1:]))
     return run_eval(_eval_parser().parse_args(argv))
 
 

@@ -485,7 +485,43 @@ def seed_values(result: Mapping[str, Any], metric: str) -> list[float]:
     return values
 
 
+def merge_runs(results: Sequence[Mapping[str, Any]], names: Sequence[str]) -> dict[str, Any]:
+    """One result whose per-seed rows are training runs, for BEST with the run as the unit when each run was
+    evaluated on several seeds: row k is ``results[k]``'s mean over its seeds of every per-seed number (its
+    ``episodes`` summed), ``seed`` k and ``unit`` ``names[k]``. The inputs must share their scenario and settings
+    (episodes, seeds, players or cars, perception, ...): a clear ValueError names what differs."""
+    if len(results) < 1 or len(results) != len(names):
+        raise ValueError("merge needs one name per result and at least one result")
+    first = results[0]
+    for name, result in zip(names[1:], results[1:]):
+        if result.get("scenario", "robocup") != first.get("scenario", "robocup"):
+            raise ValueError(f"{name}: scenario {result.get('scenario', 'robocup')!r}, the first result's is "
+                             f"{first.get('scenario', 'robocup')!r}")
+        differ = sorted(k for k in set(result["settings"]) | set(first["settings"])
+                        if result["settings"].get(k) != first["settings"].get(k))
+        if differ:
+            raise ValueError(f"{name}: settings differ from the first result's in {', '.join(differ)}")
+    keys = [k for k, v in first["per_seed"][0].items() if k not in ("seed", "episodes") and
+            isinstance(v, (int, float)) and not isinstance(v, bool)] if first["per_seed"] else []
+    rows = []
+    for k, (name, result) in enumerate(zip(names, results)):
+        seeds = result["per_seed"]
+        if not seeds or any(key not in row for row in seeds for key in keys):
+            raise ValueError(f"{name}: its per-seed rows do not have the first result's numbers")
+        row: dict[str, Any] = {"seed": k, "unit": name, "episodes": int(sum(r["episodes"] for r in seeds))}
+        row.update({key: float_mean(r[key] for r in seeds) for key in keys})
+        rows.append(row)
+    merged = {key: value for key, value in first.items() if key not in ("episodes", "per_seed", "summary", "counts")}
+    merged["evaluated"] = {"spec": "runs", "kind": "runs",
+                           "units": [{"unit": name, **result["evaluated"]} for name, result in zip(names, results)]}
+    merged["episodes"] = [dict(record, unit=name) for name, result in zip(names, results)
+                          for record in result["episodes"]]
+    merged["per_seed"] = rows
+    merged["summary"] = summarize(rows, keys)
+    return merged
+
+
 __all__ = ["TeamPolicy", "RandomTeam", "ScriptedTeam", "AgentTeam", "make_team_policy", "sample_space",
            "episode_seeds", "play_episode", "evaluate", "seed_means", "summarize", "format_table", "write_json",
-           "load_evaluation", "seed_values", "positive_part", "positive_reward", "paper_metric", "TERMS",
+           "load_evaluation", "seed_values", "merge_runs", "positive_part", "positive_reward", "paper_metric", "TERMS",
            "SEED_METRICS", "DEFAULT_SCRIPTED", "FORMAT"]
