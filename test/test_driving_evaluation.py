@@ -130,3 +130,6 @@ def test_merge_makes_each_run_one_unit_and_refuses_what_does_not_fit(tmp_path, c
     assert main(["merge", str(runs[0]), str(tmp_path / "broken.json"), "--out", str(tmp_path / "bad.json")]) == 2
     assert "not readable JSON" in capsys.readouterr().err
     assert main(["merge", str(runs[0]), "--out", str(tmp_path / "no_folder" / "m.json")]) == 2
+    (tmp_path / "a_folder").mkdir()
+    assert main(["merge", str(runs[0]), "--out", str(tmp_path / "a_folder")]) == 2       # a folder, not a file
+    assert "it is a folder" in capsys.readouterr().err and not (tmp_path / "a_folder.tmp").exists()

@@ -454,9 +454,15 @@ def write_json(result: Mapping[str, Any], path: str | os.PathLike[str]) -> None:
     target = Path(path)
     if not target.parent.is_dir():
         raise ValueError(f"cannot write {target}: folder {target.parent} does not exist")
+    if target.is_dir():
+        raise ValueError(f"cannot write {target}: it is a folder (give a file name)")
     tmp = target.with_name(target.name + ".tmp")
     tmp.write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
-    os.replace(tmp, target)
+    try:
+        os.replace(tmp, target)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def load_evaluation(path: str | os.PathLike[str]) -> dict[str, Any]:
