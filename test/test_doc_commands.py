@@ -530,8 +530,10 @@ def _semantic_eval(ns: argparse.Namespace) -> None:
         spec = getattr(ns, flag, None)
         if spec is None or spec in ("random", "scripted", *SCRIPTED_KINDS):
             continue
-        if Path(spec).suffix not in (".safetensors", ".onnx"):
-            raise DocCommandError(f"{flag} {spec!r} is neither a policy name nor a policy file")
+        checkpoint_folder = Path(spec).parent.name == "checkpoints" and Path(spec).name.startswith("step_")
+        if Path(spec).suffix not in (".safetensors", ".onnx") and not checkpoint_folder:
+            raise DocCommandError(f"{flag} {spec!r} is neither a policy name, a policy file nor a training "
+                                  f"checkpoint folder (RUN/checkpoints/step_…)")
 
 
 def _semantic_bag(ns: argparse.Namespace, argv: list[str]) -> None:

@@ -1,5 +1,6 @@
 """dynenv-train end to end: bad configs refused before any work, a real SIGKILL mid-run, and resumption from the
 last checkpoint with the networks, optimiser state and step counters as they were saved."""
+import hashlib
 import json
 import os
 import signal
@@ -98,6 +99,20 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
         assert max(adam_steps) == float(trainer.updates) and min(adam_steps) >= 1.0
     finally:
         trainer.env.close()
+
+    # killed before it wrote policy.safetensors, the run can still be evaluated: its latest checkpoint's policy
+    from dynenv_ros.learning.eval_cli import main as eval_main
+    from dynenv_ros.learning.trainer import policy_from_training_checkpoint
+    assert not (run_dir / "policy.safetensors").exists()
+    agent, meta = policy_from_training_checkpoint(run_dir)
+    assert meta["checkpoint"]["path"] == str(latest) and not agent.training
+    for name, value in agent.state_dict().items():
+        assert torch.equal(value, model_state["agent." + name]), name
+    out = tmp_path / "eval.json"
+    assert eval_main([str(run_dir), "--opponent", "random", "--episodes", "1", "--seeds", "0", "--quiet",
+                      "--players-per-team", str(cfg.players_per_team), "--out", str(out)]) == 0
+    digest = hashlib.sha256((latest / "model.safetensors").read_bytes()).hexdigest()
+    assert json.loads(out.read_text())["evaluated"]["sha256"] == digest
 
     # the CLI resumes and finishes the run: two more updates
     target = saved_steps + 8

@@ -121,15 +121,17 @@ class AgentDrivers(Driver):
 
 
 def make_driver(spec: str | Driver, greedy: bool = False) -> Driver:
-    """``"random"``, ``"scripted"`` or a driving checkpoint path; a Driver is returned as is."""
+    """``"random"``, ``"scripted"``, a driving policy file or a training checkpoint folder
+    (``evaluation.load_evaluated_policy``); a Driver is returned as is."""
     if isinstance(spec, Driver):
         return spec
     if spec == "random":
         return RandomDriver()
     if spec == "scripted":
         return ScriptedDrivers()
-    from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
-    return AgentDrivers(load_checkpoint(spec), greedy=greedy, path=str(spec), sha256=sha256(spec))
+    from dynenv_ros.learning.evaluation import load_evaluated_policy
+    model, digest = load_evaluated_policy(spec)
+    return AgentDrivers(model, greedy=greedy, path=str(spec), sha256=digest)
 
 
 def play_driving_episode(env: Any, driver: Driver, env_seed: int, seed: np.random.SeedSequence) -> dict[str, Any]:

@@ -224,12 +224,24 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
         return ScriptedTeam(DEFAULT_SCRIPTED)
     if spec in SCRIPTED_KINDS:
         return ScriptedTeam(spec)
-    from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
-    model = load_checkpoint(spec)
+    model, digest = load_evaluated_policy(spec)
     if getattr(model, "scenario", "soccer") == "driving":
         raise ValueError(f"{spec} is a driving policy; evaluate it with --scenario driving "
                          f"(learning/driving_evaluation.py)")
-    return AgentTeam(model, greedy=greedy, path=str(spec), sha256=sha256(spec))
+    return AgentTeam(model, greedy=greedy, path=str(spec), sha256=digest)
+
+
+def load_evaluated_policy(spec: str | os.PathLike[str]) -> tuple[Any, str]:
+    """A policy file (``policy.safetensors``), or a training checkpoint folder — a ``step_*`` folder, or a run
+    folder (its latest checkpoint) — rebuilt by ``trainer.policy_from_training_checkpoint``; and the SHA-256 of the
+    weights file it came from (recorded in the result)."""
+    from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
+    if Path(spec).is_dir():
+        from dynenv_ros.learning.checkpoints import MODEL_FILE
+        from dynenv_ros.learning.trainer import policy_from_training_checkpoint
+        model, meta = policy_from_training_checkpoint(spec)
+        return model, sha256(Path(meta["checkpoint"]["path"]) / MODEL_FILE)
+    return load_checkpoint(spec), sha256(spec)
 
 
 # -- seeding -----------------------------------------------------------------------------------------------------
@@ -529,5 +541,5 @@ def merge_runs(results: Sequence[Mapping[str, Any]], names: Sequence[str]) -> di
 
 __all__ = ["TeamPolicy", "RandomTeam", "ScriptedTeam", "AgentTeam", "make_team_policy", "sample_space",
            "episode_seeds", "play_episode", "evaluate", "seed_means", "summarize", "format_table", "write_json",
-           "load_evaluation", "seed_values", "merge_runs", "positive_part", "positive_reward", "paper_metric", "TERMS",
+           "load_evaluation", "seed_values", "merge_runs", "load_evaluated_policy", "positive_part", "positive_reward", "paper_metric", "TERMS",
            "SEED_METRICS", "DEFAULT_SCRIPTED", "FORMAT"]

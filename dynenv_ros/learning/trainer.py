@@ -59,6 +59,29 @@ def update_settings(cfg: TrainConfig) -> UpdateSettings:
         intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0))
 
 
+def make_agent(cfg: TrainConfig) -> DynEnvAgent:
+    """The untrained agent a run of ``cfg`` trains (its scenario, width, head and action mode)."""
+    if cfg.driving:
+        return DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
+    motion = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode}).motion
+    return DynEnvAgent(cfg.feature_size, cfg.head_mode, motion.head_units, motion.head_max_delta)
+
+
+def policy_from_training_checkpoint(path: str | Path) -> tuple[DynEnvAgent, dict[str, Any]]:
+    """The policy of a training checkpoint — a ``step_*`` folder, or a run folder or its ``checkpoints`` folder (then
+    the latest valid one) — in eval mode on the CPU, with the checkpoint's meta: to evaluate a run part-way, or one
+    stopped before it wrote ``policy.safetensors``. The agent is rebuilt from the config the checkpoint carries.
+    ValueError (from ``checkpoints``) for a missing, damaged or foreign checkpoint, or weights that do not fit."""
+    meta = checkpoints.read_checkpoint_meta(path)
+    try:
+        cfg = TrainConfig.from_dict(meta["config"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise ValueError(f"checkpoint {meta['checkpoint']['path']} has no usable training config: {error}") from None
+    agent = make_agent(cfg)
+    meta, _ = checkpoints.load_training_checkpoint(meta["checkpoint"]["path"], Learner(agent, cfg.ltp_horizon))
+    return agent.eval(), meta
+
+
 class Trainer:
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True) -> None:
         self.cfg, self.run_dir, self.progress = cfg, Path(run_dir), progress
@@ -72,11 +95,7 @@ class Trainer:
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
         self.rng = np.random.default_rng(seeds[1])
         self.env_seed = int(seeds[2].generate_state(1)[0])
-        if cfg.driving:
-            agent = DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
-        else:
-            agent = DynEnvAgent(cfg.feature_size, cfg.head_mode, soccer.motion.head_units,
-                                soccer.motion.head_max_delta)
+        agent = make_agent(cfg)
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only; no global RNG use after this
         self.learner = Learner(agent, cfg.ltp_horizon).to(self.device)
         # fused: one kernel over all 200-odd parameter tensors (CPU and CUDA) — 8x cheaper than the per-tensor loop
