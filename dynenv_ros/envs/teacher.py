@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dynenv_ros.agent.driving_actions import normalised_commands
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.soccer.actions import SoccerAction
@@ -58,10 +59,9 @@ class DrivingTeacher:
         if kind not in DRIVING_TEACHERS:
             raise ValueError(f"a driving teacher must be one of {DRIVING_TEACHERS}, got {kind!r}")
         self.driver = ScriptedDriver(config)
-        self.scale = None if config.action_mode == "discrete" else \
-            np.array([1.0, 1.0, 1.0 / config.cars.max_yaw_rate])
+        self.limit = None if config.action_mode == "discrete" else config.cars.max_yaw_rate
 
     def label(self, world, out: np.ndarray) -> None:
         """Write the (n_cars, width) labels of ``world``'s current state into ``out``."""
-        actions = np.asarray(self.driver.actions(world))
-        out[:] = actions if self.scale is None else actions * self.scale
+        actions = self.driver.actions(world)
+        out[:] = actions if self.limit is None else normalised_commands(actions, self.limit)

@@ -24,7 +24,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dynenv_ros.agent.driving_actions import BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem
+from dynenv_ros.agent.driving_actions import (BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem,
+                                              normalised_commands)
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.learning.rollout import can_act
 
@@ -125,11 +126,12 @@ class DrivingExperience:
         # the clipped Gaussian's log-density exceeds 0 where its spread is below ≈ 0.4 (the brake starts at 0.2)
         self.probability_actions = discrete
         # the nine commands, normalised [throttle, brake, steering / limit], index = 3 * acceleration + steering
-        self._nine = np.array([(c.throttle, c.brake, c.steering / self.limit) for c in
-                               (discrete_action(a, s, self.limit) for a in range(3) for s in range(3))])
+        self._nine = normalised_commands([(c.throttle, c.brake, c.steering) for c in
+                                          (discrete_action(a, s, self.limit) for a in range(3) for s in range(3))],
+                                         self.limit)
 
     def _normalised(self, msg: Any) -> np.ndarray:
-        return np.array([float(msg.throttle), float(msg.brake), float(msg.steering) / self.limit])
+        return normalised_commands((float(msg.throttle), float(msg.brake), float(msg.steering)), self.limit)
 
     def action_problem(self, msg: Any) -> str:
         """Within the bounds (the policy node's own check); off the discrete grid is ``off_grid``'s, not a fault."""

@@ -46,6 +46,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from dynenv_ros.agent.driving_actions import commands as driving_commands
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.agent.network import DynEnvAgent, State
 from dynenv_ros.envs.padded_layout import PROPRIOCEPTION_COLUMNS, SOCCER, LayoutSpec
@@ -402,9 +403,6 @@ class RolloutCollector:
         episode_end, truncated = np.zeros((steps, B), bool), np.zeros((steps, B), bool)
         final_values = np.zeros((steps, B), np.float32)
         starts, alive = np.zeros((steps + 1, B), bool), np.zeros((steps + 1, B), bool)
-        scale = np.ones(width)
-        if dtype != np.int64:              # normalised steering → rad/s
-            scale[2] = self.env.config.cars.max_yaw_rate
         teacher = np.zeros((steps, B, width), dtype) if self.with_teacher else None
         initial_state = tuple(s.clone() for s in reset_state(self.state, torch.from_numpy(self._starts)))
         current = first
@@ -423,7 +421,8 @@ class RolloutCollector:
                 teacher[t] = flatten_robots(self._teacher, self.learning_robots)
             self.state = step.state
             sent = actions[t].reshape(E, k, width)
-            result = self.env.step(sent if dtype == np.int64 else sent.astype(np.float64) * scale)
+            result = self.env.step(sent if dtype == np.int64 else     # normalised steering → rad/s
+                                   driving_commands(sent, "continuous", self.env.config.cars.max_yaw_rate))
             live = alive[t]
             step_terms = flatten_robots(result.reward_terms.transpose(0, 2, 1), self.learning_robots)
             step_terms = np.where(live[:, None], step_terms, 0.0)          # a finished car earns nothing

@@ -36,8 +36,7 @@ from dynenv_ros.learning.experience import Sequence, batch
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import arrays_as_tensors
 from dynenv_ros.learning.run_log import RunLogger
-from dynenv_ros.learning.trainer import VERSION, update_settings
-from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.learning.trainer import VERSION, make_agent, update_settings
 
 MAX_QUEUE = 4096          # sequences waiting for the learner; beyond, the oldest are dropped (counted)
 
@@ -72,12 +71,7 @@ class SequenceLearner:
         self.settings = update_settings(cfg)
         seeds = np.random.SeedSequence(cfg.seed).spawn(4)
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
-        if cfg.driving:           # the driving agent of cfg.action_mode (its heads and padded layout)
-            agent = DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
-        else:
-            motion = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team,
-                                                "head_mode": cfg.head_mode}).motion
-            agent = DynEnvAgent(cfg.feature_size, cfg.head_mode, motion.head_units, motion.head_max_delta)
+        agent = make_agent(cfg)   # the in-process trainer's agent for cfg (driving: its action mode's heads)
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only
         self.learner = Learner(agent, cfg.ltp_horizon).eval()
         self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)

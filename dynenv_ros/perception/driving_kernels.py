@@ -92,19 +92,6 @@ def _sight_lines_blocked(vv, jj, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, 
 
 
 @numba.njit(cache=True)
-def blocked_reports(v, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, d, ox, oy, cars_present,
-                    occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B):
-    """(K,) blocked sight lines of made-up reports (no object behind them: nothing is excluded but the observer)."""
-    K = len(v)
-    out = np.zeros(K, np.int64)
-    for k in range(K):
-        out[k] = _sight_lines_blocked(v[k], -1, tx[k], ty[k], ux[k], uy[k], thx[k], thy[k], trr[k], tcls[k], ddx[k],
-                                      ddy[k], d[k], ox, oy, cars_present, occ_x, occ_y, occ_ux, occ_uy, occ_a,
-                                      occ_b, occ_r, occ_kind, occ_obj, hides, B)
-    return out
-
-
-@numba.njit(cache=True)
 def visible_pairs(X, Y, UX, UY, present, cars_present, hx, hy, rr, cls, max_range, near, ox, oy, c, s,
                   occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B, any_hides,
                   realistic, n_cars, n_peds, nearby2, factor, range_offset, range_slope, range_reference, visible):
@@ -400,7 +387,7 @@ def pair_reports(at, v, j, xk, yk, dk, bits, mult, ck, noisy, realistic, confusi
 def dress_rows(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team, single_team, uniform_yaw, m,
                size_std, yaw_std, pedestrian_radius, obstacle_half, car, pedestrian):
     """Give reports that no object of their class stands behind (false positives, confusions) what a real report of
-    that class has (``DrivingPerceiver._dress`` says how), from the caller's draws: ``g`` (2, K) normal (size and
+    that class has (``DrivingPerceiver._dressing`` says how), from the caller's draws: ``g`` (2, K) normal (size and
     heading error), ``ur`` (rows, cars) uniform — per car report: the other car it copies, the car type when there
     is none, the heading when there is none, then the heading error when ``uniform_yaw``, then the team when not
     ``single_team``."""
@@ -602,14 +589,11 @@ def warm_up() -> None:
     zi = np.zeros(1, np.int64)
     hides = np.zeros((3, 256), np.bool_)
     occ = (z, z, z + 1, z, z + 1, z + 1, z + 1, zi, zi - 1)
-    blocked_reports(zi, z, z, z, z, z, z, z, np.zeros(1, np.uint8), z, z, z + 1, z, z, np.ones(1, np.bool_), *occ,
-                    hides, 1)
     visible_pairs(z, z, z, z, np.ones(1, np.bool_), np.ones(1, np.bool_), z, z, z, np.zeros(1, np.uint8), z + 1,
                   z + 1, z, z, z + 1, z, *occ, hides, 1, False, False, 1, 0, 1.0, np.ones(8), 1.0, 0.0, 1.0,
                   np.zeros(1, np.bool_))
     clip_lanes(np.zeros((1, 4)), z + 1, z, z, z + 1, z, 1.0, 0.0)
     u8 = np.zeros(1, np.uint8)
-    pair_rows(zi, u8, u8, z, z, z + 1, z, zi, zi, zi, z, z, z, z, z, np.zeros(1, np.int8), 1, 1)
     for model in (UNIFORM_POSITION, GAUSSIAN_POSITION, POLAR_POSITION):
         for flag in (True, False):
             pair_reports(zi, zi, zi, z, z, z + 1, zi, z + 1, u8, flag, flag, flag, model, flag, np.ones((4, 1)),
@@ -625,8 +609,6 @@ def warm_up() -> None:
                       flag, np.ones(256), 2)
     self_rows(rows, np.zeros((1, 8), np.float32), z, z, z, z, z + 1, z, z, z, np.zeros((4, 1)), True, 1.0, 1.0, 1.0,
               1.0, z + 1, z + 1, np.zeros(1, np.bool_), np.zeros(1, np.bool_), 0)
-    rows, order, offsets = sort_by_view(rows, zi, np.zeros(1, np.uint32), 1, 0)
-    sighting_bits(rows, np.zeros(1, np.float32), offsets, np.ones(256), 1.0, 1, 2, 3, 1, 2, 4)
     finish_rows(rows, zi, np.zeros(1, np.float32), 1, 0, np.ones(256), 1.0, 1, 2, 3, 1, 2, 4, z, 1.0, np.zeros(256),
                 True)
     f = np.ones(1, np.bool_)
@@ -634,12 +616,9 @@ def warm_up() -> None:
         for uniform in (True, False):
             lane_reports(zi, zi, zi, np.ones((8, 1)), noisy, True, uniform, np.ones((3, 1)), np.ones((2, 1)), 1.0,
                          0.1, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, z, z, f, z + 1, 1, 0, 0, 0, 0)
-    for noisy, keep, e in ((True, f, z), (False, z, z)):
-        lane_rows(zi, zi, zi, np.ones((8, 2))[:, :1], noisy, keep, e if noisy else z, e + 1 if noisy else z, e, f,
-                  f, z + 1, 1, 0, 0, 0, 0)
 
 
-__all__ = ["blocked_reports", "visible_pairs", "clip_lanes", "lane_rows", "pair_rows", "self_rows", "sort_by_view", "sighting_bits",
-           "finish_rows", "lane_reports", "pair_reports",
-           "dress_rows", "place_made_up", "uniform_false_positives",
-           "UNIFORM_POSITION", "GAUSSIAN_POSITION", "POLAR_POSITION", "warm_up"]
+# lane_rows, pair_rows and sighting_bits are steps of lane_reports, pair_reports and finish_rows, compiled inside them.
+__all__ = ["visible_pairs", "clip_lanes", "lane_reports", "pair_reports", "dress_rows",
+           "place_made_up", "uniform_false_positives", "self_rows", "finish_rows", "UNIFORM_POSITION",
+           "GAUSSIAN_POSITION", "POLAR_POSITION", "warm_up"]

@@ -162,9 +162,8 @@ class DrivingPerceiver:
                            self.occ_kind, self.occ_obj)
         self._nearby2 = params.miss.nearby_distance ** 2
         self._no_self_noise = np.zeros((4, n))
-        self._no_lane_noise = np.zeros(0)
         self._no_draws = np.zeros(0)
-        self._no_pair_noise = np.zeros((4, 0))
+        self._no_draws_2d = np.zeros((4, 0))          # a kernel's draw block when nothing is drawn
         # uniform draws per dressed car report: other car, car type, heading; heading error (uniform model); team
         self._dress_draws_per_car = 3 + (params.position.model == "uniform") + (not self.single_team)
         self._position_model = (kernels.UNIFORM_POSITION if params.position.model == "uniform" else
@@ -195,7 +194,7 @@ class DrivingPerceiver:
         K = len(at)
         made_up = []
         m = p.noise_magnitude
-        u = pos = g = self._no_pair_noise
+        u = pos = g = self._no_draws_2d
         yu = self._no_draws
         position = self._position_model
         if self.noisy:      # the draws in their fixed order: miss/confusion/near-car, position, size and yaw, yaw
@@ -246,7 +245,8 @@ class DrivingPerceiver:
         g = rng.standard_normal((2, len(rows)))
         ur = rng.random((self._dress_draws_per_car, int(np.count_nonzero(rows["class_id"] == _CAR))))
         return (g, ur, oyaw, np.asarray(st.yaw, float), np.asarray(st.present, bool), self.scene.car_half_length,
-                self.scene.car_half_width, self.team, self.single_team, p.position.model == "uniform",
+                self.scene.car_half_width, self.team, self.single_team,
+                self._position_model == kernels.UNIFORM_POSITION,
                 p.noise_magnitude, p.position.size_std, p.position.yaw_std, self.scene.pedestrian_radius,
                 self.scene.obstacle_half)
 
@@ -291,7 +291,7 @@ class DrivingPerceiver:
             return (np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.intp)), np.zeros(V, int)
         R = p.classes[ObjectClass.LANE].max_range
         lv, k, bits, g = kernels.clip_lanes(self.lanes, self._lane_len2, ox, oy, c, s, R, p.lanes.min_length)
-        u = n2 = self._no_lane_noise.reshape(0, 0)
+        u = n2 = self._no_draws_2d
         lp = p.lanes
         if self.noisy:
             u = rng.random((3, len(lv)))
