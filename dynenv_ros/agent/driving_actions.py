@@ -140,12 +140,6 @@ def commands(actions: np.ndarray, action_mode: str, max_yaw_rate: float) -> np.n
     return actions * np.array([1.0, 1.0, max_yaw_rate])
 
 
-def normalised_commands(commands: Any, max_yaw_rate: float) -> np.ndarray:
-    """[throttle, brake, steering rad/s] rows as the normalised [throttle, brake, steering / limit] a continuous
-    action is stored and learnt in: the inverse of ``commands`` for continuous actions."""
-    return np.asarray(commands, np.float64) / np.array([1.0, 1.0, max_yaw_rate])
-
-
 def log_probs(step: Any, actions: np.ndarray, action_mode: str) -> np.ndarray:
     """(B,) log-probability of the network's actions (``sample_actions``) under either runtime's outputs: the sum
     over the heads, as the learner scores them (``distributions``); NaN where an output was not finite."""

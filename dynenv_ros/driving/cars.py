@@ -78,6 +78,12 @@ def discrete_action(acceleration: int, steering: int, max_yaw_rate: float) -> Dr
                          steering=(steering - 1) * max_yaw_rate)
 
 
+def normalised_commands(commands: Any, max_yaw_rate: float) -> np.ndarray:
+    """[throttle, brake, steering rad/s] rows as the normalised [throttle, brake, steering / limit] a learner stores
+    a continuous action in (``agent.driving_actions.commands`` turns them back)."""
+    return np.asarray(commands, np.float64) / np.array([1.0, 1.0, max_yaw_rate])
+
+
 def _index(car: str, name: str, value: Any, choices: int) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) and not (
             isinstance(value, (float, np.floating)) and float(value).is_integer()):

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynenv_ros.agent.driving_actions import normalised_commands
+from dynenv_ros.driving.cars import normalised_commands
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.soccer.actions import SoccerAction

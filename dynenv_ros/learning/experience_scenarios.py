@@ -24,8 +24,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dynenv_ros.agent.driving_actions import (BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem,
-                                              normalised_commands)
+from dynenv_ros.agent.driving_actions import BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.learning.rollout import can_act
 
@@ -112,7 +111,7 @@ class DrivingExperience:
     supports_targets = False
 
     def __init__(self, config: Any, frames: int | None = None) -> None:
-        from dynenv_ros.driving.cars import discrete_action
+        from dynenv_ros.driving.cars import discrete_action, normalised_commands
         from dynenv_ros.envs.driving_observations import driving_layout
         self.action_mode = check_action_mode(config.action_mode)
         self.names = list(config.car_names)
@@ -126,12 +125,13 @@ class DrivingExperience:
         # the clipped Gaussian's log-density exceeds 0 where its spread is below ≈ 0.4 (the brake starts at 0.2)
         self.probability_actions = discrete
         # the nine commands, normalised [throttle, brake, steering / limit], index = 3 * acceleration + steering
+        self._normalise = normalised_commands           # driving.cars, imported with the driving scenario only
         self._nine = normalised_commands([(c.throttle, c.brake, c.steering) for c in
                                           (discrete_action(a, s, self.limit) for a in range(3) for s in range(3))],
                                          self.limit)
 
     def _normalised(self, msg: Any) -> np.ndarray:
-        return normalised_commands((float(msg.throttle), float(msg.brake), float(msg.steering)), self.limit)
+        return self._normalise((float(msg.throttle), float(msg.brake), float(msg.steering)), self.limit)
 
     def action_problem(self, msg: Any) -> str:
         """Within the bounds (the policy node's own check); off the discrete grid is ``off_grid``'s, not a fault."""
