@@ -9,7 +9,7 @@ import pytest
 from dynenv_ros.soccer.actions import IDLE, Kick, SoccerAction, Turn, Walk
 from dynenv_ros.soccer.config import MotionConfig, SoccerConfig
 from dynenv_ros.soccer.scripted import (ChaserPolicy, GoalkeeperPolicy, RandomPolicy, ScriptedPolicy, act_all,
-                                        team_policies, to_robot_frame, wrap)
+                                        find_robot, team_policies, to_robot_frame, wrap)
 from dynenv_ros.soccer.world import TEAM_A, TEAM_B, GameEvent, SoccerWorld
 
 MOTION = MotionConfig()
@@ -174,6 +174,26 @@ def test_random_policy_covers_every_value() -> None:
         RandomPolicy(np.random.default_rng(0), head_mode="analog")  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("team", [TEAM_A, TEAM_B], ids=["team_A", "team_B"])
+def test_eager_chaser_kicks_a_ball_at_its_foot_without_lining_up(team: int) -> None:
+    # Ball squarely in front of the left foot (robot frame x 0.20 m, y +0.05 m), the robot 0.5 rad off the aim
+    # at the goal: the chaser lines up first (no kick), the eager chaser (tolerance 1.2 rad) kicks now, with the
+    # left foot; 1.5 rad off the aim, beyond its tolerance, it lines up like the chaser.
+    for yaw_off, eager_kicks in ((0.5, True), (1.5, False)):
+        yaw = wrap(yaw_off + (0.0 if team == TEAM_A else math.pi))
+        rx, ry = mirrored(team, -1.0, 0.0)
+        c, s_ = math.cos(yaw), math.sin(yaw)
+        ball = (rx + 0.20 * c - 0.05 * s_, ry + 0.20 * s_ + 0.05 * c)
+        world, me = duel_world(team, (rx, ry, yaw), ball)
+        snapshot = world.snapshot()
+        assert to_robot_frame(find_robot(snapshot, me), *world.ball_xy) == pytest.approx((0.20, 0.05), abs=1e-6)
+        assert ChaserPolicy().act(snapshot, me).kick == Kick.NONE
+        eager = ChaserPolicy(eager_kick_tolerance=1.2).act(snapshot, me)
+        assert eager.kick == (Kick.LEFT_FOOT if eager_kicks else Kick.NONE)
+        if eager_kicks:
+            assert (eager.walk, eager.turn) == (Walk.NONE, Turn.NONE)
+
+
 # -- teams -----------------------------------------------------------------------------------------------------------
 def test_team_policies_builds_one_policy_per_robot() -> None:
     chasers = team_policies(2, "chaser")
@@ -181,6 +201,8 @@ def test_team_policies_builds_one_policy_per_robot() -> None:
     mixed = team_policies(3, "keeper_and_chasers")
     assert [type(p) for p in mixed] == [GoalkeeperPolicy, ChaserPolicy, ChaserPolicy] * 2
     assert [type(p) for p in team_policies(1, "keeper_and_chasers")] == [ChaserPolicy] * 2
+    eager = team_policies(2, "eager_chaser")
+    assert [p.eager_kick_tolerance for p in eager] == [1.2] * 4 and chasers[0].eager_kick_tolerance is None
     randoms = team_policies(2, "random", np.random.default_rng(4))
     assert all(isinstance(p, RandomPolicy) for p in randoms)
     assert len({id(p.rng) for p in randoms}) == 4, "each robot needs its own generator"
@@ -190,7 +212,7 @@ def test_team_policies_builds_one_policy_per_robot() -> None:
         team_policies(0)
 
 
-@pytest.mark.parametrize("kind", ["chaser", "random", "keeper_and_chasers"])
+@pytest.mark.parametrize("kind", ["chaser", "eager_chaser", "random", "keeper_and_chasers"])
 def test_team_actions_are_valid_and_reproducible_in_a_full_game(kind: str) -> None:
     def play(seed: int) -> list[list[SoccerAction]]:
         world = SoccerWorld(SoccerConfig.from_mapping({"players_per_team": 2}), seed=seed)

@@ -24,7 +24,7 @@ from dynenv_ros.soccer.actions import SoccerAction
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.scripted import act_all, team_policies
 
-TEACHERS = ("chaser", "keeper_and_chasers")
+TEACHERS = ("chaser", "eager_chaser", "keeper_and_chasers")
 DRIVING_TEACHERS = ("scripted",)
 
 

@@ -47,7 +47,7 @@ from dynenv_ros.sim.reward_terms import RewardTerm
 FORMAT = "dynenv_eval/1"
 TERMS = tuple(term.name.lower() for term in RewardTerm)
 OBSERVATION = RewardTerm.OBSERVATION.name.lower()
-SCRIPTED_KINDS = ("chaser", "keeper_and_chasers")
+SCRIPTED_KINDS = ("chaser", "eager_chaser", "keeper_and_chasers")
 DEFAULT_SCRIPTED = "keeper_and_chasers"
 SIDES = ("alternate", "a", "b")
 RESULTS = ("win", "draw", "loss")

@@ -133,8 +133,12 @@ class ChaserPolicy:
 
     def __init__(self, field: FieldGeometry | None = None, head_max_delta: float = HEAD_MAX_DELTA,
                  behind: float = 0.35, orbit_radius: float = 0.45, free_kick_distance: float = 0.9,
-                 aim_depth: float = 0.3) -> None:
+                 aim_depth: float = 0.3, eager_kick_tolerance: float | None = None) -> None:
         self.field = field or FieldGeometry()
+        # rad: kick whenever the ball lies squarely in front of a foot and the robot faces the aim within this,
+        # whatever the phase (None: only at the end of the line-up). A teacher whose kicks depend on what the
+        # robot's camera shows (the ball at its feet) rather than on a 0.12 rad alignment it cannot measure.
+        self.eager_kick_tolerance = eager_kick_tolerance
         self.head_max_delta = head_max_delta
         self.aim_depth = aim_depth                    # m behind the goal line: a ball on the line still goes in
         self.behind = behind                          # m behind the ball where the final approach starts
@@ -158,6 +162,10 @@ class ChaserPolicy:
             tx, ty = self._round_the_ball(ball, ux, uy, along, lateral, self.free_kick_distance,
                                           self.free_kick_distance)
             return self._go_to(me, tx, ty, aim, head)
+        if self.eager_kick_tolerance is not None and abs(wrap(aim - me.yaw)) < self.eager_kick_tolerance:
+            foot = kick_foot_for(*to_robot_frame(me, ball.x, ball.y))
+            if foot != Kick.NONE:
+                return SoccerAction(Walk.NONE, Turn.NONE, foot, head)
         if -(self.behind + 0.15) < along < -0.1 and abs(lateral) < 0.12:
             return self._line_up(me, ball, aim, head)
         tx, ty = self._round_the_ball(ball, ux, uy, along, lateral, self.behind, self.orbit_radius)
@@ -242,7 +250,8 @@ class GoalkeeperPolicy:
 
 
 # -- teams -------------------------------------------------------------------------------------------------------
-PolicyKind = Literal["chaser", "random", "keeper_and_chasers"]
+PolicyKind = Literal["chaser", "eager_chaser", "random", "keeper_and_chasers"]
+EAGER_KICK_TOLERANCE = 1.2     # rad; 18 : 10 against keeper_and_chasers in 30 games (chaser: 17 : 12), docs/results.md
 
 
 def team_policies(n_per_team: int, kind: PolicyKind = "chaser", rng: np.random.Generator | None = None, *,
@@ -260,13 +269,15 @@ def team_policies(n_per_team: int, kind: PolicyKind = "chaser", rng: np.random.G
     n = 2 * n_per_team
     if kind == "chaser":
         return [ChaserPolicy(field, m.head_max_delta) for _ in range(n)]
+    if kind == "eager_chaser":
+        return [ChaserPolicy(field, m.head_max_delta, eager_kick_tolerance=EAGER_KICK_TOLERANCE) for _ in range(n)]
     if kind == "random":
         rngs = (rng if rng is not None else np.random.default_rng()).spawn(n)
         return [RandomPolicy(r, head_mode, m.head_step, m.head_units) for r in rngs]
     if kind == "keeper_and_chasers":
         return [GoalkeeperPolicy(field, m.head_max_delta) if i % n_per_team == 0 and n_per_team > 1
                 else ChaserPolicy(field, m.head_max_delta) for i in range(n)]
-    raise ValueError(f"kind must be 'chaser', 'random' or 'keeper_and_chasers', got {kind!r}")
+    raise ValueError(f"kind must be 'chaser', 'eager_chaser', 'random' or 'keeper_and_chasers', got {kind!r}")
 
 
 def act_all(policies: Sequence[ScriptedPolicy], snapshot: WorldSnapshot) -> list[SoccerAction]:
