@@ -1,7 +1,6 @@
 """The set-up script: idempotent, clear about missing prerequisites, and fixes the wheels' CMake exports."""
 from __future__ import annotations
 
-import importlib.util
 import os
 import shutil
 import subprocess
@@ -10,6 +9,7 @@ from pathlib import Path
 
 import numpy
 import pytest
+from tool_scripts import load_tool
 
 REPO = Path(__file__).resolve().parent.parent
 BOOTSTRAP = REPO / "tools" / "bootstrap.py"
@@ -17,10 +17,7 @@ HOST_PYTHON = shutil.which("python3.11") or sys.executable
 
 
 def load_bootstrap():
-    spec = importlib.util.spec_from_file_location("bootstrap_under_test", BOOTSTRAP)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("bootstrap")
 
 
 def test_second_run_with_nothing_changed_does_nothing():

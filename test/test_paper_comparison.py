@@ -6,31 +6,25 @@ One 3 s episode per evaluation (12 evaluations), one tiny BEST run (pytensor's C
 from __future__ import annotations
 
 import csv
-import importlib.util
 import json
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from PIL import Image
+from tool_scripts import load_tool
 
 from dynenv_ros.agent.checkpoint import save_policy, sha256
 from dynenv_ros.agent.network import DynEnvAgent
 
-SCRIPT = Path(__file__).resolve().parent.parent / "tools" / "paper_comparison.py"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.fixture(scope="module")
 def tool():
-    spec = importlib.util.spec_from_file_location("paper_comparison", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("paper_comparison", module)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("paper_comparison")
 
 
 def fake_run(root: Path, variant: str, seed: int, finished: bool = True) -> Path:

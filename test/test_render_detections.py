@@ -1,14 +1,12 @@
 """Detection overlay: camera-frame rows land on the right field pixels, errors are marked, the figure script runs."""
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
+from tool_scripts import load_tool
 
 from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.perception.detections import empty
@@ -19,7 +17,6 @@ from dynenv_ros.render.topdown import CARPET, FOV, as_array, save_png
 from dynenv_ros.soccer.field import FieldGeometry
 
 PPM = 40
-SCRIPT = Path(__file__).resolve().parent.parent / "tools" / "perception_figures.py"
 FIGURES = ("perception_none.png", "perception_realistic.png", "perception_realistic_m3.png", "perception_dynenv.png")
 
 
@@ -129,14 +126,7 @@ def test_image_of_another_scale_is_refused(view):
 
 @pytest.fixture(scope="module")
 def figure_script():
-    spec = importlib.util.spec_from_file_location("perception_figures_under_test", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module                    # dataclasses look their module up while the file runs
-    try:
-        spec.loader.exec_module(module)
-        yield module
-    finally:
-        del sys.modules[spec.name]
+    return load_tool("perception_figures")
 
 
 def test_figure_script_writes_the_four_pngs_byte_identical_on_every_run(figure_script, tmp_path):

@@ -1,27 +1,20 @@
 """tools/teacher_agreement.py: agreement with the scripted teacher, split by situation."""
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from tool_scripts import load_tool
 
 from dynenv_ros.agent.checkpoint import save_policy
 from dynenv_ros.agent.network import DynEnvAgent
 
-SCRIPT = Path(__file__).resolve().parent.parent / "tools" / "teacher_agreement.py"
 
 
 @pytest.fixture(scope="module")
 def tool():
-    spec = importlib.util.spec_from_file_location("teacher_agreement", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("teacher_agreement", module)
-    spec.loader.exec_module(module)
-    return module
+    return load_tool("teacher_agreement")
 
 
 def test_rows_split_agreement_by_ball_sight_and_distance(tool) -> None:
