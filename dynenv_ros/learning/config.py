@@ -183,7 +183,9 @@ class TrainConfig:
     teacher: str | None = _f(None, "Scripted teacher whose actions label every learning robot's states for an "
                                    "imitation loss (DAgger: the learner acts, the teacher labels): 'chaser' "
                                    "(every robot a chaser: one shared network cannot tell a keeper slot from a "
-                                   "chaser slot); driving: 'scripted' (the scripted driver); null = none (paper).")
+                                   "chaser slot) or 'eager_chaser' (a chaser that also kicks a ball at its foot "
+                                   "whenever it roughly faces the goal); driving: 'scripted' (the scripted driver); "
+                                   "null = none (paper).")
     imitation_coef: float = _f(0.0, "Weight of the imitation loss −log π(teacher's action | s) at the start of "
                                     "training; needs a teacher.")
     imitation_decay_env_steps: int = _f(0, "Env steps over which imitation_coef falls linearly to "
