@@ -52,6 +52,16 @@ def test_cli_plays_labels_and_writes_consistent_figures(tool, tmp_path, capsys) 
         assert sum(shares.values()) == pytest.approx(1.0, abs=0.01)
 
 
-def test_cli_refuses_a_missing_policy(tool, tmp_path, capsys) -> None:
-    assert tool.main([str(tmp_path / "nothing.safetensors"), "--periods", "32", "--worlds", "1"]) == 2
-    assert "teacher_agreement:" in capsys.readouterr().err
+@pytest.mark.parametrize("case", ["missing policy", "corrupt policy", "unknown teacher"])
+def test_cli_refuses_bad_input_with_a_reason(tool, tmp_path, capsys, case: str) -> None:
+    policy, extra = tmp_path / "policy.safetensors", []
+    if case == "corrupt policy":
+        policy.write_bytes(b"not a safetensors file")
+    elif case == "unknown teacher":
+        save_policy(DynEnvAgent(), policy, {})
+        extra = ["--teacher", "striker"]
+    assert tool.main([str(policy), "--periods", "32", "--worlds", "1", *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("teacher_agreement:")
+    if case == "unknown teacher":
+        assert "striker" in err and "eager_chaser" in err
