@@ -1,10 +1,13 @@
 """The core stays usable without ROS: importing it loads neither rclpy nor generated messages, nor torch (an
-environment process must stay small)."""
+environment process must stay small). And the import graph keeps its layers: no import cycle between the packages
+and modules named below (read from the source with ``ast``, function-level imports included)."""
 from __future__ import annotations
 
+import ast
 import pkgutil
 import subprocess
 import sys
+from pathlib import Path
 
 import dynenv_ros.bags
 import dynenv_ros.core
@@ -27,3 +30,44 @@ def test_ros_free_packages_import_no_ros():
              "print(bad)")
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert result.stdout.strip() == "[]", result.stdout
+
+
+# -- import graph ----------------------------------------------------------------------------------------------------
+PACKAGE_ROOT = Path(dynenv_ros.__file__).resolve().parents[1]      # the folder holding dynenv_ros/
+
+
+def imported_modules(path: Path) -> set[str]:
+    """Every module a source file imports, at module level or inside a function (lazy imports count): ``import a.b``
+    gives ``a.b``; ``from a import b`` gives ``a`` and ``a.b`` (b may be a submodule); relative imports resolved."""
+    module = ".".join(path.relative_to(PACKAGE_ROOT).with_suffix("").parts)
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                base = f"{parent}.{base}" if base else parent
+            found.add(base)
+            found.update(f"{base}.{alias.name}" for alias in node.names)
+    return found
+
+
+def _imports(importer: str, imported: str) -> list[str]:
+    """The files of module or package ``importer`` that import ``imported`` or anything inside it."""
+    path = PACKAGE_ROOT.joinpath(*importer.split("."))
+    files = sorted(path.rglob("*.py")) if path.is_dir() else [path.with_suffix(".py")]
+    assert files and all(f.is_file() for f in files), f"no source for {importer}"
+    return [str(f.relative_to(PACKAGE_ROOT)) for f in files
+            if any(m == imported or m.startswith(imported + ".") for m in imported_modules(f))]
+
+
+def test_render_detections_and_driving_do_not_import_each_other():
+    # The scenario-neutral overlay (detections) takes its colours from topdown; the driving pictures may use the
+    # overlay (one direction, lazily), never the other way round.
+    assert _imports("dynenv_ros.render.detections", "dynenv_ros.render.driving") == []
+    assert not (_imports("dynenv_ros.render.driving", "dynenv_ros.render.detections")
+                and _imports("dynenv_ros.render.detections", "dynenv_ros.render.driving"))
+

@@ -19,8 +19,8 @@ from PIL import Image, ImageDraw, ImageFont
 
 from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.perception.model import missed_objects
-from dynenv_ros.render.driving import OBSTACLE, PEDESTRIAN
-from dynenv_ros.render.topdown import BALL, FOV, LEGEND_ROW, TEAM_COLOURS, Colour, FieldView
+from dynenv_ros.render.topdown import (BALL, FOV, LEGEND_ROW, OBSTACLE, PEDESTRIAN, TEAM_COLOURS, Colour,
+                                       FieldView)
 from dynenv_ros.soccer.field import FieldGeometry
 
 GOALPOST: Colour = (255, 220, 0)

@@ -23,8 +23,8 @@ from PIL import Image, ImageDraw, ImageFont
 
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
 from dynenv_ros.driving.roads import DrivingMap, LineKind
-from dynenv_ros.render.topdown import (LEGEND_HEIGHT, LEGEND_ROW, STRIP, STRIP_HEIGHT, TEAM_COLOURS, TEXT, Colour,
-                                       _check_positive, save_gif)
+from dynenv_ros.render.topdown import (LEGEND_HEIGHT, LEGEND_ROW, OBSTACLE, PEDESTRIAN, STRIP, STRIP_HEIGHT,
+                                       TEAM_COLOURS, TEXT, Colour, _check_positive, save_gif)
 from dynenv_ros.sim.ground_truth import BodyState, WorldSnapshot
 
 GROUND: Colour = (92, 122, 78)
@@ -35,8 +35,6 @@ CENTRE_LINE: Colour = (250, 200, 30)
 INNER_LINE: Colour = (215, 215, 215)
 BUILDING: Colour = (128, 102, 92)
 BUILDING_OUTLINE: Colour = (70, 52, 46)
-OBSTACLE: Colour = (235, 130, 20)
-PEDESTRIAN: Colour = (230, 60, 200)
 HEADING: Colour = (15, 15, 15)
 CRASH: Colour = (255, 0, 0)
 OUTSIDE: Colour = (48, 58, 44)            # beyond the map's edge (the walled margin)

@@ -35,6 +35,9 @@ FALLEN_OUTLINE: Colour = (128, 128, 128)
 HEADING: Colour = (20, 20, 20)
 HEAD: Colour = (255, 230, 0)
 FOV: Colour = (255, 255, 140)
+# Driving bodies: the map's pictures (render.driving) and the detection overlays (render.detections) share them.
+OBSTACLE: Colour = (235, 130, 20)
+PEDESTRIAN: Colour = (230, 60, 200)
 DEFAULT_ROBOT_RADIUS = 0.1             # m: used when a snapshot carries no robot size
 
 

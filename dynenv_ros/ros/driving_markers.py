@@ -22,9 +22,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
 from dynenv_ros.driving.roads import DrivingMap, LineKind
 from dynenv_ros.render.detections import ERROR, MISSED, camera_to_field
-from dynenv_ros.render.driving import (ASPHALT, BUILDING, CENTRE_LINE, EDGE_LINE, GROUND, INNER_LINE, OBSTACLE,
-                                       PEDESTRIAN, WALKWAY, car_colour)
-from dynenv_ros.render.topdown import HEADING, TEAM_COLOURS
+from dynenv_ros.render.driving import ASPHALT, BUILDING, CENTRE_LINE, EDGE_LINE, GROUND, INNER_LINE, WALKWAY, car_colour
+from dynenv_ros.render.topdown import HEADING, OBSTACLE, PEDESTRIAN, TEAM_COLOURS
 from dynenv_ros.ros.markers import (_circle_points, _classify_rows, _delete_all, _fp_label, _Ids, _marker, _mix,
                                     _quaternion, _rgba, _scale, _segment_points, detection_namespaces)
 from dynenv_ros.sim.ground_truth import WorldSnapshot
