@@ -25,7 +25,7 @@ TOOLS = [
     "dynenv-play = dynenv_ros.envs.play:main",
     "dynenv-bag = dynenv_ros.bags.inspect:main",
     "dynenv-record = dynenv_ros.nodes.recorder:cli_main",
-    "dynenv-eval = dynenv_ros.learning.eval_cli:main",
+    "dynenv-eval = dynenv_ros.evaluation.cli:main",
     "dynenv-train = dynenv_ros.learning.train_cli:main",
     "dynenv-pretrain = dynenv_ros.learning.pretrain:main",
 ]

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from dynenv_ros.learning.best import (best, compare_evaluations, effect_size, format_result, hdi, plot_posterior,
-                                      split_r_hat)
-from dynenv_ros.learning.eval_cli import main
-from dynenv_ros.learning.evaluation import FORMAT
+from dynenv_ros.evaluation.best import (best, compare_evaluations, effect_size, format_result, hdi, plot_posterior,
+                                        split_r_hat)
+from dynenv_ros.evaluation.cli import main
+from dynenv_ros.evaluation.results import FORMAT
 
 SMALL = dict(draws=500, tune=500, chains=2, random_seed=1)
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

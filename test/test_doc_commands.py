@@ -525,7 +525,7 @@ def _semantic_bench(ns: argparse.Namespace) -> None:
 
 
 def _semantic_eval(ns: argparse.Namespace) -> None:
-    from dynenv_ros.learning.evaluation import SCRIPTED_KINDS
+    from dynenv_ros.soccer.scripted import SCRIPTED_KINDS
     for flag in ("policy", "opponent"):
         spec = getattr(ns, flag, None)
         if spec is None or spec in ("random", "scripted", *SCRIPTED_KINDS):

@@ -9,9 +9,10 @@ import torch
 
 from dynenv_ros.agent.checkpoint import save_policy
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.learning.driving_evaluation import SEED_METRICS, evaluate_driving, format_driving_table
-from dynenv_ros.learning.eval_cli import main
-from dynenv_ros.learning.evaluation import FORMAT, load_evaluation, seed_values, write_json
+from dynenv_ros.evaluation.best import seed_values
+from dynenv_ros.evaluation.cli import main
+from dynenv_ros.evaluation.driving import SEED_METRICS, evaluate_driving, format_driving_table
+from dynenv_ros.evaluation.results import FORMAT, load_evaluation, write_json
 
 SHORT = {"episode_seconds": 3.0}
 

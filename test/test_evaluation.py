@@ -10,11 +10,12 @@ import torch
 from dynenv_ros.agent.checkpoint import save_checkpoint
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.robocup_v0 import parallel_env
-from dynenv_ros.learning.eval_cli import main
-from dynenv_ros.learning.evaluation import (FORMAT, SEED_METRICS, TERMS, AgentTeam, RandomTeam, ScriptedTeam,
-                                           episode_seeds, evaluate, format_table, load_evaluation,
-                                           make_team_policy, paper_metric, play_episode, positive_reward,
-                                           seed_values, write_json)
+from dynenv_ros.evaluation.best import seed_values
+from dynenv_ros.evaluation.cli import main
+from dynenv_ros.evaluation.episodes import episode_seeds
+from dynenv_ros.evaluation.results import FORMAT, TERMS, load_evaluation, write_json
+from dynenv_ros.evaluation.soccer import (SEED_METRICS, AgentTeam, RandomTeam, ScriptedTeam, evaluate, format_table,
+                                          make_team_policy, paper_metric, play_episode, positive_reward)
 
 SHORT = {"episode_seconds": 5.0}          # 10 motion periods
 

@@ -12,13 +12,14 @@ from pathlib import Path
 import dynenv_ros.bags
 import dynenv_ros.core
 import dynenv_ros.envs
+import dynenv_ros.evaluation
 import dynenv_ros.perception
 import dynenv_ros.render
 import dynenv_ros.sim
 import dynenv_ros.soccer
 
 ROS_FREE_PACKAGES = [dynenv_ros.core, dynenv_ros.bags, dynenv_ros.sim, dynenv_ros.soccer, dynenv_ros.envs,
-                     dynenv_ros.render, dynenv_ros.perception]
+                     dynenv_ros.render, dynenv_ros.perception, dynenv_ros.evaluation]
 
 
 def test_ros_free_packages_import_no_ros():
@@ -71,3 +72,28 @@ def test_render_detections_and_driving_do_not_import_each_other():
     assert not (_imports("dynenv_ros.render.driving", "dynenv_ros.render.detections")
                 and _imports("dynenv_ros.render.detections", "dynenv_ros.render.driving"))
 
+
+def test_learning_never_imports_evaluation():
+    # evaluation -> learning (a training checkpoint's policy, through learning.agents) is the one direction: the
+    # trainer, the opponents and the rest of learning import nothing of dynenv_ros.evaluation, not even lazily.
+    assert _imports("dynenv_ros.learning", "dynenv_ros.evaluation") == []
+    assert _imports("dynenv_ros.evaluation", "dynenv_ros.learning"), "expected evaluation to use learning.agents"
+    # and evaluation loads a checkpoint without the trainer
+    assert _imports("dynenv_ros.evaluation", "dynenv_ros.learning.trainer") == []
+
+
+def test_evaluation_modules_have_no_import_cycle():
+    folder = PACKAGE_ROOT / "dynenv_ros" / "evaluation"
+    modules = {f"dynenv_ros.evaluation.{f.stem}": f for f in folder.glob("*.py") if f.stem != "__init__"}
+    graph = {name: {m for m in imported_modules(path) if m in modules and m != name} for name, path in modules.items()}
+    done: set[str] = set()
+
+    def visit(name: str, path: tuple[str, ...]) -> None:
+        assert name not in path, f"import cycle: {' -> '.join(path + (name,))}"
+        if name not in done:
+            for other in sorted(graph[name]):
+                visit(other, path + (name,))
+            done.add(name)
+
+    for name in sorted(graph):
+        visit(name, ())

@@ -260,7 +260,7 @@ def test_trainer_writes_a_driving_run(tmp_path, algorithm, mode, teacher):
     assert json.loads((run / "config.json").read_text())["scenario"] == "driving"
     agent, meta = load_policy(run / "policy.safetensors")
     assert agent.scenario == "driving" and agent.action_mode == mode
-    from dynenv_ros.learning.trainer import policy_from_training_checkpoint
+    from dynenv_ros.learning.agents import policy_from_training_checkpoint
     again, _ = policy_from_training_checkpoint(run)          # the final checkpoint holds the same policy
     assert again.scenario == "driving" and again.action_mode == mode
     for name, value in agent.state_dict().items():

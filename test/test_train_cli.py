@@ -101,8 +101,8 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
         trainer.env.close()
 
     # killed before it wrote policy.safetensors, the run can still be evaluated: its latest checkpoint's policy
-    from dynenv_ros.learning.eval_cli import main as eval_main
-    from dynenv_ros.learning.trainer import policy_from_training_checkpoint
+    from dynenv_ros.evaluation.cli import main as eval_main
+    from dynenv_ros.learning.agents import policy_from_training_checkpoint
     assert not (run_dir / "policy.safetensors").exists()
     agent, meta = policy_from_training_checkpoint(run_dir)
     assert meta["checkpoint"]["path"] == str(latest) and not agent.training

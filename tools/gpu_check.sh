@@ -17,6 +17,6 @@ timeout 100 python3 -m benchmarks train --config ppo --updates 4 --warmup 1 --de
 timeout 90 python3 -m dynenv_ros.learning.train_cli --config quick --device cuda --set total_env_steps=600 --run-dir /tmp/r --no-progress 2>&1 | tail -6
 timeout 90 python3 -m dynenv_ros.learning.train_cli --resume /tmp/r --set total_env_steps=1200 --no-progress 2>&1 | tail -6
 ls /tmp/r; grep -c . /tmp/r/metrics.csv
-timeout 90 python3 -m dynenv_ros.learning.eval_cli /tmp/r/policy.safetensors --opponent random --episodes 1 --seeds 0 --players-per-team 2 --quiet 2>&1 | tail -8
+timeout 90 python3 -m dynenv_ros.evaluation.cli /tmp/r/policy.safetensors --opponent random --episodes 1 --seeds 0 --players-per-team 2 --quiet 2>&1 | tail -8
 timeout 90 python3 -m dynenv_ros.learning.train_cli --config driving_quick --device cuda --set total_env_steps=300 --set action_mode=continuous --run-dir /tmp/d --no-progress 2>&1 | tail -6
 timeout 60 python3 -m dynenv_ros.learning.train_cli --config ppo --device cuda --set opponent=snapshot --set snapshot_every_updates=1 --set num_envs=2 --set backend=inprocess --set total_env_steps=256 --run-dir /tmp/p --no-progress 2>&1 | tail -6

@@ -13,7 +13,7 @@ What it does:
    ``policy.safetensors`` is evaluated against ``random`` and against ``scripted`` with ONE evaluation seed: its
    training seed (the training seed is the statistical unit; two runs with the same seed meet the same env seeds,
    common random numbers). The ``random`` team itself is evaluated with seeds 0, 1, 2 (its three units). All
-   with ``learning.evaluation.evaluate``: ``--episodes`` episodes per seed, sides alternating, 2v2, realistic
+   with ``evaluation.soccer.evaluate``: ``--episodes`` episodes per seed, sides alternating, 2v2, realistic
    perception, stochastic policies. Each evaluation goes to ``--out/<unit>_vs_<opponent>.json`` (unit: the run
    folder's name, or ``random_s<seed>``) and is reused on a re-run when its settings, seed, opponent and policy
    file (SHA-256) still match, so only what is new is evaluated. ``--workers`` processes (spawn context, one
@@ -24,7 +24,7 @@ What it does:
 3. Markdown (``--markdown``): (a) against random: n seeds and mean ± sd over seeds of the total reward per robot
    and episode, of each reward term, of the paper metric, and the group's mean total over random's; (b) against
    scripted: goals for and against and W/D/L summed over seeds and episodes, goal difference and total reward
-   per episode (mean ± sd over seeds); (c) BEST (``learning.best``, seeds as the unit) on the total reward against
+   per episode (mean ± sd over seeds); (c) BEST (``evaluation.best``, seeds as the unit) on the total reward against
    random for random→baseline, random→pred, baseline→pred and pred→recon, and on the goal difference against
    scripted for baseline→pred (a comparison with a group of fewer than 2 seeds is skipped and listed); one PNG
    per comparison in ``--images`` (``best_<a>_vs_<b>.png``; ``best_<a>_vs_<b>_goal_difference.png``) and the
@@ -56,7 +56,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from dynenv_ros.learning.evaluation import FORMAT, RESULTS, SEED_METRICS, summarize  # noqa: E402
+from dynenv_ros.evaluation.results import FORMAT, summarize  # noqa: E402
+from dynenv_ros.evaluation.soccer import RESULTS, SEED_METRICS  # noqa: E402
 
 RANDOM = "random"
 OPPONENTS = ("random", "scripted")
@@ -179,7 +180,7 @@ def plan_jobs(runs: Sequence[Run], out_dir: Path) -> list[Job]:
 
 def cache_problem(job: Job, settings: Settings, sha: str | None) -> str | None:
     """None when ``job.out`` holds this evaluation already, else why it must be (re)done."""
-    from dynenv_ros.learning.evaluation import load_evaluation
+    from dynenv_ros.evaluation.results import load_evaluation
     if not job.out.is_file():
         return "new"
     try:
@@ -212,7 +213,8 @@ def _worker_init() -> None:
 
 def evaluate_job(job: Job, settings: Settings) -> tuple[Job, float]:
     """Evaluate one job and write its JSON (also the worker function: module level, so spawn can pickle it)."""
-    from dynenv_ros.learning.evaluation import evaluate, write_json
+    from dynenv_ros.evaluation.results import write_json
+    from dynenv_ros.evaluation.soccer import evaluate
     start = time.perf_counter()
     result = evaluate(job.policy, job.opponent, episodes=settings.episodes, seeds=[job.seed],
                       players_per_team=settings.players_per_team, perception=settings.perception,
@@ -271,7 +273,7 @@ def run_jobs(jobs: Sequence[Job], settings: Settings, workers: int = 1,
 # -- merged group results ----------------------------------------------------------------------------------------
 def load_units(jobs: Sequence[Job]) -> dict[str, dict[str, list[tuple[Job, dict]]]]:
     """group → opponent → [(job, evaluation JSON)], groups in GROUP_ORDER, units by seed."""
-    from dynenv_ros.learning.evaluation import load_evaluation
+    from dynenv_ros.evaluation.results import load_evaluation
     out: dict[str, dict[str, list[tuple[Job, dict]]]] = {}
     for job in sorted(jobs, key=lambda j: (group_rank(j.group), j.seed, j.unit)):
         out.setdefault(job.group, {}).setdefault(job.opponent, []).append((job, load_evaluation(job.out)))
@@ -292,12 +294,12 @@ def merge_group(group: str, opponent: str, units: Sequence[tuple[Job, dict]]) ->
                           "units": [{"unit": job.unit, "file": job.out.name, **data["evaluated"]}
                                     for job, data in units]},
             "opponent": units[0][1]["opponent"], "episodes": episodes, "per_seed": per_seed,
-            "summary": summarize(per_seed), "counts": counts}
+            "summary": summarize(per_seed, SEED_METRICS), "counts": counts}
 
 
 def write_groups(units: Mapping[str, Mapping[str, Sequence[tuple[Job, dict]]]], out_dir: Path
                  ) -> dict[tuple[str, str], Path]:
-    from dynenv_ros.learning.evaluation import write_json
+    from dynenv_ros.evaluation.results import write_json
     paths = {}
     for group, by_opponent in units.items():
         for opponent, items in by_opponent.items():
@@ -384,7 +386,7 @@ class Comparison:
 def run_best(units: Mapping[str, Mapping[str, Sequence[tuple[Job, dict]]]], images: Path, out_dir: Path,
              draws: int, tune: int, chains: int, seed: int, log: Callable[[str], None] = print
              ) -> list[Comparison]:
-    from dynenv_ros.learning.best import best, plot_posterior
+    from dynenv_ros.evaluation.best import best, plot_posterior
     plan = [(a, b, "total", "random", "") for a, b in TOTAL_COMPARISONS]
     plan += [(a, b, "goal_difference", "scripted", "_goal_difference") for a, b in GOAL_COMPARISONS]
     out = []
@@ -548,7 +550,7 @@ def markdown_text(argv: Sequence[str], settings: Settings, runs: Sequence[Run], 
     if curves is not None:
         out += ["## Training curves", "", f"![training curves]({os.path.relpath(curves, markdown.parent)})", ""]
     out += ["## Equivalent commands", "",
-            "Each evaluation (the tool ran them through `learning.evaluation.evaluate` with the same arguments):", "",
+            "Each evaluation (the tool ran them through `evaluation.soccer.evaluate` with the same arguments):", "",
             "```sh", *[job.command(settings) for job in jobs], "```", "",
             "The group files (`group_<group>_vs_<opponent>.json`) concatenate the per-seed files above in seed "
             "order; BEST on them prints the same numbers (add `--png FILE` for the plot; the tool's own plots "

@@ -65,8 +65,8 @@ def collect(policy: str, teacher: str, opponent: str, periods: int, worlds: int,
     import torch
 
     from dynenv_ros.envs.vector import SoccerVectorEnv
+    from dynenv_ros.evaluation.episodes import load_evaluated_policy
     from dynenv_ros.learning.algorithms import run_sequence
-    from dynenv_ros.learning.evaluation import load_evaluated_policy
     from dynenv_ros.learning.opponents import SCRIPTED_TEAM, WorldScriptedOpponent
     from dynenv_ros.learning.rollout import RolloutCollector, head_outputs
 

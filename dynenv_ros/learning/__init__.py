@@ -1,1 +1,1 @@
-"""ROS-free learning: rollouts, algorithms, losses wiring, checkpoints, evaluation."""
+"""ROS-free learning: rollouts, algorithms, losses wiring, checkpoints (evaluation: ``dynenv_ros.evaluation``)."""

@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import DrivingVectorEnv, SoccerVectorEnv
 from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.agents import make_agent
 from dynenv_ros.learning.algorithms import UpdateSettings, update
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.heads import Learner
@@ -57,29 +57,6 @@ def update_settings(cfg: TrainConfig) -> UpdateSettings:
         use_forward=losses.forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
         use_localization=losses.localization, use_reconstruction=losses.reconstruction,
         intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0))
-
-
-def make_agent(cfg: TrainConfig) -> DynEnvAgent:
-    """The untrained agent a run of ``cfg`` trains (its scenario, width, head and action mode)."""
-    if cfg.driving:
-        return DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
-    motion = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode}).motion
-    return DynEnvAgent(cfg.feature_size, cfg.head_mode, motion.head_units, motion.head_max_delta)
-
-
-def policy_from_training_checkpoint(path: str | Path) -> tuple[DynEnvAgent, dict[str, Any]]:
-    """The policy of a training checkpoint — a ``step_*`` folder, or a run folder or its ``checkpoints`` folder (then
-    the latest valid one) — in eval mode on the CPU, with the checkpoint's meta: to evaluate a run part-way, or one
-    stopped before it wrote ``policy.safetensors``. The agent is rebuilt from the config the checkpoint carries.
-    ValueError (from ``checkpoints``) for a missing, damaged or foreign checkpoint, or weights that do not fit."""
-    meta = checkpoints.read_checkpoint_meta(path)
-    try:
-        cfg = TrainConfig.from_dict(meta["config"])
-    except (KeyError, TypeError, ValueError) as error:
-        raise ValueError(f"checkpoint {meta['checkpoint']['path']} has no usable training config: {error}") from None
-    agent = make_agent(cfg)
-    meta, _ = checkpoints.load_training_checkpoint(meta["checkpoint"]["path"], Learner(agent, cfg.ltp_horizon))
-    return agent.eval(), meta
 
 
 class Trainer:

@@ -251,6 +251,10 @@ class GoalkeeperPolicy:
 
 # -- teams -------------------------------------------------------------------------------------------------------
 PolicyKind = Literal["chaser", "eager_chaser", "random", "keeper_and_chasers"]
+# The kinds a scripted *team* plays as an opponent or baseline ('random' aside), and the one "scripted" means in
+# dynenv-eval and in training against the scripted team.
+SCRIPTED_KINDS = ("chaser", "eager_chaser", "keeper_and_chasers")
+DEFAULT_SCRIPTED = "keeper_and_chasers"
 EAGER_KICK_TOLERANCE = 1.2     # rad; 18 : 10 against keeper_and_chasers in 30 games (chaser: 17 : 12), docs/results.md
 
 
@@ -286,4 +290,5 @@ def act_all(policies: Sequence[ScriptedPolicy], snapshot: WorldSnapshot) -> list
 
 
 __all__ = ["ScriptedPolicy", "RandomPolicy", "ChaserPolicy", "GoalkeeperPolicy", "team_policies", "act_all",
-           "wrap", "to_robot_frame", "find_robot", "find_ball", "head_toward", "kick_foot_for", "HEAD_MAX_DELTA"]
+           "wrap", "to_robot_frame", "find_robot", "find_ball", "head_toward", "kick_foot_for", "HEAD_MAX_DELTA",
+           "SCRIPTED_KINDS", "DEFAULT_SCRIPTED"]

@@ -1,6 +1,6 @@
 """BEST: Kruschke's (2013) Bayesian estimation for two groups, with PyMC — the paper's significance test.
 
-The unit is the seed: one number per seed per group (e.g. the per-seed means of ``learning.evaluation``).
+The unit is the seed: one number per seed per group (e.g. the per-seed means of ``evaluation.soccer``).
 Model (Kruschke 2013, "Bayesian estimation supersedes the t test"), with ``y`` both groups pooled:
 
     μ₁, μ₂ ~ Normal(mean(y), 1000·sd(y))
@@ -21,9 +21,12 @@ import os
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
+
+from dynenv_ros.evaluation.results import load_evaluation
+from dynenv_ros.evaluation.soccer import SEED_METRICS
 
 HDI_PROB = 0.95
 
@@ -194,11 +197,24 @@ def plot_posterior(result: BestResult, samples: dict[str, np.ndarray], path: str
     return target
 
 
+def seed_values(result: Mapping[str, Any], metric: str) -> list[float]:
+    """The per-seed values of ``metric`` (one of ``soccer.SEED_METRICS``, or a driving result's) in a result: what
+    ``compare_evaluations`` gives BEST."""
+    rows = result["per_seed"]
+    if not rows or metric not in rows[0]:
+        known = ", ".join(SEED_METRICS)
+        raise ValueError(f"unknown metric {metric!r}; known: {known}")
+    values = [float(row[metric]) for row in rows]
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"metric {metric!r} has non-finite per-seed values")
+    return values
+
+
+
 def compare_evaluations(path1: str | os.PathLike[str], path2: str | os.PathLike[str], metric: str = "total",
                         png: str | os.PathLike[str] | None = None, **kwargs: Any) -> BestResult:
     """BEST on the per-seed values of ``metric`` in two ``dynenv-eval`` JSON results (path1 baseline, path2
     proposal); writes the posterior plot to ``png`` if given. ``kwargs`` go to ``best``."""
-    from dynenv_ros.learning.evaluation import load_evaluation, seed_values
     a, b = load_evaluation(path1), load_evaluation(path2)
     values1, values2 = seed_values(a, metric), seed_values(b, metric)
     result, samples = best(values1, values2, return_samples=True, **kwargs)
@@ -224,5 +240,5 @@ def format_result(result: BestResult, labels: tuple[str, str] = ("group 1", "gro
     return "\n".join(lines)
 
 
-__all__ = ["BestResult", "best", "hdi", "effect_size", "split_r_hat", "plot_posterior", "compare_evaluations",
-           "format_result", "HDI_PROB"]
+__all__ = ["BestResult", "best", "hdi", "effect_size", "split_r_hat", "plot_posterior", "seed_values",
+           "compare_evaluations", "format_result", "HDI_PROB"]

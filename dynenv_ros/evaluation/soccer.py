@@ -6,7 +6,7 @@ checkpoint against ``random``, ``scripted`` or another checkpoint, and ``random`
 side too (baseline rows produced the same way)::
 
     result = evaluate("runs/agent.pt", "scripted", episodes=4, seeds=[0, 1, 2])
-    print(format_table(result)); write_json(result, "results.json")
+    print(format_table(result)); write_json(result, "results.json")      # write_json: evaluation.results
 
 Policies (``make_team_policy``):
 
@@ -34,21 +34,16 @@ episodes; the summary gives the mean and standard deviation over seeds.
 """
 from __future__ import annotations
 
-import json
-import math
-import os
-from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from dynenv_ros.evaluation.episodes import episode_seeds, load_evaluated_policy, sample_space
+from dynenv_ros.evaluation.results import FORMAT, TERMS, float_mean, summarize
 from dynenv_ros.sim.reward_terms import RewardTerm
+from dynenv_ros.soccer.scripted import DEFAULT_SCRIPTED, SCRIPTED_KINDS, team_policies
 
-FORMAT = "dynenv_eval/1"
-TERMS = tuple(term.name.lower() for term in RewardTerm)
 OBSERVATION = RewardTerm.OBSERVATION.name.lower()
-SCRIPTED_KINDS = ("chaser", "eager_chaser", "keeper_and_chasers")
-DEFAULT_SCRIPTED = "keeper_and_chasers"
 SIDES = ("alternate", "a", "b")
 RESULTS = ("win", "draw", "loss")
 # Per-seed numbers (means over the seed's episodes); ``compare`` metrics are these names.
@@ -114,20 +109,6 @@ class RandomTeam(TeamPolicy):
         return [sample_space(space, self.rng) for space in self.spaces]
 
 
-def sample_space(space: Any, rng: np.random.Generator) -> Any:
-    """A uniform sample of a gymnasium MultiDiscrete, Discrete, Box or Dict space from ``rng``."""
-    from gymnasium import spaces
-    if isinstance(space, spaces.MultiDiscrete):
-        return (space.start + rng.integers(space.nvec)).astype(np.int64)
-    if isinstance(space, spaces.Discrete):
-        return int(space.start + rng.integers(space.n))
-    if isinstance(space, spaces.Box):
-        return rng.uniform(space.low, space.high).astype(space.dtype)
-    if isinstance(space, spaces.Dict):
-        return {key: sample_space(sub, rng) for key, sub in space.spaces.items()}
-    raise ValueError(f"cannot sample a {type(space).__name__} action space")
-
-
 class ScriptedTeam(TeamPolicy):
     """A team of ``soccer.scripted`` policies (they read the ground-truth snapshot, not the observations)."""
 
@@ -142,7 +123,6 @@ class ScriptedTeam(TeamPolicy):
         return {"kind": self.kind, "team": self.team}
 
     def reset(self, env, robots, seed):
-        from dynenv_ros.soccer.scripted import team_policies
         c = env.config
         policies = team_policies(c.players_per_team, self.team, np.random.default_rng(seed), field=c.field,
                                  head_mode=c.head_mode, motion=c.motion)
@@ -227,29 +207,8 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
     model, digest = load_evaluated_policy(spec)
     if getattr(model, "scenario", "soccer") == "driving":
         raise ValueError(f"{spec} is a driving policy; evaluate it with --scenario driving "
-                         f"(learning/driving_evaluation.py)")
+                         f"(evaluation/driving.py)")
     return AgentTeam(model, greedy=greedy, path=str(spec), sha256=digest)
-
-
-def load_evaluated_policy(spec: str | os.PathLike[str]) -> tuple[Any, str]:
-    """A policy file (``policy.safetensors``), or a training checkpoint folder — a ``step_*`` folder, or a run
-    folder (its latest checkpoint) — rebuilt by ``trainer.policy_from_training_checkpoint``; and the SHA-256 of the
-    weights file it came from (recorded in the result)."""
-    from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
-    if Path(spec).is_dir():
-        from dynenv_ros.learning.checkpoints import MODEL_FILE
-        from dynenv_ros.learning.trainer import policy_from_training_checkpoint
-        model, meta = policy_from_training_checkpoint(spec)
-        return model, sha256(Path(meta["checkpoint"]["path"]) / MODEL_FILE)
-    return load_checkpoint(spec), sha256(spec)
-
-
-# -- seeding -----------------------------------------------------------------------------------------------------
-def episode_seeds(seed: int, episode: int) -> tuple[int, np.random.SeedSequence, np.random.SeedSequence]:
-    """(env reset seed, evaluated team's SeedSequence, opponent's SeedSequence) of episode ``episode`` of seed
-    ``seed``: the three children of ``SeedSequence(seed, spawn_key=(episode,))``."""
-    env_ss, evaluated, opponent = np.random.SeedSequence(seed, spawn_key=(episode,)).spawn(3)
-    return int(env_ss.generate_state(1, np.uint32)[0]), evaluated, opponent
 
 
 # -- one episode -------------------------------------------------------------------------------------------------
@@ -386,7 +345,7 @@ def _evaluate(ours: TeamPolicy, theirs: TeamPolicy, evaluated: str | TeamPolicy,
     return {"format": FORMAT, "settings": settings,
             "evaluated": {"spec": _spec_name(evaluated), **ours.describe()},
             "opponent": {"spec": _spec_name(opponent), **theirs.describe()},
-            "episodes": records, "per_seed": per_seed, "summary": summarize(per_seed),
+            "episodes": records, "per_seed": per_seed, "summary": summarize(per_seed, SEED_METRICS),
             "counts": {"episodes": len(records), "wins": sum(r["result"] == "win" for r in records),
                        "draws": sum(r["result"] == "draw" for r in records),
                        "losses": sum(r["result"] == "loss" for r in records)}}
@@ -394,11 +353,6 @@ def _evaluate(ours: TeamPolicy, theirs: TeamPolicy, evaluated: str | TeamPolicy,
 
 def _spec_name(spec: str | TeamPolicy) -> str:
     return spec if isinstance(spec, str) else type(spec).__name__
-
-
-def float_mean(values: Iterable[float]) -> float:
-    """The mean as a plain float (JSON-ready) of numbers or bools; shared with the driving evaluation."""
-    return float(np.mean([float(v) for v in values]))
 
 
 def seed_means(seed: int, records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
@@ -419,18 +373,6 @@ def seed_means(seed: int, records: Sequence[Mapping[str, Any]]) -> dict[str, Any
     row["opponent_total"] = float_mean(r["opponent"]["total"] for r in records)
     row["opponent_paper_metric"] = float_mean(r["opponent"]["paper_metric"] for r in records)
     return row
-
-
-def summarize(per_seed: Sequence[Mapping[str, Any]],
-              metrics: Sequence[str] = SEED_METRICS) -> dict[str, dict[str, float]]:
-    """Mean, sample standard deviation (0 for one seed) and n over seeds of every per-seed number in ``metrics``
-    (soccer's by default; the driving evaluation passes its own)."""
-    out = {}
-    for metric in metrics:
-        values = np.array([row[metric] for row in per_seed], float)
-        out[metric] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
-                       "n": int(len(values))}
-    return out
 
 
 # -- output ------------------------------------------------------------------------------------------------------
@@ -461,85 +403,6 @@ def _mean_sd(stats: Mapping[str, float]) -> str:
     return f"{stats['mean']:.3g} ± {stats['sd']:.2g}"
 
 
-def write_json(result: Mapping[str, Any], path: str | os.PathLike[str]) -> None:
-    """Write the result (via ``path.tmp`` and a rename)."""
-    target = Path(path)
-    if not target.parent.is_dir():
-        raise ValueError(f"cannot write {target}: folder {target.parent} does not exist")
-    if target.is_dir():
-        raise ValueError(f"cannot write {target}: it is a folder (give a file name)")
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(result, indent=1, allow_nan=False) + "\n")
-    try:
-        os.replace(tmp, target)
-    except OSError:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def load_evaluation(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """A result written by ``write_json``; a clear ValueError for a missing, unreadable or foreign file."""
-    source = Path(path)
-    if not source.is_file():
-        raise ValueError(f"evaluation file {source} does not exist")
-    try:
-        data = json.loads(source.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise ValueError(f"evaluation file {source} is not readable JSON: {error}") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(data.get("per_seed"), list):
-        raise ValueError(f"evaluation file {source} is not a {FORMAT} result")
-    return data
-
-
-def seed_values(result: Mapping[str, Any], metric: str) -> list[float]:
-    """The per-seed values of ``metric`` (one of ``SEED_METRICS``) in a result."""
-    rows = result["per_seed"]
-    if not rows or metric not in rows[0]:
-        known = ", ".join(SEED_METRICS)
-        raise ValueError(f"unknown metric {metric!r}; known: {known}")
-    values = [float(row[metric]) for row in rows]
-    if not all(math.isfinite(v) for v in values):
-        raise ValueError(f"metric {metric!r} has non-finite per-seed values")
-    return values
-
-
-def merge_runs(results: Sequence[Mapping[str, Any]], names: Sequence[str]) -> dict[str, Any]:
-    """One result whose per-seed rows are training runs, for BEST with the run as the unit when each run was
-    evaluated on several seeds: row k is ``results[k]``'s mean over its seeds of every per-seed number (its
-    ``episodes`` summed), ``seed`` k and ``unit`` ``names[k]``. The inputs must share their scenario and settings
-    (episodes, seeds, players or cars, perception, ...): a clear ValueError names what differs."""
-    if len(results) < 1 or len(results) != len(names):
-        raise ValueError("merge needs one name per result and at least one result")
-    first = results[0]
-    for name, result in zip(names[1:], results[1:]):
-        if result.get("scenario", "robocup") != first.get("scenario", "robocup"):
-            raise ValueError(f"{name}: scenario {result.get('scenario', 'robocup')!r}, the first result's is "
-                             f"{first.get('scenario', 'robocup')!r}")
-        differ = sorted(k for k in set(result["settings"]) | set(first["settings"])
-                        if result["settings"].get(k) != first["settings"].get(k))
-        if differ:
-            raise ValueError(f"{name}: settings differ from the first result's in {', '.join(differ)}")
-    keys = [k for k, v in first["per_seed"][0].items() if k not in ("seed", "episodes") and
-            isinstance(v, (int, float)) and not isinstance(v, bool)] if first["per_seed"] else []
-    rows = []
-    for k, (name, result) in enumerate(zip(names, results)):
-        seeds = result["per_seed"]
-        if not seeds or any(key not in row for row in seeds for key in keys):
-            raise ValueError(f"{name}: its per-seed rows do not have the first result's numbers")
-        row: dict[str, Any] = {"seed": k, "unit": name, "episodes": int(sum(r["episodes"] for r in seeds))}
-        row.update({key: float_mean(r[key] for r in seeds) for key in keys})
-        rows.append(row)
-    merged = {key: value for key, value in first.items() if key not in ("episodes", "per_seed", "summary", "counts")}
-    merged["evaluated"] = {"spec": "runs", "kind": "runs",
-                           "units": [{"unit": name, **result["evaluated"]} for name, result in zip(names, results)]}
-    merged["episodes"] = [dict(record, unit=name) for name, result in zip(names, results)
-                          for record in result["episodes"]]
-    merged["per_seed"] = rows
-    merged["summary"] = summarize(rows, keys)
-    return merged
-
-
-__all__ = ["TeamPolicy", "RandomTeam", "ScriptedTeam", "AgentTeam", "make_team_policy", "sample_space",
-           "episode_seeds", "play_episode", "evaluate", "seed_means", "summarize", "format_table", "write_json",
-           "load_evaluation", "seed_values", "merge_runs", "load_evaluated_policy", "positive_part", "positive_reward", "paper_metric", "TERMS",
-           "SEED_METRICS", "DEFAULT_SCRIPTED", "FORMAT"]
+__all__ = ["TeamPolicy", "RandomTeam", "ScriptedTeam", "AgentTeam", "make_team_policy", "play_episode", "evaluate",
+           "seed_means", "format_table", "positive_part", "positive_reward", "paper_metric", "SEED_METRICS", "RESULTS",
+           "SIDES"]

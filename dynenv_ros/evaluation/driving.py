@@ -8,7 +8,7 @@ pedestrians and obstacles). So a checkpoint is compared with ``random`` and with
 the three with the same ``--episodes`` and ``--seeds`` and comparing the JSON files (``dynenv-eval compare``)::
 
     result = evaluate_driving("runs/driving/pred_s0/policy.safetensors", episodes=4, seeds=[0, 1, 2])
-    print(format_driving_table(result)); write_json(result, "pred.json")
+    print(format_driving_table(result)); write_json(result, "pred.json")    # write_json: evaluation.results
 
 Drivers (``make_driver``):
 
@@ -31,7 +31,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from dynenv_ros.learning.evaluation import FORMAT, TERMS, episode_seeds, float_mean, sample_space, summarize
+from dynenv_ros.evaluation.episodes import episode_seeds, load_evaluated_policy, sample_space
+from dynenv_ros.evaluation.results import FORMAT, TERMS, float_mean, summarize
 
 SEED_METRICS = ("total", "paper_metric", *TERMS, "cars_home", "crashes", "home_rate", "crash_rate", "periods")
 DRIVER_KINDS = ("random", "scripted")
@@ -122,14 +123,13 @@ class AgentDrivers(Driver):
 
 def make_driver(spec: str | Driver, greedy: bool = False) -> Driver:
     """``"random"``, ``"scripted"``, a driving policy file or a training checkpoint folder
-    (``evaluation.load_evaluated_policy``); a Driver is returned as is."""
+    (``episodes.load_evaluated_policy``); a Driver is returned as is."""
     if isinstance(spec, Driver):
         return spec
     if spec == "random":
         return RandomDriver()
     if spec == "scripted":
         return ScriptedDrivers()
-    from dynenv_ros.learning.evaluation import load_evaluated_policy
     model, digest = load_evaluated_policy(spec)
     return AgentDrivers(model, greedy=greedy, path=str(spec), sha256=digest)
 

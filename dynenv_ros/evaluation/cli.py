@@ -12,7 +12,7 @@
 
 Driving: the policy ("random", "scripted" or a driving checkpoint) drives every car (--cars) of the same seeded
 episodes; there is no opponent (--opponent is refused): "against random / scripted" is the comparison of the
-evaluations of the same episodes (learning/driving_evaluation.py).
+evaluations of the same episodes (evaluation/driving.py).
 
 The evaluated team and the opponent are each a checkpoint path, "random", "scripted" (= keeper_and_chasers),
 "chaser", "eager_chaser" or "keeper_and_chasers". The evaluated team plays team A in the even episodes of each
@@ -93,7 +93,7 @@ def _merge_parser() -> argparse.ArgumentParser:
 
 
 def run_merge(args: argparse.Namespace) -> int:
-    from dynenv_ros.learning.evaluation import load_evaluation, merge_runs, write_json
+    from dynenv_ros.evaluation.results import load_evaluation, merge_runs, write_json
     try:
         _check_folder(args.out, "--out")
         results = [load_evaluation(path) for path in args.results]
@@ -121,7 +121,7 @@ def _evaluate_and_report(out: Path | None, evaluate: Callable[[], Mapping[str, A
                          table: Callable[[Mapping[str, Any]], str]) -> int:
     """Run ``evaluate`` (after checking ``--out``'s folder, so a long run cannot end unwritable), print its
     ``table`` and write the result to ``out``; shared by the soccer and driving evaluations. Exit status."""
-    from dynenv_ros.learning.evaluation import write_json
+    from dynenv_ros.evaluation.results import write_json
     try:
         _check_folder(out, "--out")
         result = evaluate()
@@ -135,7 +135,7 @@ def _evaluate_and_report(out: Path | None, evaluate: Callable[[], Mapping[str, A
 
 
 def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
-    from dynenv_ros.learning.driving_evaluation import evaluate_driving, format_driving_table
+    from dynenv_ros.evaluation.driving import evaluate_driving, format_driving_table
     if args.opponent is not None:
         return _fail("--opponent: driving has no opponent; the policy drives every car. Evaluate random and "
                      "scripted the same way and compare the files")
@@ -153,7 +153,7 @@ def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
 
 
 def run_eval(args: argparse.Namespace) -> int:
-    from dynenv_ros.learning.evaluation import evaluate, format_table
+    from dynenv_ros.evaluation.soccer import evaluate, format_table
     if args.episodes < 1:
         return _fail(f"--episodes must be at least 1, got {args.episodes}")
     if args.torch_threads < 1:
@@ -177,7 +177,7 @@ def run_eval(args: argparse.Namespace) -> int:
 
 
 def run_compare(args: argparse.Namespace) -> int:
-    from dynenv_ros.learning.best import compare_evaluations, format_result
+    from dynenv_ros.evaluation.best import compare_evaluations, format_result
     try:
         _check_folder(args.png, "--png")
         _check_folder(args.out, "--out")
