@@ -13,6 +13,10 @@ from collections.abc import Sequence
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
           "policy": "policy", "train": "train", "soak": "soak",
           "flood": "flood", "ros-train": "ros_train", "cores": "cores"}
+# suites whose one run lasts minutes: one run unless --repeat asks for more
+LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1}
+# suites that do not repeat their measurement (yet)
+RUNS_ONCE = {"ros-train"}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -23,7 +27,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name, module_name in SUITES.items():
         sub = suites.add_parser(name)
         modules[name] = module_name
-        sub.add_argument("--repeat", type=int, default=3, help="repetitions; the best is reported")
+        sub.add_argument("--repeat", type=int, default=LONG_SUITES.get(name, 3), help=(
+            "not used yet: this suite runs once" if name in RUNS_ONCE else
+            "repetitions; the median and range are reported" + (
+                " (default 1: one run lasts minutes)" if name in LONG_SUITES else "")))
         if name == "sim":   # its options are cheap to declare without importing the simulator
             from benchmarks.sim_options import add_arguments
             add_arguments(sub)
@@ -48,6 +55,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "ros-train":
             from benchmarks.ros_train import add_arguments as add_ros_train_arguments
             add_ros_train_arguments(sub)
+        if name in ("msgs", "setup"):
+            sub.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
         if name == "ros":
             sub.add_argument("--sim-seconds", type=float, default=60.0, help="sim seconds per stepped game")
             sub.add_argument("--wall-seconds", type=float, default=10.0, help="realtime CPU sampling window")

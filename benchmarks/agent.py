@@ -10,10 +10,11 @@ batch (8 worlds = 32 robots):
   halfway, so the reset path is in it), then ``backward`` of a loss touching the policy logits, the value, the pose
   and the reconstruction outputs.
 
-Each figure is the fastest of ``--iterations`` timed calls after a quarter as many untimed ones, and with
-``--repeat`` the best run (the machine is shared, so the minimum is the figure least disturbed by other work); the
-median of the best run is printed beside it. Pinned to ``--cores`` cores with ``--threads`` torch threads. A model
-without ``forward_sequence`` (the network before it) is timed calling ``forward`` once per period instead.
+A run times ``--iterations`` calls after a quarter as many untimed ones and gives their median by wall time and by
+CPU time (``time.process_time()``: on a shared machine the time other processes held the core is not counted), and
+the fastest call; with ``--repeat`` runs each of those is reported as the median and [min, max] over the runs
+(``benchmarks/timing.py``). Pinned to ``--cores`` cores with ``--threads`` torch threads. A model without
+``forward_sequence`` (the network before it) is timed calling ``forward`` once per period instead.
 """
 from __future__ import annotations
 
@@ -22,10 +23,9 @@ import json
 import platform
 import statistics
 import sys
-import time
 from typing import Any, Callable
 
-from benchmarks.timing import pin_cores, print_table, torch_threads
+from benchmarks.timing import Clock, format_stat, pin_cores, print_table, stat, torch_threads
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -88,16 +88,19 @@ def _loss(step: Any, targets: dict[str, Any]) -> Any:
             + F.softplus(step.robot_confidence).mean())
 
 
-def _best(call: Callable[[], Any], iterations: int, warmup: int) -> tuple[float, float]:
-    """(fastest, median) ms of ``iterations`` calls after ``warmup`` untimed ones."""
+def _calls(call: Callable[[], Any], iterations: int, warmup: int) -> dict[str, float]:
+    """Median ms by wall and by CPU time, and the fastest ms by wall time, of ``iterations`` calls after ``warmup``
+    untimed ones."""
     for _ in range(warmup):
         call()
-    times = []
+    clock, wall, cpu = Clock(), [], []
     for _ in range(iterations):
-        start = time.perf_counter()
+        start = clock.read()
         call()
-        times.append(1e3 * (time.perf_counter() - start))
-    return min(times), statistics.median(times)
+        span = clock.read() - start
+        wall.append(1e3 * span.wall_s)
+        cpu.append(1e3 * span.cpu_s)
+    return {"ms": statistics.median(wall), "cpu_ms": statistics.median(cpu), "fastest_ms": min(wall)}
 
 
 def run(args: Any) -> int:
@@ -154,12 +157,12 @@ def run(args: Any) -> int:
     runs, warmup = [], max(2, args.iterations // 4)
     for _ in range(max(1, getattr(args, "repeat", 1))):
         model.eval()
-        acting = _best(act, args.iterations, warmup)
+        acting = _calls(act, args.iterations, warmup)
         model.train()
-        training = _best(train, args.iterations, warmup)
-        runs.append((acting, training))
-    acting = min(runs, key=lambda r: r[0][0])[0]
-    training = min(runs, key=lambda r: r[1][0])[1]
+        training = _calls(train, args.iterations, warmup)
+        runs.append({**{f"acting_{k}": v for k, v in acting.items()},
+                     **{f"training_{k}": v for k, v in training.items()}})
+    timed = {key: stat((run[key] for run in runs), 3) for key in runs[0]}
     valid_landmarks = (~landmarks.mask).sum(-1).float()
     valid_objects = (~objects.mask).sum(-1).float()
     figures = {
@@ -169,18 +172,19 @@ def run(args: Any) -> int:
         "objects_per_frame_mean_max": [round(valid_objects.mean().item(), 2), int(valid_objects.max())],
         "forward_sequence": sequence is not None, "threads": args.threads, "cores": len(cores),
         "iterations": args.iterations, "warmup": warmup, "repeat": max(1, getattr(args, "repeat", 1)),
-        "acting_best_ms": round(acting[0], 3), "acting_median_ms": round(acting[1], 3),
-        "training_best_ms": round(training[0], 3), "training_median_ms": round(training[1], 3),
-        "torch": torch.__version__, "python": platform.python_version(),
+        **timed, "torch": torch.__version__, "python": platform.python_version(),
     }
     if args.json:
         print(json.dumps(figures))
     else:
         rows = [(k, str(v)) for k, v in figures.items() if not k.startswith(("acting", "training"))]
-        rows.append((f"acting forward, {B} robots", f"best {acting[0]:.2f} ms (median {acting[1]:.2f})"))
-        rows.append((f"forward_sequence + backward, {T}x{B}",
-                     f"best {training[0]:.2f} ms (median {training[1]:.2f})"))
-        print_table("dynenv-bench policy --agent: the agent's training passes in torch", rows)
+        for name, what in (("acting", f"acting forward, {B} robots"),
+                           ("training", f"forward_sequence + backward, {T}x{B}")):
+            rows.append((what, f"{format_stat(timed[f'{name}_ms'], '{:.2f}')} ms; by CPU time "
+                               f"{format_stat(timed[f'{name}_cpu_ms'], '{:.2f}')} ms; fastest call "
+                               f"{format_stat(timed[f'{name}_fastest_ms'], '{:.2f}')} ms"))
+        print_table(f"dynenv-bench policy --agent: the agent's training passes in torch, a run's median call, "
+                    f"median [min–max] of {figures['repeat']} runs", rows)
     return 0
 
 
@@ -192,7 +196,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--cores", type=int, default=1, help="cores to pin to (0 = no pinning)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--repeat", type=int, default=3, help="runs; the best is reported")
+    parser.add_argument("--repeat", type=int, default=3, help="runs; the median and range are reported")
     parser.add_argument("--json", action="store_true")
     return parser
 

@@ -4,7 +4,10 @@ A real-time 1v1 game (10 Hz vision, 0.5 s motion period) with a scripted policy 
 phase, two extra processes publish refused actions (walk = 99) on /team_a_0/action as fast as they can; then they
 stop. In each phase the benchmark reports the share of (robot, period) slots with an accepted action — does the
 legitimate policy keep control? — the simulator's frame rate, and the round-trip time of a service of the
-simulator (its get_parameters) called every 0.2 s — are services delayed?
+simulator (its get_parameters) called every 0.2 s — are services delayed? — and the simulator's CPU time as a
+share of one core (``/proc/<pid>/stat``: what the flood costs it, whoever else shares the machine). With
+``--repeat N`` the whole measurement runs N times and every figure is the median and [min, max] of the runs
+(``benchmarks/timing.py``; one run by default).
 """
 from __future__ import annotations
 
@@ -20,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.timing import print_table
+from benchmarks.timing import combine, format_stat, print_table, process_cpu_seconds
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -94,7 +97,7 @@ class _Probe:
         self.rclpy.try_shutdown()
 
 
-def _phase(probe: _Probe, start: float, end: float, latencies: list[float]) -> dict[str, Any]:
+def _phase(probe: _Probe, start: float, end: float, latencies: list[float], sim_cpu_s: float) -> dict[str, Any]:
     window = [(t, d) for t, d in probe.diagnostics if start <= t <= end and "accepted" in d]
     first, last = window[0][1], window[-1][1]
     periods = int(last["periods_run"]) - int(first["periods_run"])
@@ -105,7 +108,7 @@ def _phase(probe: _Probe, start: float, end: float, latencies: list[float]) -> d
             "frames_per_s": statistics.median(float(d["vision_frames_per_s"]) for _, d in window),
             "service_ms_median": round(statistics.median(ordered), 2),
             "service_ms_p99": round(ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))], 2),
-            "service_ms_max": round(ordered[-1], 2)}
+            "service_ms_max": round(ordered[-1], 2), "sim_cpu_share_of_one_core": round(sim_cpu_s / (end - start), 4)}
 
 
 def measure(args: Any, work: Path) -> dict[str, Any]:
@@ -123,23 +126,22 @@ def measure(args: Any, work: Path) -> dict[str, Any]:
         with (work / f"{node.name}.log").open("w") as log:
             processes.append(subprocess.Popen(node.command(), env=env, stdout=log, stderr=subprocess.STDOUT))
     probe = _Probe()
+    sim_pid = processes[0].pid
+
+    def phase(seconds: float) -> dict[str, Any]:
+        latencies: list[float] = []
+        start, cpu = time.monotonic(), process_cpu_seconds(sim_pid)
+        probe.spin(seconds, latencies)
+        return _phase(probe, start, time.monotonic(), latencies, process_cpu_seconds(sim_pid) - cpu)
     try:
         probe.spin(5.0, [])                                   # start-up and discovery
-        phases = {}
-        latencies: list[float] = []
-        start = time.monotonic()
-        probe.spin(args.calm_s, latencies)
-        phases["before"] = _phase(probe, start, time.monotonic(), latencies)
+        phases = {"before": phase(args.calm_s)}
         flooders = [subprocess.Popen([sys.executable, "-m", "benchmarks.flood", "--flood-process",
                                       str(args.flood_s)], env=env, stdout=subprocess.PIPE, text=True)
                     for _ in range(args.flooders)]
-        latencies, start = [], time.monotonic()
-        probe.spin(args.flood_s, latencies)
-        phases["flood"] = _phase(probe, start, time.monotonic(), latencies)
+        phases["flood"] = phase(args.flood_s)
         sent = [json.loads(f.communicate(timeout=60)[0].strip().splitlines()[-1])["sent"] for f in flooders]
-        latencies, start = [], time.monotonic()
-        probe.spin(args.calm_s, latencies)
-        phases["after"] = _phase(probe, start, time.monotonic(), latencies)
+        phases["after"] = phase(args.calm_s)
     finally:
         probe.close()
         _stop_all(processes)
@@ -147,23 +149,31 @@ def measure(args: Any, work: Path) -> dict[str, Any]:
 
 
 def run(args: Any) -> int:
-    if args.keep:
-        Path(args.keep).mkdir(parents=True, exist_ok=True)
-        result = measure(args, Path(args.keep))
-    else:
-        with tempfile.TemporaryDirectory() as tmp:
-            result = measure(args, Path(tmp))
+    runs = []
+    for k in range(args.repeat):
+        if args.keep:
+            work = Path(args.keep) / (f"run_{k}" if args.repeat > 1 else "")
+            work.mkdir(parents=True, exist_ok=True)
+            runs.append(measure(args, work))
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                runs.append(measure(args, Path(tmp)))
+    result = combine(runs, plain=("flooders",))
     if args.json:
         print(json.dumps(result))
         return 0
-    rows = [("flood", f"{result['flooders']} processes, {result['flood_messages_per_s']} refused actions/s sent")]
+    rows = [("flood", f"{result['flooders']} processes, {format_stat(result['flood_messages_per_s'])} refused "
+                      f"actions/s sent")]
     for phase in ("before", "flood", "after"):
         p = result[phase]
-        rows.append((f"{phase}: accepted slots, frames/s", f"{100 * p['accepted_share']:.1f} % of {p['periods']} "
-                     f"periods x 2, {p['frames_per_s']:.1f} frames/s, {p['refused']} refused"))
-        rows.append((f"{phase}: service round trip", f"median {p['service_ms_median']} ms, p99 "
-                     f"{p['service_ms_p99']} ms, max {p['service_ms_max']} ms"))
-    print_table("dynenv-bench flood (real-time 1v1, scripted policies)", rows)
+        rows.append((f"{phase}: accepted slots, frames/s", f"{format_stat(p['accepted_share'], '{:.1%}')} of "
+                     f"{format_stat(p['periods'])} periods x 2, {format_stat(p['frames_per_s'], '{:.1f}')} frames/s, "
+                     f"{format_stat(p['refused'])} refused"))
+        rows.append((f"{phase}: service round trip", f"median {format_stat(p['service_ms_median'], '{:.2f}')} ms, p99 "
+                     f"{format_stat(p['service_ms_p99'], '{:.2f}')} ms, max {format_stat(p['service_ms_max'], '{:.2f}')}"
+                     f" ms"))
+        rows.append((f"{phase}: simulator CPU", f"{format_stat(p['sim_cpu_share_of_one_core'], '{:.1%}')} of a core"))
+    print_table(f"dynenv-bench flood (real-time 1v1, scripted policies; median [min–max] of {args.repeat} runs)", rows)
     return 0
 
 

@@ -1,6 +1,8 @@
 """Message costs on the hot path: building, serialising and passing a vision frame's DetectionArray.
 
 A 5v5 game at 30 Hz vision publishes 300 DetectionArrays a second; these figures say what that costs in Python.
+Each figure is frames per wall second and per CPU second, the median and [min, max] of ``--repeat`` runs
+(``benchmarks/timing.py``).
 """
 from __future__ import annotations
 
@@ -12,7 +14,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from dynenv_msgs.msg import Detection, DetectionArray
 
-from benchmarks.timing import best_rate, print_table
+import json
+
+from benchmarks.timing import format_stat, measure, print_table, summarise
 
 DETECTIONS_PER_FRAME = 12  # the original's mean at noise 1, 2v2 (facts sheet 4.2) rounded up
 
@@ -28,7 +32,8 @@ def vision_frame():
     return frame
 
 
-def pubsub_rate(count: int) -> float:
+def pubsub_runs(count: int, repeat: int) -> list:
+    """``repeat`` runs of ``count`` frames published and received in one process (reliable, KEEP_ALL)."""
     context = Context()
     rclpy.init(context=context)
     try:
@@ -49,7 +54,7 @@ def pubsub_rate(count: int) -> float:
             while len(received) < count:
                 executor.spin_once(timeout_sec=0.1)
             return count
-        return best_rate(work, 1)
+        return measure(work, repeat)
     finally:
         rclpy.try_shutdown(context=context)
 
@@ -58,15 +63,24 @@ def run(args) -> int:
     repeat = args.repeat
     frame = vision_frame()
     data = serialize_message(frame)
-    build = best_rate(lambda: [vision_frame() for _ in range(2000)] and 2000, repeat)
-    serialise = best_rate(lambda: [serialize_message(frame) for _ in range(5000)] and 5000, repeat)
-    deserialise = best_rate(lambda: [deserialize_message(data, DetectionArray) for _ in range(5000)] and 5000, repeat)
-    pubsub = max(pubsub_rate(3000) for _ in range(repeat))
-    print_table(f"DetectionArray with {DETECTIONS_PER_FRAME} detections ({len(data)} B CDR), one core", [
-        ("build (frames/s)", f"{build:,.0f}"),
-        ("serialise (frames/s)", f"{serialise:,.0f}"),
-        ("deserialise (frames/s)", f"{deserialise:,.0f}"),
-        ("publish+receive, one process, reliable (frames/s)", f"{pubsub:,.0f}"),
-        ("5v5 at 30 Hz needs (frames/s)", "300"),
-    ])
+    figures = {"detections": DETECTIONS_PER_FRAME, "cdr_bytes": len(data), "repeat": repeat}
+    for name, runs in (
+            ("build", measure(lambda: [vision_frame() for _ in range(2000)] and 2000, repeat)),
+            ("serialise", measure(lambda: [serialize_message(frame) for _ in range(5000)] and 5000, repeat)),
+            ("deserialise", measure(lambda: [deserialize_message(data, DetectionArray) for _ in range(5000)]
+                                    and 5000, repeat)),
+            ("publish_receive", pubsub_runs(3000, repeat))):
+        summary = summarise(runs, "frames")
+        figures[name] = {"frames_per_s": summary["frames_per_s"], "frames_per_cpu_s": summary["frames_per_cpu_s"]}
+    if getattr(args, "json", False):
+        print(json.dumps(figures))
+        return 0
+    labels = {"build": "build", "serialise": "serialise", "deserialise": "deserialise",
+              "publish_receive": "publish+receive, one process, reliable"}
+    print_table(f"DetectionArray with {DETECTIONS_PER_FRAME} detections ({len(data)} B CDR), one core; frames/s, "
+                f"median [min–max] of {repeat} runs", [
+                    *((f"{label}", f"{format_stat(figures[name]['frames_per_s'])} per wall s, "
+                                   f"{format_stat(figures[name]['frames_per_cpu_s'])} per CPU s")
+                      for name, label in labels.items()),
+                    ("5v5 at 30 Hz needs", "300")])
     return 0

@@ -4,8 +4,10 @@ One decision = the detections of one motion period for every robot the process s
 timed on its own) → one batched forward pass with the recurrent state fed back. The detections are real (a
 ``robocup_v0`` game with sampled actions, recorded before timing), the model is the default-sized agent with seeded
 random weights (speed does not depend on training). The process is pinned to ``--cores`` cores and both runtimes
-use ``--threads`` threads, since on a robot the policy shares the CPU with everything else. With ``--repeat``, each
-case runs that many times and the run with the lowest median total is reported.
+use ``--threads`` threads, since on a robot the policy shares the CPU with everything else. Each case runs
+``--repeat`` times; every figure (a run's median and p95 per decision, by wall time; its median total by CPU time;
+decisions per wall and per CPU second) is reported as the median and [min, max] over the runs
+(``benchmarks/timing.py``).
 
 ``--agent`` times the training side instead (``benchmarks/agent.py``): the torch model's acting forward and
 ``forward_sequence`` + backward for a batch of worlds' robots.
@@ -22,7 +24,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from benchmarks.timing import pin_cores, print_table, torch_threads
+from benchmarks.timing import Run, format_stat, pin_cores, print_table, summarise, torch_threads
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -83,28 +85,32 @@ def _percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))]
 
 
-def _time_case(policy: Callable, collate: Callable, periods: list, decisions: int, warmup: int
-               ) -> dict[str, float]:
-    """Median and p95 in ms of collate, inference and their sum, over ``decisions`` decisions."""
+def _time_case(policy: Callable, collate: Callable, periods: list, decisions: int, warmup: int) -> Run:
+    """One run of ``decisions`` decisions: their wall and CPU seconds, and as extra figures the median and p95 in ms
+    of collate, inference and their sum (wall time) and the median total by CPU time."""
     state = policy.initial_state(len(periods[0][0]))
-    collate_ms, infer_ms, total_ms = [], [], []
+    collate_ms, infer_ms, total_ms, cpu_ms = [], [], [], []
     for i in range(warmup + decisions):
         detections, previous, proprio = periods[i % len(periods)]
+        cpu = time.process_time()
         start = time.perf_counter()
         landmarks, objects = collate(detections)
         middle = time.perf_counter()
         step = policy(landmarks, objects, previous, proprio, state)
         end = time.perf_counter()
+        cpu = time.process_time() - cpu
         state = step.state
         if i >= warmup:
             collate_ms.append(1e3 * (middle - start))
             infer_ms.append(1e3 * (end - middle))
             total_ms.append(1e3 * (end - start))
+            cpu_ms.append(1e3 * cpu)
     figures = {}
     for name, values in (("collate", collate_ms), ("inference", infer_ms), ("total", total_ms)):
-        figures[f"{name}_median_ms"] = round(statistics.median(values), 4)
-        figures[f"{name}_p95_ms"] = round(_percentile(values, 0.95), 4)
-    return figures
+        figures[f"{name}_median_ms"] = statistics.median(values)
+        figures[f"{name}_p95_ms"] = _percentile(values, 0.95)
+    figures["total_cpu_median_ms"] = statistics.median(cpu_ms)
+    return Run(decisions, sum(total_ms) / 1e3, sum(cpu_ms) / 1e3, figures)
 
 
 def run(args: Any) -> int:
@@ -147,8 +153,7 @@ def run(args: Any) -> int:
             for name, policy in runtimes.items():
                 runs = [_time_case(policy, collate_fixed, periods, args.decisions, args.warmup)
                         for _ in range(max(1, getattr(args, "repeat", 1)))]
-                best = min(runs, key=lambda figures: figures["total_median_ms"])
-                cases.append({"robots": robots, "runtime": name, **best})
+                cases.append({"robots": robots, "runtime": name, **summarise(runs, "decisions", digits=4)})
     import onnxruntime
 
     figures = {
@@ -163,17 +168,23 @@ def run(args: Any) -> int:
         print(json.dumps(figures))
     else:
         rows = [(k, str(v)) for k, v in figures.items() if k != "cases"]
+        ms = "{:.3f}"
         for case in cases:
             rows.append((f"{case['robots']:>2} robots {case['runtime']:<11}",
-                         f"collate {case['collate_median_ms']:.3f} (p95 {case['collate_p95_ms']:.3f})  "
-                         f"inference {case['inference_median_ms']:.3f} (p95 {case['inference_p95_ms']:.3f})  "
-                         f"total {case['total_median_ms']:.3f} (p95 {case['total_p95_ms']:.3f}) ms"))
-        print_table("dynenv-bench policy: per-decision latency, median (p95)", rows)
+                         f"collate {format_stat(case['collate_median_ms'], ms)} (p95 "
+                         f"{case['collate_p95_ms']['median']:.3f})  inference "
+                         f"{format_stat(case['inference_median_ms'], ms)} (p95 "
+                         f"{case['inference_p95_ms']['median']:.3f})  total {format_stat(case['total_median_ms'], ms)}"
+                         f" (p95 {case['total_p95_ms']['median']:.3f}) ms; CPU "
+                         f"{format_stat(case['total_cpu_median_ms'], ms)} ms"))
+        print_table(f"dynenv-bench policy: per-decision latency in ms, a run's median (p95), median [min–max] of "
+                    f"{figures['repeat']} runs", rows)
     return 0
 
 
 if __name__ == "__main__":
     _parser = argparse.ArgumentParser(description=__doc__)
     add_arguments(_parser)
-    _parser.add_argument("--repeat", type=int, default=1, help="runs per case; the best is reported")
+    _parser.add_argument("--repeat", type=int, default=1,
+                         help="runs per case; the median and range are reported")
     sys.exit(run(_parser.parse_args()))

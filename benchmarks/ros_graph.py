@@ -3,6 +3,10 @@
 - stepped: real-time factor of the lockstep loop (sim seconds per wall second), 2v2 and 5v5;
 - realtime: CPU share of the simulator process for 5v5 with vision at 30 Hz (physics 90 Hz, 3 ticks per frame);
 - recorder: messages lost by the recorder node during a stepped 2v2 game (published vs recorded).
+
+Beside the real-time factors, CPU time: the simulator's (the whole process, start-up included: ``getrusage`` of the
+waited-for child) and the driving process's own. The four measurements run ``--repeat`` times; every figure is the
+median and [min, max] of the runs (``benchmarks/timing.py``).
 """
 from __future__ import annotations
 
@@ -16,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.timing import print_table
+from benchmarks.timing import children_cpu_seconds, combine, format_stat, print_table, process_cpu_seconds
 
 
 def _env(domain: int) -> dict[str, str]:
@@ -75,16 +79,20 @@ def _drive(players: int, domain: int, until: callable, timeout_s: float) -> int:
 
 def stepped_rtf(players: int, sim_seconds: float, domain: int, work: Path) -> dict[str, Any]:
     report = work / f"stepped_{players}.json"
+    sim_cpu, driver_cpu = children_cpu_seconds(), time.process_time()
     sim = _launch("dynenv_ros.nodes.sim_node", {
         "players_per_team": players, "seed": 1, "episode_seconds": sim_seconds, "auto_reset": False,
         "exit_when_finished": True, "report_path": str(report), "publish_markers": False,
         "wait_for_subscribers": 1}, domain, work / f"sim_stepped_{players}.log")
     actions = _drive(players, domain, lambda: sim.poll() is not None, 300.0)
+    driver_cpu = time.process_time() - driver_cpu
     sim.wait(timeout=60)
+    sim_cpu = children_cpu_seconds() - sim_cpu               # the simulator: the only child waited for here
     diag = json.loads(report.read_text())["diagnostics"]
     return {"players_per_team": players, "sim_seconds": sim_seconds, "actions": actions,
             "real_time_factor": float(diag["real_time_factor_running"]),
             "real_time_factor_with_start_up": float(diag["real_time_factor_since_start"]),
+            "sim_cpu_s": sim_cpu, "sim_seconds_per_sim_cpu_s": sim_seconds / sim_cpu, "driver_cpu_s": driver_cpu,
             "missing": int(diag["missing"])}
 
 
@@ -94,15 +102,9 @@ def realtime_cpu(players: int, wall_seconds: float, domain: int, work: Path) -> 
         "motion_period_ticks": 45, "publish_markers": False, "missing_action": "hold"},
         domain, work / f"sim_realtime_{players}.log")
     time.sleep(4.0)                                        # start-up: imports, discovery
-    ticks = os.sysconf("SC_CLK_TCK")
-
-    def cpu() -> float:
-        fields = Path(f"/proc/{sim.pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / ticks
-
-    c0, t0 = cpu(), time.monotonic()
+    c0, t0 = process_cpu_seconds(sim.pid), time.monotonic()
     time.sleep(wall_seconds)
-    c1, t1 = cpu(), time.monotonic()
+    c1, t1 = process_cpu_seconds(sim.pid), time.monotonic()
     sim.send_signal(signal.SIGINT)
     sim.wait(timeout=10)
     return {"players_per_team": players, "vision_hz": 30.0, "cpu_share_of_one_core": (c1 - c0) / (t1 - t0)}
@@ -131,18 +133,29 @@ def recorder_loss(players: int, sim_seconds: float, domain: int, work: Path) -> 
 
 def run(args: Any) -> int:
     domain = 90 + os.getpid() % 10
+    runs = []
     with tempfile.TemporaryDirectory() as tmp:
-        work = Path(tmp)
-        rows = [stepped_rtf(2, args.sim_seconds, domain, work), stepped_rtf(5, args.sim_seconds, domain, work),
-                realtime_cpu(5, args.wall_seconds, domain, work), recorder_loss(2, args.sim_seconds, domain, work)]
+        for k in range(args.repeat):
+            work = Path(tmp) / str(k)
+            work.mkdir()
+            runs.append([stepped_rtf(2, args.sim_seconds, domain, work), stepped_rtf(5, args.sim_seconds, domain, work),
+                         realtime_cpu(5, args.wall_seconds, domain, work),
+                         recorder_loss(2, args.sim_seconds, domain, work)])
+    rows = [combine([run[i] for run in runs], plain=("players_per_team", "sim_seconds", "vision_hz"))
+            for i in range(4)]
     if args.json:
         print(json.dumps(rows))
     else:
-        print_table("dynenv-bench ros", [
-            ("stepped 2v2 real-time factor", f"{rows[0]['real_time_factor']:.1f}x "
-             f"({rows[0]['real_time_factor_with_start_up']:.1f}x counting start-up)"),
-            ("stepped 5v5 real-time factor", f"{rows[1]['real_time_factor']:.1f}x "
-             f"({rows[1]['real_time_factor_with_start_up']:.1f}x counting start-up)"),
-            ("realtime 5v5 @30 Hz vision, sim CPU", f"{100 * rows[2]['cpu_share_of_one_core']:.1f} % of a core"),
-            ("recorder loss (2v2 stepped)", f"{rows[3]['lost']} of {rows[3]['published']}")])
+        def rtf(row: dict[str, Any]) -> str:
+            return (f"{format_stat(row['real_time_factor'], '{:.1f}')}x "
+                    f"({format_stat(row['real_time_factor_with_start_up'], '{:.1f}')}x counting start-up; "
+                    f"{format_stat(row['sim_seconds_per_sim_cpu_s'], '{:.1f}')} sim s per simulator CPU s, start-up "
+                    f"included)")
+        print_table(f"dynenv-bench ros (median [min–max] of {args.repeat} runs)", [
+            ("stepped 2v2 real-time factor", rtf(rows[0])),
+            ("stepped 5v5 real-time factor", rtf(rows[1])),
+            ("realtime 5v5 @30 Hz vision, sim CPU",
+             f"{format_stat({k: 100 * v for k, v in rows[2]['cpu_share_of_one_core'].items() if k != 'runs'}, '{:.1f}')}"
+             f" % of a core"),
+            ("recorder loss (2v2 stepped)", f"{format_stat(rows[3]['lost'])} of {format_stat(rows[3]['published'])}")])
     return 0

@@ -4,6 +4,12 @@ One env step is one motion period (50 physics ticks by default) for every robot;
 100 ms period (10 ticks) of every car (``--observation none``: the world alone; ``full`` / ``partial``: the whole
 ``driving_v0`` step, ``partial`` with the driving perception preset ``--perception``). Random high-level actions come from a pre-drawn pool, so the policy costs
 nothing; the first 50 steps warm up and are not timed.
+
+Without ``--observation`` it times the step training runs: the whole env step with realistic perception, ``partial``
+for one world (the layout of the original's partial step), ``padded`` for a batch (``--envs > 1``); the figures name
+what was measured (``measures``). ``--repeat`` runs of ``--steps`` steps each: every rate is the median and
+[min, max] of the runs, per wall second and per CPU second (``benchmarks/timing.py``; the subprocess batch's workers'
+CPU time included).
 """
 from __future__ import annotations
 
@@ -11,12 +17,11 @@ import json
 import platform
 import resource
 import sys
-import time
 from typing import Any, Callable
 
 import numpy as np
 
-from benchmarks.timing import pin_cores, print_table
+from benchmarks.timing import inverse, measure, pin_cores, print_table, scaled, summarise, table_rows
 
 WARMUP_STEPS = 50
 ACTION_POOL = 256
@@ -69,9 +74,8 @@ def _pettingzoo_stepper(args: Any, config: Any, pool: np.ndarray) -> Callable[[i
 
 def _vector_stepper(args: Any, config: Any, pool: np.ndarray) -> tuple[Callable[[int], None], Any]:
     from dynenv_ros.envs.vector import SoccerVectorEnv
-    observation = "padded" if args.observation == "padded" else "full"
-    env = SoccerVectorEnv(args.envs, backend=args.backend, config=config, observation=observation,
-                          perception=perception_setting(args))
+    env = SoccerVectorEnv(args.envs, backend=args.backend, config=config, observation=args.observation,
+                          perception=perception_setting(args) if args.observation == "padded" else "none")
     env.reset(seed=args.seed)
     batches = np.stack([np.roll(pool, e, axis=0) for e in range(args.envs)], axis=1)
 
@@ -116,6 +120,7 @@ def run_driving(args: Any) -> int:
     """One env step = one 100 ms period of every car; random discrete actions [acceleration, steering].
     ``--observation none``: the world alone; ``full`` / ``partial``: the whole ``driving_v0`` step with that
     observation (``partial``: the driving perception with the ``--perception`` preset)."""
+    _resolve_observation(args)
     if not 1 <= args.cars <= 10:
         print("--cars must be in 1..10", file=sys.stderr)
         return 2
@@ -131,27 +136,63 @@ def run_driving(args: Any) -> int:
     config = DrivingConfig(n_cars=args.cars)
     pool = np.random.default_rng(args.seed).integers(0, 3, size=(ACTION_POOL, args.cars, 2))
     stepper = (_driving_stepper if args.observation == "none" else _driving_env_stepper)(args, config, pool)
-    stepper(WARMUP_STEPS)
-    best = 0.0
-    for _ in range(args.repeat):
-        start = time.perf_counter()
-        stepper(args.steps)
-        best = max(best, args.steps / (time.perf_counter() - start))
+    perception = args.perception if args.observation == "partial" else "n/a"
     figures = {
         "scenario": args.scenario, "cars": args.cars, "steps": args.steps, "observation": args.observation,
-        "perception": args.perception if args.observation == "partial" else "n/a",
-        "envs": 1, "backend": "single", "cores": len(cores),
-        "env_steps_per_s": round(best, 1), "ms_per_env_step": round(1000.0 / best, 4),
-        "physics_ticks_per_s": round(best * config.rates.motion_period_ticks),
-        "car_frames_per_s": round(best * config.rates.frames_per_period * args.cars)
-        if args.observation == "partial" else None,
-        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
-        "torch_imported": "torch" in sys.modules, "python": platform.python_version(),
+        "perception": perception,
+        "measures": _measures(args, f"{args.cars} cars", f"{perception} perception"),
+        "envs": 1, "backend": "single", "cores": len(cores), "repeat": args.repeat,
+        **_timed(stepper, args.steps, args.repeat, config.rates.motion_period_ticks),
     }
+    if args.observation == "partial":
+        figures["car_frames_per_s"] = scaled(figures["env_steps_per_s"], config.rates.frames_per_period * args.cars)
+    return _report(args, figures, f"dynenv-bench sim: driving, {args.cars} cars")
+
+
+def _measures(args: Any, who: str, perception: str) -> str:
+    """What a run times, in words: the table's first line, ``measures`` in JSON."""
+    if args.observation == "none":
+        what = "the world alone (physics and rules, no observation)"
+    elif args.observation == "full":
+        what = "the whole env step, full observations (ground truth, no perception)"
+    else:
+        what = f"the whole env step, {args.observation} observations, {perception}"
+    batch = f", {args.envs} worlds as one batch ({args.backend})" if args.envs > 1 else ""
+    default = " [the default observation]" if args.observation_defaulted else ""
+    return f"{args.scenario} {who}: {what}{batch}{default}"
+
+
+def _resolve_observation(args: Any) -> None:
+    """No ``--observation``: the step training runs — padded for a batch, partial for one world."""
+    args.observation_defaulted = args.observation is None
+    if args.observation is None:
+        args.observation = "padded" if args.envs > 1 and args.scenario == "robocup" else "partial"
+
+
+def _timed(stepper: Callable[[int], None], steps: int, repeat: int, ticks_per_step: int, envs: int = 1,
+           pids: Any = ()) -> dict[str, Any]:
+    """Warm up, then ``repeat`` timed runs of ``steps`` steps: the rates (median, range; per wall and per CPU
+    second), ms per env step by both clocks, physics ticks per second, peak RSS."""
+    stepper(WARMUP_STEPS)
+
+    def work() -> int:
+        stepper(steps)
+        return steps * envs
+    runs = measure(work, repeat, pids=pids)
+    figures = summarise(runs, "env_steps")
+    return {**figures, "ms_per_env_step": inverse(figures["env_steps_per_s"]),
+            "cpu_ms_per_env_step": inverse(figures["env_steps_per_cpu_s"]),
+            "physics_ticks_per_s": scaled(figures["env_steps_per_s"], ticks_per_step, 0),
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+            "torch_imported": "torch" in sys.modules, "python": platform.python_version()}
+
+
+def _report(args: Any, figures: dict[str, Any], title: str) -> int:
     if args.json:
         print(json.dumps(figures))
     else:
-        print_table(f"dynenv-bench sim: driving, {args.cars} cars", [(k, str(v)) for k, v in figures.items()])
+        print(f"measures: {figures['measures']}")
+        print_table(f"{title} (median [min–max] of {args.repeat} runs)", table_rows(figures, ["measures"]))
     return 0
 
 
@@ -164,8 +205,9 @@ def run(args: Any) -> int:
     if args.steps < 1 or args.envs < 1:
         print("--steps and --envs must be at least 1", file=sys.stderr)
         return 2
-    if args.envs > 1 and args.observation in ("partial", "image"):
-        print("vectorised batches (--envs > 1) observe 'padded' (perception) or 'full' (ground truth; also 'none')",
+    _resolve_observation(args)
+    if args.envs > 1 and args.observation not in ("padded", "full"):
+        print("vectorised batches (--envs > 1) observe 'padded' (perception; the default) or 'full' (ground truth)",
               file=sys.stderr)
         return 2
     cores = pin_cores(args.cores)
@@ -174,38 +216,32 @@ def run(args: Any) -> int:
     rng = np.random.default_rng(args.seed)
     pool = rng.integers([0, 0, 0, 0], [5, 3, 3, 2 * config.motion.head_units + 1],
                         size=(ACTION_POOL, config.n_robots, 4))
-    closer = None
+    closer, pids = None, ()
     if args.envs > 1:
         stepper, closer = _vector_stepper(args, config, pool)
+        pids = [proc.pid for proc in getattr(closer._batch, "_procs", [])]     # workers' CPU time counts too
     elif args.observation != "none":
         stepper = _pettingzoo_stepper(args, config, pool)
     else:
         stepper = _world_stepper(args, config, pool)
-    stepper(WARMUP_STEPS)
-    best = 0.0
-    for _ in range(args.repeat):
-        start = time.perf_counter()
-        stepper(args.steps)
-        best = max(best, args.steps * args.envs / (time.perf_counter() - start))
-    if closer is not None:
-        closer.close()
+    perceives = args.observation in ("partial", "padded", "image")
+    noise = args.noise if perceives else "n/a"
+    size = f"{args.players_per_team}v{args.players_per_team}"
     figures = {
         "scenario": args.scenario, "players_per_team": args.players_per_team, "steps": args.steps,
-        "observation": args.observation,
-        "noise": args.noise if args.observation in ("partial", "padded", "image") else "n/a",
-        "preset": args.preset, "noise_magnitude": args.noise_magnitude,
+        "observation": args.observation, "noise": noise, "preset": args.preset,
+        "noise_magnitude": args.noise_magnitude,
+        "measures": _measures(args, size, f"{args.preset} perception ({noise} errors, magnitude "
+                                          f"{args.noise_magnitude:g})" if noise != "none" else "perception without errors"),
         "image_size": args.image_size if args.observation == "image" else None, "envs": args.envs,
-        "backend": args.backend if args.envs > 1 else "single", "cores": len(cores),
-        "env_steps_per_s": round(best, 1), "ms_per_env_step": round(1000.0 / best, 4),
-        "physics_ticks_per_s": round(best * config.rates.motion_period_ticks),
-        "robot_frames_per_s": round(best * config.rates.frames_per_period * config.n_robots)
-        if args.observation in ("partial", "padded", "image") else None,
-        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
-        "torch_imported": "torch" in sys.modules, "python": platform.python_version(),
+        "backend": args.backend if args.envs > 1 else "single", "cores": len(cores), "repeat": args.repeat,
     }
-    if args.json:
-        print(json.dumps(figures))
-    else:
-        print_table(f"dynenv-bench sim: {args.scenario} {args.players_per_team}v{args.players_per_team}",
-                    [(k, str(v)) for k, v in figures.items()])
-    return 0
+    try:
+        figures.update(_timed(stepper, args.steps, args.repeat, config.rates.motion_period_ticks, args.envs, pids))
+    finally:
+        if closer is not None:
+            closer.close()
+    if perceives:
+        figures["robot_frames_per_s"] = scaled(figures["env_steps_per_s"],
+                                               config.rates.frames_per_period * config.n_robots, 0)
+    return _report(args, figures, f"dynenv-bench sim: {args.scenario} {size}")

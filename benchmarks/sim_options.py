@@ -13,9 +13,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--players-per-team", type=int, default=2)
     parser.add_argument("--cars", type=int, default=2, help="cars of the driving scenario (1..10)")
     parser.add_argument("--steps", type=int, default=5000, help="motion periods (env steps) to time")
-    parser.add_argument("--observation", choices=OBSERVATIONS, default="none",
+    parser.add_argument("--observation", choices=OBSERVATIONS, default=None,
                         help="none: the world's physics and rules only; full / partial / padded / image: the whole "
-                             "PettingZoo step with that observation mode (with --envs > 1: padded, or full = none)")
+                             "PettingZoo step with that observation mode. Default: the step training runs, with "
+                             "realistic perception — partial for one world (the original's partial step; padded, "
+                             "the layout training packs, adds a few %%), padded for --envs > 1")
     parser.add_argument("--noise", choices=NOISE, default="realistic",
                         help="perception error mode (partial, padded and image observations)")
     parser.add_argument("--preset", choices=("realistic", "dynenv"), default="realistic",

@@ -9,7 +9,11 @@ decision on this machine, slower than the motion period), and the recorder, for 
 - vision frames per second (30 nominal): median and worst diagnostics window;
 - the share of (robot, period) slots with an accepted action, and the refusals by reason;
 - the policy nodes' decisions per second, actions sent to a later period than the one after the frames they answer
-  (``actions_delayed``), periods dropped as stale.
+  (``actions_delayed``), periods dropped as stale;
+- each node's CPU time after the warm-up, as a share of one core (``/proc/<pid>/stat``).
+
+With ``--repeat N`` the whole soak runs N times and every figure is the median and [min, max] of the runs
+(``benchmarks/timing.py``; one run by default: a run lasts ``--minutes``).
 """
 from __future__ import annotations
 
@@ -22,7 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.timing import print_table
+from benchmarks.timing import combine, format_stat, print_table, process_cpu_seconds
 
 SHIPPED = Path(__file__).resolve().parent.parent / "policy_node" / "pretrained"
 
@@ -122,7 +126,8 @@ def soak(args: Any, work: Path) -> dict[str, Any]:
             if dead:
                 raise RuntimeError(f"nodes exited during the soak: {dead} (logs in {work})")
             samples.append({"t": time.monotonic() - started,
-                            **{name: _rss_mib(p.pid) for name, p in processes.items()}})
+                            **{name: _rss_mib(p.pid) for name, p in processes.items()},
+                            **{f"{name}_cpu_s": process_cpu_seconds(p.pid) for name, p in processes.items()}})
             sim = watcher.latest.get("/sim/diagnostics", {})
             print(f"[soak] {samples[-1]['t']:6.0f} s  sim RSS {samples[-1]['sim_node']:.1f} MiB  "
                   f"frames/s {sim.get('vision_frames_per_s', '?')}  accepted {sim.get('accepted', '?')}  "
@@ -137,7 +142,7 @@ def soak(args: Any, work: Path) -> dict[str, Any]:
     sim = final["/sim/diagnostics"]
     robots = 2 * args.players
     periods = int(sim["periods_run"])
-    refused = {k[len("rejected_"):]: int(v) for k, v in sim.items() if k.startswith("rejected_") and int(v)}
+    refused = {k[len("rejected_"):]: int(v) for k, v in sim.items() if k.startswith("rejected_")}
     policies = {name: {k: int(final[f"/{name}/diagnostics"].get(k, 0)) for k in (
         "decisions", "actions_sent", "periods_dropped", "actions_delayed", "actions_superseded", "fallback_actions")}
         for name in ("policy_team_a", "policy_team_b") if f"/{name}/diagnostics" in final}
@@ -157,33 +162,55 @@ def soak(args: Any, work: Path) -> dict[str, Any]:
         "periods_run": periods, "accepted": int(sim["accepted"]), "missing": int(sim["missing"]),
         "accepted_share": round(int(sim["accepted"]) / max(1, periods * robots), 4),
         "refused": refused, "policies": policies,
-        "recorder": {k: recorder.get(k) for k in ("messages_written", "messages_dropped")},
+        "recorder": {k: _number(recorder.get(k)) for k in ("messages_written", "messages_dropped")},
+        "cpu_share_of_one_core": {name: round((last[f"{name}_cpu_s"] - baseline[f"{name}_cpu_s"])
+                                              / (last["t"] - baseline["t"]), 4) if last["t"] > baseline["t"] else 0.0
+                                  for name in processes},
     }
 
 
+def _number(text: Any) -> Any:
+    """A diagnostics value as a number where it is one (so repeated runs combine into a median and range)."""
+    try:
+        return int(text)
+    except (TypeError, ValueError):
+        return text
+
+
 def run(args: Any) -> int:
-    if args.keep:
-        work = Path(args.keep)
-        work.mkdir(parents=True, exist_ok=True)
-        result = soak(args, work)
-    else:
-        with tempfile.TemporaryDirectory() as tmp:
-            result = soak(args, Path(tmp))
+    runs = []
+    for k in range(args.repeat):
+        if args.keep:
+            work = Path(args.keep) / (f"run_{k}" if args.repeat > 1 else "")
+            work.mkdir(parents=True, exist_ok=True)
+            runs.append(soak(args, work))
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                runs.append(soak(args, Path(tmp)))
+    result = combine(runs, plain=("players_per_team", "minutes", "warmup_s"))
     if args.json:
         print(json.dumps(result))
     else:
-        policies = "; ".join(f"{n}: {p['decisions_per_s']} decisions/s, {p['actions_delayed']} actions delayed, "
-                             f"{p['periods_dropped']} periods dropped" for n, p in result["policies"].items())
+        one, pct = "{:.1f}", "{:.1%}"
+        policies = "; ".join(f"{n}: {format_stat(p['decisions_per_s'], '{:.2f}')} decisions/s, "
+                             f"{format_stat(p['actions_delayed'])} actions delayed, "
+                             f"{format_stat(p['periods_dropped'])} periods dropped"
+                             for n, p in result["policies"].items())
         print_table(f"dynenv-bench soak ({result['players_per_team']}v{result['players_per_team']} real time, 30 Hz "
-                    f"vision, {result['runtime']} policies, {result['minutes']:g} min)", [
-            ("simulator RSS after warm-up → end", f"{result['sim_rss_mib_after_warmup']} → "
-             f"{result['sim_rss_mib_end']} MiB ({result['sim_rss_growth_pct']:+.2f} %)"),
-            ("vision frames/s (median, worst window)", f"{result['vision_frames_per_s_median']:.1f}, "
-             f"{result['vision_frames_per_s_min']:.1f}"),
-            ("slots with an accepted action", f"{100 * result['accepted_share']:.1f} % of {result['periods_run']} "
-             f"periods x {2 * result['players_per_team']} robots"),
-            ("refused actions", ", ".join(f"{n} {k}" for k, n in result["refused"].items()) or "none"),
+                    f"vision, {result['runtime']} policies, {result['minutes']:g} min; median [min–max] of "
+                    f"{args.repeat} runs)", [
+            ("simulator RSS after warm-up → end", f"{format_stat(result['sim_rss_mib_after_warmup'], one)} → "
+             f"{format_stat(result['sim_rss_mib_end'], one)} MiB "
+             f"({format_stat(result['sim_rss_growth_pct'], '{:+.2f}')} %)"),
+            ("vision frames/s (median, worst window)", f"{format_stat(result['vision_frames_per_s_median'], one)}, "
+             f"{format_stat(result['vision_frames_per_s_min'], one)}"),
+            ("slots with an accepted action", f"{format_stat(result['accepted_share'], pct)} of "
+             f"{format_stat(result['periods_run'])} periods x {2 * result['players_per_team']} robots"),
+            ("refused actions", ", ".join(f"{format_stat(n)} {k}" for k, n in result["refused"].items() if n["max"])
+             or "none"),
             ("policies", policies),
-            ("recorder", f"{result['recorder']['messages_written']} written, "
-             f"{result['recorder']['messages_dropped']} dropped")])
+            ("recorder", f"{format_stat(result['recorder']['messages_written'])} written, "
+             f"{format_stat(result['recorder']['messages_dropped'])} dropped"),
+            ("CPU after warm-up, share of one core", ", ".join(
+                f"{name} {format_stat(share, pct)}" for name, share in result["cpu_share_of_one_core"].items()))])
     return 0

@@ -17,9 +17,11 @@ slower shard); ``ceiling / inprocess`` is how far the cores scale at all (below 
 down: shared caches, hyper-threads, other work on the machine or its host).
 
 On a shared machine the speed drifts by ±10 % within seconds, so the three are timed interleaved in chunks of
-``--chunk`` batch steps (in-process, subprocess, ceiling, in-process, …) and each figure is its env steps over its
-summed time: all three see the same conditions. ``--repeat`` rounds of ``--steps`` batch steps each; the figures
-are those of all rounds together, with the lowest and highest per-round ratio beside them.
+``--chunk`` batch steps (in-process, subprocess, ceiling, in-process, …): all three see the same conditions.
+``--repeat`` rounds of ``--steps`` batch steps each; every figure is the median and [min, max] over the rounds
+(``benchmarks/timing.py``), by wall time and by CPU time — the subprocess batch's CPU time is this process's and its
+workers' (``/proc/<pid>/stat``), the ceiling's that of its processes summed, so a rate per CPU second says how much
+work a CPU-second buys, whoever else shares the machine.
 
 ``--scenario driving`` times ``DrivingVectorEnv`` the same way: ``--envs`` driving worlds of ``--cars`` cars, padded
 observations under the ``--perception`` preset (or ``--observation full``), random discrete actions from a pool.
@@ -31,13 +33,12 @@ import json
 import multiprocessing as mp
 import os
 import platform
-import time
 from typing import Any
 
 import numpy as np
 
 from benchmarks.sim_options import NOISE
-from benchmarks.timing import print_table
+from benchmarks.timing import ZERO, Clock, Reading, print_table, stat, table_rows
 
 WARMUP_STEPS = 20
 ACTION_POOL = 256
@@ -80,21 +81,23 @@ def _plain_batch(conn: Any, core: int, envs: int, kwargs: dict[str, Any], batche
     """One process of the ceiling: pinned to ``core``, an in-process batch of ``envs`` worlds; steps ``n`` batch
     steps whenever it receives ``n`` and answers the seconds they took (0 ends it)."""
     os.sched_setaffinity(0, [core])
+    clock = Clock()
     with _env_class(scenario)(envs, backend="inprocess", **kwargs) as env:
         env.reset(seed=seed)
-        _seconds(env, batches[:, :envs], WARMUP_STEPS, 0)
+        _span(env, batches[:, :envs], WARMUP_STEPS, 0, clock)
         conn.send(None)
         start = WARMUP_STEPS
         while steps := conn.recv():
-            conn.send(_seconds(env, batches[:, :envs], steps, start))
+            conn.send(_span(env, batches[:, :envs], steps, start, clock))
             start += steps
 
 
-def _seconds(env: Any, batches: np.ndarray, steps: int, start: int) -> float:
-    begin = time.perf_counter()
+def _span(env: Any, batches: np.ndarray, steps: int, start: int, clock: Clock) -> Reading:
+    """Wall and CPU seconds (by ``clock``) of ``steps`` batch steps."""
+    begin = clock.read()
     for k in range(start, start + steps):
         env.step(batches[k % ACTION_POOL])
-    return time.perf_counter() - begin
+    return clock.read() - begin
 
 
 def run(args: Any) -> int:
@@ -132,8 +135,9 @@ def run(args: Any) -> int:
     context = mp.get_context("forkserver")
     plain = []
     names = ("inprocess", "subprocess", "ceiling")
-    seconds = {name: np.zeros(args.repeat) for name in names}      # per round
+    spans = {name: [ZERO] * args.repeat for name in names}      # per round: wall and CPU seconds
     parent_envs, processes = subprocess._batch.parent_envs, len(subprocess._batch._procs)
+    clocks = {"inprocess": Clock(), "subprocess": Clock(pids=[proc.pid for proc in subprocess._batch._procs])}
     try:
         shares = subprocess._batch.sizes
         for w, share in enumerate(shares):
@@ -145,7 +149,7 @@ def run(args: Any) -> int:
         for env, pinned in ((inprocess, one_core), (subprocess, cores)):
             os.sched_setaffinity(0, pinned)
             env.reset(seed=args.seed)
-            _seconds(env, batches, WARMUP_STEPS, 0)
+            _span(env, batches, WARMUP_STEPS, 0, Clock())
         for conn, _ in plain:
             conn.recv()                       # warmed up
         start = WARMUP_STEPS
@@ -154,10 +158,11 @@ def run(args: Any) -> int:
                 n = min(args.chunk, args.steps - done)
                 for name, env, pinned in (("inprocess", inprocess, one_core), ("subprocess", subprocess, cores)):
                     os.sched_setaffinity(0, pinned)
-                    seconds[name][r] += _seconds(env, batches, n, start)
+                    spans[name][r] += _span(env, batches, n, start, clocks[name])
                 for conn, _ in plain:
                     conn.send(n)
-                seconds["ceiling"][r] += max(conn.recv() for conn, _ in plain)   # started together
+                chunk = [conn.recv() for conn, _ in plain]                 # started together: the slower's wall
+                spans["ceiling"][r] += Reading(max(c.wall_s for c in chunk), sum(c.cpu_s for c in chunk))
                 start += n
     finally:
         for conn, proc in plain:
@@ -172,30 +177,36 @@ def run(args: Any) -> int:
         subprocess.close()
         os.sched_setaffinity(0, allowed)
     env_steps = args.steps * args.envs
-    rate = {name: env_steps * args.repeat / seconds[name].sum() for name in names}
-    per_round = seconds["inprocess"] / seconds["subprocess"]
+    wall = {name: np.array([span.wall_s for span in spans[name]]) for name in names}
+    cpu = {name: np.array([span.cpu_s for span in spans[name]]) for name in names}
     figures = {
         "envs": args.envs, "players_per_team": args.players_per_team, "observation": args.observation,
         "perception": kwargs["perception"], "steps": args.steps, "chunk": args.chunk, "rounds": args.repeat,
         "workers": workers, "parent_steps": args.parent_steps, "parent_envs": parent_envs,
         "worker_processes": processes, "pin_workers": args.pin_workers, "inprocess_cores": len(one_core),
         "subprocess_cores": len(cores),
-        "inprocess_env_steps_per_s": round(rate["inprocess"], 1),
-        "subprocess_env_steps_per_s": round(rate["subprocess"], 1),
-        "ratio": round(rate["subprocess"] / rate["inprocess"], 3),
-        "ratio_per_round_min_max": [round(float(per_round.min()), 3), round(float(per_round.max()), 3)],
-        "ceiling_env_steps_per_s": round(rate["ceiling"], 1),
-        "ceiling_over_inprocess": round(rate["ceiling"] / rate["inprocess"], 3),
-        "subprocess_over_ceiling": round(rate["subprocess"] / rate["ceiling"], 3),
-        "python": platform.python_version(),
     }
+    for name in names:
+        figures[f"{name}_env_steps_per_s"] = stat(env_steps / wall[name])
+        figures[f"{name}_env_steps_per_cpu_s"] = stat(env_steps / cpu[name])
+    figures.update({          # per round, by wall time: each ratio's median and range over the rounds
+        "ratio": stat(wall["inprocess"] / wall["subprocess"], 3),
+        "ceiling_over_inprocess": stat(wall["inprocess"] / wall["ceiling"], 3),
+        "subprocess_over_ceiling": stat(wall["ceiling"] / wall["subprocess"], 3),
+        "python": platform.python_version(),
+    })
+    what = f"driving {args.cars} cars" if driving else f"{args.players_per_team}v{args.players_per_team}"
+    seen = ("ground truth" if args.observation == "full" else
+            f"{args.perception if driving else args.preset} perception")
+    figures["measures"] = (f"{what}, {args.envs} worlds: the whole batch step, {args.observation} observations "
+                           f"({seen}), in-process on 1 core against subprocess on {len(cores)}")
     if driving:
         del figures["players_per_team"]
         figures = {"scenario": "driving", "cars": args.cars, **figures}
     if args.json:
         print(json.dumps(figures))
     else:
-        what = f"driving {args.cars} cars" if driving else f"{args.players_per_team}v{args.players_per_team}"
-        print_table(f"dynenv-bench vector: {args.envs} worlds {what} {args.observation}",
-                    [(k, str(v)) for k, v in figures.items()])
+        print(f"measures: {figures['measures']}")
+        print_table(f"dynenv-bench vector: {args.envs} worlds {what} {args.observation} (median [min–max] of "
+                    f"{args.repeat} rounds)", table_rows(figures, ["measures"]))
     return 0

@@ -172,19 +172,32 @@ def test_actions_are_checked_before_anything_moves():
 
 def test_sim_benchmark_runs_the_driving_world():
     command = [sys.executable, "-m", "benchmarks", "sim", "--scenario", "driving", "--cars", "3", "--steps", "20",
-               "--repeat", "1", "--json"]
+               "--repeat", "2", "--json"]
     result = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=REPO)
     assert result.returncode == 0, result.stderr
     figures = json.loads(result.stdout)
-    assert figures["scenario"] == "driving" and figures["cars"] == 3 and figures["env_steps_per_s"] > 0
-    # env_steps_per_s is printed to 0.1 and the derived rates are rounded from the unrounded figure: within 1
-    assert abs(figures["physics_ticks_per_s"] - figures["env_steps_per_s"] * 10) <= 1
+    # without --observation it times the whole step with realistic perception, and says so
+    assert figures["scenario"] == "driving" and figures["cars"] == 3 and figures["observation"] == "partial"
+    assert figures["perception"] == "realistic" and "[the default observation]" in figures["measures"]
+    rate = figures["env_steps_per_s"]
+    assert len(rate["runs"]) == 2 and 0 < rate["min"] <= rate["median"] <= rate["max"]
+    assert figures["env_steps_per_cpu_s"]["min"] > 0 and len(figures["env_steps_per_cpu_s"]["runs"]) == 2
+    # each run's derived rates are computed from its rate (printed to 0.1): within 1
+    for ticks, steps in zip(figures["physics_ticks_per_s"]["runs"], rate["runs"]):
+        assert abs(ticks - steps * 10) <= 1
+    for frames, steps in zip(figures["car_frames_per_s"]["runs"], rate["runs"]):
+        assert abs(frames - steps * 3) <= 1
+    alone = subprocess.run(command + ["--observation", "none"], capture_output=True, text=True, timeout=120,
+                           cwd=REPO)
+    assert alone.returncode == 0, alone.stderr
+    figures = json.loads(alone.stdout)
+    assert figures["observation"] == "none" and "world alone" in figures["measures"]
+    assert "default" not in figures["measures"] and "car_frames_per_s" not in figures
     perceived = subprocess.run(command + ["--observation", "partial", "--perception", "dynenv"], capture_output=True,
                                text=True, timeout=120, cwd=REPO)
     assert perceived.returncode == 0, perceived.stderr
     figures = json.loads(perceived.stdout)
     assert figures["observation"] == "partial" and figures["perception"] == "dynenv"
-    assert abs(figures["car_frames_per_s"] - figures["env_steps_per_s"] * 3) <= 1
     refused = subprocess.run(command[:-1] + ["--observation", "padded"], capture_output=True, text=True,
                              timeout=120, cwd=REPO)
     assert refused.returncode == 2 and "none / full / partial" in refused.stderr

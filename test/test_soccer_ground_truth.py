@@ -82,8 +82,35 @@ def test_play_tool_draws_one_robots_detections(tmp_path):
 
 def test_sim_benchmark_prints_one_json_object_with_its_figures():
     result = _run("benchmarks", "sim", "--scenario", "robocup", "--players-per-team", "1", "--steps", "20",
-                  "--repeat", "1", "--json")
+                  "--repeat", "3", "--observation", "none", "--json")
     assert result.returncode == 0, result.stderr
     figures = json.loads(result.stdout)
-    assert figures["env_steps_per_s"] > 0 and figures["peak_rss_mb"] > 0
-    assert figures["torch_imported"] is False and figures["players_per_team"] == 1
+    assert figures["peak_rss_mb"] > 0 and figures["torch_imported"] is False and figures["players_per_team"] == 1
+    assert figures["observation"] == "none" and "physics and rules" in figures["measures"]
+    # every rate: the median and [min, max] of the 3 runs, per wall second and per CPU second
+    for key in ("env_steps_per_s", "env_steps_per_cpu_s", "wall_s", "cpu_s", "ms_per_env_step", "cpu_ms_per_env_step"):
+        figure = figures[key]
+        assert len(figure["runs"]) == 3 and 0 < figure["min"] <= figure["median"] <= figure["max"]
+        assert figure["median"] == sorted(figure["runs"])[1]
+    for steps, wall, cpu in zip(figures["env_steps_per_s"]["runs"], figures["wall_s"]["runs"], figures["cpu_s"]["runs"]):
+        assert abs(steps - 20 / wall) <= 0.01 * steps
+        # one process, one thread stepping: it cannot use more CPU than wall time
+        assert cpu <= wall * 1.02 + 1e-3
+
+
+def test_sim_benchmark_defaults_to_the_step_training_runs_and_says_so():
+    single = _run("benchmarks", "sim", "--players-per-team", "1", "--steps", "5", "--repeat", "1", "--json")
+    assert single.returncode == 0, single.stderr
+    figures = json.loads(single.stdout)
+    assert (figures["observation"], figures["noise"], figures["preset"]) == ("partial", "realistic", "realistic")
+    assert figures["measures"].endswith("[the default observation]") and figures["robot_frames_per_s"]["min"] > 0
+    batch = _run("benchmarks", "sim", "--players-per-team", "1", "--steps", "5", "--repeat", "1", "--envs", "2",
+                 "--json")
+    assert batch.returncode == 0, batch.stderr
+    figures = json.loads(batch.stdout)
+    assert figures["observation"] == "padded" and "2 worlds as one batch" in figures["measures"]
+    # a batch always observes: physics alone is refused instead of measuring ground truth under its name
+    refused = _run("benchmarks", "sim", "--envs", "2", "--observation", "none", "--steps", "5")
+    assert refused.returncode == 2 and "'padded'" in refused.stderr
+    table = _run("benchmarks", "sim", "--players-per-team", "1", "--steps", "5", "--repeat", "1")
+    assert table.returncode == 0 and table.stdout.startswith("measures: robocup 1v1: the whole env step, partial")
