@@ -18,12 +18,11 @@ import os as _os
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.timing import combine, format_stat, print_table, process_cpu_seconds
+from benchmarks.timing import combine, format_stat, print_table, process_cpu_seconds, runs_in_folders
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -149,15 +148,7 @@ def measure(args: Any, work: Path) -> dict[str, Any]:
 
 
 def run(args: Any) -> int:
-    runs = []
-    for k in range(args.repeat):
-        if args.keep:
-            work = Path(args.keep) / (f"run_{k}" if args.repeat > 1 else "")
-            work.mkdir(parents=True, exist_ok=True)
-            runs.append(measure(args, work))
-        else:
-            with tempfile.TemporaryDirectory() as tmp:
-                runs.append(measure(args, Path(tmp)))
+    runs = runs_in_folders(lambda folder: measure(args, folder), args.repeat, args.keep)
     result = combine(runs, plain=("flooders",))
     if args.json:
         print(json.dumps(result))

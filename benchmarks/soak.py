@@ -21,12 +21,11 @@ import argparse
 import json
 import os
 import statistics
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.timing import combine, format_stat, print_table, process_cpu_seconds
+from benchmarks.timing import combine, format_stat, print_table, process_cpu_seconds, runs_in_folders
 
 SHIPPED = Path(__file__).resolve().parent.parent / "policy_node" / "pretrained"
 
@@ -178,15 +177,7 @@ def _number(text: Any) -> Any:
 
 
 def run(args: Any) -> int:
-    runs = []
-    for k in range(args.repeat):
-        if args.keep:
-            work = Path(args.keep) / (f"run_{k}" if args.repeat > 1 else "")
-            work.mkdir(parents=True, exist_ok=True)
-            runs.append(soak(args, work))
-        else:
-            with tempfile.TemporaryDirectory() as tmp:
-                runs.append(soak(args, Path(tmp)))
+    runs = runs_in_folders(lambda folder: soak(args, folder), args.repeat, args.keep)
     result = combine(runs, plain=("players_per_team", "minutes", "warmup_s"))
     if args.json:
         print(json.dumps(result))

@@ -45,6 +45,7 @@ from __future__ import annotations
 import os
 import resource
 import statistics
+import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
@@ -137,6 +138,21 @@ def measure(work: Callable[[], float], repeat: int, pids: Pids = (), children: b
         items = work()
         span = clock.read() - start
         runs.append(Run(items, span.wall_s, span.cpu_s))
+    return runs
+
+
+def runs_in_folders(measure_once: Callable[[Path], Any], repeat: int, keep: str | None = None) -> list[Any]:
+    """``measure_once(folder)`` run ``repeat`` times, each in a folder of its own for logs and bags: under ``keep``
+    (``run_<k>``, or ``keep`` itself for one run) where given, kept; else a temporary folder, removed."""
+    runs = []
+    for k in range(repeat):
+        if keep:
+            folder = Path(keep) / (f"run_{k}" if repeat > 1 else "")
+            folder.mkdir(parents=True, exist_ok=True)
+            runs.append(measure_once(folder))
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                runs.append(measure_once(Path(tmp)))
     return runs
 
 
