@@ -173,7 +173,7 @@ def summarise(runs: list[Run], unit: str, digits: int = 1) -> dict[str, dict[str
     ``wall_s``, ``cpu_s`` and every ``extra`` figure, each a ``stat``."""
     figures = {f"{unit}_per_s": stat((r.rate for r in runs), digits),
                f"{unit}_per_cpu_s": stat((r.cpu_rate for r in runs), digits),
-               "wall_s": stat((r.wall_s for r in runs), 4), "cpu_s": stat((r.cpu_s for r in runs), 4)}
+               "wall_s": stat((r.wall_s for r in runs), 6), "cpu_s": stat((r.cpu_s for r in runs), 6)}
     for key in runs[0].extra:
         figures[key] = stat((r.extra[key] for r in runs), digits)
     return figures
