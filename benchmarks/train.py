@@ -1,17 +1,29 @@
-"""dynenv-bench train: end-to-end training throughput of the in-process trainer.
+"""dynenv-bench train: end-to-end training throughput of the in-process trainer, synchronous or asynchronous.
 
 One env step = one motion period of one world, every learning robot acting and learning. The run is the trainer
-itself (``dynenv_ros.learning.trainer.Trainer``) in a temporary run directory: warm-up updates first, then timed
-updates; the time is split into the rollout (simulation + acting forwards), the learner's forward + backward and
-the optimiser (gradient clipping + Adam step). Peak RSS of this process (workers excluded) is reported too.
+itself in a temporary run directory: warm-up updates first, then timed updates.
+
+- ``runner: sync`` presets (``paper_a2c``, ``ppo``, …): the time is split into the rollout (simulation + acting
+  forwards), the learner's forward + backward and the optimiser (gradient clipping + Adam step).
+- ``runner: async`` presets (``async``): the rollout workers run all along; the learner's time is split into waiting
+  for a rollout, forward + backward and the optimiser. Env steps are those the learner learnt from.
+
+Wall time and CPU time are both reported: CPU time of this process and of its worker processes (read from
+/proc), so a machine shared with other work shows up as wall time the CPU time does not account for. Each figure
+is the median of ``--repeat`` runs, with its range. ``--baseline PRESET`` measures a second preset in the same
+invocation, run by run interleaved with the first (so both see the same machine), and reports the ratio of their
+medians; for an async preset the baseline is ``ppo`` unless ``--baseline none``.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import resource
+import statistics
 import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
 from benchmarks.timing import print_table
@@ -20,25 +32,44 @@ from benchmarks.timing import print_table
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default="paper_a2c", help="preset name or YAML (as dynenv-train)")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
-    parser.add_argument("--updates", type=int, default=30, help="timed updates")
+    parser.add_argument("--updates", type=int, default=None,
+                        help="timed updates (default: 30 for a sync preset, 20 for an async one)")
     parser.add_argument("--warmup", type=int, default=3, help="untimed updates first")
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--baseline", default=None, help="a second preset measured interleaved with --config "
+                        "(default: ppo for an async --config, none otherwise; 'none' for none)")
     parser.add_argument("--json", action="store_true")
 
 
-def _measure(args: Any) -> dict[str, float]:
+def process_cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of a live process (Linux /proc); 0.0 once it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    import os
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _config(name: str, args: Any):
     from dynenv_ros.learning.config import load_config
     from dynenv_ros.learning.train_cli import preset_path
-    from dynenv_ros.learning.trainer import Trainer
     overrides = list(args.overrides) + [f"device={args.device}", "log_every_updates=1000000",
                                         "checkpoint_every_minutes=1000000"]
-    cfg = load_config(preset_path(args.config), overrides)
+    return load_config(preset_path(name), overrides)
+
+
+def _measure_sync(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
+    from dynenv_ros.learning.algorithms import update
+    from dynenv_ros.learning.trainer import Trainer
     with tempfile.TemporaryDirectory() as run_dir:
         trainer = Trainer(cfg, run_dir, progress=False)
-        from dynenv_ros.learning.algorithms import update
         per_update = cfg.num_envs * cfg.rollout_length
         split = {"rollout": 0.0, "forward_backward": 0.0, "optimizer": 0.0, "other": 0.0}
-        for k in range(args.warmup + args.updates):
+        workers = _vector_worker_pids(trainer.env)
+        for k in range(args.warmup + updates):
+            if k == args.warmup:
+                wall0, cpu0 = time.perf_counter(), _cpu(workers)
             t0 = time.perf_counter()
             trainer.learner.eval()
             rollout = trainer.collector.collect(cfg.rollout_length)
@@ -52,23 +83,118 @@ def _measure(args: Any) -> dict[str, float]:
                 split["forward_backward"] += stats["seconds_forward_backward"]
                 split["optimizer"] += stats["seconds_optimizer"]
                 split["other"] += (t2 - t1) - stats["seconds_forward_backward"] - stats["seconds_optimizer"]
+        wall, cpu = time.perf_counter() - wall0, _cpu(workers) - cpu0
         trainer.env.close()
-    total = sum(split.values())
-    steps = args.updates * per_update
-    return {"algorithm": cfg.algorithm, "variant": cfg.variant, "num_envs": cfg.num_envs,
+    steps = updates * per_update
+    return {"runner": "sync", "algorithm": cfg.algorithm, "variant": cfg.variant, "num_envs": cfg.num_envs,
             "players_per_team": cfg.players_per_team, "rollout_length": cfg.rollout_length,
-            "robots_learning": cfg.num_envs * len(trainer.collector.learning_robots),
-            "env_steps_per_second": steps / total,
-            **{f"ms_per_update_{k}": 1000 * v / args.updates for k, v in split.items()},
+            "robots_learning": cfg.num_envs * len(trainer.collector.learning_robots), "processes": 1 + len(workers),
+            "env_steps_per_second": steps / wall, "env_steps_per_cpu_second": steps / cpu, "cpu_seconds": cpu,
+            "wall_seconds": wall,
+            **{f"ms_per_update_{k}": 1000 * v / updates for k, v in split.items()},
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
+def _measure_async(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
+    from dynenv_ros.learning.algorithms import update
+    from dynenv_ros.learning.async_trainer import AsyncTrainer
+    with tempfile.TemporaryDirectory() as run_dir:
+        trainer = AsyncTrainer(cfg, run_dir, progress=False, log=lambda line: None)
+        try:
+            trainer._started, trainer._pending = time.perf_counter(), []
+            split = {"wait": 0.0, "forward_backward": 0.0, "optimizer": 0.0, "other": 0.0}
+            lags: list[float] = []
+            steps = 0
+            for k in range(args.warmup + updates):
+                if k == args.warmup:
+                    workers = trainer.pool.pids() if hasattr(trainer.pool, "pids") else []
+                    wall0, cpu0 = time.perf_counter(), _cpu(workers)
+                t0 = time.perf_counter()
+                batch = trainer._experience(math.inf)
+                t1 = time.perf_counter()
+                trainer.learner.train()
+                stats = update(trainer.learner, trainer.optimizer, batch.rollout.as_tensors(trainer.device),
+                               trainer.settings, trainer.generator)
+                t2 = time.perf_counter()
+                trainer.env_steps += batch.env_steps
+                trainer.updates += 1
+                trainer._learned(batch)
+                if k >= args.warmup:
+                    steps += batch.env_steps
+                    lags.append(batch.scalars["async/policy_lag"])
+                    split["wait"] += t1 - t0
+                    split["forward_backward"] += stats["seconds_forward_backward"]
+                    split["optimizer"] += stats["seconds_optimizer"]
+                    split["other"] += (t2 - t1) - stats["seconds_forward_backward"] - stats["seconds_optimizer"]
+            wall, cpu = time.perf_counter() - wall0, _cpu(workers) - cpu0
+            robots = batch.rollout.robots
+        finally:
+            trainer._stop_rollouts()
+    return {"runner": "async", "algorithm": cfg.algorithm, "variant": cfg.variant, "num_envs": cfg.num_envs,
+            "players_per_team": cfg.players_per_team, "rollout_length": cfg.rollout_length,
+            "robots_learning": robots, "processes": 1 + len(workers), "workers": len(workers),
+            "env_steps_per_second": steps / wall, "env_steps_per_cpu_second": steps / cpu, "cpu_seconds": cpu,
+            "wall_seconds": wall, "policy_lag_mean": statistics.fmean(lags),
+            "dropped_rollouts": trainer.dropped,
+            **{f"ms_per_update_{k}": 1000 * v / updates for k, v in split.items()},
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def _vector_worker_pids(env: Any) -> list[int]:
+    batch = getattr(env, "_batch", None)
+    return [p.pid for p in getattr(batch, "_procs", [])]
+
+
+def _cpu(worker_pids: list[int]) -> float:
+    return time.process_time() + sum(process_cpu_seconds(pid) for pid in worker_pids)
+
+
+def measure(name: str, args: Any) -> dict[str, Any]:
+    cfg = _config(name, args)
+    updates = args.updates if args.updates is not None else (20 if cfg.runner == "async" else 30)
+    result = (_measure_async if cfg.runner == "async" else _measure_sync)(cfg, args, updates)
+    return {"config": name, **result}
+
+
+def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Median and range of every numeric figure of repeated runs; the other fields as the first run's."""
+    out: dict[str, Any] = {}
+    for key, value in runs[0].items():
+        if isinstance(value, float):
+            values = [r[key] for r in runs]
+            out[key] = {"median": statistics.median(values), "min": min(values), "max": max(values)}
+        else:
+            out[key] = value
+    return out
+
+
 def run(args: Any) -> int:
-    results = [_measure(args) for _ in range(args.repeat)]
-    best = max(results, key=lambda r: r["env_steps_per_second"])
+    config_cfg = _config(args.config, args)
+    baseline = args.baseline if args.baseline is not None else ("ppo" if config_cfg.runner == "async" else "none")
+    names = [args.config] + ([baseline] if baseline != "none" else [])
+    runs: dict[str, list[dict[str, Any]]] = {name: [] for name in names}
+    for _ in range(args.repeat):                      # interleaved: each repetition measures every preset once
+        for name in names:
+            runs[name].append(measure(name, args))
+    result: dict[str, Any] = {"repeat": args.repeat, "results": {name: summarize(r) for name, r in runs.items()},
+                              "runs": runs}
+    if len(names) == 2:
+        first, second = (result["results"][n]["env_steps_per_second"]["median"] for n in names)
+        result["ratio_env_steps_per_second"] = first / second
+        result["ratio_per_run"] = [a["env_steps_per_second"] / b["env_steps_per_second"]
+                                   for a, b in zip(runs[names[0]], runs[names[1]])]
     if args.json:
-        print(json.dumps({"best": best, "runs": results}, indent=2))
-    else:
-        print_table(f"dynenv-bench train (best of {args.repeat})",
-                    [(k, f"{v:.1f}" if isinstance(v, float) else str(v)) for k, v in best.items()])
+        print(json.dumps(result, indent=2))
+        return 0
+    for name in names:
+        rows = []
+        for key, value in result["results"][name].items():
+            if isinstance(value, dict):
+                rows.append((key, f"{value['median']:.1f}  [{value['min']:.1f} .. {value['max']:.1f}]"))
+            else:
+                rows.append((key, str(value)))
+        print_table(f"dynenv-bench train --config {name} (median [range] of {args.repeat})", rows)
+    if len(names) == 2:
+        print(f"{names[0]} / {names[1]} env steps per second: {result['ratio_env_steps_per_second']:.2f} "
+              f"(per run: {', '.join(f'{r:.2f}' for r in result['ratio_per_run'])})")
     return 0

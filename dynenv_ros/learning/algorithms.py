@@ -72,6 +72,10 @@ class UpdateSettings:
     use_reconstruction: bool = False
     intrinsic_reward_coef: float = 0.0
     imitation_coef: float = 0.0       # weight of −log π(teacher's action | s); the trainer sets it per update
+    # PPO on lagging experience (the asynchronous runner): clip around the policy as it is when the update starts
+    # (the proximal policy) instead of the behaviour policy, weight each sample by the truncated ratio proximal /
+    # behaviour, and take advantages from the current critic (``_proximal``).
+    proximal: bool = False
 
     @property
     def ppo(self) -> bool:
@@ -132,21 +136,29 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
     """One PPO or A2C update on a rollout (``Rollout.as_tensors()``); returns the logged scalars."""
     s = settings
     T, B = rollout["actions"].shape[:2]
-    advantages, returns = generalized_advantages(
-        rollout["rewards"], rollout["values"], rollout["episode_end"], rollout["truncated"],
-        rollout["final_values"], s.gamma, s.gae_lambda)
-    minibatches = max(1, min(s.minibatches, B))
     stats: dict[str, list[float]] = {}
-    intrinsic_returns = None
+    epochs = s.epochs if s.ppo else 1
+    # decoupled PPO (``_proximal``); with one epoch each minibatch's own forward pass, made before any step on its
+    # rows, is the proximal one, so it costs no extra pass (``_fused_proximal``)
+    fused = s.proximal and s.ppo and epochs == 1
+    if s.proximal and s.ppo and not fused:
+        rollout = _proximal(learner, rollout, stats)
+    advantages = returns = None
+    if not fused:
+        advantages, returns = generalized_advantages(
+            rollout["rewards"], rollout["values"], rollout["episode_end"], rollout["truncated"],
+            rollout["final_values"], s.gamma, s.gae_lambda)
+    minibatches = max(1, min(s.minibatches, B))
+    intrinsic_returns = intrinsic_advantages = None
     if s.intrinsic_reward_coef > 0:
         intrinsic_advantages, intrinsic_returns, intrinsic = _intrinsic(learner, rollout, s)
-        advantages = advantages + intrinsic_advantages
+        if advantages is not None:
+            advantages = advantages + intrinsic_advantages
         stats["intrinsic_reward"] = [float(intrinsic.mean())]
 
     def log(name: str, value: Tensor | float) -> None:
         stats.setdefault(name, []).append(float(value))
 
-    epochs = s.epochs if s.ppo else 1
     timing = {"forward_backward": 0.0, "optimizer": 0.0}
     stop = False
     for epoch in range(epochs):
@@ -154,7 +166,8 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
         order = torch.randperm(B, generator=generator, device="cpu") if minibatches > 1 else torch.arange(B, device="cpu")
         for chunk in order.chunk(minibatches):
             started = time.perf_counter()
-            loss, kl = _minibatch_loss(learner, rollout, chunk, advantages, returns, s, log, intrinsic_returns)
+            loss, kl = _minibatch_loss(learner, rollout, chunk, advantages, returns, s, log, intrinsic_returns,
+                                       intrinsic_advantages)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             backward_done = time.perf_counter()
@@ -172,9 +185,29 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
     out["epochs_run"] = float(epoch + 1)
     out["seconds_forward_backward"] = timing["forward_backward"]
     out["seconds_optimizer"] = timing["optimizer"]
-    explained = 1.0 - torch.var(returns - rollout["values"][:-1]) / torch.var(returns).clamp(min=1e-8)
-    out["explained_variance"] = float(explained)
+    if returns is not None:           # (fused proximal: logged per minibatch)
+        explained = 1.0 - torch.var(returns - rollout["values"][:-1]) / torch.var(returns).clamp(min=1e-8)
+        out["explained_variance"] = float(explained)
     return out
+
+
+@torch.no_grad()
+def _proximal(learner: Learner, rollout: Mapping[str, Any], stats: dict[str, list[float]]) -> dict[str, Any]:
+    """Decoupled PPO for experience that lags (Hilton et al. 2022, "Batch size-invariance for policy
+    optimization"): one forward pass with the weights as they are now gives the proximal log-probabilities (the
+    clip's centre from here on), the current critic's values (fresher advantages than the behaviour's), and the
+    per-sample weight min(1, π_prox / π_behaviour) that corrects for the behaviour policy (truncated like
+    V-trace's ρ̄ = 1). The bootstrap values of truncated episodes stay the behaviour's (their observations are not
+    in the rollout)."""
+    T, B = rollout["actions"].shape[:2]
+    rows = torch.arange(B, device="cpu")
+    out = run_sequence(learner.agent, rollout["obs"], _initial_state(learner, rollout, rows), rollout["starts"])
+    log_prob, _ = log_prob_entropy(learner.agent, head_outputs(out, steps=T), rollout["actions"])
+    log_ratio = log_prob - rollout["log_probs"]
+    weights = log_ratio.clamp(max=0.0).exp()
+    stats["proximal_weight"] = [float(weights.mean())]
+    stats["proximal_kl"] = [float(((log_ratio.exp() - 1) - log_ratio).mean())]
+    return {**rollout, "log_probs": log_prob, "values": out.value.reshape(T + 1, B), "sample_weights": weights}
 
 
 def _initial_state(learner: Learner, rollout: Mapping[str, Any], rows: Tensor) -> tuple[Tensor, ...]:
@@ -205,9 +238,32 @@ def _intrinsic(learner: Learner, rollout: Mapping[str, Any], s: UpdateSettings) 
     return advantages, returns, reward
 
 
-def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, advantages: Tensor,
-                    returns: Tensor, s: UpdateSettings, log, intrinsic_returns: Tensor | None = None
-                    ) -> tuple[Tensor, float]:
+def _fused_proximal(rollout: Mapping[str, Any], rows: Tensor, log_prob: Tensor, values: Tensor, s: UpdateSettings,
+                    intrinsic_advantages: Tensor | None, log) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Decoupled PPO's proximal quantities of one minibatch from its own forward pass (one epoch: the weights have
+    not stepped on these rows yet): (advantages and returns from the current critic, the proximal
+    log-probabilities, the truncated weights min(1, π_prox / π_behaviour)) — what ``_proximal`` gets from a pass of
+    its own. A minibatch holds whole robot sequences, so its returns need nothing from other rows."""
+    with torch.no_grad():
+        advantages, returns = generalized_advantages(
+            rollout["rewards"][:, rows], values, rollout["episode_end"][:, rows], rollout["truncated"][:, rows],
+            rollout["final_values"][:, rows], s.gamma, s.gae_lambda)
+        if intrinsic_advantages is not None:
+            advantages = advantages + intrinsic_advantages[:, rows]
+        proximal = log_prob.detach()
+        log_ratio = proximal - rollout["log_probs"][:, rows]
+        weights = log_ratio.clamp(max=0.0).exp()
+        log("proximal_weight", weights.mean())
+        log("proximal_kl", ((log_ratio.exp() - 1) - log_ratio).mean())
+        log("explained_variance", 1.0 - torch.var(returns - values[:-1]) / torch.var(returns).clamp(min=1e-8))
+    return advantages, returns, proximal, weights
+
+
+def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, advantages: Tensor | None,
+                    returns: Tensor | None, s: UpdateSettings, log, intrinsic_returns: Tensor | None = None,
+                    intrinsic_advantages: Tensor | None = None) -> tuple[Tensor, float]:
+    """The loss of one minibatch of robot sequences. ``advantages`` None: decoupled PPO fused into this pass
+    (``_fused_proximal``)."""
     agent = learner.agent
     T = rollout["actions"].shape[0]
     every_row = len(rows) == rollout["actions"].shape[1] and bool((rows == torch.arange(len(rows), device=rows.device)).all())
@@ -223,11 +279,17 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
         imitated = acting
     step_out = head_outputs(out, steps=T)
     log_prob, entropy = log_prob_entropy(agent, step_out, actions)
-    adv = advantages[:, rows]
+    if advantages is None:
+        adv, target, old_log_prob, weights = _fused_proximal(rollout, rows, log_prob, out.value.detach(), s,
+                                                             intrinsic_advantages, log)
+    else:
+        adv, target, old_log_prob = advantages[:, rows], returns[:, rows], rollout["log_probs"][:, rows]
+        weights = rollout["sample_weights"][:, rows] if "sample_weights" in rollout else None
     if s.normalize_advantages:
         valid = adv[acting] if acting.any() else adv.reshape(-1)
         adv = (adv - valid.mean()) / (valid.std(unbiased=False) + 1e-8)
-    old_log_prob = rollout["log_probs"][:, rows]
+    if weights is not None:               # decoupled PPO: the behaviour policy's correction
+        adv = adv * weights
     log_ratio = log_prob - old_log_prob
     ratio = log_ratio.exp()
     if s.ppo:
@@ -236,7 +298,6 @@ def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, 
     else:
         policy_loss = -masked_mean(log_prob * adv, acting)
     value = out.value[:T]
-    target = returns[:, rows]
     value_error = (value - target) ** 2
     if s.clip_value_loss:
         old = rollout["values"][:T, rows]

@@ -41,7 +41,8 @@ import yaml
 ALGORITHMS = ("a2c", "ppo")
 VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
 OPPONENTS = ("self", "snapshot", "scripted", "random")
-BACKENDS = ("auto", "inprocess", "subprocess")
+BACKENDS = ("auto", "inprocess", "subprocess", "ray")
+RUNNERS = ("sync", "async")
 TEACHER_KINDS = ("chaser", "eager_chaser")     # one shared network has no slot input, so it cannot imitate a keeper in one slot
 DRIVING_TEACHER_KINDS = ("scripted",)   # the scripted driver (driving.scripted.ScriptedDriver)
 HEAD_MODES = ("discrete", "continuous")
@@ -142,6 +143,12 @@ class TrainConfig:
     max_minutes: float | None = _f(None, "Stop (and checkpoint) after this much wall time in minutes; null = no "
                                          "limit.")
 
+    episode_seconds: float | None = _f(None, "Episode length in seconds; null = the world's own (soccer 120, driving "
+                                             "60). Shorter episodes make curricula and small test tasks.")
+    reward_weights: tuple = _f((1.0, 1.0, 1.0, 1.0), "Weights of the four reward terms [primary, rule, auxiliary, "
+                                                     "observation] in the reward learnt; [1, 1, 1, 1] = the world's "
+                                                     "total. Logged episode returns and terms stay unweighted.")
+
     # -- returns -----------------------------------------------------------------------------------------------
     gamma: float = _f(0.99, "Discount per motion period, in (0, 1] (paper: 0.99).")
     gae_lambda: float = _f(1.0, "GAE λ in [0, 1]; 1 = A2C's n-step returns (paper), PPO usually 0.95.")
@@ -202,6 +209,29 @@ class TrainConfig:
                                "copies), 'scripted', 'random'.")
     snapshot_every_updates: int = _f(200, "Opponent 'snapshot': add a frozen copy every this many updates.")
     snapshot_pool: int = _f(5, "Opponent 'snapshot': most recent copies kept to play against.")
+
+    # -- asynchronous actor-learner (runner: async; docs/training.md "Three ways to train") -------------------
+    runner: str = _f("sync", "'sync': one process collects a rollout, then learns from it (the worlds may step in "
+                             "worker processes, see backend); 'async': rollout workers step the worlds and act "
+                             "while the learner trains in this process, experience and weights through shared "
+                             "memory (backend 'ray': the workers are Ray actors).")
+    workers: int | None = _f(None, "runner async: rollout workers (processes or Ray actors), each stepping its "
+                                   "share of num_envs; null = one per CPU core this process may use, minus one "
+                                   "for a CPU learner (at least 1).")
+    max_policy_lag: int = _f(4, "runner async: a rollout whose behaviour policy is more than this many updates "
+                                "older than the learner's is dropped (counted); PPO's ratio against the "
+                                "behaviour log-probabilities corrects the lag within it.")
+    rollouts_per_update: int = _f(1, "runner async: worker rollouts joined (along the robot axis) into one update.")
+    worker_restarts: int = _f(3, "runner async: a worker (or node) that dies is replaced at most this many times "
+                                 "in a run; after that the run continues on the workers left, or stops cleanly "
+                                 "with its reason when none is left.")
+    ray_address: str | None = _f(None, "backend ray: null = an embedded local Ray; 'HOST:PORT' joins the Ray "
+                                       "cluster whose head's GCS listens there (this machine must be one of its "
+                                       "nodes), 'ray://HOST:PORT' through Ray Client.")
+    ray_connect_timeout_s: float = _f(10.0, "backend ray: give up on ray_address after this many seconds.")
+    torch_compile: bool = _f(False, "Compile the learner's hot modules (per-class embeddings, RTA) with "
+                                    "torch.compile; falls back to eager, with a warning, where compiling fails. "
+                                    "Costs minutes at start (docs/benchmarks.md).")
 
     # -- network -----------------------------------------------------------------------------------------------
     feature_size: int = _f(64, "Width D of the agent's streams (paper: 64).")
@@ -270,10 +300,40 @@ class TrainConfig:
         if self.privileged_pose_seeding:
             raise ConfigError("privileged_pose_seeding", why + "has no pose")
 
+    def _validate_runner(self) -> None:
+        """The asynchronous runner's settings (machine-dependent limits are checked where the run starts:
+        ``async_trainer.check_resources``)."""
+        if self.runner == "sync":
+            if self.backend == "ray":
+                raise ConfigError("backend", "'ray' runs rollout workers as Ray actors, which needs runner: async")
+            return
+        if self.backend not in ("auto", "ray"):
+            raise ConfigError("backend", f"{self.backend!r} does not apply to runner async (each rollout worker "
+                                         f"steps its worlds itself); use 'auto' (worker processes) or 'ray'")
+        if self.algorithm != "ppo":
+            raise ConfigError("algorithm", "runner async needs 'ppo': its ratio against the behaviour "
+                                           "log-probabilities corrects the policy lag (A2C is on-policy only)")
+        if self.workers is not None and not 1 <= self.workers <= self.num_envs:
+            raise ConfigError("workers", f"must be in 1..num_envs ({self.num_envs}): every worker steps at least "
+                                         f"one world, got {self.workers}")
+        if self.max_policy_lag < 0:
+            raise ConfigError("max_policy_lag", f"must be >= 0, got {self.max_policy_lag}")
+        if self.rollouts_per_update < 1:
+            raise ConfigError("rollouts_per_update", f"must be >= 1, got {self.rollouts_per_update}")
+        if self.worker_restarts < 0:
+            raise ConfigError("worker_restarts", f"must be >= 0, got {self.worker_restarts}")
+        if self.ray_address is not None and self.backend != "ray":
+            raise ConfigError("ray_address", "applies to backend 'ray' only")
+        if self.ray_address is not None and not re.match(r"^(ray://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$", self.ray_address):
+            raise ConfigError("ray_address", f"expected HOST:PORT (e.g. 10.0.0.5:6379) or ray://HOST:PORT, got {self.ray_address!r}")
+        if not 0.0 < self.ray_connect_timeout_s <= 600.0 or not math.isfinite(self.ray_connect_timeout_s):
+            raise ConfigError("ray_connect_timeout_s", f"must be in (0, 600], got {self.ray_connect_timeout_s}")
+
     # -- JSON --------------------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """Every field, JSON-ready (str, int, float, bool, None only)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
+                for f in dataclasses.fields(self)}
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> TrainConfig:
@@ -300,6 +360,7 @@ class TrainConfig:
         _choice("variant", self.variant, VARIANTS)
         _choice("opponent", self.opponent, OPPONENTS)
         _choice("backend", self.backend, BACKENDS)
+        _choice("runner", self.runner, RUNNERS)
         if self.teacher is not None:
             _choice("teacher", self.teacher, DRIVING_TEACHER_KINDS if self.driving else TEACHER_KINDS)
         _choice("head_mode", self.head_mode, HEAD_MODES)
@@ -377,6 +438,12 @@ class TrainConfig:
                 raise ConfigError("teacher_driven_worlds", f"must be in 0..{self.num_envs - 1} (num_envs - 1: the "
                                                            f"learner needs a world of its own), got "
                                                            f"{self.teacher_driven_worlds}")
+        if self.episode_seconds is not None and not (math.isfinite(self.episode_seconds)
+                                                     and 0.0 < self.episode_seconds <= 3600.0):
+            raise ConfigError("episode_seconds", f"must be in (0, 3600] seconds, got {self.episode_seconds}")
+        if not all(math.isfinite(w) for w in self.reward_weights):
+            raise ConfigError("reward_weights", f"must be finite, got {list(self.reward_weights)}")
+        self._validate_runner()
         if self.intrinsic_reward_coef > 0.0 and not losses.forward:
             raise ConfigError("intrinsic_reward_coef", f"> 0 needs a forward model, which variant "
                                                        f"{self.variant!r} does not train")
@@ -388,6 +455,8 @@ _BASE_TYPES = {"int": int, "float": float, "bool": bool, "str": str}
 
 
 def _parse_annotation(annotation: str) -> tuple[type, bool]:
+    if str(annotation) == "tuple":                  # a list of 4 numbers (reward_weights)
+        return tuple, False
     parts = [p.strip() for p in str(annotation).split("|")]
     optional = "None" in parts
     (base,) = [p for p in parts if p != "None"]
@@ -405,6 +474,11 @@ def _check_type(key: str, value: Any, expected: tuple[type, bool]) -> Any:
             return None
         raise ConfigError(key, f"expected {kind.__name__}, got null")
     described = f"{type(value).__name__} {value!r}"
+    if kind is tuple:
+        if not isinstance(value, (list, tuple)) or len(value) != 4 or \
+                any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
+            raise ConfigError(key, f"expected a list of 4 numbers, got {described}")
+        return tuple(float(v) for v in value)
     if kind is bool:
         if not isinstance(value, bool):
             raise ConfigError(key, f"expected true or false, got {described}")

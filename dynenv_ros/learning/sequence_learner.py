@@ -36,7 +36,8 @@ from dynenv_ros.learning.experience import Sequence, batch
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import arrays_as_tensors
 from dynenv_ros.learning.run_log import RunLogger
-from dynenv_ros.learning.trainer import VERSION, make_agent, update_settings
+from dynenv_ros.learning.agents import make_agent
+from dynenv_ros.learning.trainer import VERSION, update_settings
 
 MAX_QUEUE = 4096          # sequences waiting for the learner; beyond, the oldest are dropped (counted)
 

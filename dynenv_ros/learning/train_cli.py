@@ -90,15 +90,18 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, ValueError) as error:
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
-    from dynenv_ros.learning.trainer import Trainer
+    from dynenv_ros.learning.trainer import make_trainer
     try:
-        trainer = Trainer(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
+        trainer = make_trainer(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
     except ValueError as error:        # a checkpoint or pretrained file that is missing, corrupt or does not fit
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
     summary = trainer.run()
     print(f"dynenv-train: {summary['env_steps']} env steps, {summary['updates']} updates, "
           f"{summary['episodes']} episodes in {summary['wall_seconds']:.0f} s -> {run_dir}")
+    if summary.get("stop_reason"):
+        print(f"dynenv-train: stopped early: {summary['stop_reason']}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -18,27 +18,23 @@ from __future__ import annotations
 import json
 import math
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from dynenv_ros.envs.vector import DrivingVectorEnv, SoccerVectorEnv
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning import checkpoints, compiled
 from dynenv_ros.learning.agents import make_agent
 from dynenv_ros.learning.algorithms import UpdateSettings, update
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.opponents import SCRIPTED_TEAM, RandomOpponent, SnapshotOpponent, WorldScriptedOpponent
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.rollout import Rollout
 from dynenv_ros.learning.run_log import RunLogger, plot_curves
-from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.learning.worlds import make_worlds, soccer_config, teacher_driven_share
 
 VERSION = "dynenv_ros.learning/1"
-# DynEnv's privileged seeding noise: N(0, 0.05²) in its normalised units (1 unit = 5.2 m) on x, y; 0.05 on the
-# unit-vector components of the pose (facts §9.6).
-SEED_NOISE = np.array([0.26, 0.26, 0.05, 0.05, 0.05, 0.05], np.float32)
 
 
 def update_settings(cfg: TrainConfig) -> UpdateSettings:
@@ -56,7 +52,18 @@ def update_settings(cfg: TrainConfig) -> UpdateSettings:
         ltp_coef=cfg.ltp_coef, self_supervised_coef=cfg.self_supervised_coef,
         use_forward=losses.forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
         use_localization=losses.localization, use_reconstruction=losses.reconstruction,
-        intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0))
+        intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0),
+        proximal=ppo and cfg.runner == "async")
+
+
+@dataclass
+class Experience:
+    """What one update learns from: a rollout (possibly several workers' joined), the env steps in it, the episodes
+    that finished while it was collected, and scalars to log about it (averaged, or the maximum for ``*_max``)."""
+    rollout: Rollout
+    env_steps: int
+    finished: list[dict[str, float]]
+    scalars: dict[str, float] = field(default_factory=dict)
 
 
 class Trainer:
@@ -66,8 +73,7 @@ class Trainer:
         torch.set_num_threads(cfg.torch_threads)
         self.device = torch.device(cfg.device)
         self.settings = update_settings(cfg)
-        soccer = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode})
-        self.soccer = soccer
+        self.soccer = soccer_config(cfg)
         seeds = np.random.SeedSequence(cfg.seed).spawn(4)
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
         self.rng = np.random.default_rng(seeds[1])
@@ -80,46 +86,29 @@ class Trainer:
                                           fused=self.device.type in ("cpu", "cuda"))
         self.env_steps = self.updates = self.episodes = 0
         self.wall_before = 0.0
+        if cfg.torch_compile:
+            compiled.compile_hot_paths()
         if resume:
             self._resume()
         elif cfg.pretrained_encoder:
             self._load_encoder(cfg.pretrained_encoder)
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
-        needs_targets = self.settings.use_localization or self.settings.use_reconstruction \
-            or cfg.privileged_pose_seeding
-        if cfg.driving:
-            self.env: Any = DrivingVectorEnv(cfg.num_envs, backend=cfg.backend, observation="padded",
-                                             config={"n_cars": cfg.n_cars, "action_mode": cfg.action_mode},
-                                             perception=cfg.perception, teacher=cfg.teacher)
-            agent.layout_spec = self.env.layout.spec
-            learning = np.arange(cfg.n_cars)
-        else:
-            self.env = SoccerVectorEnv(cfg.num_envs, backend=cfg.backend, config=soccer, observation="padded",
-                                       perception=cfg.perception, targets=needs_targets,
-                                       scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None,
-                                       teacher=cfg.teacher)
-            n = cfg.players_per_team
-            learning = np.arange(2 * n) if cfg.opponent == "self" else np.arange(n)
-        self.opponent: Any = None
-        if cfg.opponent == "random":
-            self.opponent = RandomOpponent(self.rng, 2 * soccer.motion.head_units + 1)
-        elif cfg.opponent == "snapshot":
-            self.opponent = SnapshotOpponent(agent, cfg.snapshot_pool, self.generator, self.rng)
-        elif cfg.opponent == "scripted":
-            self.opponent = WorldScriptedOpponent()
-        seeding: dict[str, Any] = {}
-        if cfg.privileged_pose_seeding:
-            seeding = {"pose_seeder": self.learner.seeded_state, "seed_noise": SEED_NOISE, "rng": self.rng}
-        self.collector = RolloutCollector(self.env, agent, learning, self.opponent, self.generator,
-                                          seed=self.env_seed + self.updates, **seeding)
+        self._start_rollouts()
         self.logger = RunLogger(self.run_dir)
+
+    def _start_rollouts(self) -> None:
+        """The worlds, the opponent and the collector (this process's; the asynchronous runner starts workers)."""
+        worlds = make_worlds(self.cfg, self.learner, self.cfg.num_envs, self.cfg.backend, self.generator, self.rng,
+                             seed=self.env_seed + self.updates)
+        self.env, self.opponent, self.collector = worlds.env, worlds.opponent, worlds.collector
+        self.layout_shapes = {k: list(v) for k, v in self.env.layout.shapes().items()}
 
     # -- checkpoints ------------------------------------------------------------------------------------------
     def _meta(self) -> dict[str, Any]:
         return {"version": VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
                 "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
                 "episodes": self.episodes, "wall_seconds": self.wall_before + self._elapsed(),
-                "observation_layout": {k: list(v) for k, v in self.env.layout.shapes().items()},
+                "observation_layout": self.layout_shapes,
                 "numpy_rng": self.rng.bit_generator.state, "code_revision": checkpoints.code_revision()}
 
     def save_checkpoint(self) -> Path:
@@ -151,70 +140,91 @@ class Trainer:
     def run(self) -> dict[str, Any]:
         cfg = self.cfg
         self._started = time.perf_counter()
-        per_update = cfg.num_envs * cfg.rollout_length
         deadline = math.inf if cfg.max_minutes is None else cfg.max_minutes * 60.0
         last_checkpoint = time.perf_counter()
-        window = {"steps": 0, "time": time.perf_counter(), "rollout": 0.0, "learn": 0.0}
+        window = self._new_window()
         returns: list[dict[str, float]] = []
         bar = None
         if self.progress:
             from tqdm import tqdm
             bar = tqdm(total=cfg.total_env_steps, initial=self.env_steps, unit="step", dynamic_ncols=True,
                        desc=f"{cfg.algorithm}/{cfg.variant}")
+        stats: dict[str, float] = {}
         try:
             while self.env_steps < cfg.total_env_steps and self._elapsed() < deadline:
                 t0 = time.perf_counter()
-                self.learner.eval()
-                self.collector.drive_with_teacher(self._teacher_driven_worlds())
-                rollout = self.collector.collect(cfg.rollout_length)
+                batch = self._experience(deadline)
+                if batch is None:           # (the asynchronous runner: the deadline passed while it waited)
+                    break
                 t1 = time.perf_counter()
                 self.learner.train()
                 self.settings.imitation_coef = cfg.imitation_weight(self.env_steps)
-                stats = update(self.learner, self.optimizer, rollout.as_tensors(self.device), self.settings,
+                stats = update(self.learner, self.optimizer, batch.rollout.as_tensors(self.device), self.settings,
                                self.generator)
                 if cfg.teacher is not None:
                     stats["imitation_coef"] = self.settings.imitation_coef
                 t2 = time.perf_counter()
-                self.env_steps += per_update
+                self.env_steps += batch.env_steps
                 self.updates += 1
-                window["steps"] += per_update
+                self._learned(batch)
+                window["steps"] += batch.env_steps
+                window["updates"] += 1
                 window["rollout"] += t1 - t0
                 window["learn"] += t2 - t1
-                finished, self.collector.finished = self.collector.finished, []
-                self.episodes += len(finished)
-                returns.extend(finished)
-                if self.opponent is not None and cfg.opponent == "snapshot" \
-                        and self.updates % cfg.snapshot_every_updates == 0:
-                    self.opponent.refresh(self.learner.agent)
+                for key, value in batch.scalars.items():
+                    window["extra"].setdefault(key, []).append(value)
+                self.episodes += len(batch.finished)
+                returns.extend(batch.finished)
                 if bar is not None:
-                    bar.update(per_update)
+                    bar.update(batch.env_steps)
                 if self.updates % cfg.log_every_updates == 0:
                     self._log(stats, window, returns, bar)
                     returns = []
-                    window = {"steps": 0, "time": time.perf_counter(), "rollout": 0.0, "learn": 0.0}
+                    window = self._new_window()
                 if time.perf_counter() - last_checkpoint > cfg.checkpoint_every_minutes * 60.0:
                     self.save_checkpoint()
                     last_checkpoint = time.perf_counter()
-            if window["steps"]:             # the updates since the last log line
-                self._log(stats, window, returns, bar, updates=window["steps"] // per_update)
+            if window["updates"]:           # the updates since the last log line
+                self._log(stats, window, returns, bar)
         finally:
             if bar is not None:
                 bar.close()
         return self.finish()
 
-    def _teacher_driven_worlds(self) -> int:
-        cfg = self.cfg
-        done = cfg.teacher_driven_env_steps and self.env_steps >= cfg.teacher_driven_env_steps
-        return 0 if done else cfg.teacher_driven_worlds
+    @staticmethod
+    def _new_window() -> dict[str, Any]:
+        return {"steps": 0, "updates": 0, "time": time.perf_counter(), "rollout": 0.0, "learn": 0.0, "extra": {}}
 
-    def _log(self, stats: dict[str, float], window: dict[str, float], returns: list[dict[str, float]],
-             bar: Any, updates: int | None = None) -> None:
-        updates = updates or self.cfg.log_every_updates
+    def _experience(self, deadline: float) -> Experience | None:
+        """The next rollout to learn from: collected here, by the current policy."""
+        self.learner.eval()
+        self.collector.drive_with_teacher(self._teacher_driven_worlds())
+        rollout = self.collector.collect(self.cfg.rollout_length)
+        finished, self.collector.finished = self.collector.finished, []
+        return Experience(rollout, self.cfg.num_envs * self.cfg.rollout_length, finished)
+
+    def _learned(self, batch: Experience) -> None:
+        """After each update: a snapshot opponent takes its copy every ``snapshot_every_updates``."""
+        if self.opponent is not None and self.cfg.opponent == "snapshot" \
+                and self.updates % self.cfg.snapshot_every_updates == 0:
+            self.opponent.refresh(self.learner.agent)
+
+    def _teacher_driven_worlds(self) -> int:
+        return teacher_driven_share(self.cfg, self.env_steps, 0, self.cfg.num_envs)
+
+    # the window's time before each update: collecting (sync) or waiting for the workers (async)
+    wait_scalar = "speed/rollout_seconds_per_update"
+
+    def _log(self, stats: dict[str, float], window: dict[str, Any], returns: list[dict[str, float]],
+             bar: Any) -> None:
+        updates = max(window["updates"], 1)
         elapsed = max(time.perf_counter() - window["time"], 1e-9)
         scalars = {f"train/{k}": v for k, v in stats.items()}
         scalars["speed/env_steps_per_second"] = window["steps"] / elapsed
-        scalars["speed/rollout_seconds_per_update"] = window["rollout"] / updates
+        scalars[self.wait_scalar] = window["rollout"] / updates
         scalars["speed/learn_seconds_per_update"] = window["learn"] / updates
+        for key, values in window["extra"].items():
+            scalars[key] = float(np.max(values)) if key.endswith("_max") else float(np.mean(values))
         if returns:
             for key in returns[0]:
                 scalars[f"episode/{key}"] = float(np.mean([r[key] for r in returns]))
@@ -232,12 +242,27 @@ class Trainer:
         agent = self.learner.agent
         checkpoints.save_policy(agent, str(self.run_dir / "policy.safetensors"), meta)
         from dynenv_ros.agent.export import export_onnx
+        compiled.restore()                  # the exporter traces the eager functions
         export_onnx(agent.cpu(), self.run_dir / "policy.onnx")
         agent.to(self.device)
         self.logger.close()
         plot_curves(self.run_dir)
-        summary = {"env_steps": self.env_steps, "updates": self.updates, "episodes": self.episodes,
-                   "wall_seconds": self.wall_before + self._elapsed()}
+        summary = self._summary()
         (self.run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-        self.env.close()
+        self._stop_rollouts()
         return summary
+
+    def _summary(self) -> dict[str, Any]:
+        return {"env_steps": self.env_steps, "updates": self.updates, "episodes": self.episodes,
+                "wall_seconds": self.wall_before + self._elapsed()}
+
+    def _stop_rollouts(self) -> None:
+        self.env.close()
+
+
+def make_trainer(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True) -> Trainer:
+    """The trainer of ``cfg.runner``: ``Trainer`` (sync) or ``async_trainer.AsyncTrainer``."""
+    if cfg.runner == "async":
+        from dynenv_ros.learning.async_trainer import AsyncTrainer
+        return AsyncTrainer(cfg, run_dir, resume=resume, progress=progress)
+    return Trainer(cfg, run_dir, resume=resume, progress=progress)
