@@ -27,6 +27,7 @@ TOOLS = [
     "dynenv-record = dynenv_ros.nodes.recorder:cli_main",
     "dynenv-eval = dynenv_ros.evaluation.cli:main",
     "dynenv-train = dynenv_ros.learning.train_cli:main",
+    "dynenv-sweep = dynenv_ros.experiments.sweep:main",
     "dynenv-pretrain = dynenv_ros.learning.pretrain:main",
 ]
 

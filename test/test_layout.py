@@ -97,3 +97,23 @@ def test_evaluation_modules_have_no_import_cycle():
 
     for name in sorted(graph):
         visit(name, ())
+
+
+RAY_MODULES = {"dynenv_ros/learning/ray_connection.py", "dynenv_ros/learning/ray_pool.py",
+               "dynenv_ros/experiments/sweep.py"}
+
+
+def test_only_the_ray_modules_import_ray():
+    # Ray is a training dependency: the simulator, the agent, the ROS graph and the in-process trainer run without it
+    users = set()
+    for package in ("dynenv_ros", "policy_node"):
+        users.update(_imports(package, "ray"))
+    assert users == RAY_MODULES
+
+
+def test_the_trainer_and_the_ros_graph_import_without_ray():
+    probe = ("import sys\nimport dynenv_ros.learning.trainer, dynenv_ros.learning.async_trainer, "
+             "dynenv_ros.learning.train_cli, dynenv_ros.nodes.trainer_node, dynenv_ros.nodes.sim_node\n"
+             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'ray'))")
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert result.stdout.strip() == "[]", result.stdout

@@ -21,7 +21,6 @@ which is exactly what ``update`` takes.
 """
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
@@ -29,23 +28,11 @@ from typing import Any
 
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.rollout_transfer import join
+from dynenv_ros.learning.rollout_worker import resolve_workers
 from dynenv_ros.learning.trainer import Experience, Trainer
 from dynenv_ros.learning.worker_pool import Delivery, WorkerPoolError
 
 WAIT_POLL_S = 1.0            # how often a waiting learner checks its deadline and its workers
-
-
-def usable_cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
-def resolve_workers(cfg: TrainConfig, cores: int | None = None) -> int:
-    """``cfg.workers``, or one per core this process may use, less one for a CPU learner; at most ``num_envs``."""
-    if cfg.workers is not None:
-        return cfg.workers
-    cores = usable_cores() if cores is None else cores
-    wanted = cores if cfg.device != "cpu" else cores - 1
-    return max(1, min(cfg.num_envs, wanted))
 
 
 class AsyncTrainer(Trainer):
@@ -109,6 +96,9 @@ class AsyncTrainer(Trainer):
                    "async/workers_alive": float(self.pool.alive),
                    "async/worker_collect_seconds": float(sum(d.info["collect_seconds"] for d in deliveries)
                                                          / len(deliveries))}
+        nodes = getattr(self.pool, "nodes_seen", None)
+        if nodes is not None:                   # Ray: the cluster nodes whose actors delivered so far
+            scalars["async/nodes_seen_max"] = float(len(nodes))
         return Experience(join([d.rollout for d in deliveries]), sum(int(d.info["env_steps"]) for d in deliveries),
                           finished, scalars)
 
@@ -144,6 +134,8 @@ class AsyncTrainer(Trainer):
         summary.update({"runner": "async", "dropped_rollouts": self.dropped,
                         "worker_deaths": self.pool.deaths if self.pool is not None else 0,
                         "env_steps_generated": self.generated_steps})
+        if getattr(self.pool, "rollouts_by_node", None) is not None:
+            summary["rollouts_by_node"] = dict(self.pool.rollouts_by_node)
         if getattr(self, "stop_reason", None):
             summary["stop_reason"] = self.stop_reason
         return summary

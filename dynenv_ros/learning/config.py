@@ -226,8 +226,8 @@ class TrainConfig:
                                  "in a run; after that the run continues on the workers left, or stops cleanly "
                                  "with its reason when none is left.")
     ray_address: str | None = _f(None, "backend ray: null = an embedded local Ray; 'HOST:PORT' joins the Ray "
-                                       "cluster whose head's GCS listens there (this machine must be one of its "
-                                       "nodes), 'ray://HOST:PORT' through Ray Client.")
+                                       "cluster whose head listens there (this machine must be one of its nodes: "
+                                       "docs/training.md, 'On a Ray cluster').")
     ray_connect_timeout_s: float = _f(10.0, "backend ray: give up on ray_address after this many seconds.")
     torch_compile: bool = _f(False, "Compile the learner's hot modules (per-class embeddings, RTA) with "
                                     "torch.compile; falls back to eager, with a warning, where compiling fails. "
@@ -324,8 +324,8 @@ class TrainConfig:
             raise ConfigError("worker_restarts", f"must be >= 0, got {self.worker_restarts}")
         if self.ray_address is not None and self.backend != "ray":
             raise ConfigError("ray_address", "applies to backend 'ray' only")
-        if self.ray_address is not None and not re.match(r"^(ray://)?[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$", self.ray_address):
-            raise ConfigError("ray_address", f"expected HOST:PORT (e.g. 10.0.0.5:6379) or ray://HOST:PORT, got {self.ray_address!r}")
+        if self.ray_address is not None and not re.match(r"^[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$", self.ray_address):
+            raise ConfigError("ray_address", f"expected HOST:PORT (e.g. 10.0.0.5:6379), got {self.ray_address!r}")
         if not 0.0 < self.ray_connect_timeout_s <= 600.0 or not math.isfinite(self.ray_connect_timeout_s):
             raise ConfigError("ray_connect_timeout_s", f"must be in (0, 600], got {self.ray_connect_timeout_s}")
 

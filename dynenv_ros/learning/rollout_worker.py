@@ -23,6 +23,19 @@ from dynenv_ros.learning.rollout_transfer import flatten
 from dynenv_ros.learning.worlds import Worlds, make_worlds, teacher_driven_share
 
 
+def usable_cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def resolve_workers(cfg: TrainConfig, cores: int | None = None) -> int:
+    """``cfg.workers``, or one per core this process may use, less one for a CPU learner; at most ``num_envs``."""
+    if cfg.workers is not None:
+        return cfg.workers
+    cores = usable_cores() if cores is None else cores
+    wanted = cores if cfg.device != "cpu" else cores - 1
+    return max(1, min(cfg.num_envs, wanted))
+
+
 def shard_sizes(num_envs: int, workers: int) -> list[tuple[int, int]]:
     """(first world, worlds) of each worker: ``num_envs`` split as evenly as possible, the larger shares first."""
     sizes = [num_envs // workers + (1 if w < num_envs % workers else 0) for w in range(workers)]

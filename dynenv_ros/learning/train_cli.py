@@ -87,13 +87,16 @@ def main(argv: list[str] | None = None) -> int:
             if (run_dir / "checkpoints").exists():
                 raise ValueError(f"{run_dir} already holds a run; use --resume {run_dir} or another --run-dir")
         _check_device(cfg.device)
+        from dynenv_ros.learning.resources import check_machine
+        check_machine(cfg)                 # cores, memory, shared memory, the Ray cluster: before anything starts
     except (ConfigError, ValueError) as error:
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
     from dynenv_ros.learning.trainer import make_trainer
+    from dynenv_ros.learning.worker_pool import WorkerPoolError
     try:
         trainer = make_trainer(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
-    except ValueError as error:        # a checkpoint or pretrained file that is missing, corrupt or does not fit
+    except (ValueError, WorkerPoolError) as error:   # a checkpoint that does not fit; workers that cannot start
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
     summary = trainer.run()
