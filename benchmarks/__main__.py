@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
-          "policy": "policy", "train": "train", "soak": "soak",
+          "policy": "policy", "train": "train", "learner": "learner", "soak": "soak",
           "flood": "flood", "ros-train": "ros_train", "cores": "cores"}
 # suites whose one run lasts minutes: one run unless --repeat asks for more
 LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1}
@@ -43,6 +43,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "train":   # declaring its options imports no torch
             from benchmarks.train import add_arguments as add_train_arguments
             add_train_arguments(sub)
+        if name == "learner":
+            from benchmarks.learner import add_arguments as add_learner_arguments
+            add_learner_arguments(sub)
         if name == "soak":    # declaring its options starts nothing
             from benchmarks.soak import add_arguments as add_soak_arguments
             add_soak_arguments(sub)

@@ -342,3 +342,19 @@ def test_the_tiny_task_is_learnt_asynchronously_as_in_process_at_equal_env_steps
         assert summary["env_steps"] >= 640
         forward, _ = _walks_forward(tmp_path / runner / "policy.safetensors", seed=11)
         assert forward > 0.8, (runner, forward)
+
+
+@pytest.mark.parametrize("overrides, key, words", [
+    (["workers={cores_plus_one}", "num_envs={cores_plus_one}"], "workers", "worker processes on the"),
+    (["num_envs=100000000"], "num_envs", "GB available"),
+    (["torch_threads={cores_plus_one}"], "torch_threads", "cores this process may use"),
+])
+def test_settings_beyond_the_machine_are_refused_in_one_line_before_anything_starts(tmp_path, capsys, overrides,
+                                                                                     key, words):
+    cores_plus_one = len(os.sched_getaffinity(0)) + 1
+    sets = [f"--set={item.format(cores_plus_one=cores_plus_one)}" for item in overrides]
+    code = main(["--config", "async", "--run-dir", str(tmp_path / "run"), *sets])
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"dynenv-train: {key}:") and words in err and "\n" not in err, err
+    assert not (tmp_path / "run").exists()          # nothing written, nothing started

@@ -80,6 +80,8 @@ SKIPPED_EXTERNAL: dict[tuple[str, ...], str] = {
     ("pip",): "installs from the package index (network); the bootstrap installs the same lock",
     ("colcon",): "the colcon workspace build; test/test_colcon_build.py runs exactly this build against the venv",
     ("make", "lock"): "re-resolves requirements.in into a throw-away venv from the package index (network, minutes)",
+    (".venv/bin/ray", "start"): "starts a node of the user's Ray cluster (other machines); test/test_ray_cluster.py "
+                                "starts a real head and second node with these options and the token auth",
 }
 # Shell syntax inside a block: no program runs. for/done/[ ... ] drive the expansion of the commands around them.
 SHELL_SYNTAX: dict[str, str] = {

@@ -237,3 +237,18 @@ def test_an_address_nobody_answers_at_is_refused_within_its_timeout(tmp_path):
     assert done.returncode == 2
     assert f"127.0.0.2:{port}" in done.stderr and done.stderr.strip().count("\n") == 0, done.stderr
     assert elapsed < 60                               # python and torch start-up included; Ray's own wait is minutes
+
+
+def test_an_embedded_local_ray_trains_with_its_actors(tmp_path):
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    token_file = Path.home() / ".ray" / "auth_token"
+    token_before = token_file.exists()
+    run_dir = tmp_path / "run"
+    done = subprocess.run([sys.executable, "-m", "dynenv_ros.learning.train_cli", "--config", "async", "--run-dir",
+                           str(run_dir), "--no-progress", "--set", "backend=ray", "--set", "workers=1",
+                           *[f"--set={item}" for item in TINY], "--set", "total_env_steps=32"],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["env_steps"] >= 32 and len(summary["rollouts_by_node"]) == 1 and summary["worker_deaths"] == 0
+    assert token_file.exists() == token_before      # its token lives in its environment, not in ~/.ray
