@@ -381,12 +381,18 @@ def validate_actions(actions: Any, config: SoccerConfig, num_envs: int) -> Any:
 
 # -- shared memory and workers -----------------------------------------------------------------------------------
 
-def _release_blocks(blocks: list[shared_memory.SharedMemory]) -> None:
+def close_blocks(blocks: list[shared_memory.SharedMemory]) -> None:
+    """Unmap blocks this process attached (their owner unlinks them)."""
     for block in blocks:
         try:
             block.close()
         except BufferError:      # someone still holds a view (copy=False); the mapping goes with the last view
             pass
+
+
+def _release_blocks(blocks: list[shared_memory.SharedMemory]) -> None:
+    close_blocks(blocks)
+    for block in blocks:
         try:
             block.unlink()
         except FileNotFoundError:

@@ -25,7 +25,7 @@ from dynenv_ros.learning.ray_connection import RayConnectionError, cluster_cpus,
 from dynenv_ros.learning.rollout_transfer import unflatten
 from dynenv_ros.learning.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
 from dynenv_ros.learning.shared_weights import pack, unpack
-from dynenv_ros.learning.worker_pool import Delivery, WorkerPoolError, one_line
+from dynenv_ros.learning.worker_pool import Delivery, WorkerPoolError, one_line, replace_or_go_on
 
 QUEUED_CALLS = 2             # collect calls per actor: one running, one waiting
 
@@ -133,21 +133,9 @@ class RayPool:
         actor.alive = False
         for reference in [r for r, i in self._calls.items() if i == actor.index]:
             del self._calls[reference]          # its rollouts in flight are lost
-        self.deaths += 1
-        free = self.ray.available_resources().get("CPU", 0.0)
-        if self.restarts < self.cfg.worker_restarts and free >= 1.0:
-            self.restarts += 1
-            actor.incarnation += 1
-            self.log(f"rollout worker {actor.index} (Ray actor) died: {why}; starting a replacement "
-                     f"({self.restarts} of {self.cfg.worker_restarts} restarts used)")
-            self._start(actor)
-            return
-        if self.alive == 0:
-            raise WorkerPoolError(f"every rollout worker is dead (last: Ray actor {actor.index}, {why})"
-                                  + ("" if free >= 1.0 else "; no free CPU left in the cluster for a replacement"))
-        reason = "no restarts left" if self.restarts >= self.cfg.worker_restarts else "no free CPU for a replacement"
-        self.log(f"rollout worker {actor.index} (Ray actor) died: {why}; {reason}, going on with {self.alive} "
-                 f"of {self.workers}")
+        actor.incarnation += 1
+        room = self.ray.available_resources().get("CPU", 0.0) >= 1.0
+        replace_or_go_on(self, f"rollout worker {actor.index} (Ray actor)", why, lambda: self._start(actor), room)
 
     def get(self, timeout: float) -> Delivery | None:
         exceptions = self.ray.exceptions

@@ -17,7 +17,7 @@ from typing import Mapping
 import numpy as np
 import torch
 
-from dynenv_ros.envs.vector import SharedArrays
+from dynenv_ros.envs.vector import SharedArrays, close_blocks
 from dynenv_ros.learning.rollout import STEP_ARRAYS, Rollout
 
 Spec = dict[str, tuple[tuple[int, ...], str]]
@@ -137,9 +137,5 @@ class AttachedSlots:
 
     def close(self) -> None:
         self._arrays = []
-        for block in self._blocks:
-            try:
-                block.close()
-            except BufferError:
-                pass
+        close_blocks(self._blocks)
         self._blocks = []

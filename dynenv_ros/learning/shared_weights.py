@@ -19,7 +19,7 @@ from multiprocessing import shared_memory
 import numpy as np
 import torch
 
-from dynenv_ros.envs.vector import SharedArrays
+from dynenv_ros.envs.vector import SharedArrays, close_blocks
 
 _SEQUENCE, _VERSION = 0, 1
 
@@ -136,9 +136,5 @@ class AttachedWeights:
 
     def close(self) -> None:
         self.header = self.flat = None
-        for block in self._blocks:
-            try:
-                block.close()
-            except BufferError:
-                pass
+        close_blocks(self._blocks)
         self._blocks = []

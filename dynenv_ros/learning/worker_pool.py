@@ -60,6 +60,25 @@ def one_line(error: BaseException) -> str:
     return f"{type(error).__name__}: {text}"
 
 
+def replace_or_go_on(pool: Any, label: str, why: str, replace: Callable[[], None], room: bool = True) -> None:
+    """After a worker's death (counted here): replace it while ``worker_restarts`` allow and there is ``room``;
+    otherwise go on with the workers left (logged), or raise WorkerPoolError when none is left. ``pool``: the
+    process or Ray pool (``cfg``, ``deaths``, ``restarts``, ``alive``, ``workers``, ``log``)."""
+    pool.deaths += 1
+    restarts_left = pool.restarts < pool.cfg.worker_restarts
+    if restarts_left and room:
+        pool.restarts += 1
+        pool.log(f"{label} died: {why}; starting a replacement ({pool.restarts} of {pool.cfg.worker_restarts} "
+                 f"restarts used)")
+        replace()
+        return
+    reason = "no free CPU for a replacement" if restarts_left else \
+        f"no restarts left (worker_restarts={pool.cfg.worker_restarts})"
+    if pool.alive == 0:
+        raise WorkerPoolError(f"every rollout worker is dead (last: {label}, {why}); {reason}")
+    pool.log(f"{label} died: {why}; {reason}, going on with {pool.alive} of {pool.workers}")
+
+
 def _die_with_parent() -> None:
     """SIGKILL this process when the process that started it dies (Linux; elsewhere the pipe's end-of-file stops
     the worker after its current rollout)."""
@@ -186,19 +205,8 @@ class ProcessPool:
             handle.process.join(timeout=1.0)
             code = handle.process.exitcode
             why = f"{why} (exit code {code})" if code is not None else why
-        self.deaths += 1
-        if self.restarts < self.cfg.worker_restarts:
-            self.restarts += 1
-            handle.incarnation += 1
-            self.log(f"rollout worker {handle.index} died: {why}; starting a replacement "
-                     f"({self.restarts} of {self.cfg.worker_restarts} restarts used)")
-            self._start(handle)
-            return
-        if self.alive == 0:
-            raise WorkerPoolError(f"every rollout worker is dead (last: worker {handle.index}, {why}); "
-                                  f"no restarts left (worker_restarts={self.cfg.worker_restarts})")
-        self.log(f"rollout worker {handle.index} died: {why}; no restarts left "
-                 f"(worker_restarts={self.cfg.worker_restarts}), going on with {self.alive} of {self.workers}")
+        handle.incarnation += 1
+        replace_or_go_on(self, f"rollout worker {handle.index}", why, lambda: self._start(handle))
 
     def _hello(self, handle: _Handle, spec: dict[str, Any], shapes: dict[str, list[int]], layout_spec: Any) -> None:
         if handle.slots is None:
