@@ -20,7 +20,7 @@ import statistics
 import time
 from typing import Any
 
-from benchmarks.timing import print_table
+from benchmarks.timing import print_table, stat, table_rows
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -86,15 +86,11 @@ def measure(args: Any) -> dict[str, Any]:
     limit = statistics.median(gemm)
     return {"config": args.config, "robot_steps_per_update": robot_steps, "flops_per_update": flops,
             "flops_per_robot_step": flops / robot_steps,
-            "cpu_seconds_per_update": _stat(cpu), "wall_seconds_per_update": _stat([w for _, w in runs]),
-            "robot_steps_per_cpu_second": _stat([robot_steps / c for c in cpu]),
-            "achieved_gflops": _stat([x / 1e9 for x in achieved]),
-            "gemm_gflops": _stat([x / 1e9 for x in gemm]), "embedding_shaped_gflops": _stat([x / 1e9 for x in shaped]),
-            "fraction_of_gemm": _stat([x / limit for x in achieved])}
-
-
-def _stat(values: list[float]) -> dict[str, float]:
-    return {"median": statistics.median(values), "min": min(values), "max": max(values), "runs": values}
+            "cpu_seconds_per_update": stat(cpu, 4), "wall_seconds_per_update": stat([w for _, w in runs], 4),
+            "robot_steps_per_cpu_second": stat([robot_steps / c for c in cpu]),
+            "achieved_gflops": stat([x / 1e9 for x in achieved]),
+            "gemm_gflops": stat([x / 1e9 for x in gemm]), "embedding_shaped_gflops": stat([x / 1e9 for x in shaped]),
+            "fraction_of_gemm": stat([x / limit for x in achieved], 3)}
 
 
 def run(args: Any) -> int:
@@ -102,11 +98,5 @@ def run(args: Any) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    rows = []
-    for key, value in result.items():
-        if isinstance(value, dict):
-            rows.append((key, f"{value['median']:.4g}  [{value['min']:.4g} .. {value['max']:.4g}]"))
-        else:
-            rows.append((key, f"{value:.4g}" if isinstance(value, float) else str(value)))
-    print_table(f"dynenv-bench learner (median [range] of {args.repeat}, CPU time, one thread)", rows)
+    print_table(f"dynenv-bench learner (median [range] of {args.repeat}, CPU time, one thread)", table_rows(result))
     return 0

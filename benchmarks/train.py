@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.timing import print_table
+from benchmarks.timing import Clock, combine, format_stat, print_table, stat, table_rows
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,16 +39,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--baseline", default=None, help="a second preset measured interleaved with --config "
                         "(default: ppo for an async --config, none otherwise; 'none' for none)")
     parser.add_argument("--json", action="store_true")
-
-
-def process_cpu_seconds(pid: int) -> float:
-    """User + system CPU seconds of a live process (Linux /proc); 0.0 once it is gone."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return 0.0
-    import os
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _config(name: str, args: Any):
@@ -69,7 +59,8 @@ def _measure_sync(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
         workers = _vector_worker_pids(trainer.env)
         for k in range(args.warmup + updates):
             if k == args.warmup:
-                wall0, cpu0 = time.perf_counter(), _cpu(workers)
+                clock = Clock(workers)
+                start = clock.read()
             t0 = time.perf_counter()
             trainer.learner.eval()
             rollout = trainer.collector.collect(cfg.rollout_length)
@@ -83,14 +74,14 @@ def _measure_sync(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
                 split["forward_backward"] += stats["seconds_forward_backward"]
                 split["optimizer"] += stats["seconds_optimizer"]
                 split["other"] += (t2 - t1) - stats["seconds_forward_backward"] - stats["seconds_optimizer"]
-        wall, cpu = time.perf_counter() - wall0, _cpu(workers) - cpu0
+        span = clock.read() - start
+        wall, cpu = span.wall_s, span.cpu_s
         trainer.env.close()
     steps = updates * per_update
     return {"runner": "sync", "algorithm": cfg.algorithm, "variant": cfg.variant, "num_envs": cfg.num_envs,
             "players_per_team": cfg.players_per_team, "rollout_length": cfg.rollout_length,
             "robots_learning": cfg.num_envs * len(trainer.collector.learning_robots), "processes": 1 + len(workers),
-            "env_steps_per_second": steps / wall, "env_steps_per_cpu_second": steps / cpu, "cpu_seconds": cpu,
-            "wall_seconds": wall,
+            "env_steps_per_s": steps / wall, "env_steps_per_cpu_s": steps / cpu, "cpu_s": cpu, "wall_s": wall,
             **{f"ms_per_update_{k}": 1000 * v / updates for k, v in split.items()},
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
@@ -108,7 +99,8 @@ def _measure_async(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
             for k in range(args.warmup + updates):
                 if k == args.warmup:
                     workers = trainer.pool.pids() if hasattr(trainer.pool, "pids") else []
-                    wall0, cpu0 = time.perf_counter(), _cpu(workers)
+                    clock = Clock(workers)
+                    start = clock.read()
                 t0 = time.perf_counter()
                 batch = trainer._experience(math.inf)
                 t1 = time.perf_counter()
@@ -126,15 +118,16 @@ def _measure_async(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
                     split["forward_backward"] += stats["seconds_forward_backward"]
                     split["optimizer"] += stats["seconds_optimizer"]
                     split["other"] += (t2 - t1) - stats["seconds_forward_backward"] - stats["seconds_optimizer"]
-            wall, cpu = time.perf_counter() - wall0, _cpu(workers) - cpu0
+            span = clock.read() - start
+            wall, cpu = span.wall_s, span.cpu_s
             robots = batch.rollout.robots
         finally:
             trainer._stop_rollouts()
     return {"runner": "async", "algorithm": cfg.algorithm, "variant": cfg.variant, "num_envs": cfg.num_envs,
             "players_per_team": cfg.players_per_team, "rollout_length": cfg.rollout_length,
             "robots_learning": robots, "processes": 1 + len(workers), "workers": len(workers),
-            "env_steps_per_second": steps / wall, "env_steps_per_cpu_second": steps / cpu, "cpu_seconds": cpu,
-            "wall_seconds": wall, "policy_lag_mean": statistics.fmean(lags),
+            "env_steps_per_s": steps / wall, "env_steps_per_cpu_s": steps / cpu, "cpu_s": cpu, "wall_s": wall,
+            "policy_lag_mean": statistics.fmean(lags),
             "dropped_rollouts": trainer.dropped,
             **{f"ms_per_update_{k}": 1000 * v / updates for k, v in split.items()},
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
@@ -145,27 +138,11 @@ def _vector_worker_pids(env: Any) -> list[int]:
     return [p.pid for p in getattr(batch, "_procs", [])]
 
 
-def _cpu(worker_pids: list[int]) -> float:
-    return time.process_time() + sum(process_cpu_seconds(pid) for pid in worker_pids)
-
-
 def measure(name: str, args: Any) -> dict[str, Any]:
     cfg = _config(name, args)
     updates = args.updates if args.updates is not None else (20 if cfg.runner == "async" else 30)
     result = (_measure_async if cfg.runner == "async" else _measure_sync)(cfg, args, updates)
     return {"config": name, **result}
-
-
-def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Median and range of every numeric figure of repeated runs; the other fields as the first run's."""
-    out: dict[str, Any] = {}
-    for key, value in runs[0].items():
-        if isinstance(value, float):
-            values = [r[key] for r in runs]
-            out[key] = {"median": statistics.median(values), "min": min(values), "max": max(values)}
-        else:
-            out[key] = value
-    return out
 
 
 def run(args: Any) -> int:
@@ -176,25 +153,19 @@ def run(args: Any) -> int:
     for _ in range(args.repeat):                      # interleaved: each repetition measures every preset once
         for name in names:
             runs[name].append(measure(name, args))
-    result: dict[str, Any] = {"repeat": args.repeat, "results": {name: summarize(r) for name, r in runs.items()},
-                              "runs": runs}
+    plain = ("num_envs", "players_per_team", "rollout_length", "robots_learning", "processes", "workers",
+             "dropped_rollouts")
+    result: dict[str, Any] = {"repeat": args.repeat,
+                              "results": {name: combine(r, plain) for name, r in runs.items()}}
     if len(names) == 2:
-        first, second = (result["results"][n]["env_steps_per_second"]["median"] for n in names)
-        result["ratio_env_steps_per_second"] = first / second
-        result["ratio_per_run"] = [a["env_steps_per_second"] / b["env_steps_per_second"]
-                                   for a, b in zip(runs[names[0]], runs[names[1]])]
+        per_run = [a["env_steps_per_s"] / b["env_steps_per_s"] for a, b in zip(runs[names[0]], runs[names[1]])]
+        result["ratio_env_steps_per_s"] = stat(per_run, 3)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
     for name in names:
-        rows = []
-        for key, value in result["results"][name].items():
-            if isinstance(value, dict):
-                rows.append((key, f"{value['median']:.1f}  [{value['min']:.1f} .. {value['max']:.1f}]"))
-            else:
-                rows.append((key, str(value)))
-        print_table(f"dynenv-bench train --config {name} (median [range] of {args.repeat})", rows)
+        print_table(f"dynenv-bench train --config {name} (median [range] of {args.repeat}; wall and CPU time)",
+                    table_rows(result["results"][name]))
     if len(names) == 2:
-        print(f"{names[0]} / {names[1]} env steps per second: {result['ratio_env_steps_per_second']:.2f} "
-              f"(per run: {', '.join(f'{r:.2f}' for r in result['ratio_per_run'])})")
+        print(f"{names[0]} / {names[1]} env steps per second: {format_stat(result['ratio_env_steps_per_s'])}")
     return 0
