@@ -358,3 +358,27 @@ def test_settings_beyond_the_machine_are_refused_in_one_line_before_anything_sta
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"dynenv-train: {key}:") and words in err and "\n" not in err, err
     assert not (tmp_path / "run").exists()          # nothing written, nothing started
+
+
+@pytest.mark.parametrize("changes, logged", [
+    ({"opponent": "snapshot", "snapshot_every_updates": 1}, "train/loss"),
+    ({"opponent": "scripted"}, "train/loss"),
+    ({"opponent": "random"}, "train/loss"),
+    ({"teacher": "chaser", "imitation_coef": 1.0, "teacher_driven_worlds": 1}, "train/imitation_loss"),
+    ({"variant": "pred", "privileged_pose_seeding": True, "use_localization": True, "use_reconstruction": True},
+     "train/reconstruction_loss"),
+    ({"variant": "pred", "ppo_epochs": 2}, "train/proximal_weight"),          # the extra proximal pass
+    ({"scenario": "driving", "players_per_team": 2, "teacher": "scripted", "imitation_coef": 0.5},
+     "train/imitation_loss"),
+    ({"scenario": "driving", "players_per_team": 2, "action_mode": "continuous"}, "train/loss"),
+])
+def test_every_kind_of_run_trains_asynchronously(tmp_path, changes, logged):
+    """Opponents (snapshots refreshed in the worker), teachers and teacher-driven worlds, the self-supervised losses
+    with privileged seeding (the worker acts with the learner's seeder), several epochs, driving in both action
+    modes: each runs through the workers and learns finite losses."""
+    cfg = small(runner="async", workers=1, total_env_steps=24, **changes)
+    summary = make_trainer(cfg, tmp_path / "run", progress=False).run()
+    assert summary["env_steps"] >= 24 and summary["worker_deaths"] == 0 and "stop_reason" not in summary
+    metrics = _metrics(tmp_path / "run")
+    assert metrics[logged] and all(np.isfinite(v) for v in metrics[logged])
+    assert all(np.isfinite(v) for v in metrics["train/loss"])
