@@ -54,7 +54,7 @@ class SoccerObservations:
     def __init__(self, config: SoccerConfig, mode: str = "partial",
                  perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
                  image_size: tuple[int, int] = (640, 480), max_landmarks: int | None = None,
-                 max_objects: int | None = None) -> None:
+                 max_objects: int | None = None, localization: bool = False) -> None:
         if mode not in OBSERVATION_MODES:
             raise ValueError(f"observation must be one of {OBSERVATION_MODES}, got {mode!r}")
         self.config = config
@@ -63,6 +63,7 @@ class SoccerObservations:
         self.params = perception_params(perception)
         self.ground_truth = GroundTruthEncoder(config)
         self.vision: SoccerVision | None = None
+        self.localization = localization       # step the self-pose estimates (self.vision.estimate ...); not observed
         self._frame = 0
         self.layout = PaddedLayout.for_players(config.players_per_team, self.frames, max_landmarks, max_objects)
         padded = self.layout.space(head_max=config.motion.head_max_delta)
@@ -89,7 +90,7 @@ class SoccerObservations:
         self.world = world
         if self.mode != "full":
             if self.vision is None:
-                self.vision = SoccerVision(world, self.params)
+                self.vision = SoccerVision(world, self.params, localization=self.localization)
             else:
                 self.vision.world = world
                 self.vision.reset()

@@ -23,16 +23,21 @@ from dynenv_ros.soccer.world import TEAM_A, TEAM_B, SoccerWorld
 
 
 class SoccerSession(ActionSession):
-    """One world, its perception, and a mailbox of actions per motion period (``session.ActionSession``)."""
+    """One world, its perception, and a mailbox of actions per motion period (``session.ActionSession``).
+
+    ``localization=True``: every robot's emulated self-pose estimate is stepped with the vision; after ``initial`` or
+    ``step``, ``session.vision.estimate`` (n, 3), ``.covariance`` (n, 3, 3), ``.flipped`` (n,) (field frame, the
+    period's last frame; ``soccer/vision.py``)."""
 
     def __init__(self, config: SoccerConfig, perception: PerceptionParams, seed: int | None = None,
-                 missing_action: str = "none", controlled: list[int] | None = None) -> None:
+                 missing_action: str = "none", controlled: list[int] | None = None,
+                 localization: bool = False) -> None:
         super().__init__(config.n_robots, missing_action, controlled)
         self.config = config
         self.names = config.robot_names
         self.world = SoccerWorld(config, seed=seed)
         self.perception = perception
-        self.vision = SoccerVision(self.world, perception)
+        self.vision = SoccerVision(self.world, perception, localization=localization)
 
     # -- episode -----------------------------------------------------------------------------------------------
     def reset(self, seed: int | None = None, kickoff_team: int = TEAM_A) -> int:

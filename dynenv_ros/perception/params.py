@@ -19,6 +19,7 @@ MODES = ("realistic", "random", "none")
 CONFIDENCE_MODELS = ("calibrated", "none")
 OCCLUSION_MODELS = ("cone", "band")
 PRESETS = ("realistic", "dynenv", "none")
+LOCALIZATION_MODES = ("emulated", "none")
 T = TypeVar("T")
 CLASS_NAMES = {"ball": ObjectClass.BALL, "robot": ObjectClass.ROBOT, "goalpost": ObjectClass.GOALPOST,
                "penalty_cross": ObjectClass.PENALTY_CROSS, "line_crossing": ObjectClass.LINE_CROSSING,
@@ -98,6 +99,54 @@ class OcclusionParams:
 
 
 @dataclass(frozen=True)
+class LocalizationParams:
+    """The emulated self-localization (``perception/localization.py``; docs/perception.md, "Self-localization").
+    Absolute values, not scaled by ``noise_magnitude``. σ (standard deviations) in metres and radians; the
+    odometry terms are the σ reached after one unit walked / turned / waited without landmarks (the variance grows
+    linearly: a random walk, so the numbers do not depend on the frame rate)."""
+    mode: str = "emulated"             # 'emulated' | 'none' (the true pose, zero covariance)
+    odometry_xy_per_m: float = 0.1     # position σ after walking 1 m (variance + this² per metre walked)
+    odometry_yaw_per_rad: float = 0.1  # heading σ after turning 1 rad
+    odometry_yaw_per_m: float = 0.05   # heading σ after walking 1 m
+    drift_xy_per_s: float = 0.01       # floor: position σ after 1 s, walking or not (stepping on the spot, sway)
+    drift_yaw_per_s: float = 0.01      # floor: heading σ after 1 s
+    landmark_xy_std: float = 0.2       # one landmark sighting's evidence on the position, σ per axis
+    landmark_yaw_std: float = 0.1      # ... on the heading
+    landmark_cap: int = 4              # sightings of one frame beyond this add nothing (they share one camera pose)
+    fall_xy_std: float = 0.5           # a fall adds this σ per position axis ...
+    fall_yaw_std: float = 0.5          # ... and this to the heading
+    lost_xy_std: float = 0.3           # position σ (either axis) above this: lost; the next sighting re-localizes
+    flip_probability: float = 0.05     # P(re-localizing onto the mirror pose) without an asymmetric cue
+    flip_probability_cue: float = 0.005  # the same with a cue (kickoff placement or penalty re-entry)
+    cue_seconds: float = 30.0          # a kickoff or re-entry is a cue for this long
+    placement_xy_std: float = 0.05     # kickoff / episode start: the estimate's error at a known spot
+    placement_yaw_std: float = 0.05
+    touchline_along_std: float = 1.0   # penalty re-entry: σ along the touchline (where along the own half)
+    touchline_across_std: float = 0.1  # ... across it
+    touchline_yaw_std: float = 0.1     # ... heading (placed facing into the field)
+
+    def __post_init__(self) -> None:
+        if self.mode not in LOCALIZATION_MODES:
+            raise ValueError(f"localization.mode must be one of {LOCALIZATION_MODES}, got {self.mode!r}")
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name != "mode" and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise ValueError(f"localization.{f.name} must be a number, got {value!r}")
+        check_numbers(self, "localization.")
+        if not isinstance(self.landmark_cap, int) or self.landmark_cap < 1:
+            raise ValueError(f"localization.landmark_cap must be a whole number >= 1, got {self.landmark_cap!r}")
+        for name in ("flip_probability", "flip_probability_cue"):
+            if getattr(self, name) > 1:
+                raise ValueError(f"localization.{name} must be a probability in [0, 1], got {getattr(self, name)}")
+        if self.flip_probability_cue > self.flip_probability:
+            raise ValueError("localization.flip_probability_cue must not exceed flip_probability (a cue makes the "
+                             f"mirror less likely), got {self.flip_probability_cue} > {self.flip_probability}")
+        if self.landmark_xy_std <= 0 or self.landmark_yaw_std <= 0:
+            raise ValueError("localization.landmark_xy_std and landmark_yaw_std must be positive (a sighting's "
+                             f"evidence is never exact), got {self.landmark_xy_std}, {self.landmark_yaw_std}")
+
+
+@dataclass(frozen=True)
 class PerceptionParams:
     mode: str = "realistic"
     noise_magnitude: float = 1.0
@@ -112,6 +161,7 @@ class PerceptionParams:
     confusions: tuple[Confusion, ...] = ()
     false_positives: FalsePositiveParams = field(default_factory=FalsePositiveParams)
     occlusion: OcclusionParams = field(default_factory=OcclusionParams)
+    localization: LocalizationParams = field(default_factory=LocalizationParams)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -274,7 +324,8 @@ def from_mapping(values: Mapping[str, Any]) -> PerceptionParams:
                                 ("noise_magnitude", "field_of_view", "confidence_separation"))
     if "classes" in values:
         kwargs["classes"] = parse_class_sections(values["classes"], ClassParams, CLASS_NAMES)
-    for key, cls in (("miss", MissParams), ("position", PositionParams), ("occlusion", OcclusionParams)):
+    for key, cls in (("miss", MissParams), ("position", PositionParams), ("occlusion", OcclusionParams),
+                     ("localization", LocalizationParams)):
         if key in values:
             kwargs[key] = parse_section(cls, values[key], key)
     if "false_positives" in values:

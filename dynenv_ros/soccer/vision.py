@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from dynenv_ros.core.object_classes import ObjectClass
+from dynenv_ros.perception.localization import FALL, KICKOFF, PENALTY, RETURN, Localization
 from dynenv_ros.perception.model import Perception, Perceiver
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.perception.scene import SceneFrames, SceneObjects, Views
@@ -15,6 +16,8 @@ from dynenv_ros.soccer.world import SoccerWorld
 
 GOALPOST_ID, PENALTY_MARK_ID, CROSSING_ID, CENTER_CIRCLE_ID = 1000, 1100, 1200, 1300
 _PROPRIOCEPTION_FIELDS = np.array((5, 3, 4, 6))   # of a robot's recorded values: head yaw, fallen, penalized, kicking
+# The world's GameEvents that move a robot's pose estimate (perception/localization.py); a goal means a kickoff.
+_LOCALIZATION_EVENTS = {"fall": FALL, "penalty": PENALTY, "return": RETURN}
 
 
 def soccer_scene(world: SoccerWorld) -> SceneObjects:
@@ -41,11 +44,20 @@ def soccer_scene(world: SoccerWorld) -> SceneObjects:
 
 class SoccerVision:
     """Attach to a world: call ``frame`` at each vision instant (``world.step(..., on_frame=vision.frame)``), then
-    ``perceive`` once per period."""
+    ``perceive`` once per period.
 
-    def __init__(self, world: SoccerWorld, params: PerceptionParams) -> None:
+    ``localization=True`` also steps every robot's emulated self-pose estimate once per frame
+    (``perception/localization.py``, parameters ``params.localization``): after each ``perceive``, ``estimate``
+    (n, 3) x, y, yaw in the field frame, ``covariance`` (n, 3, 3) and ``flipped`` (n,) at the period's last frame
+    (``localization.estimates`` etc. for every frame). Its draws come from its own generator, a child spawned from the
+    world's seed sequence at each ``reset`` (``world.rng.spawn``, which leaves the world's stream untouched), so
+    switching it on changes no other outcome. Off by default: nothing of it runs."""
+
+    def __init__(self, world: SoccerWorld, params: PerceptionParams, localization: bool = False) -> None:
         self.world = world
         self.params = params
+        self.localization: Localization | None = None
+        self._localize = localization
         self.reset()
 
     def reset(self) -> None:
@@ -70,6 +82,51 @@ class SoccerVision:
         self.teams = np.array([r.team for r in world.robots], np.int8)
         self._diagonal = (np.arange(n), np.arange(n))
         self._landmark_index = np.flatnonzero(self.perceiver.is_landmark)
+        if self._localize:
+            self._reset_localization()
+
+    def _reset_localization(self) -> None:
+        world = self.world
+        rates = world.config.rates
+        self.localization = Localization(self.params.localization, world.n_robots,
+                                         rates.vision_period_ticks * rates.tick_seconds, world.rng.spawn(1)[0])
+        self.localization.reset([(r.x, r.y, r.yaw) for r in world.robots])
+        self._events = np.zeros((len(self._x), world.n_robots), np.uint8)   # per frame of the period, per robot
+        self._event_list: list | None = None                                # the world's list read so far ...
+        self._event_cursor = 0                                              # ... up to here
+
+    def _record_events(self, slot: int) -> None:
+        """Flag the world's events since the last frame (``world.events`` is a new list every period)."""
+        world = self.world
+        if world.events is not self._event_list:
+            self._event_list, self._event_cursor = world.events, 0
+        flags = self._events[slot]
+        for event in world.events[self._event_cursor:]:
+            if event.kind == "goal":
+                flags |= KICKOFF
+            elif event.kind in _LOCALIZATION_EVENTS and event.robot is not None:
+                flags[event.robot] |= _LOCALIZATION_EVENTS[event.kind]
+        self._event_cursor = len(world.events)
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """(n, 3) every robot's self-pose estimate (x, y m, yaw rad, field frame) at the last perceived frame."""
+        return self._located().estimate
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """(n, 3, 3) the estimates' covariance (x, y, yaw; m², rad²) at the last perceived frame."""
+        return self._located().covariance
+
+    @property
+    def flipped(self) -> np.ndarray:
+        """(n,) bool: the estimate tracks the mirror pose (−x, −y, yaw + π) at the last perceived frame."""
+        return self._located().flipped
+
+    def _located(self) -> Localization:
+        if self.localization is None:
+            raise RuntimeError("self-localization is off: make the vision with SoccerVision(..., localization=True)")
+        return self.localization
 
     def frame(self, index: int) -> None:
         """Record the world at this vision instant."""
@@ -83,6 +140,8 @@ class SoccerVision:
         positions, ball = world.instant_positions or ([r.body.position for r in world.robots], world.ball.position)
         for r, (x, y) in zip(world.robots, positions):
             values += (x, y, r.body.angle, r.rules.fallen, r.rules.penalized, r.head_yaw, r.kick is not None)
+        if self.localization is not None:
+            self._record_events(self._recorded)
         x, y = ball
         state = world.state
         # What the GameController broadcasts: ball owner (absolute team), seconds of it left, game seconds left.
@@ -131,7 +190,13 @@ class SoccerVision:
         views = Views(frame=frame_of_view, observer=observer, head_yaw=self._head[:frames].ravel())
         scene = SceneFrames(self._x[:frames], self._y[:frames], self._yaw[:frames], self._fallen[:frames],
                             self._penalized[:frames])
-        return self.perceiver.perceive(scene, views, self.world.rng, team)
+        perception = self.perceiver.perceive(scene, views, self.world.rng, team)
+        if self.localization is not None:
+            events = self._events[:frames]
+            self.localization.step(table[:, :n, :3], self.landmarks_seen(perception), events,
+                                   self._penalized[:frames, :n])
+            events[:] = 0
+        return perception
 
     def landmarks_seen(self, perception: Perception) -> np.ndarray:
         """(frames, n_robots): landmarks (posts, marks, crossings, lines) each robot truly saw in each frame."""
