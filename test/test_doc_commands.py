@@ -527,10 +527,10 @@ def _semantic_bench(ns: argparse.Namespace) -> None:
 
 
 def _semantic_eval(ns: argparse.Namespace) -> None:
-    from dynenv_ros.soccer.scripted import SCRIPTED_KINDS
+    from dynenv_ros.evaluation.soccer import TEAM_NAMES
     for flag in ("policy", "opponent"):
         spec = getattr(ns, flag, None)
-        if spec is None or spec in ("random", "scripted", *SCRIPTED_KINDS):
+        if spec is None or spec in TEAM_NAMES:
             continue
         checkpoint_folder = Path(spec).parent.name == "checkpoints" and Path(spec).name.startswith("step_")
         if Path(spec).suffix not in (".safetensors", ".onnx") and not checkpoint_folder:

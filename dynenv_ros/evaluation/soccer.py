@@ -15,6 +15,8 @@ Policies (``make_team_policy``):
 - ``"scripted"``: ``keeper_and_chasers`` (``soccer.scripted``: a goalkeeper in slot 0, chasers elsewhere; a team
   of one is a chaser), the default of ``dynenv-play`` and the nearer to a real SPL line-up; ``"chaser"`` and
   ``"keeper_and_chasers"`` name a kind explicitly.
+- ``"perceiving"``: ``keeper_and_chasers`` on each robot's own padded observation and self-pose estimate
+  (``soccer.perceiving``): the fair opponent of a learning agent, which sees no ground truth either.
 - ``"random"``: every action dimension uniform over the env's action space, from a seeded generator.
 
 Sides: with ``sides="alternate"`` (default) the evaluated team is team A in the even episodes of a seed and team B
@@ -46,6 +48,8 @@ from dynenv_ros.soccer.scripted import DEFAULT_SCRIPTED, SCRIPTED_KINDS, team_po
 OBSERVATION = RewardTerm.OBSERVATION.name.lower()
 SIDES = ("alternate", "a", "b")
 RESULTS = ("win", "draw", "loss")
+# The team names make_team_policy knows (anything else is a checkpoint path).
+TEAM_NAMES = ("random", "scripted", *SCRIPTED_KINDS, "perceiving")
 # Per-seed numbers (means over the seed's episodes); ``compare`` metrics are these names.
 SEED_METRICS = ("total", "paper_metric", "positive", *TERMS, "goals_for", "goals_against", "goal_difference",
                 "win_rate", "draw_rate", "loss_rate", "falls", "penalties", "opponent_total",
@@ -82,9 +86,12 @@ def paper_metric(step_terms: Iterable[Mapping[str, float]]) -> float:
 class TeamPolicy:
     """Drives one side. ``reset`` at each episode start with the env, the robot indexes it drives (into
     ``env.possible_agents``; team A is 0..n-1, team B n..2n-1) and its SeedSequence; ``act`` gets the padded
-    observations of those robots in that order and returns one env action per robot."""
+    observations of those robots in that order and returns one env action per robot. ``needs_localization``: the
+    env steps every robot's self-pose estimate (``env.observations.vision.estimate``); its draws come from a
+    generator of its own, so the episodes are the same with it on or off."""
 
     kind = "team"
+    needs_localization = False
 
     def describe(self) -> dict[str, Any]:
         return {"kind": self.kind}
@@ -132,6 +139,28 @@ class ScriptedTeam(TeamPolicy):
     def act(self, env, observations):
         snapshot = env.world.snapshot()
         return [policy.act(snapshot, i) for policy, i in zip(self.policies, self.robots)]
+
+
+class PerceivingTeam(TeamPolicy):
+    """``keeper_and_chasers`` on each robot's own observation and self-pose estimate (``soccer.perceiving``), not on
+    the ground truth: the opponent that knows only what a robot can know."""
+
+    kind = "perceiving"
+    needs_localization = True
+
+    def reset(self, env, robots, seed):
+        from dynenv_ros.soccer.perceiving import perceiving_team
+        c = env.config
+        team = perceiving_team(c.players_per_team, c.period_seconds, field=c.field, motion=c.motion)
+        self.robots = list(robots)
+        self.policies = [team[i] for i in self.robots]
+        for policy in self.policies:
+            policy.reset()
+
+    def act(self, env, observations):
+        estimate = env.observations.vision.estimate
+        return [policy.act(observation, estimate[i])
+                for policy, i, observation in zip(self.policies, self.robots, observations)]
 
 
 class AgentTeam(TeamPolicy):
@@ -202,6 +231,8 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
         return RandomTeam()
     if spec == "scripted":
         return ScriptedTeam(DEFAULT_SCRIPTED)
+    if spec == "perceiving":
+        return PerceivingTeam()
     if spec in SCRIPTED_KINDS:
         return ScriptedTeam(spec)
     model, digest = load_evaluated_policy(spec)
@@ -318,6 +349,7 @@ def _evaluate(ours: TeamPolicy, theirs: TeamPolicy, evaluated: str | TeamPolicy,
               config: dict[str, Any], progress: Callable[[str], None] | None) -> dict[str, Any]:
     from dynenv_ros.envs.robocup_v0 import parallel_env
     env = parallel_env(players_per_team=players_per_team, observation="padded", perception=perception, **config)
+    env.observations.localization = ours.needs_localization or theirs.needs_localization
     records = []
     for seed in seeds:
         for episode in range(int(episodes)):
