@@ -283,6 +283,8 @@ def missing_from_bag(report: dict[str, Any], info: dict[str, Any]) -> dict[str, 
     for name in report["robots"]:
         expected[f"/{name}/detections"] = published["detections_per_robot"]
         expected[f"/{name}/feedback"] = published["feedback_per_robot"]
+        if published.get("pose_estimates_per_robot"):           # the simulator's self-localization was on
+            expected[f"/{name}/pose_estimate"] = published["pose_estimates_per_robot"]
     counts = {t["name"]: t["count"] for t in info["topics"]}
     return {t: (n, counts.get(t, 0)) for t, n in expected.items() if counts.get(t, 0) != n}
 

@@ -17,6 +17,13 @@ steering; a discrete choice as the command ``driving.cars.discrete_action`` make
 mode accepts); a car whose decision failed brakes. ``action_mode`` must be the simulator's, and the policy's: a
 policy of the other scenario or action mode is refused with the reason (``agent.export.check_scenario``).
 
+Self-localization (robocup): a policy that takes the pose estimate (``uses_pose``: a torch model's attribute, an
+ONNX file's input ``pose_estimate``) makes the node subscribe to every robot's ``<robot>/pose_estimate``
+(geometry_msgs/PoseWithCovarianceStamped, frame ``map``: the simulator's, or a real robot's localization) and put
+each robot's newest estimate at or before its period's last frame into the batch as ``pose_estimate`` (B, 7)
+(``envs/pose_features.py``, the robot's team frame); none, or one older than ``pose_max_age``, is "lost" (zeros, the
+standard deviations at the bound; counted), and a malformed one is refused with the reason (counted, logged).
+
 Real time degrades gracefully (docs/deploy.md, "Slow policies"): the detection subscriptions keep the last
 ``DETECTION_DEPTH`` messages per robot (bounded), and before each decision the node takes every frame already
 waiting, so it always acts on the newest complete period; older ones are dropped and counted, and the counts go to
@@ -37,15 +44,19 @@ import torch
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from dynenv_msgs.msg import Action, DetectionArray, PolicyWeights
 from dynenv_msgs.srv import LoadPolicy
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
+from dynenv_ros.envs.pose_features import POSE_KEY
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str
+from dynenv_ros.ros.pose_estimates import (HISTORY_DEPTH, LOST_ROW, PoseHistory, pose_batch, pose_problem,
+                                           stamp_ns)
 from dynenv_ros.ros.qos import action_stream, latched
 from dynenv_ros.ros.tf import base_frame
 from dynenv_ros.soccer.config import MotionConfig, SoccerConfig, robot_names
@@ -72,6 +83,28 @@ DETECTION_DEPTH = 2 * MAX_FRAMES
 STAND_STILL = (0, 0, 0, 0.0)       # the fallback action of a robot whose decision failed or was not finite
 BRAKE = driving_actions.BRAKE_COMMAND  # driving's: [throttle, brake, steering] (also the previous action at reset)
 SCENARIOS = ("robocup", "driving")
+
+
+def pose_qos() -> QoSProfile:
+    """Reliable, keep-last ``HISTORY_DEPTH``: matches the simulator's writers and reliable localization stacks
+    (AMCL's, robot_localization's); a best-effort publisher does not match it (docs/deploy.md)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def uses_pose(policy: Any) -> bool:
+    """Whether a policy takes the ``pose_estimate`` input: its torch model's ``uses_pose`` (absent, so False, in
+    older checkpoints), or an ONNX file's input of that name."""
+    own = getattr(policy, "uses_pose", None)        # TorchPolicy / OnnxPolicy say it themselves
+    if isinstance(own, bool):
+        return own
+    model = getattr(policy, "model", None)
+    if model is not None:
+        return bool(getattr(model, "uses_pose", False))
+    session = getattr(policy, "session", None)
+    if session is not None:
+        return any(i.name == POSE_KEY for i in session.get_inputs())
+    return False
 
 
 def detection_qos() -> QoSProfile:
@@ -131,10 +164,19 @@ class PolicyNode(Node):
                                     "swapped in between two decisions (torch runtime); empty: never.", read_only=True)
         self.weights_run = declare_str(self, "weights_run_id", "", "Take weights from this trainer run only "
                                        "(PolicyWeights.run_id); empty: any run.", read_only=True)
+        self.pose_max_age = declare_float(self, "pose_max_age", 0.5, 0.0, 60.0, "Robocup, a policy that takes the "
+                                          "pose estimate: the newest <robot>/pose_estimate at or before a period's "
+                                          "last frame older than this (s, stamps) is 'lost'.", read_only=True)
+        self.pose_frame = declare_str(self, "pose_frame", "map", "The frame_id a pose estimate must have "
+                                      "(others are refused).", read_only=True)
         everyone = car_names(n_cars) if self.driving else robot_names(players)
         self.names = [name for name in everyone if not team or name[5] == team]
         self.ids = {name: everyone.index(name) for name in self.names}
         self.memory = {name: RobotMemory(self.idle) for name in self.names}
+        self.teams = {name: 1 if name.startswith("team_a") else -1 for name in self.names}   # robocup's team signs
+        self.pose_histories = {name: PoseHistory() for name in self.names}
+        self.pose_subs: dict[str, Any] = {}          # created when a policy takes the pose estimate
+        self.pose_refusal = ""                       # the last refused estimate and why
         self.graph_frames: int | None = None           # frames per period of the detections arriving
         self.counts: Counter[str] = Counter()
         self.latencies_ms: list[float] = []
@@ -163,6 +205,7 @@ class PolicyNode(Node):
         self.detection_subs = {n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)),
                                                            self._receiver(n),
                                                            detection_qos()) for n in self.names}
+        self._subscribe_poses()
         self.load_srv = self.create_service(LoadPolicy, "~/load_policy", self._on_load)
         self.weights_sub = (self.create_subscription(PolicyWeights, weights_topic, self._on_weights, latched(1))
                             if weights_topic else None)
@@ -172,7 +215,8 @@ class PolicyNode(Node):
         self._window_latencies: list[float] = []
         self.diagnostics_timer = self.create_timer(diagnostics_s, self._publish_diagnostics,
                                                    clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.get_logger().info(f"controlling {', '.join(self.names)} with {self.runtime_name}")
+        self.get_logger().info(f"controlling {', '.join(self.names)} with {self.runtime_name}"
+                               f"{'; the policy takes the pose estimates' if self.pose_wanted else ''}")
 
     # -- weights ---------------------------------------------------------------------------------------------------
     def _load(self, path: str, runtime: str):
@@ -230,7 +274,9 @@ class PolicyNode(Node):
         head_max = float(policy.head_max)
         if not math.isfinite(head_max) or head_max <= 0:
             head_max = 1.0            # check_policy refuses it with the reason; the trial inputs must stay finite
-        return (*streams_from_padded(observation), *side_inputs(observation, head_max))
+        if uses_pose(policy):         # the trial runs as a robot that has lost its pose
+            observation[POSE_KEY] = np.tile(LOST_ROW, (len(periods), 1))
+        return (*streams_from_padded(observation), *self._side_inputs(observation, head_max, uses_pose(policy)))
 
     def _on_load(self, request: LoadPolicy.Request, response: LoadPolicy.Response):
         runtime = request.runtime or self.runtime_name
@@ -254,6 +300,7 @@ class PolicyNode(Node):
             for memory in self.memory.values():
                 memory.state = None
         self.policy, self.checkpoint_sha256, self.policy_version = policy, digest, version
+        self._subscribe_poses()
 
     def _on_weights(self, msg: PolicyWeights) -> None:
         """A trainer's new weights: checked like a file (and against the message's own checksum), swapped in, or
@@ -302,6 +349,42 @@ class PolicyNode(Node):
         self.weights_acting = (msg.run_id, msg.version)
         return policy, digest
 
+    # -- pose estimates --------------------------------------------------------------------------------------------
+    def _subscribe_poses(self) -> None:
+        """Subscribe to every robot's ``<robot>/pose_estimate`` once a policy takes the pose (kept afterwards)."""
+        self.pose_wanted = not self.driving and uses_pose(self.policy)
+        if self.pose_wanted and not self.pose_subs:
+            self.pose_subs = {n: self.create_subscription(PoseWithCovarianceStamped,
+                                                          topics.local(topics.pose_estimate(n)),
+                                                          self._pose_receiver(n), pose_qos()) for n in self.names}
+
+    def _pose_receiver(self, name: str):
+        return lambda msg: self.store_pose(name, msg)
+
+    def store_pose(self, name: str, msg: PoseWithCovarianceStamped) -> bool:
+        """File one robot's estimate, or refuse it (counted in ``pose_malformed``, logged with the reason)."""
+        problem = pose_problem(msg, self.pose_frame)
+        if problem:
+            self.counts["pose_malformed"] += 1
+            self.pose_refusal = f"{name}: {problem}"
+            self.get_logger().warning(f"{topics.pose_estimate(name)}: estimate refused: {problem}",
+                                      throttle_duration_sec=5.0)
+            return False
+        self.pose_histories[name].add(msg)
+        return True
+
+    def pose_rows(self, periods: list[list[DetectionArray]]) -> np.ndarray:
+        """(B, 7) float32 ``pose_estimate`` of the robots (``self.names`` order) for their periods: each robot's
+        newest estimate at or before its period's last frame, in its team's frame; ``LOST_ROW`` (zeros, the
+        standard deviations at the bound) without one, or when it is older than ``pose_max_age`` (counted:
+        pose_used, pose_missing, pose_stale). Takes every estimate already waiting first."""
+        for name, sub in self.pose_subs.items():
+            for msg in _waiting(sub, HISTORY_DEPTH):
+                self.store_pose(name, msg)
+        return pose_batch([self.pose_histories[n] for n in self.names],
+                          [stamp_ns(p[-1].header.stamp) for p in periods], [self.teams[n] for n in self.names],
+                          round(self.pose_max_age * 1e9), self.counts)
+
     # -- frames ----------------------------------------------------------------------------------------------------
     def _receiver(self, name: str):
         def receive(msg: DetectionArray) -> None:
@@ -316,15 +399,8 @@ class PolicyNode(Node):
         that follows acts on the newest complete period, not on one a slow decision left behind. Uses the
         subscription handle's take, what rclpy's executor itself calls (there is no public take in rclpy)."""
         for name, sub in self.detection_subs.items():
-            for _ in range(DETECTION_DEPTH):
-                try:
-                    with sub.handle:
-                        taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                except AttributeError:        # an rclpy without it: the bounded queue alone limits staleness
-                    return
-                if taken is None:
-                    break
-                self._store(name, taken[0])
+            for msg in _waiting(sub, DETECTION_DEPTH):
+                self._store(name, msg)
 
     def _store(self, name: str, msg: DetectionArray) -> None:
         """File one frame: a new episode resets the robot; frames of a period older than the one being collected
@@ -464,7 +540,7 @@ class PolicyNode(Node):
                 previous, proprio = side_inputs(observation, spec=self.spec)
             else:
                 head_max = float(self.policy.head_max)
-                previous, proprio = side_inputs(observation, head_max)
+                previous, proprio = self._side_inputs(observation, head_max, self.pose_wanted)
             states = [m.state or self.policy.initial_state(1) for m in memories]
             state = tuple(torch.cat([s[i] for s in states]) for i in range(4))
             step = self.policy(landmarks, objects, previous, proprio, state)
@@ -484,6 +560,12 @@ class PolicyNode(Node):
             self.get_logger().error(f"non-finite outputs for {[n for n, f in zip(self.names, finite) if not f]}: "
                                     "they stand still", throttle_duration_sec=5.0)
         return actions, finite, step
+
+    @staticmethod
+    def _side_inputs(observation: dict[str, np.ndarray], head_max: float, pose: bool):
+        """Soccer's side inputs; a policy taking the pose gets the batch's ``pose_estimate`` appended
+        (``agent.inputs.side_inputs(..., pose=True)``)."""
+        return side_inputs(observation, head_max, pose=True) if pose else side_inputs(observation, head_max)
 
     def _behaviour(self, step: Any, actions: np.ndarray, finite: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each robot's action log-probability and value estimate, for the trainer (NaN where unknown: the
@@ -508,6 +590,8 @@ class PolicyNode(Node):
                                              getattr(self.policy, "max_objects", None), stats, self.spec)
         self.dropped_detections += dropped
         self.counts.update(stats)
+        if self.pose_wanted:           # the network reads it from the batch (envs/pose_features.py)
+            observation[POSE_KEY] = self.pose_rows(periods)
         return observation
 
     # -- diagnostics -----------------------------------------------------------------------------------------------
@@ -521,8 +605,10 @@ class PolicyNode(Node):
         for key in ("decisions", "periods_dropped", "actions_delayed", "actions_superseded", "frames_stale",
                     "frames_malformed", "detections_malformed", "values_malformed", "self_missing",
                     "fallback_actions", "failed_decisions", "weights_loaded", "weights_refused", "weights_duplicate",
-                    "weights_other_run"):
+                    "weights_other_run", "pose_used", "pose_missing", "pose_stale", "pose_malformed"):
             values[key] = str(self.counts.get(key, 0))
+        values["pose_input"] = "yes" if self.pose_wanted else "no"
+        values["pose_refusal"] = self.pose_refusal
         values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"
         values["latency_max_ms"] = f"{max(window):.2f}" if window else "0.00"
         return values
@@ -530,7 +616,8 @@ class PolicyNode(Node):
     def _publish_diagnostics(self) -> None:
         values = self.diagnostics()
         watched = ("periods_dropped", "frames_malformed", "detections_malformed", "values_malformed",
-                   "fallback_actions", "failed_decisions", "weights_refused")
+                   "fallback_actions", "failed_decisions", "weights_refused", "pose_missing", "pose_stale",
+                   "pose_malformed")
         new = {k: int(values[k]) - self._reported[k] for k in watched if int(values[k]) > self._reported[k]}
         self._reported.update(new)
         status = DiagnosticStatus(level=DiagnosticStatus.WARN if new else DiagnosticStatus.OK, name="dynenv_policy",
@@ -562,6 +649,21 @@ def _decision_seed(seed: int, episode: int, period: int) -> int:
     """A sampling seed per (node seed, episode, period): which periods a slow node drops, or whether it answers
     an episode's last period, cannot change the draws of any other decision, so stepped runs stay reproducible."""
     return int(np.random.SeedSequence([seed, episode, period]).generate_state(1, np.uint64)[0] >> 1)
+
+
+def _waiting(sub: Any, limit: int):
+    """The messages already waiting on ``sub``, at most ``limit``: the subscription handle's take, what rclpy's
+    executor itself calls (rclpy has no public take); none on an rclpy without it (the bounded queue alone then
+    limits staleness)."""
+    for _ in range(limit):
+        try:
+            with sub.handle:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+        except AttributeError:
+            return
+        if taken is None:
+            return
+        yield taken[0]
 
 
 def _empty_period(frames: int) -> list[DetectionArray]:

@@ -238,6 +238,7 @@ def test_a_burst_of_plausible_actions_hands_at_most_the_documented_depth_to_the_
 def test_wait_for_recorder_also_waits_for_a_reader_of_every_action_topic(make_node, executor):
     """The recorder lost a policy's first actions when the simulator started before it had subscribed to them."""
     from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
+    from geometry_msgs.msg import PoseWithCovarianceStamped
     from rosgraph_msgs.msg import Clock
     from dynenv_ros.ros.qos import sim_stream
     sim, client = _sim(make_node, executor, wait_for_subscribers=1, wait_for_recorder=True)
@@ -245,6 +246,7 @@ def test_wait_for_recorder_also_waits_for_a_reader_of_every_action_topic(make_no
     for name in names:             # policies (detections readers, action writers) and a recorder without actions
         client.create_subscription(DetectionArray, topics.detections(name), lambda m: None, qos)
         client.create_subscription(StepFeedback, topics.feedback(name), lambda m: None, qos)
+        client.create_subscription(PoseWithCovarianceStamped, topics.pose_estimate(name), lambda m: None, qos)
         client.create_publisher(Action, topics.action(name), qos)
     client.create_subscription(Clock, topics.CLOCK, lambda m: None, qos)
     assert spin_until(executor, lambda: all(sim.count_publishers(topics.action(n)) >= 1 for n in names), 5.0)
@@ -262,6 +264,7 @@ def test_wait_for_recorder_waits_until_a_dynenv_recorder_has_matched_every_actio
     a 10-period game ended before it had, and all of one robot's actions went unrecorded."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
+    from geometry_msgs.msg import PoseWithCovarianceStamped
     from rosgraph_msgs.msg import Clock
     from dynenv_ros.ros.qos import latched, sim_stream
     sim, client = _sim(make_node, executor, wait_for_subscribers=1, wait_for_recorder=True)
@@ -269,6 +272,7 @@ def test_wait_for_recorder_waits_until_a_dynenv_recorder_has_matched_every_actio
     for name in names:
         client.create_subscription(DetectionArray, topics.detections(name), lambda m: None, qos)
         client.create_subscription(StepFeedback, topics.feedback(name), lambda m: None, qos)
+        client.create_subscription(PoseWithCovarianceStamped, topics.pose_estimate(name), lambda m: None, qos)
         client.create_publisher(Action, topics.action(name), qos)
     recorder = make_node("recorder_stand_in")
     recorder.create_subscription(Clock, topics.CLOCK, lambda m: None, qos)

@@ -81,7 +81,8 @@ def test_mismatched_names_and_poses_are_refused():
 
 
 def test_the_simulator_publishes_the_tree_and_latches_the_team_frames(make_node, executor):
-    """Every robot's base_link and camera on /tf with each frame's stamp; a late subscriber still gets /tf_static."""
+    """Every robot's odom, base_link, camera and ground-truth frame on /tf with each frame's stamp; a late
+    subscriber still gets /tf_static."""
     from rclpy.parameter import Parameter
     from tf2_msgs.msg import TFMessage
 
@@ -101,8 +102,11 @@ def test_the_simulator_publishes_the_tree_and_latches_the_team_frames(make_node,
     listener.create_subscription(TFMessage, "/tf_static", static.append, tf_static_qos())
     assert spin_until(executor, lambda: static, 10.0)
     children = {t.child_frame_id: t.header.frame_id for t in dynamic[-1].transforms}
-    assert children == {"team_a_0/base_link": "map", "team_a_0/camera": "team_a_0/base_link",
-                        "team_b_0/base_link": "map", "team_b_0/camera": "team_b_0/base_link"}
+    tree = {}
+    for robot in ("team_a_0", "team_b_0"):       # self-localization is on by default: REP 105's chain
+        tree.update({f"{robot}/odom": "map", f"{robot}/base_link": f"{robot}/odom",
+                     f"{robot}/camera": f"{robot}/base_link", f"{robot}/ground_truth/base_link": "map"})
+    assert children == tree
     stamps = [(m.transforms[0].header.stamp.sec, m.transforms[0].header.stamp.nanosec) for m in dynamic]
     assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)      # one tree per frame, in sim time
     assert {t.child_frame_id for t in static[0].transforms} == {"team_a/field", "team_b/field"}

@@ -24,6 +24,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
@@ -39,6 +40,7 @@ from dynenv_ros.ros.cdr import detection_array_cdr
 from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
 from dynenv_ros.ros.node_runner import run_node
+from dynenv_ros.ros.pose_estimates import EmulatedOdometry, pose_message, stamp_ns
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list,
                                        refuse_other_scenario)
 from dynenv_ros.ros.qos import (REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, action_queue, latched,
@@ -55,7 +57,7 @@ MODES_OF_RUNNING = ("stepped", "realtime")
 SCENARIOS = ("robocup", "driving")
 RESET_OPTIONS = ("kickoff_team",)                    # robocup; driving takes none
 # Parameters only one scenario has: giving one to the other scenario is refused (it would change nothing).
-SCENARIO_PARAMETERS = {"robocup": ("players_per_team", "falls_enabled"),
+SCENARIO_PARAMETERS = {"robocup": ("players_per_team", "falls_enabled", "localization"),
                        "driving": ("n_cars", "action_mode", "teams")}
 # Defaults that differ: rates (physics Hz, ticks per vision frame, ticks per motion period), episode seconds, the
 # agent whose detections the markers show.
@@ -114,6 +116,10 @@ class SimNode(Node):
                                   "Episode length, s (default robocup 120, driving 60).", **fixed)
         falls = declare_bool(self, "falls_enabled", True, "Random and contact falls (robocup only).", **fixed)
         seed = declare_int(self, "seed", -1, -1, 2**62, "World seed; -1 draws one.", **fixed)
+        localization = declare_bool(self, "localization", True, "Robocup only: emulate every robot's "
+                                    "self-localization, publish <robot>/pose_estimate and TF map -> <robot>/odom -> "
+                                    "<robot>/base_link at the estimate (the truth on <robot>/ground_truth/base_link); "
+                                    "off: base_link is the truth.", **fixed)
         controlled = declare_str_list(self, "controlled_robots", [], "Robots whose actions a period waits for "
                                       "(names like team_a_0); empty: all.", **fixed)
         self.auto_reset = declare_bool(self, "auto_reset", True, "Start a new episode when one ends.")
@@ -161,10 +167,13 @@ class SimNode(Node):
             raise ParameterException(f"unknown robots {unknown}; robots are {names}", ["controlled_robots"])
         if self.marker_robot and self.marker_robot not in names:
             raise ParameterException(f"'{self.marker_robot}' is not one of {names}", ["marker_robot"])
+        self.localization = localization and not driving
+        session_options: dict[str, Any] = {} if driving else {"localization": self.localization}
         session_type: Any = DrivingSession if driving else SoccerSession
         self.session = session_type(config, params, seed=None if seed < 0 else seed,
                                     missing_action=self.missing_action,
-                                    controlled=[names.index(c) for c in controlled] if controlled else None)
+                                    controlled=[names.index(c) for c in controlled] if controlled else None,
+                                    **session_options)
         self.map = self.session.world.map if driving else None
         self.names = names
         self._seed = None if seed < 0 else seed
@@ -181,6 +190,10 @@ class SimNode(Node):
                                                      frame_qos) for n in names]
         self.feedback_pubs = [self.create_publisher(cv.StepFeedback, local(topics.feedback(n)), feedback_qos)
                               for n in names]
+        # Self-localization (ros/pose_estimates.py): each robot's estimate per frame, with the detections' QoS.
+        self.pose_pubs = [self.create_publisher(PoseWithCovarianceStamped, local(topics.pose_estimate(n)),
+                                                frame_qos) for n in names] if self.localization else []
+        self.odometry = EmulatedOdometry(config.rates.vision_period_ticks * config.rates.tick_seconds)
         # In real time, actions arrive on a participant and thread of their own (ros/action_inbox.py): a flood on
         # one robot's topic cannot drop this node's service requests. Both modes queue a bounded number (qos.py).
         realtime = self.mode == "realtime"
@@ -235,7 +248,8 @@ class SimNode(Node):
         self.get_logger().info(
             f"{world} {self.mode} ({config.rates.vision_hz:g} Hz vision, {config.rates.motion_hz:g} Hz "
             f"motion), perception '{preset}' mode {params.mode} magnitude {params.noise_magnitude:g}; "
-            f"{'cars' if driving else 'robots'} {', '.join(names)}")
+            f"{'cars' if driving else 'robots'} {', '.join(names)}"
+            f"{'; self-localization emulated' if self.localization else ''}")
 
     # -- episodes --------------------------------------------------------------------------------------------------
     def _start(self) -> None:
@@ -253,7 +267,8 @@ class SimNode(Node):
                               >= max(1, self.count_publishers(local(topics.action(self.names[i]))))
                               for i in self.session.controlled)
         if self.wait_for_recorder:
-            ready = ready and all(p.get_subscription_count() >= 1 for p in self.feedback_pubs + [self.clock_pub])
+            ready = ready and all(p.get_subscription_count() >= 1
+                                  for p in self.feedback_pubs + self.pose_pubs + [self.clock_pub])
             # ... and every action topic has a reader besides this node (the recorder), or the first actions a
             # policy sends are accepted here but never recorded.
             ready = ready and all(self.count_subscribers(local(topics.action(n))) >= 2 for n in self.names)
@@ -276,6 +291,7 @@ class SimNode(Node):
             self.session.reset(seed=seed)
         else:
             self.session.reset(seed=seed, kickoff_team=kickoff)
+        self.odometry.restart()                 # a new episode, a new odometry (odom: the kickoff pose)
         self.episodes_started += 1
         self._buffer.clear()
         self._emit(self.session.initial())
@@ -387,10 +403,7 @@ class SimNode(Node):
         now = time.monotonic()
         self._first_period_wall = self._first_period_wall or now
         self._last_period_wall = now
-        if self.mode == "stepped":
-            self._emit(output)
-        else:
-            self._buffer.extend((output, k) for k in range(len(output.frames)))
+        self._emit(output)
         logged = getattr(self.session, "logged_events", ("goal", "penalty"))
         for event in output.events:
             if event.kind in logged:
@@ -401,18 +414,22 @@ class SimNode(Node):
         if not self._buffer:
             self._run_period()
         if self._buffer:
-            output, k = self._buffer.popleft()
-            self._publish_frame(output, k)
+            output, k, poses = self._buffer.popleft()
+            self._publish_frame(output, k, poses)
             if k == len(output.frames) - 1:
                 self._publish_feedback(output)
 
     def _emit(self, output: PeriodOutput) -> None:
-        """Stepped mode (and resets): every frame of the period now, then the feedback."""
+        """Stepped mode: every frame of the period now, then the feedback; real time: the frames wait in the
+        buffer for their instants. The period's pose estimates go with them (the session's arrays are new ones
+        every period)."""
+        localization = self.session.vision.localization if self.localization else None
+        poses = None if localization is None else (localization.estimates, localization.variances)
         if self.mode == "realtime":
-            self._buffer.extend((output, k) for k in range(len(output.frames)))
+            self._buffer.extend((output, k, poses) for k in range(len(output.frames)))
             return
         for k in range(len(output.frames)):
-            self._publish_frame(output, k)
+            self._publish_frame(output, k, poses)
         self._publish_feedback(output)
 
     def _publish(self, publisher, message) -> None:
@@ -444,17 +461,28 @@ class SimNode(Node):
         self.get_logger().error(f"could not publish on {publisher.topic_name}: its readers are stuck",
                                 throttle_duration_sec=1.0)
 
-    def _publish_frame(self, output: PeriodOutput, k: int) -> None:
+    def _publish_frame(self, output: PeriodOutput, k: int, poses: tuple | None = None) -> None:
+        """Frame k of a period: /clock, /world_state, TF, the pose estimates (``poses``: the period's (F, n, 3)
+        estimates and variances, None without localization), then every robot's detections."""
         frame = output.frames[k]
         stamp = cv.sim_time(self._tick_offset + frame.tick, self._tick_s)
         self._publish(self.clock_pub, ClockMsg(clock=stamp))
         self._publish(self.world_pub, cv.world_state(frame.snapshot, stamp))
-        tf_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-        if tf_ns > self._last_tf_ns:          # period 0 repeats one instant: tf2 warns on repeated stamps
+        truth = [(o.x, o.y, o.yaw, o.head_yaw) for o in frame.snapshot.objects[:len(self.names)]]
+        estimates = odometry = None
+        if poses is not None:
+            estimates, variances = poses[0][k], poses[1][k]
+            odometry = self.odometry.step([t[:3] for t in truth])
+        # Period 0 repeats one instant and tf2 warns on repeated stamps: one tree per instant, its last frame's
+        # (the estimate a policy acts on).
+        last_of_instant = k == len(output.frames) - 1 or output.frames[k + 1].tick != frame.tick
+        tf_ns = stamp_ns(stamp)
+        if tf_ns > self._last_tf_ns and last_of_instant:
             self._last_tf_ns = tf_ns
-            robots = frame.snapshot.objects[:len(self.names)]
-            self.tf_pub.publish(robot_transforms(self.names, [(o.x, o.y, o.yaw, o.head_yaw) for o in robots],
-                                                 stamp))
+            self.tf_pub.publish(robot_transforms(self.names, truth, stamp, estimates, odometry))
+        if poses is not None:
+            for i, publisher in enumerate(self.pose_pubs):
+                self._publish(publisher, pose_message(estimates[i], variances[i], stamp))
         frames_per_period = len(output.frames)
         for i, robot in enumerate(frame.robots):   # serialised from the numpy records directly (ros/cdr.py)
             self._publish(self.detection_pubs[i], detection_array_cdr(
@@ -490,7 +518,7 @@ class SimNode(Node):
 
         from dynenv_ros.ros.node_runner import NodeExit
         final = self.diagnostics()     # before waiting: acknowledgements take a heartbeat period (≈ 3 s)
-        publishers = [self.clock_pub, self.world_pub] + self.detection_pubs + self.feedback_pubs
+        publishers = [self.clock_pub, self.world_pub] + self.detection_pubs + self.feedback_pubs + self.pose_pubs
         for publisher in publishers:
             publisher.wait_for_all_acked(Duration(seconds=5.0))
         self.write_report(final)
@@ -503,7 +531,8 @@ class SimNode(Node):
         report = {"diagnostics": diagnostics or self.diagnostics(), "episode_scores": self.episode_scores,
                   "published": {"world_state": self.frames_published,
                                 "detections_per_robot": self.frames_published,
-                                "feedback_per_robot": self.periods_run + self.episodes_started},
+                                "feedback_per_robot": self.periods_run + self.episodes_started,
+                                "pose_estimates_per_robot": self.frames_published if self.localization else 0},
                   # what a lossless recorder must hold on each /<robot>/action (the main job checks it)
                   "accepted_actions": {n: self.session.accepted_per_robot[i] for i, n in enumerate(self.names)},
                   "robots": self.names, "scenario": self.scenario}

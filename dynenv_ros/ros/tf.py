@@ -2,7 +2,9 @@
 detections without knowing this project.
 
 ``/tf`` (vision rate): ``map → <robot>/base_link`` (the robot's pose on the field) and
-``<robot>/base_link → <robot>/camera`` (the head's yaw: the frame of the robot's DetectionArray).
+``<robot>/base_link → <robot>/camera`` (the head's yaw: the frame of the robot's DetectionArray). With the
+simulator's self-localization on, REP 105's chain instead: ``map → <robot>/odom → <robot>/base_link`` composes to
+the robot's pose *estimate* (``ros/pose_estimates.py``), and the truth is ``map → <robot>/ground_truth/base_link``.
 ``/tf_static`` (latched, once): ``map → team_a/field`` and ``map → team_b/field``, the team frames the agent's
 localization and reconstruction outputs use (team B's is turned by π, so each team attacks along its +x).
 
@@ -20,6 +22,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from tf2_msgs.msg import TFMessage
 
 from dynenv_ros.ros.conversions import WORLD_FRAME, camera_frame
+from dynenv_ros.ros.pose_estimates import compose, ground_truth_frame, inverse, odom_frame
 
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
@@ -56,13 +59,26 @@ def planar_transform(parent: str, child: str, x: float, y: float, yaw: float, st
 
 
 def robot_transforms(names: Sequence[str], poses: Sequence[tuple[float, float, float, float]],
-                     stamp: Time) -> TFMessage:
-    """``poses[i]`` = (x, y, yaw, head_yaw) of robot ``names[i]`` in the map frame (m, rad)."""
+                     stamp: Time, estimates: Sequence[Sequence[float]] | None = None,
+                     odometry: Sequence[Sequence[float]] | None = None) -> TFMessage:
+    """``poses[i]`` = (x, y, yaw, head_yaw) of robot ``names[i]`` in the map frame (m, rad), the truth.
+
+    Without ``estimates``: ``map → base_link`` is the truth. With ``estimates`` and ``odometry`` ((n, 3) x, y, yaw
+    each: the pose estimates in map, the odometry poses in odom): ``map → odom`` (estimate ∘ odometry⁻¹),
+    ``odom → base_link`` (the odometry), so base_link sits at the estimate, and ``map → ground_truth/base_link``."""
     if len(names) != len(poses):
         raise ValueError(f"{len(names)} robot names but {len(poses)} poses")
+    if (estimates is None) != (odometry is None):
+        raise ValueError("estimates and odometry come together")
     transforms = []
-    for name, (x, y, yaw, head_yaw) in zip(names, poses):
-        transforms.append(planar_transform(WORLD_FRAME, base_frame(name), x, y, yaw, stamp))
+    for i, (name, (x, y, yaw, head_yaw)) in enumerate(zip(names, poses)):
+        if estimates is None:
+            transforms.append(planar_transform(WORLD_FRAME, base_frame(name), x, y, yaw, stamp))
+        else:
+            correction = compose(estimates[i], inverse(odometry[i]))          # map → odom
+            transforms.append(planar_transform(WORLD_FRAME, odom_frame(name), *correction, stamp))
+            transforms.append(planar_transform(odom_frame(name), base_frame(name), *odometry[i], stamp))
+            transforms.append(planar_transform(WORLD_FRAME, ground_truth_frame(name), x, y, yaw, stamp))
         transforms.append(planar_transform(base_frame(name), camera_frame(name), 0.0, 0.0, head_yaw, stamp))
     return TFMessage(transforms=transforms)
 

@@ -42,8 +42,14 @@ def feedback(robot: str) -> str:
     return f"/{robot}/feedback"
 
 
+def pose_estimate(robot: str) -> str:
+    """geometry_msgs/PoseWithCovarianceStamped: one robot's self-localization estimate, frame "map", vision rate
+    (the simulator's with ``localization`` on; a real robot's localization feeds the policy node on the same name)."""
+    return f"/{robot}/pose_estimate"
+
+
 SIM_PUBLISHED_TYPES = {
     "rosgraph_msgs/msg/Clock", "dynenv_msgs/msg/WorldState", "dynenv_msgs/msg/DetectionArray",
     "dynenv_msgs/msg/StepFeedback", "diagnostic_msgs/msg/DiagnosticArray", "visualization_msgs/msg/MarkerArray",
-    "tf2_msgs/msg/TFMessage",
+    "tf2_msgs/msg/TFMessage", "geometry_msgs/msg/PoseWithCovarianceStamped",
 }
