@@ -11,6 +11,7 @@ Per robot, for the F vision frames of a motion period:
 | ``proprioception`` | (F, 4) | ``PROPRIOCEPTION_COLUMNS`` per frame: what the robot knows of itself |
 | ``game`` | (3,) | ``GAME_COLUMNS``: what the GameController broadcasts, at the period's last frame |
 | ``previous_action`` | (4,) | ``ACTION_COLUMNS``: the action the robot took last period (zeros after a reset) |
+| ``pose_estimate`` | (7,) | only with ``PaddedLayout(pose=True)`` (soccer's ``localization="estimate"``): the self-localization estimate at the period's last frame, in the robot's team frame (``envs.pose_features``: columns and bounds) |
 
 All float32 Boxes. The layout is one definition for both scenarios: a ``LayoutSpec`` names a scenario's two
 detection streams (their keys and classes: the static one first, the dynamic one second), its proprioception, game
@@ -36,6 +37,7 @@ import numpy as np
 from gymnasium import spaces
 
 from dynenv_ros.core.object_classes import ObjectClass
+from dynenv_ros.envs.pose_features import POSE_COLUMNS, POSE_HIGH, POSE_KEY, POSE_LOW
 from dynenv_ros.perception.detections import FEATURE_COLUMNS
 
 FEATURES = len(FEATURE_COLUMNS)
@@ -137,6 +139,7 @@ class PaddedLayout:
     max_landmarks: int = DEFAULT_MAX_LANDMARKS      # the first (static) stream's maximum
     max_objects: int = 2 * 2 + EXTRA_OBJECT_SLOTS   # the second (dynamic) stream's maximum
     spec: LayoutSpec = SOCCER
+    pose: bool = False          # soccer: the ``pose_estimate`` key too (``envs.pose_features``), last in ``keys``
 
     def __post_init__(self) -> None:
         for name in ("frames", "max_landmarks", "max_objects"):
@@ -145,10 +148,15 @@ class PaddedLayout:
                 raise ValueError(f"PaddedLayout.{name} must be a positive integer, got {value!r}")
         if not isinstance(self.spec, LayoutSpec):
             raise ValueError(f"PaddedLayout.spec must be a LayoutSpec, got {self.spec!r}")
+        if not isinstance(self.pose, bool):
+            raise ValueError(f"PaddedLayout.pose must be True or False, got {self.pose!r}")
+        if self.pose and self.spec.scenario != "soccer":
+            raise ValueError(f"PaddedLayout.pose: the pose estimate is soccer's, not {self.spec.scenario!r}'s")
 
     @property
     def keys(self) -> tuple[str, ...]:
-        return self.spec.keys
+        """The spec's keys, then ``pose_estimate`` when ``pose``."""
+        return self.spec.keys + ((POSE_KEY,) if self.pose else ())
 
     @property
     def maxima(self) -> tuple[int, int]:
@@ -157,10 +165,10 @@ class PaddedLayout:
 
     @classmethod
     def for_players(cls, players_per_team: int, frames: int, max_landmarks: int | None = None,
-                    max_objects: int | None = None) -> "PaddedLayout":
+                    max_objects: int | None = None, pose: bool = False) -> "PaddedLayout":
         """Default maxima: 40 landmarks, and the ball + every other robot + 4 false positives."""
         return cls(frames, DEFAULT_MAX_LANDMARKS if max_landmarks is None else max_landmarks,
-                   2 * players_per_team + EXTRA_OBJECT_SLOTS if max_objects is None else max_objects)
+                   2 * players_per_team + EXTRA_OBJECT_SLOTS if max_objects is None else max_objects, pose=pose)
 
     @classmethod
     def fitting(cls, frames_per_robot: list[list[np.ndarray]], max_landmarks: int | None = None,
@@ -178,10 +186,13 @@ class PaddedLayout:
     def shapes(self) -> dict[str, tuple[int, ...]]:
         F, spec = self.frames, self.spec
         (a, b) = spec.streams
-        return {a.key: (F, self.max_landmarks, FEATURES), a.mask: (F, self.max_landmarks),
-                b.key: (F, self.max_objects, FEATURES), b.mask: (F, self.max_objects),
-                "proprioception": (F, len(spec.proprioception_columns)),
-                "game": (len(spec.game_columns),), "previous_action": (len(spec.action_columns),)}
+        shapes = {a.key: (F, self.max_landmarks, FEATURES), a.mask: (F, self.max_landmarks),
+                  b.key: (F, self.max_objects, FEATURES), b.mask: (F, self.max_objects),
+                  "proprioception": (F, len(spec.proprioception_columns)),
+                  "game": (len(spec.game_columns),), "previous_action": (len(spec.action_columns),)}
+        if self.pose:
+            shapes[POSE_KEY] = (len(POSE_COLUMNS),)
+        return shapes
 
     def space(self, head_max: float | None = None) -> spaces.Dict:
         """The observation space. ``head_max`` (soccer only; default π): the head turn's bound, rad per period."""
@@ -202,7 +213,9 @@ class PaddedLayout:
         out["game"] = spaces.Box(np.array(spec.game_low, np.float32), np.array(spec.game_high, np.float32),
                                  dtype=np.float32)
         out["previous_action"] = spaces.Box(action_low, action_high, dtype=np.float32)
-        return spaces.Dict({key: out[key] for key in spec.keys})
+        if self.pose:
+            out[POSE_KEY] = pose_space()
+        return spaces.Dict({key: out[key] for key in self.keys})
 
     def empty(self, *batch: int) -> dict[str, np.ndarray]:
         """Zeroed arrays with leading ``batch`` axes (e.g. ``empty(E, A)``)."""
@@ -243,6 +256,11 @@ class PaddedLayout:
             rows_out.view(_ROW)[..., 0][at] = records[chosen]
             mask_out[at] = 1.0
         return dropped
+
+
+def pose_space() -> spaces.Box:
+    """The ``pose_estimate`` Box: (7,) float32 within ``POSE_LOW`` / ``POSE_HIGH``."""
+    return spaces.Box(np.array(POSE_LOW, np.float32), np.array(POSE_HIGH, np.float32), dtype=np.float32)
 
 
 _ROW = np.dtype((np.void, FEATURES * 4))     # one float32 feature row as an opaque item

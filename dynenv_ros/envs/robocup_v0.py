@@ -9,13 +9,14 @@
 | observation (``'padded'``) | the same as fixed-shape Box arrays with masks and the previous action (``envs.padded_layout``): what Stable-Baselines3, SuperSuit, RLlib batch |
 | observation (``'full'`` / ``'image'``) | team-frame ground truth / top and bottom camera segmentation per frame (uint8 0/255 image, channels first) |
 | perception | ``perception='realistic'`` (default), ``'dynenv'``, ``'none'``, or ``{"preset": …, "noise_magnitude": …, "mode": …}`` |
+| localization | ``localization='none'`` (default, the paper's) or ``'estimate'``: the emulated self-localization runs and every observation (partial, padded, image) gains ``pose_estimate`` (7,) float32, the team-frame pose estimate (``envs.pose_features``) |
 | reward | sum of the primary, rule, auxiliary and observation terms; each term in ``infos[agent]['reward_terms']`` |
 | episode | 120 s = 240 motion periods, then every agent is truncated |
 
 Keyword arguments are the settings of ``soccer.config.SoccerConfig`` (nested ones as dicts), plus
-``render_mode='rgb_array'``, ``observation``, ``perception``, ``image_size=(width, height)`` and, for the padded
-layout, ``max_landmarks`` / ``max_objects`` (rows per frame; the farthest beyond them are dropped and counted in
-``infos[agent]['dropped_detections']``).
+``render_mode='rgb_array'``, ``observation``, ``perception``, ``localization``, ``image_size=(width, height)`` and,
+for the padded layout, ``max_landmarks`` / ``max_objects`` (rows per frame; the farthest beyond them are dropped and
+counted in ``infos[agent]['dropped_detections']``).
 
 Head modes for learners: ``head_mode='discrete'`` (default) makes the whole action one ``MultiDiscrete``, which every
 PPO implementation accepts (Stable-Baselines3, CleanRL, RLlib). ``head_mode='continuous'`` gives a ``Dict`` of a
@@ -31,7 +32,7 @@ from typing import Any
 import numpy as np
 from pettingzoo import ParallelEnv
 
-from dynenv_ros.envs.soccer_observations import SoccerObservations
+from dynenv_ros.envs.soccer_observations import LOCALIZATION_OPTIONS, SoccerObservations
 from dynenv_ros.envs.soccer_session import kickoff_team
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder, action_space
 from dynenv_ros.envs.parallel_agents import AgentSpaces, check_step_actions
@@ -49,7 +50,8 @@ class RoboCupParallelEnv(AgentSpaces, ParallelEnv):
 
     def __init__(self, render_mode: str | None = None, observation: str = "partial",
                  perception: Any = "realistic", image_size: tuple[int, int] = (640, 480),
-                 max_landmarks: int | None = None, max_objects: int | None = None, **config: Any) -> None:
+                 max_landmarks: int | None = None, max_objects: int | None = None, localization: str = "none",
+                 **config: Any) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
@@ -59,8 +61,10 @@ class RoboCupParallelEnv(AgentSpaces, ParallelEnv):
         self.agents: list[str] = []
         self._index = {name: i for i, name in enumerate(self.possible_agents)}
         self.encoder = GroundTruthEncoder(self.config)
+        if localization not in LOCALIZATION_OPTIONS:       # a bool is SoccerObservations' own, not a setting
+            raise ValueError(f"localization must be one of {LOCALIZATION_OPTIONS}, got {localization!r}")
         self.observations = SoccerObservations(self.config, observation, perception, image_size, max_landmarks,
-                                               max_objects)
+                                               max_objects, localization)
         self._action_space = action_space(self.config)
         self._action_spaces = {a: self._action_space for a in self.possible_agents}
         self._observation_spaces = {a: self.observations.space for a in self.possible_agents}

@@ -14,6 +14,13 @@
 
 Partial, padded and image modes also give the observation reward (what was truly seen); full mode gives none, as
 in DynEnv.
+
+``localization="estimate"`` (partial, padded and image modes): the emulated self-localization runs
+(``perception/localization.py``) and every observation gains ``pose_estimate``, (7,) float32, the robot's pose
+estimate at the period's last frame in its team frame (``envs.pose_features``: columns, units, bounds).
+``"none"`` (the default, the paper's configuration): nothing changes. ``True`` / ``False``: the estimate runs (or
+not) without being observed (``self.vision.estimate``; what the scripted perceiving team reads). Full mode is
+ground truth without perception, so it refuses ``"estimate"``.
 """
 from __future__ import annotations
 
@@ -25,6 +32,8 @@ from gymnasium import spaces
 from dynenv_ros.envs.padded_layout import (ACTION_COLUMNS, FEATURE_BOUND, GAME_COLUMNS, PROPRIOCEPTION_COLUMNS,
                                            PaddedLayout, clamp_features)
 from dynenv_ros.envs.learning_targets import LearningTargets
+from dynenv_ros.envs.padded_layout import pose_space
+from dynenv_ros.envs.pose_features import POSE_KEY, pose_features
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder
 from dynenv_ros.perception.detections import FEATURE_COLUMNS, as_features
 from dynenv_ros.perception.params import PerceptionParams, load_preset, resolve_setting
@@ -34,7 +43,8 @@ from dynenv_ros.soccer.vision import SoccerVision
 from dynenv_ros.soccer.world import SoccerWorld
 
 OBSERVATION_MODES = ("partial", "padded", "full", "image")
-__all__ = ["OBSERVATION_MODES", "PROPRIOCEPTION_COLUMNS", "GAME_COLUMNS", "ACTION_COLUMNS", "FEATURE_BOUND",
+LOCALIZATION_OPTIONS = ("none", "estimate")
+__all__ = ["OBSERVATION_MODES", "LOCALIZATION_OPTIONS", "localization_option", "PROPRIOCEPTION_COLUMNS", "GAME_COLUMNS", "ACTION_COLUMNS", "FEATURE_BOUND",
            "SoccerObservations", "perception_params", "previous_actions"]
 
 
@@ -48,32 +58,49 @@ def perception_params(setting: str | Mapping[str, Any] | PerceptionParams) -> Pe
     return resolve_setting(setting, PerceptionParams, load_preset, "a preset name or a mapping")
 
 
+def localization_option(value: bool | str) -> tuple[bool, bool]:
+    """(run the self-localization, observe its estimate) of a ``localization`` setting: ``"none"``, ``"estimate"``,
+    or a bool (run it, unobserved)."""
+    if isinstance(value, bool):
+        return value, False
+    if value not in LOCALIZATION_OPTIONS:
+        raise ValueError(f"localization must be one of {LOCALIZATION_OPTIONS} ('estimate': observe the pose "
+                         f"estimate as 'pose_estimate'), got {value!r}")
+    return value == "estimate", value == "estimate"
+
+
 class SoccerObservations:
     """Builds every agent's observation for one period; hook ``on_frame`` into ``SoccerWorld.step``."""
 
     def __init__(self, config: SoccerConfig, mode: str = "partial",
                  perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
                  image_size: tuple[int, int] = (640, 480), max_landmarks: int | None = None,
-                 max_objects: int | None = None, localization: bool = False) -> None:
+                 max_objects: int | None = None, localization: bool | str = False) -> None:
         if mode not in OBSERVATION_MODES:
             raise ValueError(f"observation must be one of {OBSERVATION_MODES}, got {mode!r}")
+        localization, self.pose_observed = localization_option(localization)
+        if self.pose_observed and mode == "full":
+            raise ValueError("localization='estimate' needs a perceived observation (partial, padded or image); "
+                             "'full' is the noise-free ground truth, which has no pose estimate")
         self.config = config
         self.mode = mode
         self.frames = config.rates.frames_per_period
         self.params = perception_params(perception)
         self.ground_truth = GroundTruthEncoder(config)
         self.vision: SoccerVision | None = None
-        self.localization = localization       # step the self-pose estimates (self.vision.estimate ...); not observed
+        self.localization = localization       # step the self-pose estimates (self.vision.estimate ...)
         self._frame = 0
-        self.layout = PaddedLayout.for_players(config.players_per_team, self.frames, max_landmarks, max_objects)
+        self.layout = PaddedLayout.for_players(config.players_per_team, self.frames, max_landmarks, max_objects,
+                                               pose=self.pose_observed)
         padded = self.layout.space(head_max=config.motion.head_max_delta)
         proprio_space, game_space = padded["proprioception"], padded["game"]
+        pose = {POSE_KEY: pose_space()} if self.pose_observed else {}
         if mode == "full":
             self.space: spaces.Space = self.ground_truth.observation_space
         elif mode == "partial":
             row = spaces.Box(-FEATURE_BOUND, FEATURE_BOUND, (len(FEATURE_COLUMNS),), np.float32)
             self.space = spaces.Dict({"detections": spaces.Tuple([spaces.Sequence(row, stack=True)] * self.frames),
-                                      "proprioception": proprio_space, "game": game_space})
+                                      "proprioception": proprio_space, "game": game_space, **pose})
         elif mode == "padded":
             self.space = padded
         else:
@@ -81,10 +108,11 @@ class SoccerObservations:
             self.image_config = ImageConfig(*image_size)
             shape = (self.frames * 2 * CHANNELS_PER_CAMERA, self.image_config.height, self.image_config.width)
             self.space = spaces.Dict({"images": spaces.Box(0, 255, shape, np.uint8),
-                                      "proprioception": proprio_space, "game": game_space})
+                                      "proprioception": proprio_space, "game": game_space, **pose})
         self.dropped_rows = np.zeros(config.n_robots, np.int64)   # padded: rows beyond the maxima, last period
         self._targets: LearningTargets | None = None              # made on the first build_padded(targets=...)
         self._views: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # per frame count: each view's robot, frame
+        self._teams = np.where(np.arange(config.n_robots) < config.players_per_team, 1.0, -1.0)   # A +1, B -1
 
     def reset(self, world: SoccerWorld) -> None:
         self.world = world
@@ -146,7 +174,13 @@ class SoccerObservations:
         arrays["proprioception"][:, :frames] = self.vision.proprioception.transpose(1, 0, 2)
         arrays["game"][:] = self.vision.game_controller[-1]
         arrays["previous_action"][:] = previous_actions(self.world.last_actions)
+        if self.pose_observed:
+            self.pose_rows(arrays[POSE_KEY])
         return arrays
+
+    def pose_rows(self, out: np.ndarray | None = None) -> np.ndarray:
+        """(robots, 7) ``pose_estimate`` rows of the period's last frame (``envs.pose_features``)."""
+        return pose_features(self.vision.estimate, self.vision.covariance, self._teams, out=out)
 
     def build(self) -> tuple[list[Any], np.ndarray]:
         """(one observation per robot, observation reward per robot) for the frames recorded this period."""
@@ -167,11 +201,14 @@ class SoccerObservations:
             off = perception.offsets
             out = [{"detections": tuple(features[off[k * n + i]:off[k * n + i + 1]] for k in range(frames)),
                     "proprioception": proprio[:, i], "game": game[i]} for i in range(n)]
-            return out, rewards
-        from dynenv_ros.perception.camera import render_segmentation
-        out = []
-        for i in range(n):
-            images = np.concatenate([render_segmentation(perception.of_view(k * n + i), self.image_config)
-                                     for k in range(frames)]) * np.uint8(255)
-            out.append({"images": images, "proprioception": proprio[:, i], "game": game[i]})
+        else:
+            from dynenv_ros.perception.camera import render_segmentation
+            out = []
+            for i in range(n):
+                images = np.concatenate([render_segmentation(perception.of_view(k * n + i), self.image_config)
+                                         for k in range(frames)]) * np.uint8(255)
+                out.append({"images": images, "proprioception": proprio[:, i], "game": game[i]})
+        if self.pose_observed:
+            for entry, row in zip(out, self.pose_rows()):
+                entry[POSE_KEY] = row
         return out, rewards

@@ -45,7 +45,7 @@ import numpy as np
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.envs.learning_targets import target_shapes
 from dynenv_ros.envs.padded_layout import PaddedLayout
-from dynenv_ros.envs.soccer_observations import SoccerObservations, perception_params
+from dynenv_ros.envs.soccer_observations import LOCALIZATION_OPTIONS, SoccerObservations, perception_params
 from dynenv_ros.envs.teacher import DRIVING_TEACHERS, TEACHERS, DrivingTeacher, Teacher
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.sim.reward_terms import RewardTerm
@@ -101,6 +101,7 @@ class _Settings:
     targets: bool = False
     scripted_team_b: str | None = None
     teacher: str | None = None
+    localization: str = "none"   # "estimate": the observations gain pose_estimate (envs.pose_features)
     scenario = "soccer"
     action_width = 4             # [walk, turn, kick, head]
     teacher_dtype = np.dtype(np.int64)
@@ -114,7 +115,8 @@ class _Settings:
 
     def observations(self) -> SoccerObservations:
         return SoccerObservations(self.config, self.observation, self.perception,
-                                  max_landmarks=self.max_landmarks, max_objects=self.max_objects)
+                                  max_landmarks=self.max_landmarks, max_objects=self.max_objects,
+                                  localization=self.localization)
 
     def make_world(self) -> SoccerWorld:
         return SoccerWorld(self.config)
@@ -734,6 +736,10 @@ class SoccerVectorEnv(VectorEnv):
     for those robots are ignored (send zeros). Why in the worlds: a scripted policy needs the ground truth, which
     would otherwise have to cross the process boundary every step.
 
+    ``localization="estimate"`` (padded only): every world runs the emulated self-localization and the observations
+    gain ``pose_estimate`` (E, A, 7), the team-frame pose estimate of the period's last frame (``envs.pose_features``);
+    ``"none"`` (default): nothing changes.
+
     ``teacher="chaser"`` or ``"keeper_and_chasers"``: every world also labels each robot with that scripted team's
     action for the state its observation shows (``envs.teacher``), as (E, A, 4) discrete action indices:
     ``BatchStep.teacher_actions``, and ``self.teacher_actions`` for the observations returned last.
@@ -744,7 +750,7 @@ class SoccerVectorEnv(VectorEnv):
                  perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
                  max_landmarks: int | None = None, max_objects: int | None = None, copy: bool = True,
                  pin_workers: bool = False, targets: bool = False, scripted_team_b: str | None = None,
-                 teacher: str | None = None, parent_steps: bool = True) -> None:
+                 teacher: str | None = None, parent_steps: bool = True, localization: str = "none") -> None:
         self.config = config if isinstance(config, SoccerConfig) else SoccerConfig.from_mapping(config)
         if observation not in VECTOR_OBSERVATIONS:
             raise ValueError(f"observation must be one of {VECTOR_OBSERVATIONS}, got {observation!r}")
@@ -761,8 +767,10 @@ class SoccerVectorEnv(VectorEnv):
             raise ValueError("teacher labels need head_mode='discrete' (the agent's head is then an index)")
         if not isinstance(parent_steps, bool):
             raise ValueError(f"parent_steps must be True or False, got {parent_steps!r}")
+        if localization not in LOCALIZATION_OPTIONS:
+            raise ValueError(f"localization must be one of {LOCALIZATION_OPTIONS}, got {localization!r}")
         settings = _Settings(self.config, observation, perception_params(perception), max_landmarks, max_objects,
-                             bool(targets), scripted_team_b, teacher)
+                             bool(targets), scripted_team_b, teacher, localization)
         observations = settings.observations()      # checks the layout maxima; gives the spaces
         self._start(settings, observations, num_envs, backend, workers, pin_workers, parent_steps, copy)
         self.target_shapes: dict[str, tuple[int, ...]] | None = \
