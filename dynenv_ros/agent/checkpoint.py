@@ -7,7 +7,8 @@ Layout of a policy file (format ``dynenv_policy/1``):
 
 * tensors: ``model.state_dict()`` under its own names;
 * header metadata (string → string): ``format`` = ``dynenv_policy/1``, ``config`` = JSON of the ``DynEnvAgent``
-  constructor arguments (feature_size, head_mode, head_units, head_max), ``meta`` = JSON of the caller's metadata,
+  constructor arguments (feature_size, head_mode, head_units, head_max; ``uses_pose: true`` for an agent that takes
+  the self-localization estimate — absent, as in every earlier file, means false), ``meta`` = JSON of the caller's metadata,
   ``data_sha256`` = SHA-256 of the tensor data section (so a flipped byte in the weights is caught on load).
 
 Limits on what a file may ask for, checked before anything is allocated (a tiny file whose config asks for a huge
@@ -44,8 +45,8 @@ _HEADER_LIMIT = 100 * 1024 * 1024      # safetensors' own limit on the JSON head
 MAX_POLICY_BYTES = 256 * 1024 * 1024   # a policy file, safetensors or ONNX (D = 1024 is 163 MB)
 MAX_FEATURE_SIZE = 1024
 MAX_HEAD_UNITS = 64
-CONFIG_KEYS = ("feature_size", "head_mode", "head_units", "head_max", "scenario", "action_mode")
-SOCCER_ONLY_KEYS = ("head_mode", "head_units", "head_max")
+CONFIG_KEYS = ("feature_size", "head_mode", "head_units", "head_max", "scenario", "action_mode", "uses_pose")
+SOCCER_ONLY_KEYS = ("head_mode", "head_units", "head_max", "uses_pose")
 
 
 # -- generic helpers (also used by the training checkpoints) -------------------------------------------------------
@@ -217,6 +218,8 @@ def check_agent_config(config: Mapping[str, Any]) -> dict[str, Any]:
         return out
     if "action_mode" in config:
         raise ValueError("action_mode is a driving setting; a soccer agent's head has head_mode")
+    if not isinstance(config.get("uses_pose", False), bool):
+        raise ValueError(f"uses_pose must be true or false, got {config['uses_pose']!r}")
     check_head(config.get("head_mode", "discrete"), config.get("head_units", 3),
                config.get("head_max", math.radians(37.5)))
     if config.get("head_mode") == "continuous" and "head_units" in config:
@@ -233,13 +236,17 @@ def non_finite_tensors(tensors: Mapping[str, torch.Tensor]) -> list[str]:
 # -- policy files --------------------------------------------------------------------------------------------------
 def agent_config(model: DynEnvAgent) -> dict[str, Any]:
     """The ``DynEnvAgent`` constructor arguments that rebuild ``model``'s architecture (soccer: the four keys it
-    always had, no ``scenario``; driving: feature_size, scenario, action_mode)."""
+    always had, no ``scenario``, and ``uses_pose: True`` when it takes the pose estimate; driving: feature_size,
+    scenario, action_mode)."""
     if getattr(model, "scenario", "soccer") == "driving":
         return {"feature_size": int(model.feature_size), "scenario": "driving", "action_mode": str(model.action_mode)}
     discrete = model.head_mode == "discrete"
-    return {"feature_size": int(model.feature_size), "head_mode": str(model.head_mode),
-            "head_units": (model.head_head.out_features - 1) // 2 if discrete else 3,
-            "head_max": float(model.head_max)}
+    config = {"feature_size": int(model.feature_size), "head_mode": str(model.head_mode),
+              "head_units": (model.head_head.out_features - 1) // 2 if discrete else 3,
+              "head_max": float(model.head_max)}
+    if getattr(model, "uses_pose", False):      # only then: a file without the pose stays byte-identical
+        config["uses_pose"] = True
+    return config
 
 
 def policy_bytes(model: DynEnvAgent, meta: Mapping[str, Any] | None = None) -> bytes:

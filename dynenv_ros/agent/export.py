@@ -19,9 +19,16 @@ object_kind         (B, F, N_o)         int64
 object_mask         (B, F, N_o)         bool
 previous_action     (B, 12)             float32   ``encode_previous_action``
 proprioception      (B, 4)              float32
+pose_estimate       (B, 7)              float32   only when the agent ``uses_pose``: the raw ``pose_estimate`` row
 h_loc, c_loc        (B, D)              float32   localization LSTM state
 h_obj, c_obj        (B, D)              float32   object LSTM state
 ==================  ==================  ========  ==========================================
+
+``pose_estimate`` (``envs.pose_features``: x, y, cos yaw, sin yaw, σx, σy, σyaw in the team frame) is an input
+only of a policy that takes the self-localization estimate (``DynEnvAgent.uses_pose``, trained with
+``localization: estimate``); its metadata then says ``"uses_pose": true``. Both runtimes are called with the self
+state that ``side_inputs(batch, head_max, pose=policy.uses_pose)`` builds — (B, 14), the pose appended —; the ONNX
+runtime feeds its first 7 columns as ``proprioception`` and the last 7 as ``pose_estimate``.
 
 Outputs: walk_logits (B, 5), turn_logits (B, 3), kick_logits (B, 3), head (B, 2·units+1 logits, or B, 2
 [mean, log_std]), value (B,), pose (B, 6), then the next state h_loc', c_loc', h_obj', c_obj' (B, D) each.
@@ -72,7 +79,7 @@ from torch import nn
 from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, _bounded_int, check_file_size, check_head,
                                          non_finite_tensors)
 from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.inputs import FEATURES, StreamBatch, agent_inputs
+from dynenv_ros.agent.inputs import FEATURES, POSE_INPUT, StreamBatch, agent_inputs
 from dynenv_ros.agent.network import DynEnvAgent, State
 from dynenv_ros.envs.padded_layout import MAX_FRAMES, MAX_SLOTS, SOCCER
 
@@ -89,9 +96,16 @@ DRIVING_INPUT_NAMES = ("lane_features", "lane_kind", "lane_mask", "object_featur
 DRIVING_DEFAULT_MAXIMA = (11, 52)       # envs.driving_observations.default_maxima of the default 2-car config
 
 
-def io_names(scenario: str, action_mode: str | None = None) -> tuple[tuple[str, ...], tuple[str, ...]]:
+POSE_INPUT_NAME = "pose_estimate"            # after proprioception, when the policy uses_pose
+
+
+def io_names(scenario: str, action_mode: str | None = None, uses_pose: bool = False
+             ) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """(input names, output names) of a scenario's exported graph (module docstring)."""
     if scenario != "driving":
+        if uses_pose:
+            at = INPUT_NAMES.index("proprioception") + 1
+            return INPUT_NAMES[:at] + (POSE_INPUT_NAME,) + INPUT_NAMES[at:], OUTPUT_NAMES
         return INPUT_NAMES, OUTPUT_NAMES
     heads = (("acceleration_logits", "steering_logits") if action_mode == "discrete" else ("command",))
     return DRIVING_INPUT_NAMES, (*heads, "value", *(name + "_out" for name in STATE_NAMES))
@@ -132,13 +146,15 @@ class _ExportWrapper(nn.Module):
         super().__init__()
         self.model = copy.deepcopy(model).eval()
 
-    def forward(self, landmark_features: torch.Tensor, landmark_kind: torch.Tensor, landmark_mask: torch.Tensor,
-                object_features: torch.Tensor, object_kind: torch.Tensor, object_mask: torch.Tensor,
-                previous_action: torch.Tensor, proprioception: torch.Tensor, h_loc: torch.Tensor,
-                c_loc: torch.Tensor, h_obj: torch.Tensor, c_obj: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """The inputs in ``io_names`` order (``pose_estimate`` after ``proprioception`` when the model uses it)."""
+        (landmark_features, landmark_kind, landmark_mask, object_features, object_kind, object_mask,
+         previous_action, proprioception), rest = inputs[:8], inputs[8:]
+        if getattr(self.model, "uses_pose", False):
+            proprioception, rest = torch.cat([proprioception, rest[0]], dim=-1), rest[1:]
         step = self.model(StreamBatch(landmark_features, landmark_kind, landmark_mask),
                           StreamBatch(object_features, object_kind, object_mask),
-                          previous_action, proprioception, (h_loc, c_loc, h_obj, c_obj))
+                          previous_action, proprioception, tuple(rest))
         if self.model.scenario == "driving":
             heads = ((step.acceleration, step.steering) if self.model.action_mode == "discrete"
                      else (step.command,))
@@ -160,8 +176,9 @@ def _example_inputs(model: DynEnvAgent, batch: int, frames: int, max_landmarks: 
         return features, kind, mask
 
     D = model.feature_size
+    pose = (torch.rand(batch, POSE_INPUT, generator=generator),) if getattr(model, "uses_pose", False) else ()
     return (*stream(max_landmarks), *stream(max_objects), torch.zeros(batch, inputs.action_encoding),
-            torch.zeros(batch, inputs.self_state), *(torch.zeros(batch, D) for _ in range(4)))
+            torch.zeros(batch, inputs.self_state), *pose, *(torch.zeros(batch, D) for _ in range(4)))
 
 
 def _layout_metadata(scenario: str) -> dict[str, Any]:
@@ -195,7 +212,7 @@ def _config(model: DynEnvAgent, frames: int, max_landmarks: int, max_objects: in
     return {"format": FORMAT, "feature_size": model.feature_size, "head_mode": model.head_mode,
             "head_units": head_units, "head_max": float(model.head_max), "frames": frames,
             "max_landmarks": max_landmarks, "max_objects": max_objects, "scenario": "soccer",
-            "layout": _layout_metadata("soccer"),
+            "uses_pose": bool(getattr(model, "uses_pose", False)), "layout": _layout_metadata("soccer"),
             "actions": {"heads": {"walk": WALK_CHOICES, "turn": TURN_CHOICES, "kick": KICK_CHOICES,
                                   "head": 2 * head_units + 1 if head_units else 2}}}
 
@@ -223,7 +240,8 @@ def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int
         max_objects = 12 if max_objects is None else max_objects
     if frames < 1 or max_landmarks < 1 or max_objects < 1:
         raise ValueError("frames, max_landmarks and max_objects must be at least 1")
-    input_names, output_names = io_names("driving" if driving else "soccer", getattr(model, "action_mode", None))
+    input_names, output_names = io_names("driving" if driving else "soccer", getattr(model, "action_mode", None),
+                                         getattr(model, "uses_pose", False))
     target = Path(path)
     if not target.parent.is_dir():
         raise ValueError(f"cannot write {target}: folder {target.parent} does not exist")
@@ -276,12 +294,16 @@ def check_onnx_config(config: dict[str, Any]) -> None:
     scenario = config.get("scenario", "soccer")
     if scenario == "driving":
         driving_actions.check_action_mode(config.get("action_mode"))
+        if config.get("uses_pose", False) is not False:
+            raise ValueError("uses_pose: the pose estimate is a soccer input; a driving policy has none")
         if config["frames"] != 1:
             raise ValueError(f"a driving policy takes 1 frame per period, the metadata says {config['frames']}")
         return
     if scenario != "soccer":
         raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
     check_head(config.get("head_mode"), config.get("head_units"), config.get("head_max"))
+    if not isinstance(config.get("uses_pose", False), bool):
+        raise ValueError(f"uses_pose must be true or false, got {config['uses_pose']!r}")
 
 
 def _non_finite_initializers(proto: Any) -> list[str]:
@@ -307,14 +329,14 @@ def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
     """The first way the session's declared inputs/outputs disagree with the metadata ('' if none). Dimensions the
     file leaves symbolic are not checked here (the robot axis always is); the node's trial decision runs them."""
     F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size
-    input_names, output_names = io_names(policy.scenario, policy.action_mode)
+    input_names, output_names = io_names(policy.scenario, policy.action_mode, policy.uses_pose)
     static = "lane" if policy.scenario == "driving" else "landmark"
     widths = agent_inputs(policy.scenario)
     inputs = {f"{static}_features": ("float", (F, L, FEATURES)), f"{static}_kind": ("int64", (F, L)),
               f"{static}_mask": ("bool", (F, L)), "object_features": ("float", (F, O, FEATURES)),
               "object_kind": ("int64", (F, O)), "object_mask": ("bool", (F, O)),
               "previous_action": ("float", (widths.action_encoding,)),
-              "proprioception": ("float", (widths.self_state,)),
+              "proprioception": ("float", (widths.self_state,)), POSE_INPUT_NAME: ("float", (POSE_INPUT,)),
               **{name: ("float", (D,)) for name in STATE_NAMES}}
     if policy.scenario == "driving":
         outputs = {"acceleration_logits": (driving_actions.ACCELERATION_CHOICES,),
@@ -390,6 +412,7 @@ class OnnxPolicy:
         self.config: dict[str, Any] = config
         self.feature_size: int = config["feature_size"]
         self.scenario: str = config.get("scenario", "soccer")
+        self.uses_pose: bool = config.get("uses_pose", False)
         if self.scenario == "driving":
             self.action_mode: str | None = config["action_mode"]
             self.head_mode, self.head_units, self.head_max = None, None, None
@@ -435,10 +458,19 @@ class OnnxPolicy:
     def __call__(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                  proprioception: torch.Tensor, state: State) -> PolicyStep:
         static = "lane" if self.scenario == "driving" else "landmark"
+        self_state = _numpy(proprioception, np.float32)
         feeds = {**self._stream(static, landmarks, self.max_landmarks),
                  **self._stream("object", objects, self.max_objects),
-                 "previous_action": _numpy(previous_action, np.float32),
-                 "proprioception": _numpy(proprioception, np.float32)}
+                 "previous_action": _numpy(previous_action, np.float32)}
+        if self.uses_pose:
+            width = agent_inputs(self.scenario).self_state
+            if self_state.ndim != 2 or self_state.shape[1] != width + POSE_INPUT:
+                raise ValueError(f"self state of shape {self_state.shape}; this policy uses the pose estimate: "
+                                 f"(B, {width + POSE_INPUT}) from side_inputs(batch, head_max, pose=True)")
+            feeds["proprioception"] = np.ascontiguousarray(self_state[:, :width])
+            feeds[POSE_INPUT_NAME] = np.ascontiguousarray(self_state[:, width:])
+        else:
+            feeds["proprioception"] = self_state
         for name, tensor in zip(STATE_NAMES, state):
             feeds[name] = _numpy(tensor, np.float32)
         out = [torch.from_numpy(array) for array in self.session.run(None, feeds)]
@@ -454,6 +486,7 @@ class TorchPolicy:
     def __init__(self, model: DynEnvAgent) -> None:
         self.model = model.eval()
         self.scenario: str = getattr(model, "scenario", "soccer")
+        self.uses_pose: bool = getattr(model, "uses_pose", False)
         self.action_mode: str | None = getattr(model, "action_mode", None)
         self.feature_size, self.head_mode, self.head_max = model.feature_size, model.head_mode, model.head_max
         self.head_units: int | None = ((model.head_head.out_features - 1) // 2 if model.head_mode == "discrete"

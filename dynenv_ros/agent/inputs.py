@@ -24,6 +24,10 @@ scenario's network takes (``AgentInputs``):
 - **Self state**: soccer's last-frame proprioception (4) and the GameController's values scaled (3); driving's
   last-frame ego values scaled by ``DRIVING_EGO_SCALE`` (speed /10 m/s, yaw rate as is, destination /50 m, length
   and width /5 m, crashed and finished as is: 8) and the seconds remaining over a 60 s episode (1).
+- **Pose estimate** (soccer, an agent with ``uses_pose``, trained with ``localization: estimate``):
+  ``side_inputs(..., pose=True)`` appends the batch's ``pose_estimate`` (B, 7) (``envs.pose_features``: x, y,
+  cos yaw, sin yaw, σx, σy, σyaw in the team frame) to the self state *as it is*, so the self state is (B, 14); the
+  network scales it itself (``encode_pose``), which keeps an exported graph's ``pose_estimate`` input the raw row.
 """
 from __future__ import annotations
 
@@ -35,6 +39,7 @@ import torch
 
 from dynenv_ros.envs.padded_layout import (FEATURES, GAME_COLUMNS, LANDMARK_CLASSES, OBJECT_CLASSES,
                                            PROPRIOCEPTION_COLUMNS, SOCCER, LayoutSpec, PaddedLayout, pack_frames)
+from dynenv_ros.envs.pose_features import POSE_COLUMNS, POSE_KEY
 
 SCENARIOS = ("soccer", "driving")
 
@@ -98,19 +103,51 @@ def streams_from_padded(observation: Mapping[str, object], spec: LayoutSpec = SO
             stream(observation[dynamic.key], observation[dynamic.mask], table))
 
 
-def side_inputs(observation: Mapping[str, object], head_max: float | None = None, spec: LayoutSpec = SOCCER
-                ) -> tuple[torch.Tensor, torch.Tensor]:
+def side_inputs(observation: Mapping[str, object], head_max: float | None = None, spec: LayoutSpec = SOCCER,
+                pose: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """(previous action encoding (B, action_encoding), self state (B, self_state)) of padded observations: the
     period's last proprioception row and the game's values, scaled. ``head_max`` (soccer only): the head turn's
-    bound; driving scales the steering by its layout spec's bound."""
+    bound; driving scales the steering by its layout spec's bound. ``pose`` (soccer, an agent's ``uses_pose``): the
+    self state ends with the observation's ``pose_estimate`` row, unscaled (B, 7 more)."""
     action = _as_tensor(observation["previous_action"])
     proprioception = _as_tensor(observation["proprioception"])[:, -1]
     if spec.scenario == "driving":
+        if pose:
+            raise ValueError("the pose estimate is a soccer input; driving has none")
         return encode_driving_action(action, spec), driving_self_state(proprioception, observation["game"])
     if head_max is None:
         raise ValueError("soccer's side inputs need head_max (the head turn's bound, rad per period)")
     previous = encode_previous_action(action[:, 0], action[:, 1], action[:, 2], action[:, 3], head_max)
-    return previous, self_state(proprioception, observation["game"])
+    state = self_state(proprioception, observation["game"])
+    if pose:
+        state = torch.cat([state, pose_input(observation)], dim=-1)
+    return previous, state
+
+
+def pose_input(observation: Mapping[str, object]) -> torch.Tensor:
+    """The batch's ``pose_estimate`` (B, 7) float32, checked; ValueError naming the key when it is missing."""
+    if POSE_KEY not in observation:
+        raise ValueError(f"this agent takes the self-localization estimate (uses_pose): the batch needs "
+                         f"{POSE_KEY!r} (B, {len(POSE_COLUMNS)}) float32, team frame (envs/pose_features.py); an env "
+                         f"gives it with localization='estimate'")
+    value = _as_tensor(observation[POSE_KEY]).float()
+    if value.dim() != 2 or value.shape[-1] != len(POSE_COLUMNS):
+        raise ValueError(f"{POSE_KEY} must be (B, {len(POSE_COLUMNS)}), got {tuple(value.shape)}")
+    return value
+
+
+# The pose estimate to about unit size inside the network: x and y over 5 m (a field half is 4.5 m long), the
+# heading's cos and sin as they are, each σ as log(1 + σ / 0.1 m or rad) — 1 cm 0.1, 10 cm 0.7, 1 m 2.4, the bound
+# 50 m 6.2 — so a lost robot's large σ stays within reach of the same weights as a tracking one's few centimetres.
+POSE_INPUT = len(POSE_COLUMNS)
+POSE_XY_SCALE = 1 / 5.0
+POSE_STD_UNIT = 0.1
+
+
+def encode_pose(pose: torch.Tensor) -> torch.Tensor:
+    """(…, 7) ``pose_estimate`` rows → the network's scaled (…, 7) (constants above)."""
+    return torch.cat([pose[..., :2] * POSE_XY_SCALE, pose[..., 2:4],
+                      torch.log1p(pose[..., 4:].clamp(min=0.0) / POSE_STD_UNIT)], dim=-1)
 
 
 def self_state(proprioception, game) -> torch.Tensor:

@@ -30,6 +30,12 @@ Two scenarios (``DynEnvAgent(scenario=…)``), one architecture:
   not built for driving (``envs/learning_targets.py`` is soccer's), and an untrained pose head feeding the object
   stream (the paper's predictor of 4) would be a fixed random projection; the object stream takes the self state
   only. ``pose``, ``ball`` and ``robots`` of its steps are None.
+
+**The pose estimate as an input** (soccer, ``uses_pose=True``; a run with ``localization: estimate``): the self
+state both streams take before their LSTMs ends with the robot's self-localization estimate (``pose_estimate``, 7
+values, ``inputs.side_inputs(..., pose=True)``), scaled inside the network (``inputs.encode_pose``); the two
+streams' input transforms are 7 columns wider, nothing else changes. ``uses_pose=False`` (the default, every
+earlier checkpoint) is the network above, parameter for parameter.
 """
 from __future__ import annotations
 
@@ -42,8 +48,8 @@ from torch import nn
 from torch.distributions import Categorical, Normal
 
 from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, PROPRIOCEPTION, SCENARIOS, StreamBatch,
-                                     agent_inputs)
+from dynenv_ros.agent.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, POSE_INPUT, PROPRIOCEPTION, SCENARIOS,
+                                     StreamBatch, agent_inputs, encode_pose)
 
 POSE_SIZE = 6            # [x, y, cos(θ+h), sin(θ+h), cos h, sin h] in the team frame
 State = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
@@ -486,12 +492,17 @@ class DynEnvAgent(nn.Module):
 
     def __init__(self, feature_size: int = 64, head_mode: str = "discrete", head_units: int = 3,
                  head_max: float = math.radians(37.5), scenario: str = "soccer",
-                 action_mode: str = "discrete") -> None:
+                 action_mode: str = "discrete", uses_pose: bool = False) -> None:
         super().__init__()
         if scenario not in SCENARIOS:
             raise ValueError(f"scenario must be one of {SCENARIOS}, got {scenario!r}")
+        if not isinstance(uses_pose, bool):
+            raise ValueError(f"uses_pose must be True or False, got {uses_pose!r}")
         self.scenario = scenario
+        self.uses_pose = uses_pose
         if scenario == "driving":
+            if uses_pose:
+                raise ValueError("uses_pose: the pose estimate is a soccer input; a driving agent has none")
             self._build_driving(feature_size, driving_actions.check_action_mode(action_mode))
             return
         self.action_mode = None
@@ -499,9 +510,10 @@ class DynEnvAgent(nn.Module):
             raise ValueError(f"head_mode must be 'discrete' or 'continuous', got {head_mode!r}")
         D = feature_size
         self.feature_size, self.head_mode, self.head_max = D, head_mode, head_max
-        self.localization = Stream(D, ACTION_ENCODING + PROPRIOCEPTION)
+        self.self_state_size = PROPRIOCEPTION + (POSE_INPUT if uses_pose else 0)
+        self.localization = Stream(D, ACTION_ENCODING + self.self_state_size)
         self.pose_head = nn.Linear(D, POSE_SIZE)
-        self.objects = Stream(D, POSE_SIZE + PROPRIOCEPTION)
+        self.objects = Stream(D, POSE_SIZE + self.self_state_size)
         self.walk_head = nn.Linear(2 * D, 5)
         self.turn_head = nn.Linear(2 * D, 3)
         self.kick_head = nn.Linear(2 * D, 3)
@@ -518,6 +530,7 @@ class DynEnvAgent(nn.Module):
         D = feature_size
         self.feature_size, self.action_mode = D, action_mode
         self.head_mode, self.head_max = None, None
+        self.self_state_size = inputs.self_state
         self.localization = Stream(D, inputs.action_encoding + inputs.self_state, inputs.num_classes, temporal=False)
         self.pose_head = None
         self.objects = Stream(D, inputs.self_state, inputs.num_classes, temporal=False)
@@ -543,16 +556,16 @@ class DynEnvAgent(nn.Module):
 
     def forward(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                 proprioception: torch.Tensor, state: State) -> AgentStep:
-        """One motion period of B robots: streams (B, F, N, ...), previous_action (B, 12), proprioception (B, 7),
-        state four (B, D) tensors."""
+        """One motion period of B robots: streams (B, F, N, ...), previous_action (B, 12), proprioception (B, 7) —
+        the self state; (B, 14) with the pose estimate appended when ``uses_pose`` —, state four (B, D) tensors."""
         return self._periods(landmarks, objects, previous_action, proprioception, state, None)
 
     def forward_sequence(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                          proprioception: torch.Tensor, state: State, resets: torch.Tensor | None = None
                          ) -> AgentSequence:
         """T consecutive motion periods of B robots (a rollout): streams (T, B, F, N, ...), previous_action
-        (T, B, 12), proprioception (T, B, 7), ``state`` the four (B, D) tensors before the first period, ``resets``
-        (T, B) bool, True = the robot's episode starts at that period (its recurrent state is zeroed before it;
+        (T, B, 12), proprioception (T, B, 7) (14 when ``uses_pose``), ``state`` the four (B, D) tensors before the
+        first period, ``resets`` (T, B) bool, True = the robot's episode starts at that period (its recurrent state is zeroed before it;
         None: no resets). Gives what T calls of ``forward`` with the state carried (and zeroed at the resets) give,
         stacked; the embeddings and the RTA run over all T·B periods at once (they do not depend on earlier
         periods), only the two LSTM cells step through the periods."""
@@ -576,6 +589,15 @@ class DynEnvAgent(nn.Module):
         """T·B periods, period-major (T = 1 when resets is None), as one flat batch; the LSTMs step through T."""
         if self.scenario == "driving":
             return self._driving_periods(landmarks, objects, previous_action, proprioception, state, resets)
+        if not _tracing() and proprioception.shape[-1] != self.self_state_size:
+            raise ValueError(
+                f"self state of width {proprioception.shape[-1]}, this agent takes {self.self_state_size}: "
+                + ("it uses the pose estimate (uses_pose): side_inputs(batch, head_max, pose=True) with "
+                   "'pose_estimate' in the batch" if self.uses_pose else
+                   "it does not use the pose estimate (uses_pose False): side_inputs(..., pose=False)"))
+        if self.uses_pose:
+            proprioception = torch.cat([proprioception[:, :PROPRIOCEPTION],
+                                        encode_pose(proprioception[:, PROPRIOCEPTION:])], dim=-1)
         loc_pooled, landmark_confidence = self.localization.encode(landmarks)
         obj_pooled, object_confidence = self.objects.encode(objects)
         loc_in = self.localization.transform(torch.cat([loc_pooled, previous_action, proprioception], dim=-1))

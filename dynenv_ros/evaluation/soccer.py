@@ -88,10 +88,13 @@ class TeamPolicy:
     ``env.possible_agents``; team A is 0..n-1, team B n..2n-1) and its SeedSequence; ``act`` gets the padded
     observations of those robots in that order and returns one env action per robot. ``needs_localization``: the
     env steps every robot's self-pose estimate (``env.observations.vision.estimate``); its draws come from a
-    generator of its own, so the episodes are the same with it on or off."""
+    generator of its own, so the episodes are the same with it on or off. ``observes_pose``: the observations must
+    also carry it as ``pose_estimate`` (the env is made with ``localization="estimate"``; implies
+    ``needs_localization``)."""
 
     kind = "team"
     needs_localization = False
+    observes_pose = False
 
     def describe(self) -> dict[str, Any]:
         return {"kind": self.kind}
@@ -174,9 +177,14 @@ class AgentTeam(TeamPolicy):
         self.model = model.eval()
         self.greedy = bool(greedy)
         self.path, self.sha256 = path, sha256
+        # a checkpoint trained with localization: estimate reads pose_estimate from its observations
+        self.observes_pose = self.needs_localization = bool(getattr(model, "uses_pose", False))
 
     def describe(self):
-        return {"kind": self.kind, "path": self.path, "sha256": self.sha256, "greedy": self.greedy}
+        described = {"kind": self.kind, "path": self.path, "sha256": self.sha256, "greedy": self.greedy}
+        if self.observes_pose:
+            described["uses_pose"] = True
+        return described
 
     def reset(self, env, robots, seed):
         import torch
@@ -197,7 +205,7 @@ class AgentTeam(TeamPolicy):
         head_max = float(self.model.head_max)
         with torch.inference_mode():
             landmarks, objects = streams_from_padded(batch)
-            previous, proprioception = side_inputs(batch, head_max)
+            previous, proprioception = side_inputs(batch, head_max, pose=self.observes_pose)
             step = self.model(landmarks, objects, previous, proprioception, self.state)
             actions = self.model.act(step, generator=self.generator, greedy=self.greedy).numpy()
         self.state = step.state
@@ -325,7 +333,7 @@ def evaluate(evaluated: str | TeamPolicy, opponent: str | TeamPolicy, *, episode
     if sides not in SIDES:
         raise ValueError(f"sides must be one of {', '.join(SIDES)}, got {sides!r}")
     config = dict(env_config or {})
-    for key in ("players_per_team", "observation", "perception", "render_mode"):
+    for key in ("players_per_team", "observation", "perception", "render_mode", "localization"):
         if key in config:
             raise ValueError(f"env_config must not set {key!r}; it is an argument of evaluate")
     ours, theirs = make_team_policy(evaluated, greedy), make_team_policy(opponent, greedy)
@@ -348,8 +356,10 @@ def _evaluate(ours: TeamPolicy, theirs: TeamPolicy, evaluated: str | TeamPolicy,
               episodes: int, seeds: list[int], players_per_team: int, perception: Any, sides: str, greedy: bool,
               config: dict[str, Any], progress: Callable[[str], None] | None) -> dict[str, Any]:
     from dynenv_ros.envs.robocup_v0 import parallel_env
-    env = parallel_env(players_per_team=players_per_team, observation="padded", perception=perception, **config)
-    env.observations.localization = ours.needs_localization or theirs.needs_localization
+    observed = ours.observes_pose or theirs.observes_pose
+    env = parallel_env(players_per_team=players_per_team, observation="padded", perception=perception,
+                       localization="estimate" if observed else "none", **config)
+    env.observations.localization = ours.needs_localization or theirs.needs_localization or observed
     records = []
     for seed in seeds:
         for episode in range(int(episodes)):

@@ -14,11 +14,13 @@ from dynenv_ros.soccer.config import SoccerConfig
 
 
 def make_agent(cfg: TrainConfig) -> DynEnvAgent:
-    """The untrained agent a run of ``cfg`` trains (its scenario, width, head and action mode)."""
+    """The untrained agent a run of ``cfg`` trains (its scenario, width, head and action mode, and whether it takes
+    the pose estimate: ``localization: estimate``)."""
     if cfg.driving:
         return DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
     motion = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode}).motion
-    return DynEnvAgent(cfg.feature_size, cfg.head_mode, motion.head_units, motion.head_max_delta)
+    return DynEnvAgent(cfg.feature_size, cfg.head_mode, motion.head_units, motion.head_max_delta,
+                       uses_pose=cfg.localization == "estimate")
 
 
 def policy_from_training_checkpoint(path: str | Path) -> tuple[DynEnvAgent, dict[str, Any]]:

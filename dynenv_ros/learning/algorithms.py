@@ -86,18 +86,20 @@ def _flat(x: Tensor) -> Tensor:
     return x.reshape(-1, *x.shape[2:])
 
 
-def sequence_inputs(obs: Mapping[str, Tensor], head_max: float | None, spec: LayoutSpec = SOCCER
-                    ) -> tuple[StreamBatch, StreamBatch, Tensor, Tensor]:
-    """The network's inputs for observations with (T, B) leading axes (``spec``: the layout's, soccer's default)."""
+def sequence_inputs(obs: Mapping[str, Tensor], head_max: float | None, spec: LayoutSpec = SOCCER,
+                    pose: bool = False) -> tuple[StreamBatch, StreamBatch, Tensor, Tensor]:
+    """The network's inputs for observations with (T, B) leading axes (``spec``: the layout's, soccer's default;
+    ``pose``: the agent's ``uses_pose``)."""
     T, B = obs["game"].shape[:2]
     flat = {k: _flat(v) for k, v in obs.items()}
-    previous, self_state = side_inputs(flat, head_max, spec)
+    previous, self_state = side_inputs(flat, head_max, spec, pose=pose)
     landmarks, objects = streams_from_padded(obs, spec)
     return landmarks, objects, previous.reshape(T, B, -1), self_state.reshape(T, B, -1)
 
 
 def run_sequence(agent: Any, obs: Mapping[str, Tensor], state: tuple[Tensor, ...], starts: Tensor) -> Any:
-    landmarks, objects, previous, self_state = sequence_inputs(obs, agent.head_max, layout_spec(agent))
+    landmarks, objects, previous, self_state = sequence_inputs(obs, agent.head_max, layout_spec(agent),
+                                                               getattr(agent, "uses_pose", False))
     return agent.forward_sequence(landmarks, objects, previous, self_state, state, starts)
 
 

@@ -21,7 +21,8 @@ Rules worth knowing:
   ``scripted`` (the scripted driver; soccer's is ``chaser``), without teacher-driven worlds. Soccer-only settings
   are refused there with the key named: ``teacher: chaser``, ``teacher_driven_worlds``, ``opponent`` other than
   ``self``, ``variant: recon``, ``use_localization`` / ``use_reconstruction``, ``pretrained_encoder``,
-  ``privileged_pose_seeding`` (driving has no learning targets: no pose, no reconstruction). ``action_mode`` and
+  ``privileged_pose_seeding`` (driving has no learning targets: no pose, no reconstruction), ``localization:
+  estimate`` (no self-localization). ``action_mode`` and
   ``n_cars`` other than their defaults are refused for ``scenario: robocup``.
 * ``ltp_horizon <= rollout_length`` is required only when the LTP loss is on; ``ppo_minibatches`` may not exceed
   the number of learning robot sequences (``learning_robots``) only when ``algorithm`` is ppo.
@@ -47,6 +48,7 @@ TEACHER_KINDS = ("chaser", "eager_chaser")     # one shared network has no slot 
 DRIVING_TEACHER_KINDS = ("scripted",)   # the scripted driver (driving.scripted.ScriptedDriver)
 HEAD_MODES = ("discrete", "continuous")
 PERCEPTIONS = ("realistic", "dynenv", "none")        # the presets of dynenv_ros.perception (config/perception/)
+LOCALIZATIONS = ("none", "estimate")                # envs.soccer_observations.LOCALIZATION_OPTIONS
 SCENARIOS = ("robocup", "driving")
 ACTION_MODES = ("discrete", "continuous")           # driving's actor heads (agent/driving_actions.py)
 MAX_CARS = 10
@@ -133,6 +135,11 @@ class TrainConfig:
     players_per_team: int = _f(2, f"Robots per team, 1..{MAX_PLAYERS_PER_TEAM} (paper: 2, i.e. 2v2).")
     num_envs: int = _f(8, "Parallel worlds (paper: 8).")
     perception: str = _f("realistic", f"Perception preset: one of {PERCEPTIONS}.")
+    localization: str = _f("none", "Self-localization as an input: 'none' (paper) or 'estimate' (the worlds run the "
+                                   "emulated localization, the observations carry pose_estimate (7 values, team "
+                                   "frame: envs/pose_features.py) and the agent takes it as an input beside its "
+                                   "self state; checkpoints record it as uses_pose). Not use_localization, which "
+                                   "is the pose-regression loss.")
     backend: str = _f("auto", "Vector env backend: 'auto' (worker processes for many worlds), 'inprocess', "
                               "'subprocess'.")
 
@@ -297,6 +304,8 @@ class TrainConfig:
                 raise ConfigError(key, why + "has no learning targets (no pose, no reconstruction heads)")
         if self.pretrained_encoder:
             raise ConfigError("pretrained_encoder", why + "has no reconstruction encoder to load")
+        if self.localization != "none":
+            raise ConfigError("localization", why + "has no self-localization estimate (keep localization: none)")
         if self.privileged_pose_seeding:
             raise ConfigError("privileged_pose_seeding", why + "has no pose")
 
@@ -369,6 +378,7 @@ class TrainConfig:
                               "and the curiosity heads one-hot encode the 7 head choices (the continuous head runs "
                               "in the policy node and the env, not in the trainer yet)")
         _choice("perception", self.perception, PERCEPTIONS)
+        _choice("localization", self.localization, LOCALIZATIONS)
         _choice("scenario", self.scenario, SCENARIOS)
         _choice("action_mode", self.action_mode, ACTION_MODES)
         if not 1 <= self.n_cars <= MAX_CARS:

@@ -131,7 +131,7 @@ def policy_step(agent: DynEnvAgent, obs: Mapping[str, Any], state: State):
     device = device_of(agent)
     spec = layout_spec(agent)
     landmarks, objects = streams_from_padded(obs, spec)
-    previous, self_state = side_inputs(obs, agent.head_max, spec)
+    previous, self_state = side_inputs(obs, agent.head_max, spec, pose=getattr(agent, "uses_pose", False))
     if device.type != "cpu":
         landmarks, objects = (type(b)(b.features.to(device), b.kind.to(device), b.mask.to(device))
                               for b in (landmarks, objects))

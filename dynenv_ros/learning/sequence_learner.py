@@ -59,6 +59,10 @@ class SequenceLearner:
                              f"got {batch_sequences}")
         if max_policy_lag < 0:
             raise ConfigError("max_policy_lag", f"must be >= 0, got {max_policy_lag}")
+        if cfg.localization != "none":
+            raise ConfigError("localization", "'estimate' trains on the simulator's pose estimates; experience "
+                                              "over ROS (the trainer node, --from-bag) carries none yet: use "
+                                              "localization: none here")
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.batch_sequences, self.max_policy_lag = batch_sequences, max_policy_lag

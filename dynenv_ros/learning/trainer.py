@@ -127,6 +127,10 @@ class Trainer:
     def _load_encoder(self, path: str) -> None:
         """The localization and object streams (and reconstruction head) of a pretrained policy file."""
         pretrained, _ = checkpoints.load_policy(path)
+        if getattr(pretrained, "uses_pose", False) != self.learner.agent.uses_pose:
+            raise ValueError(f"pretrained encoder {path} {'takes' if pretrained.uses_pose else 'does not take'} the "
+                             f"pose estimate and this run's agent (localization: {self.cfg.localization}) "
+                             f"{'does' if self.learner.agent.uses_pose else 'does not'}: the streams' inputs differ")
         wanted = ("localization.", "pose_head.", "objects.", "reconstruction.")
         state = {k: v for k, v in pretrained.state_dict().items() if k.startswith(wanted)}
         missing = self.learner.agent.load_state_dict(state, strict=False)

@@ -54,7 +54,8 @@ def make_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.nda
         return env, np.arange(cfg.n_cars)
     env = SoccerVectorEnv(num_envs, backend=backend, config=soccer_config(cfg), observation="padded",
                           perception=cfg.perception, targets=needs_targets(cfg),
-                          scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None, teacher=cfg.teacher)
+                          scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None, teacher=cfg.teacher,
+                          localization=cfg.localization)
     n = cfg.players_per_team
     return env, (np.arange(2 * n) if cfg.opponent == "self" else np.arange(n))
 
