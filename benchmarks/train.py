@@ -29,6 +29,13 @@ from typing import Any
 from benchmarks.timing import Clock, combine, format_stat, print_table, stat, table_rows
 
 
+
+def _learner_split(split: dict[str, float], stats: dict[str, float], update_seconds: float) -> None:
+    """Book one update's seconds: forward/backward and optimizer as the update measured them, the rest as other."""
+    split["forward_backward"] += stats["seconds_forward_backward"]
+    split["optimizer"] += stats["seconds_optimizer"]
+    split["other"] += update_seconds - stats["seconds_forward_backward"] - stats["seconds_optimizer"]
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default="paper_a2c", help="preset name or YAML (as dynenv-train)")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
@@ -71,9 +78,7 @@ def _measure_sync(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
             t2 = time.perf_counter()
             if k >= args.warmup:
                 split["rollout"] += t1 - t0
-                split["forward_backward"] += stats["seconds_forward_backward"]
-                split["optimizer"] += stats["seconds_optimizer"]
-                split["other"] += (t2 - t1) - stats["seconds_forward_backward"] - stats["seconds_optimizer"]
+                _learner_split(split, stats, t2 - t1)
         span = clock.read() - start
         wall, cpu = span.wall_s, span.cpu_s
         trainer.env.close()
@@ -115,9 +120,7 @@ def _measure_async(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
                     steps += batch.env_steps
                     lags.append(batch.scalars["async/policy_lag"])
                     split["wait"] += t1 - t0
-                    split["forward_backward"] += stats["seconds_forward_backward"]
-                    split["optimizer"] += stats["seconds_optimizer"]
-                    split["other"] += (t2 - t1) - stats["seconds_forward_backward"] - stats["seconds_optimizer"]
+                    _learner_split(split, stats, t2 - t1)
             span = clock.read() - start
             wall, cpu = span.wall_s, span.cpu_s
             robots = batch.rollout.robots
