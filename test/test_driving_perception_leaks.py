@@ -6,6 +6,10 @@ scored on odd ones: geometry alone (per class: distance, bearing, the distance t
 report of the frame — rule 4 of the paper puts false pedestrians there on purpose) and geometry plus every other
 feature but the confidence (heading, size, team, subtype, sighting bits). The chance level is the geometry's held-out
 AUC (docs/perception.md records it); the extra features must not raise it beyond 3 bootstrap standard errors.
+
+Every expectation here is computed independently of ``perception.audit`` (test/leak_reference.py, shared with the
+soccer leak test: labels, brute-force nearest distances, AUCs by counting pairs, scipy's logistic fits), and
+``driving_leak_check`` (the tool that prints docs/perception.md's figures) must agree with them.
 """
 from __future__ import annotations
 
@@ -13,11 +17,12 @@ import math
 
 import numpy as np
 import pytest
+from leak_reference import false_mask, held_out_comparison, nearest_report, pair_auc, standardised
 
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.vision import DrivingVision
 from dynenv_ros.driving.world import DrivingWorld
-from dynenv_ros.perception.audit import _logistic_fit, auc
+from dynenv_ros.perception.audit import driving_leak_check
 from dynenv_ros.perception.detections import FEATURE_COLUMNS, as_features
 from dynenv_ros.perception.driving_params import load_driving_preset
 
@@ -49,26 +54,15 @@ def reports():
     return rows[point], views[point]
 
 
-def _false(rows):
-    return (rows["true_id"] == -1) | (rows["true_class"] != rows["class_id"])
-
-
 def _nearest_crowd(rows, views):
     """Distance to the nearest other car or obstacle report of the same view (inf if none)."""
-    out = np.full(len(rows), np.inf)
-    crowd = np.isin(rows["class_id"], (CAR, OBSTACLE))
-    x, y = rows["x"].astype(float), rows["y"].astype(float)
-    for v in np.unique(views):
-        at = np.flatnonzero(views == v)
-        c = at[crowd[at]]
-        if len(c):
-            gap = np.hypot(x[at, None] - x[None, c], y[at, None] - y[None, c])
-            gap[at[:, None] == c[None, :]] = np.inf
-            out[at] = gap.min(axis=1)
-    return out
+    return nearest_report(rows, views, (CAR, OBSTACLE))
 
 
 def _design(rows, near, extra):
+    """Per class: distance (/68 m) and its square and cube, cos and sin of the bearing and cos of twice it, the
+    distance n to the nearest car or obstacle report (capped at 10 m, /10), n², n < 2 m and n < 4 m; then the
+    ``extra`` features; standardised, with an intercept."""
     f = as_features(rows)
     d = np.hypot(rows["x"], rows["y"]).astype(float) / 68.0
     b = np.arctan2(rows["y"], rows["x"]).astype(float)
@@ -80,36 +74,24 @@ def _design(rows, near, extra):
                     near < 2.0, near < 4.0]
         cols += [ind * g for g in geometry]
         cols += [ind * f[:, FEATURE_COLUMNS.index(name)] for name in extra]
-    x = np.column_stack(cols)
-    std = x.std(axis=0)
-    x = (x[:, std > 0] - x[:, std > 0].mean(axis=0)) / std[std > 0]
-    return np.column_stack((np.ones(len(x)), x))
-
-
-def audit(rows, views):
-    """(geometry AUC, geometry + other features AUC, bootstrap SE of the difference, false reports, reports)."""
-    label = _false(rows)
-    near = _nearest_crowd(rows, views)
-    train = views % 2 == 0
-    scores = []
-    for extra in ((), OTHER):
-        x = _design(rows, near, extra)
-        scores.append(x[~train] @ _logistic_fit(x[train], label[train].astype(float)))
-    test = label[~train]
-    rng = np.random.default_rng(0)
-    diffs = []
-    for _ in range(30):
-        pick = rng.integers(0, len(test), len(test))
-        diffs.append(auc(scores[1][pick], test[pick]) - auc(scores[0][pick], test[pick]))
-    return auc(scores[0], test), auc(scores[1], test), float(np.std(diffs)), int(label.sum()), len(rows)
+    return standardised(cols)
 
 
 def test_no_feature_but_the_confidence_adds_to_what_the_geometry_says(reports):
     rows, views = reports
-    geometry, everything, se, false, _ = audit(rows, views)
-    assert false > 1000, false
+    label = false_mask(rows)
+    assert label.sum() > 1000, label.sum()
+    near, train = _nearest_crowd(rows, views), views % 2 == 0           # whole frames on one side
+    geometry, everything, se = held_out_comparison(*(_design(rows, near, extra) for extra in ((), OTHER)), label,
+                                                   train)
     assert 0.55 < geometry < 0.98, geometry              # the chance level the geometry gives (documented)
     assert everything - geometry < 3 * se + 0.002, (geometry, everything, se)
+    # The audit tool finds the same.
+    check = driving_leak_check(rows, views, OTHER)
+    assert (check.false_reports, check.reports) == (label.sum(), len(rows))
+    assert check.geometry_auc == pytest.approx(geometry, abs=1e-3), (check.geometry_auc, geometry)
+    assert check.extended_auc == pytest.approx(everything, abs=1e-3), (check.extended_auc, everything)
+    assert check.difference_se == pytest.approx(se, abs=1e-3), (check.difference_se, se)
 
 
 def test_sighting_bits_follow_the_report_for_real_and_false(reports):
@@ -125,7 +107,7 @@ def test_sighting_bits_follow_the_report_for_real_and_false(reports):
 
 def test_made_up_cars_and_obstacles_look_like_real_ones(reports):
     rows, _ = reports
-    label = _false(rows)
+    label = false_mask(rows)
     for cls in (CAR, OBSTACLE, PEDESTRIAN):
         of = rows["class_id"] == cls
         fake, real = rows["size_x"][of & label].astype(float), rows["size_x"][of & ~label].astype(float)
@@ -139,10 +121,10 @@ def test_made_up_cars_and_obstacles_look_like_real_ones(reports):
 
 def test_confidence_ranks_as_d_prime_allows_and_is_calibrated(reports):
     rows, _ = reports
-    label = _false(rows)
+    label = false_mask(rows)
     expected = 0.5 * (1 + math.erf(1.5 / 2))                 # Φ(d'/√2) with d' = 1.5: 0.856
     of = rows["class_id"] == CAR
-    measured = auc(-rows["confidence"][of].astype(float), label[of])
+    measured = pair_auc(-rows["confidence"][of].astype(float), label[of])
     assert abs(measured - expected) < 0.05, measured
 
 

@@ -9,10 +9,10 @@ every other feature but the confidence. The second must do no better than the fi
 (docs/perception.md gives the measured chance level). The confidence is informative by design, exactly as far as the
 documented separation d' allows.
 
-Every expectation here is computed in this file — the labels from the simulator's ``true_id``/``true_class``, the
-distances to the nearest ball or robot report by brute force over each frame's pairs, AUCs by counting pairs, the
-regressions fitted by scipy — not with ``perception.audit``, whose ``leak_check`` (the tool that prints
-docs/perception.md's figures) must agree with them.
+Every expectation here is computed independently of ``perception.audit`` (test/leak_reference.py, shared with the
+driving leak test) — the labels from the simulator's ``true_id``/``true_class``, the distances to the nearest ball or
+robot report by brute force over each frame's pairs, AUCs by counting pairs, the regressions fitted by scipy — and
+``leak_check`` (the tool that prints docs/perception.md's figures) must agree with them.
 """
 from __future__ import annotations
 
@@ -20,8 +20,7 @@ import math
 
 import numpy as np
 import pytest
-
-from scipy.optimize import minimize
+from leak_reference import false_mask, held_out_comparison, nearest_report, pair_auc, standardised
 
 from dynenv_ros.envs.soccer_observations import perception_params
 from dynenv_ros.perception.audit import leak_check
@@ -68,33 +67,8 @@ def _collect(preset: str, periods: int, seed: int) -> tuple[np.ndarray, np.ndarr
     return rows[point], views[point]
 
 
-def _false(rows: np.ndarray) -> np.ndarray:
-    """False or confused: no object behind the report (``true_id`` −1), or an object of another class."""
-    return (rows["true_id"] == -1) | (rows["true_class"] != rows["class_id"])
-
-
 def _nearest_ball_or_robot(rows: np.ndarray, views: np.ndarray) -> np.ndarray:
-    """Distance from each report to the nearest other ball or robot report of its view (inf if none), every pair
-    of every view (``views`` sorted) compared."""
-    out = np.full(len(rows), np.inf)
-    x, y = rows["x"].astype(float), rows["y"].astype(float)
-    dynamic = np.isin(rows["class_id"], (BALL, ROBOT))
-    for at in np.split(np.arange(len(rows)), np.flatnonzero(np.diff(views)) + 1):
-        others = at[dynamic[at]]
-        if len(others):
-            gap = np.hypot(x[at, None] - x[others], y[at, None] - y[others])
-            gap[at[:, None] == others] = np.inf
-            out[at] = gap.min(axis=1)
-    return out
-
-
-def _auc(score: np.ndarray, positive: np.ndarray) -> float:
-    """P(a positive scores above a negative) + ½·P(a tie), by counting for each positive the negatives below it and
-    level with it."""
-    negatives, positives = np.sort(score[~positive]), score[positive]
-    below = np.searchsorted(negatives, positives, side="left")
-    level = np.searchsorted(negatives, positives, side="right") - below
-    return float((below.sum() + 0.5 * level.sum()) / (len(positives) * len(negatives)))
+    return nearest_report(rows, views, (BALL, ROBOT))
 
 
 def _design(rows: np.ndarray, nearest: np.ndarray, extra: tuple[str, ...]) -> np.ndarray:
@@ -110,29 +84,7 @@ def _design(rows: np.ndarray, nearest: np.ndarray, extra: tuple[str, ...]) -> np
         of = (rows["class_id"] == cls).astype(float)
         geometry = [np.ones(len(rows)), d, d ** 2, d ** 3, b, b ** 2, b ** 3, d * b, n, n ** 2, n < NEARBY_DISTANCE]
         columns += [of * g for g in geometry] + [of * features[:, FEATURE_COLUMNS.index(f)] for f in extra]
-    x = np.column_stack(columns)
-    varies = x.std(axis=0) > 0
-    x = (x[:, varies] - x[:, varies].mean(axis=0)) / x[:, varies].std(axis=0)
-    return np.column_stack((np.ones(len(x)), x))
-
-
-def _held_out_scores(x: np.ndarray, label: np.ndarray, train: np.ndarray, ridge: float = 1e-3) -> np.ndarray:
-    """Logistic regression fitted on the ``train`` rows (negative log-likelihood + ridge/2·|w|², minimised by
-    scipy's exact trust-region method), its logits on the others."""
-    xt, yt = x[train], label[train].astype(float)
-
-    def objective(w):
-        z = xt @ w
-        return (np.sum(np.logaddexp(0.0, z) - yt * z) + 0.5 * ridge * w @ w,
-                xt.T @ (1.0 / (1.0 + np.exp(-z)) - yt) + ridge * w)
-
-    def hessian(w):
-        p = 1.0 / (1.0 + np.exp(-(xt @ w)))
-        return (xt * (p * (1 - p))[:, None]).T @ xt + ridge * np.eye(len(w))
-
-    fit = minimize(objective, np.zeros(x.shape[1]), jac=True, hess=hessian, method="trust-exact")
-    assert fit.success, fit.message
-    return x[~train] @ fit.x
+    return standardised(columns)
 
 
 @pytest.fixture(scope="module")
@@ -148,19 +100,11 @@ def dynenv():
 @pytest.mark.parametrize("preset", ["realistic", "dynenv"])
 def test_no_feature_but_the_confidence_adds_to_what_the_geometry_says(preset, request):
     rows, views = request.getfixturevalue(preset)
-    label = _false(rows)
+    label = false_mask(rows)
     assert label.sum() > 2000                             # enough false reports for the comparison to mean much
     nearest, train = _nearest_ball_or_robot(rows, views), views % 2 == 0     # whole frames on one side
-    test = label[~train]
-    geometry_score, everything_score = (_held_out_scores(_design(rows, nearest, extra), label, train)
-                                        for extra in ((), OTHER_FEATURES))
-    geometry, everything = _auc(geometry_score, test), _auc(everything_score, test)
-    rng = np.random.default_rng(0)
-    differences = []
-    for _ in range(30):                                   # bootstrap over the held-out reports
-        pick = rng.integers(0, len(test), len(test))
-        differences.append(_auc(everything_score[pick], test[pick]) - _auc(geometry_score[pick], test[pick]))
-    se = float(np.std(differences))
+    geometry, everything, se = held_out_comparison(*(_design(rows, nearest, extra) for extra in ((), OTHER_FEATURES)),
+                                                   label, train)
     # The chance level the geometry gives (docs/perception.md: 0.87-0.89 realistic) is far from perfect...
     assert 0.6 < geometry < 0.95
     # ... and flags, sizes, headings, teams, states and shapes add nothing to it.
@@ -174,11 +118,11 @@ def test_no_feature_but_the_confidence_adds_to_what_the_geometry_says(preset, re
 
 def test_the_confidence_separates_correct_and_false_reports_as_far_as_d_prime_allows(realistic):
     rows, _ = realistic
-    label = _false(rows)
+    label = false_mask(rows)
     expected = 0.5 * (1 + math.erf(SEPARATION / math.sqrt(2) / math.sqrt(2)))     # Φ(d'/√2) = 0.856
     for cls in (BALL, ROBOT, GOALPOST):
         of = rows["class_id"] == cls
-        measured = _auc(-rows["confidence"][of].astype(float), label[of])
+        measured = pair_auc(-rows["confidence"][of].astype(float), label[of])
         n_false, n_true = label[of].sum(), (~label[of]).sum()
         # Hanley & McNeil's standard error of an AUC
         q1, q2 = expected / (2 - expected), 2 * expected ** 2 / (1 + expected)
@@ -189,7 +133,7 @@ def test_the_confidence_separates_correct_and_false_reports_as_far_as_d_prime_al
 
 def test_the_confidence_is_calibrated_per_class_in_random_play(realistic):
     rows, _ = realistic
-    correct = ~_false(rows)
+    correct = ~false_mask(rows)
     for cls, prior in REALISTIC_PRIOR.items():
         of = rows["class_id"] == cls
         confidence, share = rows["confidence"][of].astype(float), correct[of].mean()
@@ -214,7 +158,7 @@ def test_sighting_bits_follow_the_report_by_one_rule_for_real_and_false(preset, 
     expected = ((d > near) * DISTANT
                 | (np.abs(np.arctan2(rows["y"], rows["x"])) > HALF_FOV - reach) * PARTIAL
                 | (nearest < NEARBY_DISTANCE) * NEARBY)
-    label = _false(rows)
+    label = false_mask(rows)
     mismatch = rows["sighting"] != expected
     assert mismatch.mean() < 1e-3, (mismatch[label].mean(), mismatch[~label].mean())
     # the issue's examples: false reports beyond their near range are DISTANT; balls at robots' feet are NEARBY
@@ -225,7 +169,7 @@ def test_sighting_bits_follow_the_report_by_one_rule_for_real_and_false(preset, 
 
 def test_false_balls_have_the_size_distribution_of_real_balls(realistic):
     rows, _ = realistic
-    label = _false(rows)
+    label = false_mask(rows)
     balls = rows["class_id"] == BALL
     false_size, real_size = rows["size_x"][balls & label], rows["size_x"][balls & ~label]
     assert len(np.unique(false_size)) > len(false_size) // 2           # not one nominal value

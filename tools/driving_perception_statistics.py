@@ -129,12 +129,13 @@ def main():
     if not args.timing:
         counts()
         shares()
-        import test_driving_perception_leaks as leaks
-        rows, views = leaks.reports.__wrapped__()
-        geometry, everything, se, false, total = leaks.audit(rows, views)
-        print(f"leak audit (realistic, magnitude 3, 4 cars, 1500 periods): {total} reports, {false} false; "
-              f"AUC geometry {geometry:.3f}, + other features {everything:.3f}, difference "
-              f"{everything - geometry:+.4f} (SE {se:.4f})")
+        import test_driving_perception_leaks as leaks      # the test's reports: the figures it asserts
+        from dynenv_ros.perception.audit import driving_leak_check
+        check = driving_leak_check(*leaks.reports.__wrapped__())
+        print(f"leak audit (realistic, magnitude 3, 4 cars, 1500 periods): {check.reports} reports, "
+              f"{check.false_reports} false; AUC geometry {check.geometry_auc:.3f}, + other features "
+              f"{check.extended_auc:.3f}, difference {check.extended_auc - check.geometry_auc:+.4f} "
+              f"(SE {check.difference_se:.4f})")
     timing()
 
 

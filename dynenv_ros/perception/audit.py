@@ -6,6 +6,11 @@ on the geometry alone — where the report is, and how close it is to the frame'
 information the paper's rule 4 puts there on purpose) — and one on the geometry plus the chosen extra features. A
 preset leaks when the extra features raise the held-out AUC beyond the sampling error. ``tools/perception_statistics.py``
 prints the figures docs/perception.md records; ``test/test_perception_leaks.py`` asserts them.
+
+``driving_leak_check`` is the same audit for the driving scenario's car, pedestrian and obstacle reports (the
+geometry: distance, bearing and the distance to the frame's nearest car or obstacle report, where rule 4 puts false
+pedestrians); ``tools/driving_perception_statistics.py`` prints its figures, ``test/test_driving_perception_leaks.py``
+asserts them. Both tests compute their expectations independently (``test/leak_reference.py``).
 """
 from __future__ import annotations
 
@@ -21,6 +26,10 @@ POINT_CLASSES = (ObjectClass.BALL, ObjectClass.ROBOT, ObjectClass.GOALPOST, Obje
 NON_GEOMETRIC_FEATURES = ("cos_yaw", "sin_yaw", "size_x", "size_y", "team", "subtype", "fallen", "penalized",
                           "distant", "partial", "nearby")
 NEARBY_FEATURE_DISTANCE = 0.35
+DRIVING_POINT_CLASSES = (ObjectClass.CAR, ObjectClass.PEDESTRIAN, ObjectClass.OBSTACLE)
+DRIVING_CROWD_CLASSES = (ObjectClass.CAR, ObjectClass.OBSTACLE)
+DRIVING_NON_GEOMETRIC_FEATURES = ("cos_yaw", "sin_yaw", "size_x", "size_y", "team", "subtype", "distant", "partial",
+                                  "nearby")
 
 
 def false_reports(rows: np.ndarray) -> np.ndarray:
@@ -28,11 +37,11 @@ def false_reports(rows: np.ndarray) -> np.ndarray:
     return (rows["true_id"] == -1) | (rows["true_class"] != rows["class_id"])
 
 
-def nearest_dynamic(rows: np.ndarray, views: np.ndarray) -> np.ndarray:
-    """Distance from each report to the nearest other ball or robot report of its view (inf if none); ``views``
-    (k,) sorted, one id per view."""
+def nearest_of(rows: np.ndarray, views: np.ndarray, classes: tuple[int, ...]) -> np.ndarray:
+    """Distance from each report to the nearest other report of one of ``classes`` in its view (inf if none);
+    ``views`` (k,) sorted, one id per view."""
     out = np.full(len(rows), np.inf)
-    dynamic = np.flatnonzero(np.isin(rows["class_id"], (ObjectClass.BALL, ObjectClass.ROBOT)))
+    dynamic = np.flatnonzero(np.isin(rows["class_id"], classes))
     if not len(dynamic):
         return out
     first, last = np.searchsorted(dynamic, np.searchsorted(views, views)), np.searchsorted(
@@ -44,6 +53,20 @@ def nearest_dynamic(rows: np.ndarray, views: np.ndarray) -> np.ndarray:
         gap = np.hypot(x - x[other], y - y[other])
         out = np.where((at < last) & (other != np.arange(len(rows))), np.minimum(out, gap), out)
     return out
+
+
+def nearest_dynamic(rows: np.ndarray, views: np.ndarray) -> np.ndarray:
+    """Distance from each report to the nearest other ball or robot report of its view (inf if none)."""
+    return nearest_of(rows, views, (ObjectClass.BALL, ObjectClass.ROBOT))
+
+
+def _standardised(columns: list[np.ndarray]) -> np.ndarray:
+    """The columns that vary, standardised, after an intercept column."""
+    x = np.column_stack(columns)
+    mean, std = x.mean(axis=0), x.std(axis=0)
+    varies = std > 0
+    x = (x[:, varies] - mean[varies]) / std[varies]
+    return np.column_stack((np.ones(len(x)), x))
 
 
 def _design(rows: np.ndarray, near: np.ndarray, extra: tuple[str, ...]) -> np.ndarray:
@@ -58,11 +81,22 @@ def _design(rows: np.ndarray, near: np.ndarray, extra: tuple[str, ...]) -> np.nd
                     n < NEARBY_FEATURE_DISTANCE]
         columns += [indicator * g for g in geometry]
         columns += [indicator * features[:, FEATURE_COLUMNS.index(name)] for name in extra]
-    x = np.column_stack(columns)
-    mean, std = x.mean(axis=0), x.std(axis=0)
-    varies = std > 0
-    x = (x[:, varies] - mean[varies]) / std[varies]
-    return np.column_stack((np.ones(len(x)), x))
+    return _standardised(columns)
+
+
+def _driving_design(rows: np.ndarray, near: np.ndarray, extra: tuple[str, ...]) -> np.ndarray:
+    features = as_features(rows)
+    d = np.hypot(rows["x"], rows["y"]).astype(float) / 68.0
+    b = np.arctan2(rows["y"], rows["x"]).astype(float)
+    n = np.minimum(near, 10.0) / 10.0
+    columns = []
+    for cls in DRIVING_POINT_CLASSES:
+        indicator = (rows["class_id"] == cls).astype(float)
+        geometry = [np.ones(len(rows)), d, d ** 2, d ** 3, np.cos(b), np.sin(b), np.cos(2 * b), n, n ** 2,
+                    near < 2.0, near < 4.0]
+        columns += [indicator * g for g in geometry]
+        columns += [indicator * features[:, FEATURE_COLUMNS.index(name)] for name in extra]
+    return _standardised(columns)
 
 
 def _logistic_fit(x: np.ndarray, y: np.ndarray, ridge: float = 1e-3, iterations: int = 10) -> np.ndarray:
@@ -97,12 +131,30 @@ def leak_check(rows: np.ndarray, views: np.ndarray, extra: tuple[str, ...] = NON
     odd views test, so whole frames stay on one side)."""
     point = np.isin(rows["class_id"], POINT_CLASSES)
     rows, views = rows[point], views[point]
+    return _held_out_check(rows, views, nearest_dynamic(rows, views), _design, tuple(extra), bootstrap, seed)
+
+
+def driving_leak_check(rows: np.ndarray, views: np.ndarray,
+                       extra: tuple[str, ...] = DRIVING_NON_GEOMETRIC_FEATURES, bootstrap: int = 30,
+                       seed: int = 0) -> LeakCheck:
+    """``leak_check`` for driving: the car, pedestrian and obstacle reports of ``rows`` (view ids ``views``,
+    sorted), the geometry per class being the distance, the bearing and the distance to the view's nearest other
+    car or obstacle report."""
+    point = np.isin(rows["class_id"], DRIVING_POINT_CLASSES)
+    rows, views = rows[point], views[point]
+    near = nearest_of(rows, views, DRIVING_CROWD_CLASSES)
+    return _held_out_check(rows, views, near, _driving_design, tuple(extra), bootstrap, seed)
+
+
+def _held_out_check(rows: np.ndarray, views: np.ndarray, near: np.ndarray, design, extra: tuple[str, ...],
+                    bootstrap: int, seed: int) -> LeakCheck:
+    """Fit the geometry-only and the geometry-plus-``extra`` regressions (``design(rows, near, columns)``) on the
+    even views, score the odd ones; the AUCs and the bootstrap SE of their difference over the held-out reports."""
     label = false_reports(rows)
-    near = nearest_dynamic(rows, views)
     train = views % 2 == 0
     scores = []
-    for columns in ((), tuple(extra)):
-        x = _design(rows, near, columns)
+    for columns in ((), extra):
+        x = design(rows, near, columns)
         scores.append(x[~train] @ _logistic_fit(x[train], label[train].astype(float)))
     test_label = label[~train]
     rng = np.random.default_rng(seed)
