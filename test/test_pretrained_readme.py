@@ -1,0 +1,59 @@
+"""policy_node/pretrained/README.md is what tools/pretrained_readme.py makes of the files beside it (so it cannot
+drift from the policy), names the policy file's sha256, and the generator refuses the evaluation of another policy."""
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+from tool_scripts import load_tool
+
+from dynenv_ros.agent.checkpoint import sha256
+
+
+@pytest.fixture(scope="module")
+def tool():
+    return load_tool("pretrained_readme")
+
+
+@pytest.fixture(scope="module")
+def folder(tool):
+    return tool.ROOT / tool.FOLDER
+
+
+def test_the_committed_readme_is_what_the_files_give(tool, folder):
+    try:
+        expected = tool.render()
+    except tool.GitUnknown as error:         # a clone without the history the README's fix check reads
+        pytest.skip(str(error))
+    assert (folder / "README.md").read_text() == expected, "run .venv/bin/python tools/pretrained_readme.py"
+
+
+def test_the_readme_names_the_policy_files_sha256_and_its_evaluations_are_of_that_file(tool, folder):
+    digest, text = sha256(folder / tool.POLICY), (folder / "README.md").read_text()
+    assert f"sha256 `{digest}`" in text
+    evaluations = sorted((folder / tool.EVAL_DIR).glob("*.json"))
+    assert {path.stem for path in evaluations} >= {"vs_random", "vs_scripted", "vs_perceiving"}
+    for path in evaluations:
+        assert json.loads(path.read_text())["evaluated"]["sha256"] == digest, path
+        assert f"--out policy_node/pretrained/eval/{path.name}" in text
+
+
+def test_an_evaluation_of_another_policy_is_refused(tool, folder, tmp_path):
+    copy = tmp_path / tool.FOLDER
+    shutil.copytree(folder, copy)
+    path = copy / tool.EVAL_DIR / "vs_random.json"
+    result = json.loads(path.read_text())
+    result["evaluated"]["sha256"] = "0" * 64
+    path.write_text(json.dumps(result))
+    with pytest.raises(tool.ReadmeError, match=r"vs_random.json evaluates another policy: its sha256 is 0{64}"):
+        tool.render(root=tmp_path)
+
+
+def test_check_mode_reports_a_stale_readme(tool, folder, tmp_path, monkeypatch, capsys):
+    copy = tmp_path / tool.FOLDER
+    shutil.copytree(folder, copy)
+    monkeypatch.setattr(tool, "render", lambda: "something else\n")
+    monkeypatch.setattr(tool, "ROOT", tmp_path)
+    assert tool.main(["--check"]) == 1
+    assert "is not what the files give" in capsys.readouterr().err

@@ -1,0 +1,314 @@
+#!/usr/bin/env python3
+"""policy_node/pretrained/README.md from the files beside it, so that what it says about the shipped policy can
+never drift from the policy.
+
+Usage::
+
+    .venv/bin/python tools/pretrained_readme.py           # write policy_node/pretrained/README.md
+    .venv/bin/python tools/pretrained_readme.py --check   # exit 1 if the README is not what the files give
+
+Every figure and name in the README comes from a file: the policy file's safetensors header (the agent's config,
+the training metadata: variant, training config, env steps, the code revision it was trained at), the SHA-256 of
+``policy.safetensors`` and ``policy.onnx``, ``train_config.json`` / ``train_summary.json`` (checked against the
+header), the ``dynenv-eval`` results in ``eval/*.json`` (each must record the SHA-256 of this policy file: the
+evaluation of another policy is refused), the training presets of config/train/ (which one the training config is,
+and the ``--set`` overrides that make it), docs/results.md's table of runs (whether the policy is one of them), and
+git (whether the code revision it was trained at includes the fixes listed in ``FIXES``). The commands that
+reproduce each evaluation are built from the evaluation's own settings.
+
+ROS-free; torch is imported only to read the safetensors header (``agent.checkpoint``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+FOLDER = Path("policy_node") / "pretrained"
+POLICY, ONNX = "policy.safetensors", "policy.onnx"
+EVAL_DIR = "eval"
+RESULTS_DOC = Path("docs") / "results.md"
+PRESETS = Path("config") / "train"
+OPPONENT_ORDER = ("random", "scripted", "perceiving")
+# Fixes to training that a policy trained at an earlier revision lacks: (commit, what was wrong, whether the policy's
+# training config was affected by it).
+FIXES = (
+    ("066a7cb", "the trainer computed RCM's attention-weighted forward loss and dropped it (it switched the forward "
+                "loss on for ICM's plain forward model only)",
+     lambda config: _losses(config).rcm_attention),
+)
+
+
+class ReadmeError(ValueError):
+    """The files do not describe one policy consistently (or cannot be read)."""
+
+
+class GitUnknown(ReadmeError):
+    """git cannot tell whether a revision includes a fix (no git, or a clone without that history)."""
+
+
+# -- reading the files -------------------------------------------------------------------------------------------
+def policy_header(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(agent config, training meta) from a policy file's safetensors header."""
+    from dynenv_ros.agent.checkpoint import FORMAT, safetensors_header
+    header, _ = safetensors_header(path.read_bytes())
+    metadata = header.get("__metadata__") or {}
+    if metadata.get("format") != FORMAT:
+        raise ReadmeError(f"{path} is not a {FORMAT} policy file")
+    return json.loads(metadata["config"]), json.loads(metadata.get("meta", "{}"))
+
+
+def load_evaluations(folder: Path, digest: str) -> list[tuple[Path, dict[str, Any]]]:
+    """The ``dynenv-eval`` soccer results in ``folder/eval`` (random, scripted, perceiving first), each checked to
+    be an evaluation of the policy file whose SHA-256 is ``digest``."""
+    from dynenv_ros.evaluation.results import load_evaluation
+    found = []
+    for path in sorted((folder / EVAL_DIR).glob("*.json")):
+        result = load_evaluation(path)
+        evaluated = result.get("evaluated", {})
+        if result.get("scenario", "robocup") != "robocup" or evaluated.get("kind") != "checkpoint":
+            raise ReadmeError(f"{path} is not a soccer evaluation of a policy file")
+        if evaluated.get("sha256") != digest:
+            raise ReadmeError(f"{path} evaluates another policy: its sha256 is {evaluated.get('sha256')}, "
+                              f"{folder / POLICY}'s is {digest}; re-run its command (README) to evaluate this one")
+        found.append((path, result))
+    if not found:
+        raise ReadmeError(f"no evaluation in {folder / EVAL_DIR}: run the dynenv-eval commands first")
+    rank = {name: k for k, name in enumerate(OPPONENT_ORDER)}
+    return sorted(found, key=lambda item: (rank.get(item[1]["opponent"]["spec"], len(rank)), item[0].name))
+
+
+def _losses(config: Mapping[str, Any]):
+    from dynenv_ros.learning.config import TrainConfig
+    return TrainConfig.from_dict(config).losses()
+
+
+def training_preset(root: Path, config: Mapping[str, Any]) -> tuple[str, list[str]]:
+    """The preset of config/train/ that ``config`` is with the fewest overrides, and those overrides as
+    ``dynenv-train`` arguments (``--seed S``, ``--set key=value``); checked by loading the preset with them."""
+    from dynenv_ros.learning.config import load_config
+    best: tuple[int, str, list[str]] | None = None
+    for path in sorted((root / PRESETS).glob("*.yaml")):
+        preset = load_config(path).to_dict()
+        differ = [key for key in config if preset.get(key) != config[key]]
+        if best is None or len(differ) < best[0]:
+            best = (len(differ), path.stem, differ)
+    if best is None:
+        raise ReadmeError(f"no training presets in {root / PRESETS}")
+    _, name, differ = best
+    arguments = []
+    for key in differ:
+        arguments += ["--seed", str(config[key])] if key == "seed" else ["--set", f"{key}={_yaml(config[key])}"]
+    overrides = [a for a in arguments[1::2] if "=" in a]
+    rebuilt = load_config(root / PRESETS / f"{name}.yaml", overrides).to_dict()
+    rebuilt["seed"] = config.get("seed", rebuilt["seed"])
+    if any(rebuilt.get(key) != config[key] for key in config):
+        raise ReadmeError(f"preset {name} with {' '.join(arguments)} does not give the training config")
+    return name, arguments
+
+
+def _yaml(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    return str(value)
+
+
+def listed_sha256s(root: Path) -> list[str]:
+    """The policy sha256s (12 hex digits or more, in backquotes) that docs/results.md lists, in page order."""
+    doc = root / RESULTS_DOC
+    return list(dict.fromkeys(re.findall(r"`([0-9a-f]{12,64})`", doc.read_text()))) if doc.is_file() else []
+
+
+def includes_fix(root: Path, fix: str, revision: str) -> bool:
+    """Whether ``revision`` has ``fix`` among its ancestors (git); GitUnknown when git cannot tell."""
+    try:
+        done = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", fix, revision],
+                              capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as error:
+        raise GitUnknown(f"git cannot tell whether {revision} includes {fix}: {error}") from None
+    if done.returncode not in (0, 1):
+        raise GitUnknown(f"git cannot tell whether {revision} includes {fix}: {done.stderr.strip()}")
+    return done.returncode == 0
+
+
+# -- the text ----------------------------------------------------------------------------------------------------
+def _n(value: float) -> str:
+    """A figure as the README prints it: 3 significant digits (integers whole, with thousands separators)."""
+    if float(value).is_integer() and abs(value) >= 100:
+        return f"{int(value):,}"
+    return f"{value:.3g}"
+
+
+def _mean_sd(stats: Mapping[str, float]) -> str:
+    return f"{_n(stats['mean'])} ± {_n(stats['sd'])}"
+
+
+def _totals(result: Mapping[str, Any]) -> tuple[int, int]:
+    return (sum(r["goals_for"] for r in result["episodes"]), sum(r["goals_against"] for r in result["episodes"]))
+
+
+def eval_command(path: str, result: Mapping[str, Any]) -> str:
+    """The ``dynenv-eval`` command that writes ``result`` to ``path`` (from its own settings)."""
+    settings = result["settings"]
+    perception = settings["perception"]
+    words = [".venv/bin/dynenv-eval", result["evaluated"]["path"], "--opponent", result["opponent"]["spec"],
+             "--episodes", str(settings["episodes"]), "--seeds", *map(str, settings["seeds"]),
+             "--players-per-team", str(settings["players_per_team"])]
+    if isinstance(perception, Mapping):
+        words += ["--perception", perception["preset"], "--noise-magnitude", _yaml(perception["noise_magnitude"])]
+    else:
+        words += ["--perception", str(perception)]
+    words += ["--sides", settings["sides"]]
+    env_config = dict(settings.get("env_config") or {})
+    if "episode_seconds" in env_config:
+        words += ["--episode-seconds", _yaml(env_config.pop("episode_seconds"))]
+    if env_config:
+        raise ReadmeError(f"{path}: env_config {sorted(env_config)} has no dynenv-eval option")
+    if settings.get("greedy"):
+        words.append("--greedy")
+    return shlex.join([*words, "--quiet", "--out", path])
+
+
+def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
+    """The README of ``root/folder``'s policy, from its files (``ReadmeError`` when they disagree)."""
+    from dynenv_ros.agent.checkpoint import sha256
+    from dynenv_ros.evaluation.soccer import format_table
+    here = root / folder
+    digest, onnx_digest = sha256(here / POLICY), sha256(here / ONNX)
+    agent, meta = policy_header(here / POLICY)
+    config = json.loads((here / "train_config.json").read_text())
+    summary = json.loads((here / "train_summary.json").read_text())
+    if meta.get("config") != config:
+        raise ReadmeError(f"train_config.json is not the training config in {POLICY}'s header")
+    for key in ("env_steps", "updates", "episodes"):
+        if meta.get(key) != summary.get(key):
+            raise ReadmeError(f"train_summary.json's {key} {summary.get(key)} is not the header's {meta.get(key)}")
+    evaluations = load_evaluations(here, digest)
+    preset, arguments = training_preset(root, config)
+    revision = meta["code_revision"]
+    losses = {k: v for k, v in _losses(config).as_dict().items() if v}
+    teacher = config.get("teacher")
+    self_play = config.get("opponent") == "self"
+
+    out = ["# The shipped policy", "",
+           "<!-- Written by tools/pretrained_readme.py from the files of this folder; do not edit by hand. "
+           "Regenerate: .venv/bin/python tools/pretrained_readme.py -->", ""]
+    out += ["## What it is", "",
+            f"`{POLICY}` (torch runtime; sha256 `{digest}`) and `{ONNX}` (onnxruntime; sha256 `{onnx_digest}`) hold "
+            f"one trained agent (feature size {agent['feature_size']}, {agent['head_mode']} head). From the policy "
+            f"file's header (`train_config.json` and `train_summary.json` are the same):", "",
+            f"- **{config['algorithm'].upper()}, variant `{config['variant']}`** (its losses: "
+            f"{', '.join(f'`{k}`' for k in losses) or 'none'})"
+            + (f", **plus imitation of the scripted `{teacher}`** (imitation weight {_n(config['imitation_coef'])}: "
+               f"the {teacher} labels the states the learner reaches; not in the paper, docs/training.md)"
+               if teacher else ", pure reinforcement learning (no teacher)") + ";",
+            f"- {'self-play' if self_play else 'against ' + str(config.get('opponent'))}, "
+            f"{config['players_per_team']} per team, `{config['perception']}` perception, seed {config['seed']};",
+            f"- **{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
+            f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes on `{config['device']}` "
+            f"with {config['torch_threads']} torch "
+            f"thread{'s' if config['torch_threads'] != 1 else ''};",
+            f"- training preset **`{preset}`** (config/train/{preset}.yaml) with these overrides, at code revision "
+            f"`{revision}`:", "", "```bash",
+            f"git checkout {revision}",
+            shlex.join([".venv/bin/dynenv-train", "--config", preset, *arguments, "--no-progress"]),
+            "```", "",
+            f"  The run stops after `max_minutes` of wall time, so the env steps it reaches (and its weights) depend "
+            f"on the machine: the command reproduces the recipe, not the file.", ""]
+
+    out += ["## What it is not", ""]
+    listed = listed_sha256s(root)
+    mine = [prefix for prefix in listed if digest.startswith(prefix)]
+    if mine:
+        out.append(f"- Its sha256 is among those {RESULTS_DOC} lists (`{mine[0]}`): that page's figures for that "
+                   f"run are about this file.")
+    elif listed:
+        out.append(f"- It is **not one of the runs of {RESULTS_DOC}**: its sha256 begins with none of the "
+                   f"{len(listed)} policy sha256s that page lists, so none of its figures is about this file.")
+    for fix, what, applies in FIXES:
+        if applies(config) and not includes_fix(root, fix, revision):
+            out.append(f"- It was trained **before the fix of `{fix}`**, at `{revision[:7]}`: {what}. It is a "
+                       f"first-pass model of its variant.")
+    for path, result in evaluations:
+        goals_for, goals_against = _totals(result)
+        if result["opponent"]["spec"] != "random" and goals_for <= goals_against:
+            out.append(f"- It is **not a match for the `{result['opponent']['spec']}` team**: {goals_for} goals for, "
+                       f"{goals_against} against in {result['counts']['episodes']} games (below).")
+    out.append("")
+
+    out += ["## How it plays (held-out seeds)", "",
+            "The paper's metric (positive reward minus observation reward, per robot and episode) is the headline, "
+            "the total reward beside it; mean ± sd over the evaluation seeds (the unit), goals and W/D/L summed over "
+            "every game. Against `random`, the last column is the ratio of the policy's paper's metric to the "
+            "random team's in the same episodes.", "",
+            "| opponent | games (episodes × seeds) | W/D/L | goals for : against | paper's metric | total reward | "
+            "opponent's paper's metric | × random's paper's metric |",
+            "|---|---|---|---|---:|---:|---:|---:|"]
+    for path, result in evaluations:
+        s, counts, settings = result["summary"], result["counts"], result["settings"]
+        goals_for, goals_against = _totals(result)
+        ratio = (f"{s['paper_metric']['mean'] / s['opponent_paper_metric']['mean']:.2f}x"
+                 if result["opponent"]["spec"] == "random" else "")
+        out.append(f"| `{result['opponent']['spec']}` | {counts['episodes']} ({settings['episodes']} × "
+                   f"{len(settings['seeds'])}) | {counts['wins']}/{counts['draws']}/{counts['losses']} | "
+                   f"{goals_for} : {goals_against} | **{_mean_sd(s['paper_metric'])}** | {_mean_sd(s['total'])} | "
+                   f"{_mean_sd(s['opponent_paper_metric'])} | {ratio} |")
+    out += ["", "Settings of each evaluation: " + "; ".join(
+        f"`{path.name}`: seeds {', '.join(map(str, r['settings']['seeds']))}, {r['settings']['players_per_team']} "
+        f"per team, `{r['settings']['perception']}` perception, sides `{r['settings']['sides']}`, "
+        f"{'greedy' if r['settings']['greedy'] else 'sampled'} actions" for path, r in evaluations) + ".", ""]
+
+    out += ["### Reproduce", "",
+            "Each file in `eval/` is the output of one command (run from the repository root; same code, same "
+            "file), and this README is regenerated from them:", "", "```bash"]
+    out += [eval_command(str(folder / EVAL_DIR / path.name), result) for path, result in evaluations]
+    out += [".venv/bin/python tools/pretrained_readme.py", "```", "",
+            "`git log -- policy_node/pretrained/eval` gives the commit each file was made at.", "",
+            "### Per seed", ""]
+    for path, result in evaluations:
+        out += [format_table(result), ""]
+
+    out += ["## Play it", "",
+            "`make run` (team A, through the policy node and onnxruntime, against the scripted team B), or "
+            "`ros2 run dynenv_ros policy_node --ros-args -p checkpoint:=policy_node/pretrained/policy.onnx "
+            "-p runtime:=onnxruntime`.", ""]
+    return "\n".join(out)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="exit 1 if the README is not what the files give")
+    args = parser.parse_args(argv)
+    target = ROOT / FOLDER / "README.md"
+    try:
+        text = render()
+    except (ReadmeError, OSError) as error:
+        print(f"pretrained_readme: {error}", file=sys.stderr)
+        return 2
+    if args.check:
+        if not target.is_file() or target.read_text() != text:
+            print(f"{target} is not what the files give: run .venv/bin/python tools/pretrained_readme.py",
+                  file=sys.stderr)
+            return 1
+        print(f"{target} is up to date")
+        return 0
+    target.write_text(text)
+    print(f"wrote {target}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
