@@ -12,6 +12,7 @@ NODES = [
     "selfcheck_listener = dynenv_ros.nodes.selfcheck_listener:main",
     "sim_node = dynenv_ros.nodes.sim_node:main",
     "scripted_policy = policy_node.scripted_policy:main",
+    "perceiving_policy = policy_node.perceiving_policy:main",
     "scripted_driver = policy_node.scripted_driver:main",
     "policy_node = policy_node.policy_node:main",
     "recorder = dynenv_ros.nodes.recorder:main",

@@ -2,7 +2,8 @@
 
 Graphs: ``train`` — live training over ROS: simulator games, their policy nodes, the trainer node and a recorder
 (``graph/train_graph.py``). ``soccer`` (default) — the simulator node in stepped mode, team A played by a trained policy file (one
-policy node) or scripted, team B by one scripted policy node per robot, and the recorder, for ``duration_s`` of sim
+policy node) or scripted, team B by one scripted policy node per robot (``policy: perceiving``: a
+``perceiving_policy`` node per robot, on its detections and pose estimate), and the recorder, for ``duration_s`` of sim
 time; it prints achieved rates, message counts and the score, leaves the bag and a GIF in the run directory, and
 checks the bag holds every message the simulator published and every action it accepted. With
 ``scenario: driving`` the same graph plays urban driving instead: the simulator with ``n_cars`` cars, one
@@ -42,7 +43,10 @@ class ConfigError(ValueError):
     """A configuration value is missing, unknown or out of range."""
 
 
-POLICIES = ("keeper_and_chasers", "chaser", "random")
+POLICIES = ("keeper_and_chasers", "chaser", "random", "perceiving")
+# Scripted teams that play on their robots' detections and pose estimates (policy_node/perceiving_policy.py), not
+# on /world_state: the simulator's self-localization must be on for them.
+PERCEIVING = ("perceiving",)
 SCENARIOS = ("robocup", "driving")
 ACTION_MODES = ("discrete", "continuous")
 PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
@@ -58,6 +62,7 @@ class MainJobConfig:
     duration_s: float = 60.0         # soccer graph: sim seconds
     players_per_team: int = 2
     perception: str = "realistic"
+    localization: bool = True        # robocup: the simulator's emulated self-localization (pose estimates)
     policy: str = "keeper_and_chasers"
     team_a: str = SHIPPED_POLICY     # soccer: a policy file (.onnx/.safetensors) or 'scripted' (the policy above)
     gif: bool = True
@@ -112,6 +117,9 @@ class MainJobConfig:
             raise ConfigError(f"episode_seconds must be in [1, 600], got {self.episode_seconds}")
         if self.policy not in POLICIES:
             raise ConfigError(f"policy must be one of {POLICIES}, got {self.policy!r}")
+        if self.policy in PERCEIVING and not self.localization and self.scenario == "robocup":
+            raise ConfigError(f"policy {self.policy} plays on the robots' pose estimates: it needs "
+                              "localization=true (the simulator's self-localization)")
         if self.scenario not in SCENARIOS:
             raise ConfigError(f"scenario must be one of {SCENARIOS}, got {self.scenario!r}")
         if not 1 <= self.n_cars <= 10:
@@ -143,7 +151,10 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
     "games": ("simulator games (each with its policy node) feeding the trainer, 1..8", ("train",)),
     "train_minutes": ("the trainer's wall-time budget, minutes", ("train",)),
     "episode_seconds": ("sim seconds per training episode, 1..600", ("train",)),
-    "policy": ("scripted team(s): " + " | ".join(POLICIES), ("soccer",)),
+    "policy": ("scripted team(s): " + " | ".join(POLICIES) + " (perceiving: keeper_and_chasers on each robot's own "
+               "detections and pose estimate, never the ground truth)", ("soccer",)),
+    "localization": ("the simulator's self-localization, robots' pose estimates (true | false; perceiving needs it)",
+                     ("soccer",)),
     "team_a": ("a trained policy file for team A (.onnx: onnxruntime, .safetensors: torch) or 'scripted'",
                ("soccer",)),
     "gif": ("render the recorded bag as game.gif (true | false)", ("soccer",)),
@@ -154,6 +165,7 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
 }
 # Settings of the soccer graph that only one scenario uses (a --set for the other scenario is refused).
 SCENARIO_SETTINGS: dict[str, str] = {"players_per_team": "robocup", "policy": "robocup", "team_a": "robocup",
+                                     "localization": "robocup",
                                      "n_cars": "driving", "action_mode": "driving"}
 
 
@@ -234,12 +246,14 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         return driving_graph(config, run_dir)
     names = robot_names(config.players_per_team)
     learned = config.team_a != "scripted"
-    scripted_nodes = len(names) - (config.players_per_team if learned else 0)
+    perceiving = config.policy in PERCEIVING
+    # readers of /world_state: the recorder and the ground-truth scripted nodes (perceiving ones never read it)
+    truth_readers = 1 + (0 if perceiving else len(names) - (config.players_per_team if learned else 0))
     sim = NodeLaunch("sim_node", "dynenv_ros.nodes.sim_node", {
         "players_per_team": config.players_per_team, "seed": config.seed, "perception_preset": config.perception,
-        "mode": "stepped", "episode_seconds": config.duration_s, "auto_reset": False, "exit_when_finished": True,
+        "localization": config.localization, "mode": "stepped", "episode_seconds": config.duration_s, "auto_reset": False, "exit_when_finished": True,
         "report_path": str(run_dir / "sim_report.json"), "wait_for_subscribers": 2,
-        "wait_for_ground_truth_subscribers": scripted_nodes + 1, "wait_for_recorder": True}, ends_run=True)
+        "wait_for_ground_truth_subscribers": truth_readers, "wait_for_recorder": True}, ends_run=True)
     policies = []
     if learned:       # one policy node drives all of team A (onnxruntime for .onnx files)
         path = team_a_policy(config.team_a)
@@ -248,6 +262,10 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
             "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch", "seed": config.seed}))
     for i, name in enumerate(names):
         if learned and i < config.players_per_team:
+            continue
+        if perceiving:        # keeper_and_chasers on the robot's detections and pose estimate
+            policies.append(NodeLaunch(f"policy_{name}", "policy_node.perceiving_policy",
+                                       {"robot": name, "players_per_team": config.players_per_team}))
             continue
         slot = i % config.players_per_team
         kind = {"chaser": "chaser", "random": "random"}.get(
@@ -364,7 +382,8 @@ def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig
     rejected = sum(int(v) for k, v in diag.items() if k.startswith("rejected_"))
     scores = report["episode_scores"]
     team_a = config.policy if config.team_a == "scripted" else f"{config.team_a} (policy node)"
-    print(f"  teams: A {team_a}, B {config.policy} (scripted)")
+    played = "scripted, on its detections and pose estimates" if config.policy in PERCEIVING else "scripted"
+    print(f"  teams: A {team_a}, B {config.policy} ({played})")
     print(f"  game: {diag['sim_time_s']} s of sim time in {diag['periods_run']} periods, "
           f"score A {scores[-1][0]} : {scores[-1][1]} B" if scores else "  game: unfinished")
     print(f"  stepped-mode real-time factor {diag['real_time_factor_running']}x "

@@ -55,8 +55,8 @@ from dynenv_ros.envs.pose_features import POSE_KEY
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str
-from dynenv_ros.ros.pose_estimates import (HISTORY_DEPTH, LOST_ROW, PoseHistory, pose_batch, pose_problem,
-                                           stamp_ns)
+from dynenv_ros.ros.pose_estimates import (HISTORY_DEPTH, LOST_ROW, PoseHistory, declare_pose_input, pose_batch,
+                                           pose_problem, stamp_ns)
 from dynenv_ros.ros.qos import action_stream, latched
 from dynenv_ros.ros.tf import base_frame
 from dynenv_ros.soccer.config import MotionConfig, SoccerConfig, robot_names
@@ -69,6 +69,7 @@ from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.driving.config import MAX_CARS, DrivingConfig, car_names
 from dynenv_ros.envs.driving_observations import driving_layout_spec
 from dynenv_ros.envs.padded_layout import SOCCER
+from policy_node.periods import PeriodMemory, file_frame, period_problem
 
 RUNTIMES = ("torch", "onnxruntime")
 # The simulator refuses a head turn beyond this per period (docs/ros_graph.md): a policy must stay inside it.
@@ -113,16 +114,12 @@ def detection_qos() -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-class RobotMemory:
-    """What the node keeps per robot between periods."""
+class RobotMemory(PeriodMemory):
+    """What the node keeps per robot between periods: its frames (``periods.PeriodMemory``) and more."""
 
     def __init__(self, idle: tuple = STAND_STILL) -> None:
+        super().__init__()
         self.idle = idle
-        self.episode: int | None = None
-        self.period: int | None = None                 # the period whose frames are being collected
-        self.frames: dict[int, DetectionArray] = {}
-        self.ready: list[DetectionArray] | None = None  # the newest complete period, not acted on yet
-        self.decided: int | None = None                # the last period acted on
         self.addressed: int | None = None              # the period its last action was sent for
         self.last: list[DetectionArray] | None = None  # its frames (the trial decision of a new policy)
         self.state: tuple | None = None
@@ -164,11 +161,8 @@ class PolicyNode(Node):
                                     "swapped in between two decisions (torch runtime); empty: never.", read_only=True)
         self.weights_run = declare_str(self, "weights_run_id", "", "Take weights from this trainer run only "
                                        "(PolicyWeights.run_id); empty: any run.", read_only=True)
-        self.pose_max_age = declare_float(self, "pose_max_age", 0.5, 0.0, 60.0, "Robocup, a policy that takes the "
-                                          "pose estimate: the newest <robot>/pose_estimate at or before a period's "
-                                          "last frame older than this (s, stamps) is 'lost'.", read_only=True)
-        self.pose_frame = declare_str(self, "pose_frame", "map", "The frame_id a pose estimate must have "
-                                      "(others are refused).", read_only=True)
+        self.pose_max_age, self.pose_frame = declare_pose_input(self, "Robocup, a policy that takes the pose "
+                                                                "estimate")
         everyone = car_names(n_cars) if self.driving else robot_names(players)
         self.names = [name for name in everyone if not team or name[5] == team]
         self.ids = {name: everyone.index(name) for name in self.names}
@@ -403,16 +397,9 @@ class PolicyNode(Node):
                 self._store(name, msg)
 
     def _store(self, name: str, msg: DetectionArray) -> None:
-        """File one frame: a new episode resets the robot; frames of a period older than the one being collected
-        (or already complete or acted on) are stale; a complete period replaces an older one not yet acted on
-        (counted as dropped), and so does a newer period's first frame replace an incomplete one."""
+        """File one frame (``periods.file_frame``); a new episode resets the robot."""
         memory = self.memory[name]
-        problem = frame_problem(msg)
-        if not problem and memory.frames:
-            first = next(iter(memory.frames.values()))
-            if msg.motion_period == memory.period and msg.frames_per_period != first.frames_per_period:
-                problem = (f"frames_per_period {msg.frames_per_period} differs from the period's other frames "
-                           f"({first.frames_per_period})")
+        problem = frame_problem(msg) or period_problem(memory, msg)
         if problem:
             self.counts["frames_malformed"] += 1
             self.get_logger().warning(f"{topics.detections(name)}: frame refused: {problem}",
@@ -421,22 +408,7 @@ class PolicyNode(Node):
         if memory.episode != msg.episode_id:                 # a new episode: forget everything
             memory.__init__(self.idle)
             memory.episode = msg.episode_id
-        period = msg.motion_period
-        if ((memory.decided is not None and period <= memory.decided)
-                or (memory.ready is not None and period <= memory.ready[0].motion_period)
-                or (memory.frames and period < memory.period)):
-            self.counts["frames_stale"] += 1
-            return
-        if memory.period != msg.motion_period:
-            if memory.frames:
-                self.counts["periods_dropped"] += 1          # an incomplete period that a newer one replaces
-            memory.period, memory.frames = msg.motion_period, {}
-        memory.frames[msg.frame_index] = msg
-        if len(memory.frames) == msg.frames_per_period:
-            if memory.ready is not None:
-                self.counts["periods_dropped"] += 1          # complete but never acted on: stale now
-            memory.ready = [memory.frames[k] for k in sorted(memory.frames)]
-            memory.frames = {}
+        file_frame(memory, msg, self.counts)
 
     # -- decisions -------------------------------------------------------------------------------------------------
     def _decide_if_ready(self) -> bool:

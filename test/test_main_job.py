@@ -97,6 +97,36 @@ def test_main_job_plays_a_trained_policy_for_team_a(tmp_path, capsys):
     assert f"teams: A {policy} (policy node)" in output and "dynenv-run: OK" in output
 
 
+def test_main_job_plays_the_perceiving_team_on_detections_and_pose_estimates(tmp_path, capsys):
+    """policy=perceiving, team_a=scripted: both teams keeper_and_chasers on their own detections and pose estimates
+    (perceiving_policy nodes), none reading /world_state; the simulator's localization stays on."""
+    output = _run_main(tmp_path, capsys, "duration_s=3", "policy=perceiving", "team_a=scripted", "gif=false")
+    report = json.loads((tmp_path / "sim_report.json").read_text())
+    assert report["diagnostics"]["periods_run"] == "6" and report["diagnostics"]["missing"] == "0"
+    assert report["published"]["pose_estimates_per_robot"] > 0
+    assert "teams: A perceiving, B perceiving (scripted, on its detections and pose estimates)" in output
+    assert "every published message recorded" in output and "dynenv-run: OK" in output
+
+
+def test_the_perceiving_graph_and_its_need_for_localization():
+    from pathlib import Path
+    from dynenv_ros.main_job import REPO_CONFIG, soccer_graph
+    config = load_config(REPO_CONFIG, {"policy": "perceiving", "players_per_team": 3})
+    nodes = {n.name: n for n in soccer_graph(config, Path("/tmp/run"))}
+    assert nodes["policy_team_b_0"].module == "policy_node.perceiving_policy"
+    assert nodes["policy_team_b_2"].parameters == {"robot": "team_b_2", "players_per_team": 3}
+    assert "policy_team_a" in nodes and "policy_team_a_0" not in nodes          # team A: the shipped policy
+    sim = nodes["sim_node"].parameters
+    assert sim["localization"] is True and sim["wait_for_ground_truth_subscribers"] == 1     # the recorder only
+    scripted = {n.name: n for n in soccer_graph(load_config(REPO_CONFIG, {"team_a": "scripted"}), Path("/r"))}
+    assert scripted["sim_node"].parameters["wait_for_ground_truth_subscribers"] == 5         # 4 robots + recorder
+    with pytest.raises(ConfigError, match="needs localization=true"):
+        load_config(REPO_CONFIG, {"policy": "perceiving", "localization": False})
+    assert not load_config(REPO_CONFIG, {"localization": False}).localization
+    with pytest.raises(ConfigError, match="localization: not used by scenario 'driving'"):
+        load_config(REPO_CONFIG, {"scenario": "driving", "localization": False})
+
+
 def test_graph_reports_a_listener_that_does_not_get_what_it_expects(tmp_path):
     domain = int(os.environ["ROS_DOMAIN_ID"])
     nodes = [NodeLaunch("talker", "dynenv_ros.nodes.selfcheck_talker", {"seed": 1, "samples_per_type": 2}),

@@ -33,6 +33,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 
 from dynenv_ros.envs.pose_features import POSE_BOUND, POSE_COLUMNS, pose_features
 from dynenv_ros.ros.conversions import WORLD_FRAME
+from dynenv_ros.ros.parameters import declare_float, declare_str
 
 COV_X, COV_Y, COV_YAW = 0, 7, 35            # the variances' slots in the row-major 6x6 (x, y, z, roll, pitch, yaw)
 UNUSED_SLOTS = (14, 21, 28)                  # z, roll, pitch
@@ -199,6 +200,16 @@ class PoseHistory:
         return (pose, variances), "pose_used"
 
 
+def declare_pose_input(node, when: str) -> tuple[float, str]:
+    """The read-only parameters of a node that reads ``<robot>/pose_estimate``: ``pose_max_age`` (s) and
+    ``pose_frame``; ``when`` starts the age's description (which estimates it applies to)."""
+    max_age = declare_float(node, "pose_max_age", 0.5, 0.0, 60.0, f"{when}: the newest <robot>/pose_estimate at or "
+                            "before a period's last frame older than this (s, stamps) is 'lost'.", read_only=True)
+    frame = declare_str(node, "pose_frame", WORLD_FRAME, "The frame_id a pose estimate must have (others are "
+                        "refused).", read_only=True)
+    return max_age, frame
+
+
 def pose_batch(histories: Sequence[PoseHistory], stamps: Sequence[int], teams: Sequence[int], max_age_ns: int,
                counts: Counter[str] | None = None) -> np.ndarray:
     """(B, 7) float32 ``pose_estimate`` rows: robot b's estimate at or before ``stamps[b]`` (ns: its period's last
@@ -222,5 +233,5 @@ def pose_batch(histories: Sequence[PoseHistory], stamps: Sequence[int], teams: S
 
 
 __all__ = ["COV_X", "COV_Y", "COV_YAW", "UNUSED_SLOTS", "UNUSED_VARIANCE", "LOST_ROW", "EmulatedOdometry",
-           "PoseHistory", "compose", "ground_truth_frame", "inverse", "message_pose", "odom_frame", "pose_batch",
+           "PoseHistory", "compose", "declare_pose_input", "ground_truth_frame", "inverse", "message_pose", "odom_frame", "pose_batch",
            "pose_message", "pose_problem", "stamp_ns"]
