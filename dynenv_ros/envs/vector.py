@@ -46,7 +46,8 @@ from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.envs.learning_targets import target_shapes
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.envs.soccer_observations import LOCALIZATION_OPTIONS, SoccerObservations, perception_params
-from dynenv_ros.envs.teacher import DRIVING_TEACHERS, TEACHERS, DrivingTeacher, Teacher
+from dynenv_ros.envs.teacher import (DRIVING_TEACHERS, PERCEIVING_TEACHER, TEACHERS, DrivingTeacher, PerceivingTeacher,
+                                     Teacher, make_soccer_teacher)
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.actions import Kick, Turn, Walk, parse_action
@@ -106,17 +107,21 @@ class _Settings:
     action_width = 4             # [walk, turn, kick, head]
     teacher_dtype = np.dtype(np.int64)
 
-    def make_teacher(self) -> Teacher | None:
-        return Teacher(self.config, self.teacher) if self.teacher is not None else None
+    def make_teacher(self) -> Teacher | PerceivingTeacher | None:
+        return make_soccer_teacher(self.config, self.teacher) if self.teacher is not None else None
 
     @property
     def n_agents(self) -> int:
         return self.config.n_robots
 
     def observations(self) -> SoccerObservations:
+        # the perceiving teacher reads the pose estimate: the localization runs for it, observed or not
+        localization: bool | str = self.localization
+        if self.teacher == PERCEIVING_TEACHER and localization == "none":
+            localization = True
         return SoccerObservations(self.config, self.observation, self.perception,
                                   max_landmarks=self.max_landmarks, max_objects=self.max_objects,
-                                  localization=self.localization)
+                                  localization=localization)
 
     def make_world(self) -> SoccerWorld:
         return SoccerWorld(self.config)
@@ -219,8 +224,9 @@ class InProcessBatch:
             self._scripted = team_policies(n, settings.scripted_team_b, field=self.config.field,
                                            head_mode=self.config.head_mode, motion=self.config.motion)
             self._scripted_robots = range(n, 2 * n)
-        self._teacher = settings.make_teacher()
         self.worlds = [settings.make_world() for _ in range(num_envs)]
+        # one teacher per world: the perceiving teacher remembers the ball along its world's episode
+        self._teachers = [settings.make_teacher() for _ in range(num_envs)]
         self.observers = [settings.observations() for _ in range(num_envs)]
         if arrays is None:
             arrays = {key: np.zeros(shape, dtype) for key, (shape, dtype) in _storage(settings, num_envs).items()}
@@ -249,8 +255,16 @@ class InProcessBatch:
             obs.initial_padded(out=self._obs[e], targets=self._targets[e])
         else:
             self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
-        if self._teacher is not None:
-            self._teacher.label(world, self.arrays["teacher"][e])
+        self._label(e, episode_start=True)
+
+    def _label(self, e: int, episode_start: bool = False) -> None:
+        """World ``e``'s teacher labels of the observations just written (``envs.teacher``), if it has a teacher."""
+        teacher = self._teachers[e]
+        if teacher is None:
+            return
+        if episode_start:
+            teacher.reset()
+        teacher.label(self.worlds[e], self.arrays["teacher"][e], self._obs[e], self.observers[e])
 
     def reset(self, seeds: list[int | None]) -> None:
         for e, (world, seed) in enumerate(zip(self.worlds, seeds)):
@@ -287,8 +301,8 @@ class InProcessBatch:
                     final[...] = self._targets[e][key]
                 world.reset(seed=int(world.rng.integers(2**63)))
                 self._observe_initial(e)
-            elif self._teacher is not None:
-                self._teacher.label(world, self.arrays["teacher"][e])
+            else:
+                self._label(e)
 
     def _step_driving(self, actions: Any) -> None:
         """Driving worlds: as ``step``, with driving_v0's per-car termination in ``agents_terminated`` (the world
@@ -314,8 +328,8 @@ class InProcessBatch:
                     final[...] = self._obs[e][key]
                 world.reset(seed=int(world.rng.integers(2**63)))
                 self._observe_initial(e)
-            elif self._teacher is not None:
-                self._teacher.label(world, self.arrays["teacher"][e])
+            else:
+                self._label(e)
 
     def close(self) -> None:
         pass
@@ -740,9 +754,13 @@ class SoccerVectorEnv(VectorEnv):
     gain ``pose_estimate`` (E, A, 7), the team-frame pose estimate of the period's last frame (``envs.pose_features``);
     ``"none"`` (default): nothing changes.
 
-    ``teacher="chaser"`` or ``"keeper_and_chasers"``: every world also labels each robot with that scripted team's
-    action for the state its observation shows (``envs.teacher``), as (E, A, 4) discrete action indices:
-    ``BatchStep.teacher_actions``, and ``self.teacher_actions`` for the observations returned last.
+    ``teacher="chaser"``, ``"eager_chaser"`` or ``"keeper_and_chasers"``: every world also labels each robot with
+    that scripted team's action for the state its observation shows (``envs.teacher``), as (E, A, 4) discrete action
+    indices: ``BatchStep.teacher_actions``, and ``self.teacher_actions`` for the observations returned last.
+    ``teacher="perceiving"`` (padded only): the label is the perceiving chaser's (``soccer.perceiving``), computed
+    from exactly the robot's padded observation and its pose estimate, with a ball memory that starts afresh with
+    each episode of its world; every world runs its self-localization for it, even with ``localization="none"``
+    (the observations then do not carry the estimate the teacher used).
     """
 
     def __init__(self, num_envs: int, backend: str = "auto", workers: int | None = None,
@@ -765,6 +783,9 @@ class SoccerVectorEnv(VectorEnv):
             raise ValueError(f"teacher must be None or one of {TEACHERS}, got {teacher!r}")
         if teacher is not None and self.config.head_mode != "discrete":
             raise ValueError("teacher labels need head_mode='discrete' (the agent's head is then an index)")
+        if teacher == PERCEIVING_TEACHER and observation != "padded":
+            raise ValueError("teacher='perceiving' acts on each robot's perceived observation and pose estimate: it "
+                             f"needs observation='padded', got observation={observation!r}")
         if not isinstance(parent_steps, bool):
             raise ValueError(f"parent_steps must be True or False, got {parent_steps!r}")
         if localization not in LOCALIZATION_OPTIONS:

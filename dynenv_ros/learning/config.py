@@ -44,7 +44,9 @@ VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
 OPPONENTS = ("self", "snapshot", "scripted", "random")
 BACKENDS = ("auto", "inprocess", "subprocess", "ray")
 RUNNERS = ("sync", "async")
-TEACHER_KINDS = ("chaser", "eager_chaser")     # one shared network has no slot input, so it cannot imitate a keeper in one slot
+# one shared network has no slot input, so it cannot imitate a keeper in one slot: chasers only ('perceiving': the
+# chaser on the robot's own observation and pose estimate, soccer.perceiving)
+TEACHER_KINDS = ("chaser", "eager_chaser", "perceiving")
 DRIVING_TEACHER_KINDS = ("scripted",)   # the scripted driver (driving.scripted.ScriptedDriver)
 HEAD_MODES = ("discrete", "continuous")
 PERCEPTIONS = ("realistic", "dynenv", "none")        # the presets of dynenv_ros.perception (config/perception/)
@@ -198,8 +200,10 @@ class TrainConfig:
                                    "imitation loss (DAgger: the learner acts, the teacher labels): 'chaser' "
                                    "(every robot a chaser: one shared network cannot tell a keeper slot from a "
                                    "chaser slot) or 'eager_chaser' (a chaser that also kicks a ball at its foot "
-                                   "whenever it roughly faces the goal); driving: 'scripted' (the scripted driver); "
-                                   "null = none (paper).")
+                                   "whenever it roughly faces the goal), 'perceiving' (the chaser on the robot's "
+                                   "own padded observation and self-localization estimate, which the worlds then "
+                                   "run; with localization: none the learner does not see that estimate); driving: "
+                                   "'scripted' (the scripted driver); null = none (paper).")
     imitation_coef: float = _f(0.0, "Weight of the imitation loss −log π(teacher's action | s) at the start of "
                                     "training; needs a teacher.")
     imitation_decay_env_steps: int = _f(0, "Env steps over which imitation_coef falls linearly to "
@@ -371,6 +375,9 @@ class TrainConfig:
         _choice("backend", self.backend, BACKENDS)
         _choice("runner", self.runner, RUNNERS)
         if self.teacher is not None:
+            if self.driving and self.teacher in TEACHER_KINDS:
+                raise ConfigError("teacher", f"{self.teacher!r} is a soccer teacher; scenario 'driving' has "
+                                             f"{', '.join(DRIVING_TEACHER_KINDS)}")
             _choice("teacher", self.teacher, DRIVING_TEACHER_KINDS if self.driving else TEACHER_KINDS)
         _choice("head_mode", self.head_mode, HEAD_MODES)
         if self.head_mode != "discrete":

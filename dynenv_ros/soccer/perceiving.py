@@ -154,20 +154,26 @@ class PerceivingPolicy:
         return SoccerAction(Walk.NONE, Turn.LEFT, Kick.NONE, head)
 
 
+PERCEIVING_KINDS = ("keeper_and_chasers", "chaser")
+
+
 def perceiving_team(players_per_team: int, period_seconds: float, field: FieldGeometry | None = None,
-                    motion: MotionConfig | None = None, memory_seconds: float = MEMORY_SECONDS
-                    ) -> list[PerceivingPolicy]:
+                    motion: MotionConfig | None = None, memory_seconds: float = MEMORY_SECONDS,
+                    kind: str = "keeper_and_chasers") -> list[PerceivingPolicy]:
     """Both teams' robots (A's slots, then B's), ``keeper_and_chasers`` as in ``scripted.team_policies``: a
-    goalkeeper in slot 0 of each team of two or more, chasers elsewhere."""
+    goalkeeper in slot 0 of each team of two or more, chasers elsewhere; ``kind="chaser"``: chasers in every slot
+    (the imitation teacher ``perceiving``, ``envs.teacher``)."""
     if isinstance(players_per_team, bool) or not isinstance(players_per_team, int) or players_per_team < 1:
         raise ValueError(f"players_per_team must be a positive integer, got {players_per_team!r}")
+    if kind not in PERCEIVING_KINDS:
+        raise ValueError(f"kind must be one of {PERCEIVING_KINDS}, got {kind!r}")
     m = motion or MotionConfig()
     out = []
     for i in range(2 * players_per_team):
-        keeper = i % players_per_team == 0 and players_per_team > 1
+        keeper = kind == "keeper_and_chasers" and i % players_per_team == 0 and players_per_team > 1
         inner = GoalkeeperPolicy(field, m.head_max_delta) if keeper else ChaserPolicy(field, m.head_max_delta)
         out.append(PerceivingPolicy(inner, i, 1 if i < players_per_team else -1, period_seconds, memory_seconds, m))
     return out
 
 
-__all__ = ["PerceivingPolicy", "BallSighting", "perceiving_team", "ball_in_view", "to_field", "MEMORY_SECONDS"]
+__all__ = ["PerceivingPolicy", "BallSighting", "perceiving_team", "PERCEIVING_KINDS", "ball_in_view", "to_field", "MEMORY_SECONDS"]
