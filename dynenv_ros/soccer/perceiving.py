@@ -176,4 +176,5 @@ def perceiving_team(players_per_team: int, period_seconds: float, field: FieldGe
     return out
 
 
-__all__ = ["PerceivingPolicy", "BallSighting", "perceiving_team", "PERCEIVING_KINDS", "ball_in_view", "to_field", "MEMORY_SECONDS"]
+__all__ = ["PerceivingPolicy", "BallSighting", "perceiving_team", "PERCEIVING_KINDS", "ball_in_view", "to_field",
+           "MEMORY_SECONDS"]
