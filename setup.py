@@ -1,5 +1,6 @@
 """ament_python package dynenv_ros: the simulator core, its ROS 2 nodes, the agent (policy_node) and benchmarks."""
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
@@ -41,7 +42,8 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/config/perception", glob("config/perception/*.yaml")),
-        (f"share/{PACKAGE}/pretrained", glob("policy_node/pretrained/*")),
+        (f"share/{PACKAGE}/pretrained", [f for f in glob("policy_node/pretrained/*") if Path(f).is_file()]),
+        (f"share/{PACKAGE}/pretrained/eval", glob("policy_node/pretrained/eval/*.json")),
         (f"share/{PACKAGE}/config/train", glob("config/train/*.yaml")),
     ],
     install_requires=["setuptools"],
