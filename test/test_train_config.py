@@ -128,8 +128,8 @@ def test_wrong_types_are_refused_naming_the_key():
 
 
 def test_impossible_values_are_refused_naming_the_key():
-    _refused("num_envs", ">= 1", num_envs=0)
-    _refused("rollout_length", ">= 1", rollout_length=0)
+    _refused("num_envs", "must be in 1..1024", num_envs=0)
+    _refused("rollout_length", "must be in 1..1024", rollout_length=0)
     _refused("players_per_team", "1..5", players_per_team=6)
     _refused("gamma", "(0, 1]", gamma=0.0)
     _refused("gamma", "(0, 1]", gamma=1.01)
@@ -141,7 +141,7 @@ def test_impossible_values_are_refused_naming_the_key():
     _refused("entropy_coef", ">= 0", entropy_coef=-0.01)
     _refused("ltp_coef", ">= 0", ltp_coef=-1e-3)
     _refused("max_minutes", "> 0", max_minutes=0)
-    _refused("keep_checkpoints", ">= 1", keep_checkpoints=0)
+    _refused("keep_checkpoints", "must be in 1..100", keep_checkpoints=0)
     # LTP must fit in the rollout, but only when LTP is trained
     _refused("ltp_horizon", "exceeds rollout_length 4", rollout_length=4, ltp_horizon=6)
     assert TrainConfig(variant="rcm", rollout_length=4, ltp_horizon=6).rollout_length == 4
@@ -174,3 +174,23 @@ def test_continuous_head_is_refused_for_training_with_the_reason():
     import pytest
     with pytest.raises(ConfigError, match="head_mode: only 'discrete'"):
         load_config(None, ["head_mode=continuous"])
+
+
+@pytest.mark.parametrize("key, value, bounds", [
+    ("num_envs", 100_000_000, "1..1024"), ("num_envs", 1025, "1..1024"), ("feature_size", 100_000, "1..1024"),
+    ("feature_size", 0, "1..1024"), ("players_per_team", 6, "1..5"), ("rollout_length", 5000, "1..1024"),
+    ("ppo_minibatches", 5000, "1..4096"), ("ppo_epochs", 101, "1..100"), ("rollouts_per_update", 65, "1..64"),
+    ("workers", 300, "1..256"), ("torch_threads", 1000, "1..256"), ("snapshot_pool", 101, "1..100"),
+    ("ltp_horizon", 2000, "1..1024")])
+def test_size_settings_out_of_bounds_are_refused_in_one_line_naming_key_and_bounds(key, value, bounds):
+    """Checked on construction, before a world or a network exists: the 120 GB network of feature_size=100000 and
+    the unbounded worlds of num_envs=100000000 are never allocated."""
+    message = _refused(key, f"must be in {bounds}, got {value}", **{key: value})
+    assert "\n" not in message
+    with pytest.raises(ConfigError, match=f"^{key}: must be in {bounds}"):
+        load_config(None, [f"{key}={value}"])
+
+
+def test_size_bounds_are_in_the_help():
+    helps = field_help()
+    assert "1..1024" in helps["num_envs"] and "1..1024" in helps["feature_size"] and "1..256" in helps["workers"]

@@ -57,6 +57,25 @@ MAX_CARS = 10
 MAX_PLAYERS_PER_TEAM = 5
 _DEVICE = re.compile(r"^(cpu|cuda(:\d+)?|mps)$")
 
+# Bounds of every size setting, inclusive, checked first when a config is validated (before anything is allocated:
+# a world, a network, a rollout buffer). Whether a run inside them fits this machine's memory and cores is
+# learning/resources.py's check_machine, where the run starts. docs/training.md "Bounds" lists them.
+SIZE_BOUNDS: dict[str, tuple[int, int]] = {
+    "num_envs": (1, 1024),              # worlds per run (paper: 8)
+    "players_per_team": (1, MAX_PLAYERS_PER_TEAM),
+    "n_cars": (1, MAX_CARS),
+    "feature_size": (1, 1024),          # the streams' width D (paper: 64); weights grow with D squared
+    "rollout_length": (1, 1024),        # motion periods per rollout (paper: 6)
+    "ltp_horizon": (1, 1024),           # and at most rollout_length when the LTP loss is on
+    "ppo_epochs": (1, 100),
+    "ppo_minibatches": (1, 4096),       # and at most learning_robots under ppo
+    "rollouts_per_update": (1, 64),
+    "workers": (1, 256),                # and at most num_envs (null: one per core)
+    "torch_threads": (1, 256),
+    "snapshot_pool": (1, 100),
+    "keep_checkpoints": (1, 100),
+}
+
 
 class ConfigError(ValueError):
     """A training setting is unknown, of the wrong type or impossible; ``key`` names it."""
@@ -135,7 +154,7 @@ class TrainConfig:
     action_mode: str = _f("discrete", "Driving: 'discrete' (two categorical heads [3, 3], paper) or 'continuous' "
                                       "(a clipped 3-d Gaussian over [throttle, brake, steering / limit]).")
     players_per_team: int = _f(2, f"Robots per team, 1..{MAX_PLAYERS_PER_TEAM} (paper: 2, i.e. 2v2).")
-    num_envs: int = _f(8, "Parallel worlds (paper: 8).")
+    num_envs: int = _f(8, "Parallel worlds, 1..1024 (paper: 8).")
     perception: str = _f("realistic", f"Perception preset: one of {PERCEPTIONS}.")
     localization: str = _f("none", "Self-localization as an input: 'none' (paper) or 'estimate' (the worlds run the "
                                    "emulated localization, the observations carry pose_estimate (7 values, team "
@@ -146,7 +165,7 @@ class TrainConfig:
                               "'subprocess'.")
 
     # -- schedule ----------------------------------------------------------------------------------------------
-    rollout_length: int = _f(6, "Motion periods per rollout and world before each update (paper: 6).")
+    rollout_length: int = _f(6, "Motion periods per rollout and world before each update, 1..1024 (paper: 6).")
     total_env_steps: int = _f(2_000_000, "Stop after this many env steps; one env step = one motion period of one "
                                          "world (paper: 60,000 updates x 8 worlds x 6 = 2,880,000).")
     max_minutes: float | None = _f(None, "Stop (and checkpoint) after this much wall time in minutes; null = no "
@@ -245,7 +264,7 @@ class TrainConfig:
                                     "Costs minutes at start (docs/benchmarks.md).")
 
     # -- network -----------------------------------------------------------------------------------------------
-    feature_size: int = _f(64, "Width D of the agent's streams (paper: 64).")
+    feature_size: int = _f(64, "Width D of the agent's streams, 1..1024 (paper: 64).")
     head_mode: str = _f("discrete", "Head-turn action: 'discrete' (paper) or 'continuous'.")
 
     # -- run ---------------------------------------------------------------------------------------------------
@@ -253,7 +272,8 @@ class TrainConfig:
     device: str = _f("cpu", "Torch device for learning: 'cpu', 'cuda', 'cuda:N' or 'mps'.")
     torch_threads: int = _f(1, "torch.set_num_threads for the learner (>= 1).")
     log_every_updates: int = _f(10, "Write scalars every this many updates.")
-    checkpoint_every_minutes: float = _f(5.0, "Write a training checkpoint every this many minutes of wall time.")
+    checkpoint_every_minutes: float = _f(5.0, "Write a training checkpoint every this many minutes of wall time, "
+                                              "after a first one as the run starts (a kill loses at most this much).")
     keep_checkpoints: int = _f(3, "Training checkpoints kept (the newest ones).")
 
     def __post_init__(self) -> None:
@@ -331,8 +351,6 @@ class TrainConfig:
                                          f"one world, got {self.workers}")
         if self.max_policy_lag < 0:
             raise ConfigError("max_policy_lag", f"must be >= 0, got {self.max_policy_lag}")
-        if self.rollouts_per_update < 1:
-            raise ConfigError("rollouts_per_update", f"must be >= 1, got {self.rollouts_per_update}")
         if self.worker_restarts < 0:
             raise ConfigError("worker_restarts", f"must be >= 0, got {self.worker_restarts}")
         if self.ray_address is not None and self.backend != "ray":
@@ -369,6 +387,10 @@ class TrainConfig:
         for f in dataclasses.fields(self):
             value = _check_type(f.name, getattr(self, f.name), _FIELD_TYPES[f.name])
             object.__setattr__(self, f.name, value)             # ints given for floats become floats
+        for key, (low, high) in SIZE_BOUNDS.items():
+            value = getattr(self, key)
+            if value is not None and not low <= value <= high:
+                raise ConfigError(key, f"must be in {low}..{high}, got {value}")
         _choice("algorithm", self.algorithm, ALGORITHMS)
         _choice("variant", self.variant, VARIANTS)
         _choice("opponent", self.opponent, OPPONENTS)
@@ -388,8 +410,6 @@ class TrainConfig:
         _choice("localization", self.localization, LOCALIZATIONS)
         _choice("scenario", self.scenario, SCENARIOS)
         _choice("action_mode", self.action_mode, ACTION_MODES)
-        if not 1 <= self.n_cars <= MAX_CARS:
-            raise ConfigError("n_cars", f"must be in 1..{MAX_CARS}, got {self.n_cars}")
         if self.driving:
             self._validate_driving()
         else:
@@ -398,13 +418,9 @@ class TrainConfig:
                     raise ConfigError(key, f"applies to scenario 'driving' only (scenario is {self.scenario!r})")
         if not _DEVICE.match(self.device):
             raise ConfigError("device", f"expected 'cpu', 'cuda', 'cuda:N' or 'mps', got {self.device!r}")
-        for key in ("num_envs", "rollout_length", "total_env_steps", "ppo_epochs", "ppo_minibatches", "ltp_horizon",
-                    "snapshot_every_updates", "snapshot_pool", "feature_size", "torch_threads", "log_every_updates",
-                    "keep_checkpoints"):
+        for key in ("total_env_steps", "snapshot_every_updates", "log_every_updates"):
             if getattr(self, key) < 1:
                 raise ConfigError(key, f"must be >= 1, got {getattr(self, key)}")
-        if not 1 <= self.players_per_team <= MAX_PLAYERS_PER_TEAM:
-            raise ConfigError("players_per_team", f"must be in 1..{MAX_PLAYERS_PER_TEAM}, got {self.players_per_team}")
         if self.seed < 0:
             raise ConfigError("seed", f"must be >= 0, got {self.seed}")
         for key in ("gamma", "gae_lambda", "learning_rate", "adam_eps", "max_grad_norm", "value_coef",
@@ -533,7 +549,13 @@ def _check_known(key: Any) -> None:
 
 def field_help() -> dict[str, str]:
     """Each field's help text, in declaration order."""
-    return {f.name: f.metadata["help"] for f in dataclasses.fields(TrainConfig)}
+    helps = {}
+    for f in dataclasses.fields(TrainConfig):
+        text = f.metadata["help"]
+        if f.name in SIZE_BOUNDS and "{}..{}".format(*SIZE_BOUNDS[f.name]) not in text:
+            text += " Bounds: {}..{}.".format(*SIZE_BOUNDS[f.name])
+        helps[f.name] = text
+    return helps
 
 
 # -- YAML ------------------------------------------------------------------------------------------------------------
