@@ -403,13 +403,13 @@ def test_player_republishes_every_message(make_node, executor, game_bag, game):
 
 
 def test_player_rebuilds_messages_recorded_with_an_older_definition(make_node, executor):
-    """The sample bag's DetectionArrays predate self_kicking and the GameController fields: played raw, their bytes
+    """The old sample bag's DetectionArrays predate self_kicking and the GameController fields: played raw, their bytes
     would be misread; the player rebuilds them as the installed type (old fields equal, new ones at defaults)."""
     from dynenv_msgs.msg import DetectionArray, WorldState
     from dynenv_ros.bags.inspect import echo
     from dynenv_ros.nodes.bag_player import BagPlayer
 
-    sample = REPO / "bags" / "sample_2v2_realistic_30s"
+    sample = REPO / "test" / "data" / "bag_before_checksums_2v2_30s"
     played = {"/team_b_0/detections": DetectionArray, topics.WORLD_STATE: WorldState}
     received: dict[str, list] = {topic: [] for topic in played}
     listener = make_node("old_listener")
