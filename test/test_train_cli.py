@@ -155,14 +155,18 @@ def test_resume_with_every_checkpoint_damaged_is_refused_and_loses_nothing(tmp_p
     assert main(["--config", "quick", "--run-dir", str(run_dir), "--no-progress", *TINY,
                  "--set", "total_env_steps=4"]) == 0
     capsys.readouterr()
-    weights = next((run_dir / "checkpoints").glob("step_*")) / "model.safetensors"
-    damaged = bytearray(weights.read_bytes())
-    damaged[-1] ^= 0xFF
-    weights.write_bytes(bytes(damaged))
+    damaged = {}
+    for folder in (run_dir / "checkpoints").glob("step_*"):     # the first (step 0) and the last
+        weights = folder / "model.safetensors"
+        data = bytearray(weights.read_bytes())
+        data[-1] ^= 0xFF
+        weights.write_bytes(bytes(data))
+        damaged[weights] = bytes(data)
+    assert len(damaged) == 2
     assert main(["--resume", str(run_dir), "--no-progress", "--set", "total_env_steps=8"]) == 2
     err = capsys.readouterr().err
     assert "dynenv-train:" in err and "Traceback" not in err
-    assert weights.read_bytes() == bytes(damaged)            # the evidence is left as it was
+    assert all(path.read_bytes() == data for path, data in damaged.items())   # the evidence is left as it was
 
 
 def test_missing_pretrained_encoder_is_refused(tmp_path, capsys):

@@ -114,8 +114,11 @@ def _fail(message: str) -> int:
 
 
 def _check_folder(path: Path | None, flag: str) -> None:
-    if path is not None and not path.parent.is_dir():
-        raise ValueError(f"{flag} {path}: folder {path.parent} does not exist")
+    """``path`` (an output file) can be written: its folder exists and takes a probe file (a read-only or full file
+    system is refused here, before any evaluation runs)."""
+    if path is not None:
+        from dynenv_ros.core.writable import check_writable_file
+        check_writable_file(path, flag)
 
 
 def _evaluate_and_report(out: Path | None, evaluate: Callable[[], Mapping[str, Any]],
@@ -130,7 +133,10 @@ def _evaluate_and_report(out: Path | None, evaluate: Callable[[], Mapping[str, A
         return _fail(str(error))
     print(table(result))
     if out is not None:
-        write_json(result, out)
+        try:
+            write_json(result, out)
+        except (ValueError, OSError) as error:   # the disk filled or went read-only while it ran
+            return _fail(f"--out {out}: cannot write: {error}")
         print(f"wrote {out}")
     return 0
 
@@ -191,7 +197,10 @@ def run_compare(args: argparse.Namespace) -> int:
         print(f"wrote {args.png}")
     if args.out is not None:
         summary = {"a": str(args.a), "b": str(args.b), "metric": args.metric, **result.as_dict()}
-        args.out.write_text(json.dumps(summary, indent=1) + "\n")
+        try:
+            args.out.write_text(json.dumps(summary, indent=1) + "\n")
+        except OSError as error:
+            return _fail(f"--out {args.out}: cannot write: {error}")
         print(f"wrote {args.out}")
     return 0
 

@@ -89,15 +89,27 @@ def main(argv: list[str] | None = None) -> int:
         _check_device(cfg.device)
         from dynenv_ros.learning.resources import check_machine
         check_machine(cfg)                 # cores, memory, shared memory, the Ray cluster: before anything starts
+        from dynenv_ros.core.writable import check_writable_dir
+        check_writable_dir(run_dir, "--resume" if args.resume else "--run-dir")   # read-only, full: refused now
     except (ConfigError, ValueError) as error:
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
+    from dynenv_ros.learning.checkpoints import list_checkpoints
+    resume = bool(args.resume)
+    if resume and not list_checkpoints(run_dir):     # killed before its first checkpoint (seconds after starting)
+        print(f"dynenv-train: --resume {run_dir}: no checkpoint yet (the run stopped before its first); starting "
+              f"it again from the beginning", file=sys.stderr)
+        resume = False
     from dynenv_ros.learning.trainer import make_trainer
     from dynenv_ros.learning.worker_pool import WorkerPoolError
     try:
-        trainer = make_trainer(cfg, run_dir, resume=bool(args.resume), progress=not args.no_progress)
+        trainer = make_trainer(cfg, run_dir, resume=resume, progress=not args.no_progress)
     except (ValueError, WorkerPoolError) as error:   # a checkpoint that does not fit; workers that cannot start
         print(f"dynenv-train: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:                         # the disk filled or went read-only since the probe
+        from dynenv_ros.core.writable import describe_os_error
+        print(f"dynenv-train: cannot write to {run_dir}: {describe_os_error(error)}", file=sys.stderr)
         return 2
     summary = trainer.run()
     print(f"dynenv-train: {summary['env_steps']} env steps, {summary['updates']} updates, "
@@ -115,10 +127,16 @@ def _from_bags(args: argparse.Namespace) -> int:
     try:
         if args.resume:
             raise ValueError("--from-bag starts a new run; --resume continues an in-process one")
+        for flag, value, high in (("--epochs", args.epochs, 10_000), ("--batch-sequences", args.batch_sequences,
+                                                                      4096)):
+            if not 1 <= value <= high:
+                raise ValueError(f"{flag} must be in 1..{high}, got {value}")
         cfg = load_config(preset_path(args.config), _overrides(args))
         run_dir = Path(args.run_dir or f"runs/from_bag_s{cfg.seed}")
         if (run_dir / "checkpoints").exists():
             raise ValueError(f"{run_dir} already holds a run; choose another --run-dir")
+        from dynenv_ros.core.writable import check_writable_dir
+        check_writable_dir(run_dir, "--run-dir")
         learns = (lambda name: name[5] == args.team) if args.team else None
         summary = train_from_bags(cfg, args.from_bag, run_dir, epochs=args.epochs,
                                   batch_sequences=args.batch_sequences, learns=learns)

@@ -142,9 +142,35 @@ class Trainer:
         return time.perf_counter() - self._started
 
     def run(self) -> dict[str, Any]:
+        """Train until total_env_steps or max_minutes, then ``finish``. A write that fails (a full or read-only disk:
+        OSError) stops the run cleanly: ``stop_reason`` in the summary, the last checkpoint left as it was (they are
+        written atomically), nothing more written."""
+        try:
+            return self._run()
+        except OSError as error:
+            return self._write_failed(error)
+
+    def _write_failed(self, error: OSError) -> dict[str, Any]:
+        from dynenv_ros.core.writable import describe_os_error
+        where = f" ({error.filename})" if getattr(error, "filename", None) else ""
+        self.stop_reason = f"cannot write to {self.run_dir}: {describe_os_error(error)}{where}; the last " \
+                           f"checkpoint is kept (dynenv-train --resume {self.run_dir} once there is room)"
+        for close in (getattr(getattr(self, "logger", None), "close", None), self._stop_rollouts):
+            try:
+                if close is not None:
+                    close()
+            except Exception:       # noqa: BLE001 - best effort on the way out; the reason is already known
+                pass
+        summary = self._summary()
+        summary["stop_reason"] = self.stop_reason
+        return summary
+
+    def _run(self) -> dict[str, Any]:
         cfg = self.cfg
         self._started = time.perf_counter()
         deadline = math.inf if cfg.max_minutes is None else cfg.max_minutes * 60.0
+        if not checkpoints.list_checkpoints(self.run_dir):
+            self.save_checkpoint()      # the first one at once: a kill from now on leaves a run to --resume
         last_checkpoint = time.perf_counter()
         window = self._new_window()
         returns: list[dict[str, float]] = []
