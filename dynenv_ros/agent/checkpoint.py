@@ -233,6 +233,15 @@ def non_finite_tensors(tensors: Mapping[str, torch.Tensor]) -> list[str]:
             if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all())]
 
 
+def refuse_non_finite(tensors: Mapping[str, torch.Tensor], source: str) -> None:
+    """ValueError naming the first tensor that holds a NaN or an infinity: such weights are never saved,
+    published or loaded."""
+    bad = non_finite_tensors(tensors)
+    if bad:
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise ValueError(f"{source} holds NaN or infinite values in tensor {bad[0]!r}{more}")
+
+
 # -- policy files --------------------------------------------------------------------------------------------------
 def agent_config(model: DynEnvAgent) -> dict[str, Any]:
     """The ``DynEnvAgent`` constructor arguments that rebuild ``model``'s architecture (soccer: the four keys it
@@ -252,6 +261,7 @@ def agent_config(model: DynEnvAgent) -> dict[str, Any]:
 def policy_bytes(model: DynEnvAgent, meta: Mapping[str, Any] | None = None) -> bytes:
     """A policy file's content (what ``save_policy`` writes; what the trainer node streams in PolicyWeights)."""
     tensors = tensors_for_saving(model.state_dict())
+    refuse_non_finite(tensors, "the policy to save or publish")
     metadata = {"format": FORMAT, "config": json_dumps(agent_config(model), "the agent's config"),
                 "meta": json_dumps(dict(meta or {}), "policy meta")}
     first = _st_save(tensors, metadata=metadata)
@@ -284,8 +294,9 @@ def save_policy(model: DynEnvAgent, path: str | os.PathLike[str], meta: Mapping[
 def load_policy(path: str | os.PathLike[str]) -> tuple[DynEnvAgent, dict[str, Any]]:
     """The agent (eval mode, on the CPU) and the caller's meta. Refuses with ValueError: a missing file
     ("does not exist"), a damaged one ("cannot be read safely" — truncated, not safetensors, a pickle, or a tensor
-    checksum mismatch), a foreign one ("not a dynenv_policy/1 file") and one whose weights do not fit the agent
-    its config describes ("does not fit")."""
+    checksum mismatch), a foreign one ("not a dynenv_policy/1 file"), one whose weights do not fit the agent
+    its config describes ("does not fit") and one with a NaN or infinite tensor ("holds NaN or infinite values in
+    tensor 'name'")."""
     source = Path(path)
     check_file_size(source, "policy file")
     return policy_from_bytes(source.read_bytes(), f"policy file {source}")
@@ -316,6 +327,7 @@ def policy_from_bytes(data: bytes, source: str = "policy") -> tuple[DynEnvAgent,
     except (TypeError, ValueError) as error:
         raise ValueError(f"{source} does not fit the agent: config {config}: {error}") from None
     check_state_dict_fits(shape_model, tensors, source)
+    refuse_non_finite(tensors, source)
     model = DynEnvAgent(**config)
     model.load_state_dict(tensors)
     return model.eval(), meta

@@ -25,6 +25,7 @@ take the one-hot [3, 3] actions (discrete) or the continuous action vector, whos
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 from typing import Any, Mapping
@@ -41,6 +42,7 @@ from dynenv_ros.learning.advantages import generalized_advantages
 from dynenv_ros.learning.heads import Learner, action_features
 from dynenv_ros.learning.rollout import head_outputs, layout_spec
 
+LOG = logging.getLogger(__name__)
 BALL_ANCHOR = ((0.0, 0.0),)
 
 
@@ -133,6 +135,16 @@ def self_supervised_losses(out: Any, targets: Mapping[str, Tensor], use_localiza
     return losses
 
 
+NONFINITE_SKIPS = ("nonfinite_loss_skipped", "nonfinite_gradient_skipped")
+
+
+def _skip_step(optimizer: torch.optim.Optimizer, what: str, value: float) -> None:
+    """A minibatch whose loss or gradient norm is NaN or infinite (poisoned experience, a diverging run): no
+    optimizer step, its gradients dropped — the weights never see it. Logged at ERROR; ``update`` counts it."""
+    optimizer.zero_grad(set_to_none=True)
+    LOG.error("non-finite %s (%r): the update step is skipped, the weights are unchanged", what, value)
+
+
 def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[str, Any], settings: UpdateSettings,
            generator: torch.Generator | None = None) -> dict[str, float]:
     """One PPO or A2C update on a rollout (``Rollout.as_tensors()``); returns the logged scalars."""
@@ -171,9 +183,17 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
             loss, kl = _minibatch_loss(learner, rollout, chunk, advantages, returns, s, log, intrinsic_returns,
                                        intrinsic_advantages)
             optimizer.zero_grad(set_to_none=True)
+            if not bool(torch.isfinite(loss.detach())):
+                _skip_step(optimizer, "loss", float(loss.detach()))
+                stats.setdefault("nonfinite_loss_skipped", []).append(1.0)
+                continue
             loss.backward()
             backward_done = time.perf_counter()
             norm = torch.nn.utils.clip_grad_norm_(learner.parameters(), s.max_grad_norm, foreach=True)
+            if not bool(torch.isfinite(norm)):
+                _skip_step(optimizer, "gradient norm", float(norm))
+                stats.setdefault("nonfinite_gradient_skipped", []).append(1.0)
+                continue
             optimizer.step()
             timing["forward_backward"] += backward_done - started
             timing["optimizer"] += time.perf_counter() - backward_done
@@ -183,7 +203,9 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
                 break
         if stop:
             break
-    out = {name: float(np.mean(values)) for name, values in stats.items()}
+    skips = {name: float(len(stats.pop(name, []))) for name in NONFINITE_SKIPS}
+    out = {name: float(np.mean(values)) for name, values in stats.items() if values}
+    out.update(skips)                   # counts (0 when none), not means: the runners and the trainer add them up
     out["epochs_run"] = float(epoch + 1)
     out["seconds_forward_backward"] = timing["forward_backward"]
     out["seconds_optimizer"] = timing["optimizer"]

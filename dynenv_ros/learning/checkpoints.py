@@ -47,8 +47,8 @@ import torch
 from safetensors.torch import save as _st_save
 
 from dynenv_ros.agent.checkpoint import (FORMAT as POLICY_FORMAT, atomic_write, check_state_dict_fits, fsync_dir,
-                                         json_dumps, load_policy, read_safetensors, save_policy, sha256,
-                                         tensors_for_saving, write_synced)
+                                         json_dumps, load_policy, read_safetensors, refuse_non_finite,
+                                         save_policy, sha256, tensors_for_saving, write_synced)
 
 __all__ = ["FORMAT", "POLICY_FORMAT", "CheckpointWarning", "save_training_checkpoint", "load_training_checkpoint",
            "read_checkpoint_meta", "resolve_checkpoint", "list_checkpoints", "capture_rng_state",
@@ -137,11 +137,14 @@ def save_training_checkpoint(run_dir: str | os.PathLike[str], step: int, model: 
     if "checkpoint" in meta:
         raise ValueError("meta key 'checkpoint' is reserved (load_training_checkpoint fills it in)")
     json_dumps(dict(meta), "meta")                                    # refuse before anything touches the disk
-    blobs = {MODEL_FILE: _st_save(tensors_for_saving(model.state_dict())),
+    weights = tensors_for_saving(model.state_dict())
+    refuse_non_finite(weights, "the model to checkpoint")          # a NaN is never saved
+    blobs = {MODEL_FILE: _st_save(weights),
              EXTRA_FILE: _st_save(tensors_for_saving(dict(extra_tensors or {})))}
     optimizer_json = None
     if optimizer is not None:
         optimizer_tensors, optimizer_json = _optimizer_payload(optimizer)
+        refuse_non_finite(optimizer_tensors, "the optimizer state to checkpoint")
         json_dumps(optimizer_json, "the optimizer's non-tensor state")
         blobs[OPTIMIZER_FILE] = _st_save(optimizer_tensors)
     record = {"format": FORMAT, "step": step, "created_unix": time.time(), "code_revision": code_revision(),
@@ -336,7 +339,7 @@ def load_training_checkpoint(path: str | os.PathLike[str], model: torch.nn.Modul
     code_revision, created_unix}, the extra tensors on the CPU).
 
     ValueError for: nothing there, a damaged file (SHA-256 mismatch, unreadable), a foreign format, weights that
-    do not fit ``model`` (naming the first offending key), an optimizer of another class or parameter layout, or
+    do not fit ``model`` (naming the first offending key), weights holding a NaN or infinity (named), an optimizer of another class or parameter layout, or
     an optimizer asked for when none was saved. Nothing is modified unless every check passes.
     """
     directory, record, blobs = _resolve(path)
@@ -346,6 +349,7 @@ def load_training_checkpoint(path: str | os.PathLike[str], model: torch.nn.Modul
     except ValueError as error:
         raise ValueError(f"checkpoint {directory} cannot be read: {error}") from None
     check_state_dict_fits(model, state, f"checkpoint {directory}")
+    refuse_non_finite(state, f"checkpoint {directory}")
     optimizer_state = None
     if optimizer is not None:
         if record.get("optimizer") is None:

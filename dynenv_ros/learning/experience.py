@@ -32,10 +32,12 @@ stream goes on with the game's next episode. So that such a period never starts 
 restarts after a cut, mid-episode), a chain's first slot after period 0 waits for its own feedback.
 
 Everything that can go wrong with messages is counted, never raised: ``late`` (for a slot already passed),
-``duplicate`` (a second frame index, answer or feedback for a slot: the first wins), ``out_of_order`` (arrived after a
+``duplicate`` (a second frame index, answer or feedback for a slot, the same again: the first wins), ``out_of_order`` (arrived after a
 newer slot's messages; still used), ``malformed`` (fields out of range, non-finite learning fields),
 ``actions_rounded`` (a learnt action the learner's action space holds only approximately — a head turn between the
 discrete head's steps, a driving command that is not one of the nine discrete ones — taken to the nearest),
+``out_of_range`` (learning fields or rewards beyond the bounds ``LOG_PROB_MIN``, ``VALUE_BOUND``,
+``REWARD_BOUND``: refused), ``early_replaced`` and ``contested`` (rival answers for one slot, ``_rival``),
 ``not_learning`` (an answer without learning fields: a scripted or foreign policy — its steps cannot be corrected
 off-policy), and ``missing``: a slot that never completes (a lost message, a killed node) once the stream has
 moved ``patience`` periods past it. A missing slot *cuts* the sequence: the steps gathered since the last emitted
@@ -58,6 +60,18 @@ from dynenv_ros.learning.rollout import STEP_ARRAYS, StepArrays
 
 STATUS_FALLEN = 1                 # ObjectState.STATUS_FALLEN
 KEPT_ENDS = 8                     # per stream: the last episodes whose per-agent end is remembered
+# Bounds on what a message may teach (docs/training.md, "What the trainer refuses"). Outside them the message is
+# refused and counted ``out_of_range``; a NaN or infinity is ``malformed``.
+LOG_PROB_MIN = -50.0              # Action.log_prob of a discrete action in [LOG_PROB_MIN, 0]; a density's |.| <= 50
+VALUE_BOUND = 1e4                 # |Action.value| (discounted return, reward units)
+REWARD_BOUND = 1e4                # |each StepFeedback reward term| per period
+ANSWER_FIELDS = ("walk", "turn", "kick", "head_yaw_delta", "throttle", "brake", "steering", "policy_version",
+                 "log_prob", "value")
+
+
+def answer_content(msg: Any) -> tuple:
+    """What makes two Actions for one slot the same answer (a re-delivered one) or rivals (one of them forged)."""
+    return tuple(getattr(msg, name, None) for name in ANSWER_FIELDS)
 
 
 def version(action: Any) -> int:
@@ -76,6 +90,8 @@ class Slot:
     frames_per_period: int = 0
     answer: Any = None
     feedback: Any = None
+    answer_early: bool = False    # the answer arrived before this period's frames were all here
+    contested: bool = False       # two different answers that cannot be told apart: the slot is no step
 
     @property
     def observed(self) -> bool:
@@ -146,6 +162,7 @@ class ExperienceAssembler:
         self.ready: list[Sequence] = []
         self._known: dict[tuple[str, str], tuple] = {}     # per stream: seen-since-episode-start, carried over
         self.last_missing = ""          # the last step given up as missing, and what it lacked
+        self.last_refused = ""          # the last message refused as out of range, and why
 
     # -- messages in ------------------------------------------------------------------------------------------
     def _stream(self, source: str, robot: str) -> _Stream | None:
@@ -202,6 +219,11 @@ class ExperienceAssembler:
         if msg.motion_period == 0 or msg.robot_id != self.names.index(robot) or self._action_problem(msg):
             self.counts["malformed"] += 1
             return
+        problem = self._range_problem(msg)
+        if problem:
+            self.counts["out_of_range"] += 1
+            self.last_refused = f"{source or '/'} {robot} action for period {msg.motion_period}: {problem}"
+            return
         self._file(source, robot, stream, (int(msg.episode_id), int(msg.motion_period) - 1), "answer", msg)
 
     def add_feedback(self, source: str, robot: str, msg: Any) -> None:
@@ -212,6 +234,11 @@ class ExperienceAssembler:
         if msg.robot_id != self.names.index(robot) or not all(math.isfinite(v) for v in terms):
             self.counts["malformed"] += 1
             return
+        if any(abs(v) > REWARD_BOUND for v in terms):
+            self.counts["out_of_range"] += 1
+            self.last_refused = (f"{source or '/'} {robot} feedback of period {msg.motion_period}: a reward term "
+                                 f"beyond ±{REWARD_BOUND:g}")
+            return
         self._file(source, robot, stream, (int(msg.episode_id), int(msg.motion_period)), "feedback", msg)
 
     def _file(self, source: str, robot: str, stream: _Stream, key: tuple[int, int], field_name: str,
@@ -220,13 +247,42 @@ class ExperienceAssembler:
         slot = self._slot(stream, key)
         if slot is None:
             return
+        if field_name == "answer" and slot.answer is not None:
+            self._rival(slot, msg)
+            return
         if getattr(slot, field_name) is not None:
             self.counts["duplicate"] += 1
             return
         setattr(slot, field_name, msg)
+        if field_name == "answer":
+            slot.answer_early = not slot.observed
         if field_name == "feedback" and self.scenario.per_agent_ends and (msg.terminated or msg.truncated):
             self._end_episode(stream, key)
         self._advance(source, robot, stream)
+
+    def _rival(self, slot: Slot, msg: Any) -> None:
+        """A second answer for a slot. The same content: a duplicate. A different one: the simulator accepts an
+        answer only once its period's frames are out (an earlier one is refused as ``early``), so an answer that
+        came before the frames gives way to one that came after them (``early_replaced``); two that cannot be told
+        apart make the slot no step (``contested``: the step is cut, never learnt from a guess)."""
+        if answer_content(msg) == answer_content(slot.answer):
+            self.counts["duplicate"] += 1
+        elif slot.answer_early and slot.observed and not slot.contested:
+            slot.answer, slot.answer_early = msg, False
+            self.counts["early_replaced"] += 1
+        else:
+            slot.contested = True
+            self.counts["contested"] += 1
+
+    def _range_problem(self, msg: Any) -> str:
+        """Why an Action's learning fields are outside the documented bounds ("" when inside)."""
+        if not version(msg):
+            return ""
+        if abs(msg.log_prob) > -LOG_PROB_MIN:
+            return f"|log_prob| {abs(msg.log_prob):g} beyond {-LOG_PROB_MIN:g}"
+        if abs(msg.value) > VALUE_BOUND:
+            return f"value {msg.value:g} beyond ±{VALUE_BOUND:g}"
+        return ""
 
     def _end_episode(self, stream: _Stream, key: tuple[int, int]) -> None:
         """The agent's episode ended at period ``key[1]`` (per-agent ends): its later periods are no experience —
@@ -293,6 +349,8 @@ class ExperienceAssembler:
         slot = stream.slots.get(key)
         if slot is None or not slot.observed or slot.answer is None:
             return False
+        if slot.contested:
+            return None
         if self.require_learning_fields and version(slot.answer) == 0:
             return None
         following = stream.slots.get((key[0], key[1] + 1))
@@ -345,7 +403,7 @@ class ExperienceAssembler:
                 stream.chain.append(following)
                 continue
             if ready is None:
-                self.counts["not_learning"] += 1
+                self.counts["contested_cuts" if stream.slots[key].contested else "not_learning"] += 1
                 self._cut(stream, key)
                 continue
             if not self._give_up(stream, key):
@@ -425,7 +483,7 @@ class ExperienceAssembler:
         final_values = np.zeros(T, np.float32)
         for t in np.flatnonzero(truncated):
             final = stream.slots.get((keys[t][0], keys[t][1] + 1))
-            if final is not None and final.answer is not None and version(final.answer):
+            if final is not None and final.answer is not None and version(final.answer) and not final.contested:
                 final_values[t] = final.answer.value
             else:       # a stepped policy node often skips the final observation (the next episode is already
                 final_values[t] = values[t]     # there): V(s) of the last step stands in, counted

@@ -30,7 +30,7 @@ import torch
 from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.learning import checkpoints
-from dynenv_ros.learning.algorithms import log_prob_entropy, run_sequence, update
+from dynenv_ros.learning.algorithms import NONFINITE_SKIPS, log_prob_entropy, run_sequence, update
 from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.experience import Sequence, batch
 from dynenv_ros.learning.heads import Learner
@@ -168,6 +168,8 @@ class SequenceLearner:
         self.learner.train()
         stats = update(self.learner, self.optimizer, tensors, self.settings, self.generator)
         self.learner.eval()
+        for name in NONFINITE_SKIPS:            # skipped steps (logged at ERROR by update): the node's diagnostics
+            self.counts[name] += int(stats.get(name, 0))
         self._store_states(sequences, tensors)
         versions = arrays["versions"]
         lag = self.version - versions

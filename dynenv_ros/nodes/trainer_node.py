@@ -277,7 +277,12 @@ class TrainerNode(Node):
             self._publish_weights()
 
     def _publish_weights(self) -> None:
-        data = self.learner.weights()
+        try:
+            data = self.learner.weights()
+        except ValueError as error:         # non-finite weights are never published (checkpoint.policy_bytes)
+            self.learner.counts["weights_refused"] += 1
+            self.get_logger().error(f"weights not published: {error}")
+            return
         msg = PolicyWeights(version=self.learner.version, run_id=self.run_id, data=data,
                             sha256=hashlib.sha256(data).hexdigest(),
                             metadata_json=json.dumps(self.learner.policy_meta()))
@@ -315,10 +320,12 @@ class TrainerNode(Node):
                   "policy_loss": f"{stats.get('policy_loss', 0.0):.4f}",
                   "value_loss": f"{stats.get('value_loss', 0.0):.4f}",
                   "entropy": f"{stats.get('entropy', 0.0):.4f}",
-                  "learner_error": self.background.error, "last_missing": self.assembler.last_missing}
+                  "learner_error": self.background.error, "last_missing": self.assembler.last_missing,
+                  "last_refused": self.assembler.last_refused}
         for key in ("steps", "sequences", "late", "duplicate", "out_of_order", "missing", "malformed",
                     "not_learning", "cuts", "steps_discarded", "unknown_robot", "targets_missing",
-                    "bootstrap_estimated", "after_end", "actions_rounded"):
+                    "bootstrap_estimated", "after_end", "actions_rounded", "out_of_range", "early_replaced",
+                    "contested", "contested_cuts"):
             values[key] = str(counts.get(key, 0))
         for key, value in list(self.learner.counts.items()) + list(self.background.counts.items()):
             values[key] = str(value)
