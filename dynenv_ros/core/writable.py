@@ -66,7 +66,7 @@ def check_writable_file(path: str | os.PathLike[str], what: str = "file") -> Non
     """``path``'s folder must exist and take a new file; ``path`` itself must not be a folder."""
     path = Path(path)
     if path.is_dir():
-        raise NotWritable(f"{what} {path} is a folder (give a file name)")
+        raise NotWritable(f"{what} {path}: it is a folder (give a file name)")
     if not path.parent.is_dir():
         raise NotWritable(f"{what} {path}: folder {path.parent} does not exist")
     check_writable_dir(path.parent, f"{what} {path}: folder", probe_bytes=4096)
