@@ -346,7 +346,7 @@ def test_the_tiny_task_is_learnt_asynchronously_as_in_process_at_equal_env_steps
 
 @pytest.mark.parametrize("overrides, key, words", [
     (["workers={cores_plus_one}", "num_envs={cores_plus_one}"], "workers", "worker processes on the"),
-    (["num_envs=100000000"], "num_envs", "GB available"),
+    (["num_envs=1024", "players_per_team=5"], "num_envs", "GB available"),   # within the bounds, not the memory
     (["torch_threads={cores_plus_one}"], "torch_threads", "cores this process may use"),
 ])
 def test_settings_beyond_the_machine_are_refused_in_one_line_before_anything_starts(tmp_path, capsys, overrides,

@@ -93,13 +93,11 @@ def files(tmp_path_factory):
     nan = DynEnvAgent(feature_size=16)
     with torch.no_grad():
         nan.walk_head.bias[0] = float("nan")
-    out["nan_weights"] = folder / "nan.safetensors"
-    save_checkpoint(nan, out["nan_weights"])
+    out["nan_weights"] = _policy_file(folder / "nan.safetensors", nan, agent_config(nan))   # save refuses NaN
     unreached = DynEnvAgent(feature_size=16)                  # a goalpost block: an empty trial never runs it
     with torch.no_grad():
         unreached.localization.embed.blocks[5].net[0].weight[0, 0] = float("inf")
-    out["nan_unreached"] = folder / "nan_unreached.safetensors"
-    save_checkpoint(unreached, out["nan_unreached"])
+    out["nan_unreached"] = _policy_file(folder / "nan_unreached.safetensors", unreached, agent_config(unreached))
     for name, head_max in (("head_max_nan", float("nan")), ("head_max_1e6", 1e6), ("head_max_wide", 1.0)):
         out[name] = _policy_file(folder / f"{name}.safetensors", small, {**agent_config(small), "head_max": head_max})
     out["absurd_network"] = _policy_file(folder / "absurd.safetensors", small,

@@ -136,10 +136,16 @@ def _from_bags(args: argparse.Namespace) -> int:
         if (run_dir / "checkpoints").exists():
             raise ValueError(f"{run_dir} already holds a run; choose another --run-dir")
         from dynenv_ros.core.writable import check_writable_dir
+        fresh = not run_dir.exists()
         check_writable_dir(run_dir, "--run-dir")
         learns = (lambda name: name[5] == args.team) if args.team else None
-        summary = train_from_bags(cfg, args.from_bag, run_dir, epochs=args.epochs,
-                                  batch_sequences=args.batch_sequences, learns=learns)
+        try:
+            summary = train_from_bags(cfg, args.from_bag, run_dir, epochs=args.epochs,
+                                      batch_sequences=args.batch_sequences, learns=learns)
+        except (ConfigError, ValueError, BagError):
+            if fresh and run_dir.is_dir() and not any(run_dir.iterdir()):
+                run_dir.rmdir()                        # refused before anything was written: leave no folder
+            raise
     except (ConfigError, ValueError, BagError) as error:
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
