@@ -113,7 +113,7 @@ def install_dependencies(state: dict[str, str]) -> bool:
     key = fingerprint(LOCK, extra=sys.version)
     if state.get("dependencies") == key:
         return False
-    log("installing locked dependencies (first run: about a minute)")
+    log("installing locked dependencies (first run: about 2 minutes on an idle 2-core machine, up to 5 on a busy one)")
     run([str(VENV_PYTHON), "-m", "pip", "install", "--disable-pip-version-check", "--no-deps",
          "-r", str(LOCK)], quiet_log=ROOT / "build" / "logs" / "pip-install.log")
     state["dependencies"] = key
