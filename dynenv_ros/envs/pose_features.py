@@ -16,8 +16,6 @@ Standard deviations rather than variances: they share the units of the position,
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 POSE_KEY = "pose_estimate"
@@ -49,10 +47,4 @@ def pose_features(estimate: np.ndarray, covariance: np.ndarray, teams: np.ndarra
     return rows
 
 
-def field_pose(row: np.ndarray, team: int) -> tuple[float, float, float]:
-    """One ``pose_estimate`` row back to a field-frame (x, y, yaw) for a robot of ``team`` (±1)."""
-    x, y, c, s = (float(v) for v in np.asarray(row)[:4])
-    return team * x, team * y, math.atan2(team * s, team * c)
-
-
-__all__ = ["POSE_KEY", "POSE_COLUMNS", "POSE_BOUND", "POSE_LOW", "POSE_HIGH", "pose_features", "field_pose"]
+__all__ = ["POSE_KEY", "POSE_COLUMNS", "POSE_BOUND", "POSE_LOW", "POSE_HIGH", "pose_features"]
