@@ -17,6 +17,11 @@ After the grid: ``OUT/<variant>.json`` merges each variant's evaluations (``dyne
 BEST between every variant and the reference (or the first variant), and ``OUT/table.md`` holds the table, headlined by
 the paper's metric (soccer; driving: the reward per car and episode). A run that fails is reported with its reason
 and the others go on; the exit status is 1 if any failed, 2 for bad arguments (checked before Ray starts).
+
+``--scratch DIR`` trains each run in ``DIR/<variant>_s<seed>/`` instead of a temporary folder, and keeps it: a sweep
+killed mid-run (a machine reboot, a session's end) run again resumes each unfinished run from its last checkpoint
+(``dynenv-train --resume``) rather than starting it over. Local sweeps only: on a cluster the folder would be on
+whichever node the task lands.
 """
 from __future__ import annotations
 
@@ -47,6 +52,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override a training setting of every run (repeatable)")
     parser.add_argument("--out", type=Path, required=True, help="folder for the runs, merged results and table")
+    parser.add_argument("--scratch", type=Path, help="train each run in SCRATCH/<variant>_s<seed> and keep it, so a "
+                        "sweep run again resumes unfinished runs from their checkpoints (local sweeps only)")
     parser.add_argument("--ray-address", help="HOST:PORT of a Ray cluster's head (default: an embedded local Ray)")
     parser.add_argument("--ray-timeout", type=float, default=10.0, help="seconds to wait for --ray-address")
     parser.add_argument("--cpus-per-run", type=int, help="CPUs each run reserves (default: the async runner's "
@@ -97,22 +104,30 @@ def cpus_for(cfg: Any, cpus_per_run: int | None) -> tuple[int, Any]:
     return cpus, (cfg.replace(backend="inprocess") if cpus == 1 else cfg)
 
 
-def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str, Any]) -> dict[str, Any]:
-    """One run, where the task landed: train in a scratch folder, evaluate the policy, return the small files."""
+def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str, Any],
+                       scratch: str | None = None) -> dict[str, Any]:
+    """One run, where the task landed: train in a scratch folder (``scratch``/name, kept and resumed from its last
+    checkpoint, or a temporary one), evaluate the policy, return the small files."""
+    from dynenv_ros.learning.checkpoints import list_checkpoints
     from dynenv_ros.learning.config import TrainConfig
     from dynenv_ros.learning.trainer import make_trainer
     cfg = TrainConfig.from_dict(cfg_dict)
     started = time.time()
-    with tempfile.TemporaryDirectory(prefix=f"dynenv-sweep-{name}-") as scratch:
-        run_dir = Path(scratch) / name
-        summary = make_trainer(cfg, run_dir, progress=False).run()
+    with tempfile.TemporaryDirectory(prefix=f"dynenv-sweep-{name}-") as temporary:
+        run_dir = Path(scratch or temporary) / name
+        resume = run_dir.is_dir() and bool(list_checkpoints(run_dir))
+        if run_dir.is_dir() and not resume:          # killed before its first checkpoint: nothing to keep
+            import shutil
+            shutil.rmtree(run_dir)
+        summary = make_trainer(cfg, run_dir, resume=resume, progress=False).run()
         result = _evaluate(cfg, run_dir / "policy.safetensors", evaluation)
         files = {f: (run_dir / f).read_bytes() for f in RUN_FILES if (run_dir / f).is_file()}
     import platform
 
     import ray
+    node = ray.get_runtime_context().get_node_id() if ray.is_initialized() else None
     return {"name": name, "summary": summary, "evaluation": result, "files": files, "host": platform.node(),
-            "node": ray.get_runtime_context().get_node_id(), "seconds": time.time() - started}
+            "node": node, "seconds": time.time() - started}
 
 
 def _evaluate(cfg: Any, policy: str | Path, evaluation: dict[str, Any]) -> dict[str, Any]:
@@ -162,6 +177,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         configs = _configs(args)
         planned = {name: cpus_for(cfg, args.cpus_per_run) for name, cfg in configs.items()}
         args.out.mkdir(parents=True, exist_ok=True)
+        if args.scratch and args.ray_address:
+            raise ValueError("--scratch is for local sweeps: on a cluster each run lands on another node's disk")
+        if args.scratch:
+            args.scratch.mkdir(parents=True, exist_ok=True)
     except (ConfigError, ValueError, OSError) as error:
         print(f"{PROG}: {error}".splitlines()[0], file=sys.stderr)
         return 2
@@ -193,7 +212,8 @@ def _sweep(ray: Any, args: argparse.Namespace, configs: dict[str, Any], planned:
             print(f"{name}: already in {args.out / name}, skipped")
             continue
         evaluation = {"episodes": args.eval_episodes, "opponent": args.opponent, "seeds": args.eval_seeds}
-        pending[task.options(num_cpus=run_cpus).remote(cfg.to_dict(), name, evaluation)] = name
+        scratch = str(args.scratch.resolve()) if args.scratch else None
+        pending[task.options(num_cpus=run_cpus).remote(cfg.to_dict(), name, evaluation, scratch)] = name
     print(f"{len(pending)} runs on {cpus} CPUs ({'cluster ' + args.ray_address if args.ray_address else 'local'})",
           flush=True)
     while pending:
