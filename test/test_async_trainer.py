@@ -363,6 +363,7 @@ def test_settings_beyond_the_machine_are_refused_in_one_line_before_anything_sta
 @pytest.mark.parametrize("changes, logged", [
     ({"opponent": "snapshot", "snapshot_every_updates": 1}, "train/loss"),
     ({"opponent": "scripted"}, "train/loss"),
+    ({"opponent": "perceiving"}, "train/loss"),
     ({"opponent": "random"}, "train/loss"),
     ({"teacher": "chaser", "imitation_coef": 1.0, "teacher_driven_worlds": 1}, "train/imitation_loss"),
     ({"variant": "pred", "privileged_pose_seeding": True, "use_localization": True, "use_reconstruction": True},

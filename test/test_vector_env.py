@@ -326,3 +326,30 @@ def test_scripted_team_b_refuses_unknown_kinds():
     from dynenv_ros.envs.vector import SoccerVectorEnv
     with pytest.raises(ValueError, match="scripted_team_b"):
         SoccerVectorEnv(1, backend="inprocess", scripted_team_b="random")
+
+
+def test_perceiving_team_b_plays_in_the_worlds_on_its_own_perception():
+    """Team B as the perceiving keeper_and_chasers team (each robot on its own detections and pose estimate): the
+    rows given for team B make no difference, both backends agree, and it scores against a team standing still —
+    as it does in dynenv-eval (docs/results.md, "The perceiving scripted team": 75:0 in 50 games against random)."""
+    import numpy as np
+    from dynenv_ros.envs.vector import SoccerVectorEnv
+    config = {"players_per_team": 1, "episode_seconds": 60.0}
+    results = []
+    for backend, junk in (("inprocess", 0), ("inprocess", 4), ("subprocess", 2)):
+        with SoccerVectorEnv(2, backend=backend, config=config, perception="realistic",
+                             scripted_team_b="perceiving") as env:
+            env.reset(seed=11)
+            actions = np.zeros((2, 2, 4), np.int64)
+            actions[:, 0] = [0, 1, 0, 3]          # team A stands still, head centred
+            actions[:, 1] = [junk, 0, junk % 3, junk]
+            total = np.zeros((2, 4, 2))
+            for _ in range(240):
+                total += env.step(actions).reward_terms
+            results.append(total)
+    np.testing.assert_array_equal(results[0], results[1])
+    np.testing.assert_array_equal(results[0], results[2])
+    primary = results[0][:, 0].sum(axis=0)
+    assert primary[1] > 0 > primary[0]            # the perceiving robot scored against the team standing still
+    with pytest.raises(ValueError, match="needs observation='padded'"):
+        SoccerVectorEnv(1, backend="inprocess", observation="full", scripted_team_b="perceiving")

@@ -46,12 +46,13 @@ from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.envs.learning_targets import target_shapes
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.envs.soccer_observations import LOCALIZATION_OPTIONS, SoccerObservations, perception_params
-from dynenv_ros.envs.teacher import (DRIVING_TEACHERS, PERCEIVING_TEACHER, TEACHERS, DrivingTeacher, PerceivingTeacher,
-                                     Teacher, make_soccer_teacher)
+from dynenv_ros.envs.teacher import (DRIVING_TEACHERS, PERCEIVED_KEYS, PERCEIVING_TEACHER, TEACHERS, DrivingTeacher,
+                                     PerceivingTeacher, Teacher, make_soccer_teacher)
 from dynenv_ros.perception.params import PerceptionParams
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.actions import Kick, Turn, Walk, parse_action
 from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.soccer.perceiving import perceiving_team
 from dynenv_ros.soccer.scripted import team_policies
 from dynenv_ros.soccer.world import SoccerWorld
 
@@ -91,6 +92,9 @@ def _seeds(seed: int | None, count: int) -> list[int]:
     return [int(child.generate_state(1, np.uint64)[0]) for child in children]
 
 
+SCRIPTED_TEAMS_B = (None, "chaser", "keeper_and_chasers", PERCEIVING_TEACHER)
+
+
 @dataclass(frozen=True)
 class _Settings:
     """What every world of a batch is built from (pickled once to each worker)."""
@@ -117,8 +121,8 @@ class _Settings:
     def observations(self) -> SoccerObservations:
         # the perceiving teacher reads the pose estimate: the localization runs for it, observed or not
         localization: bool | str = self.localization
-        if self.teacher == PERCEIVING_TEACHER and localization == "none":
-            localization = True
+        if PERCEIVING_TEACHER in (self.teacher, self.scripted_team_b) and localization == "none":
+            localization = True     # the perceiving opponent reads it too
         return SoccerObservations(self.config, self.observation, self.perception,
                                   max_landmarks=self.max_landmarks, max_objects=self.max_objects,
                                   localization=localization)
@@ -219,11 +223,17 @@ class InProcessBatch:
         self.driving = settings.scenario == "driving"
         self._scripted: list[Any] = []
         self._scripted_robots = range(0)
+        # team B of every world played by the perceiving team: its own policies, since each remembers the ball
+        self._perceiving: list[list[Any]] = []
         if settings.scripted_team_b is not None:
             n = self.config.players_per_team
-            self._scripted = team_policies(n, settings.scripted_team_b, field=self.config.field,
-                                           head_mode=self.config.head_mode, motion=self.config.motion)
             self._scripted_robots = range(n, 2 * n)
+            if settings.scripted_team_b == PERCEIVING_TEACHER:
+                self._perceiving = [perceiving_team(n, self.config.period_seconds, field=self.config.field,
+                                                    motion=self.config.motion) for _ in range(num_envs)]
+            else:
+                self._scripted = team_policies(n, settings.scripted_team_b, field=self.config.field,
+                                               head_mode=self.config.head_mode, motion=self.config.motion)
         self.worlds = [settings.make_world() for _ in range(num_envs)]
         # one teacher per world: the perceiving teacher remembers the ball along its world's episode
         self._teachers = [settings.make_teacher() for _ in range(num_envs)]
@@ -255,6 +265,8 @@ class InProcessBatch:
             obs.initial_padded(out=self._obs[e], targets=self._targets[e])
         else:
             self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
+        for policy in self._perceiving[e] if self._perceiving else ():
+            policy.reset()                      # a new episode: no memory of the last one's ball
         self._label(e, episode_start=True)
 
     def _label(self, e: int, episode_start: bool = False) -> None:
@@ -286,6 +298,10 @@ class InProcessBatch:
                 snapshot = world.snapshot()
                 for i in self._scripted_robots:
                     acts[i] = self._scripted[i].act(snapshot, i)
+            elif self._perceiving:               # ... or by the perceiving team, on what each robot saw last
+                seen, estimate = self._obs[e], obs.vision.estimate
+                for i in self._scripted_robots:
+                    acts[i] = self._perceiving[e][i].act({key: seen[key][i] for key in PERCEIVED_KEYS}, estimate[i])
             result = world.step(acts, on_frame=obs.on_frame)
             terms[e] = result.rewards
             if self.padded:
@@ -748,7 +764,10 @@ class SoccerVectorEnv(VectorEnv):
     ``scripted_team_b="chaser"`` or ``"keeper_and_chasers"``: every world drives its team B robots with that scripted
     team (``soccer.scripted``, reading the world's own ground truth in the world's process), and the rows given
     for those robots are ignored (send zeros). Why in the worlds: a scripted policy needs the ground truth, which
-    would otherwise have to cross the process boundary every step.
+    would otherwise have to cross the process boundary every step. ``"perceiving"`` (padded only): team B is the
+    perceiving keeper_and_chasers team (``soccer.perceiving``), each robot acting on its own padded observation of
+    the last period and its pose estimate, with a ball memory per world that starts afresh each episode; the
+    self-localization runs for it.
 
     ``localization="estimate"`` (padded only): every world runs the emulated self-localization and the observations
     gain ``pose_estimate`` (E, A, 7), the team-frame pose estimate of the period's last frame (``envs.pose_features``);
@@ -777,8 +796,11 @@ class SoccerVectorEnv(VectorEnv):
         if targets and observation != "padded":
             raise ValueError(f"targets=True needs observation='padded' (the targets come with perception), "
                              f"got observation={observation!r}")
-        if scripted_team_b not in (None, "chaser", "keeper_and_chasers"):
-            raise ValueError(f"scripted_team_b must be None, 'chaser' or 'keeper_and_chasers', got {scripted_team_b!r}")
+        if scripted_team_b not in SCRIPTED_TEAMS_B:
+            raise ValueError(f"scripted_team_b must be one of {SCRIPTED_TEAMS_B}, got {scripted_team_b!r}")
+        if scripted_team_b == PERCEIVING_TEACHER and observation != "padded":
+            raise ValueError("scripted_team_b='perceiving' acts on each robot's perceived observation and pose "
+                             f"estimate: it needs observation='padded', got observation={observation!r}")
         if teacher is not None and teacher not in TEACHERS:
             raise ValueError(f"teacher must be None or one of {TEACHERS}, got {teacher!r}")
         if teacher is not None and self.config.head_mode != "discrete":

@@ -41,7 +41,7 @@ import yaml
 
 ALGORITHMS = ("a2c", "ppo")
 VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
-OPPONENTS = ("self", "snapshot", "scripted", "random")
+OPPONENTS = ("self", "snapshot", "scripted", "perceiving", "random")
 BACKENDS = ("auto", "inprocess", "subprocess", "ray")
 RUNNERS = ("sync", "async")
 # one shared network has no slot input, so it cannot imitate a keeper in one slot: chasers only ('perceiving': the
@@ -236,7 +236,8 @@ class TrainConfig:
 
     # -- opponents ---------------------------------------------------------------------------------------------
     opponent: str = _f("self", "Team B: 'self' (both teams learn, shared weights), 'snapshot' (frozen past "
-                               "copies), 'scripted', 'random'.")
+                               "copies), 'scripted' (keeper_and_chasers on the ground truth), 'perceiving' (keeper_and_chasers on "
+                               "its robots' own detections and pose estimates, soccer.perceiving), 'random'.")
     snapshot_every_updates: int = _f(200, "Opponent 'snapshot': add a frozen copy every this many updates.")
     snapshot_pool: int = _f(5, "Opponent 'snapshot': most recent copies kept to play against.")
 

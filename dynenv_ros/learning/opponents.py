@@ -13,12 +13,12 @@ from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.learning.rollout import Opponent, policy_step, reset_state, sample_actions
 from dynenv_ros.soccer.scripted import DEFAULT_SCRIPTED
 
-OPPONENTS = ("self", "snapshot", "scripted", "random")
 SCRIPTED_TEAM = DEFAULT_SCRIPTED      # what "scripted" means, here as in dynenv-eval
 
 
 class WorldScriptedOpponent(Opponent):
-    """Team B played inside the worlds (``SoccerVectorEnv(scripted_team_b=...)``): its rows are ignored there."""
+    """Team B played inside the worlds (``SoccerVectorEnv(scripted_team_b=...)``: the ground-truth scripted team,
+    or the perceiving one on its robots' own observations): its rows are ignored there."""
 
     def act(self, obs: Mapping[str, np.ndarray], starts: np.ndarray) -> np.ndarray:
         return np.zeros((*starts.shape, 4), np.int64)

@@ -54,10 +54,14 @@ def make_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.nda
         return env, np.arange(cfg.n_cars)
     env = SoccerVectorEnv(num_envs, backend=backend, config=soccer_config(cfg), observation="padded",
                           perception=cfg.perception, targets=needs_targets(cfg),
-                          scripted_team_b=SCRIPTED_TEAM if cfg.opponent == "scripted" else None, teacher=cfg.teacher,
+                          scripted_team_b=IN_WORLD_TEAMS.get(cfg.opponent), teacher=cfg.teacher,
                           localization=cfg.localization)
     n = cfg.players_per_team
     return env, (np.arange(2 * n) if cfg.opponent == "self" else np.arange(n))
+
+
+# opponents the worlds play themselves (team B's rows of the learner's actions are ignored)
+IN_WORLD_TEAMS = {"scripted": SCRIPTED_TEAM, "perceiving": "perceiving"}
 
 
 @dataclass
@@ -82,7 +86,7 @@ def make_worlds(cfg: TrainConfig, learner: Learner, num_envs: int, backend: str,
         opponent = RandomOpponent(rng, 2 * soccer_config(cfg).motion.head_units + 1)
     elif cfg.opponent == "snapshot":
         opponent = SnapshotOpponent(agent, cfg.snapshot_pool, generator, rng)
-    elif cfg.opponent == "scripted":
+    elif cfg.opponent in IN_WORLD_TEAMS:
         opponent = WorldScriptedOpponent()
     seeding: dict[str, Any] = {}
     if cfg.privileged_pose_seeding:
