@@ -7,9 +7,10 @@ PettingZoo docs give for SB3) and train SB3's PPO on it with the Dict of Boxes o
 
 SuperSuit's SB3 wrapper forwards ``seed()`` to a gymnasium vector env that has none, so ``PPO(seed=...)`` and the
 wrapper's ``reset(seed=...)`` raise AttributeError (SuperSuit 3.11.0): seed the batch through ``vec_env.venv.reset``
-(sub-env i gets seed + i) and torch / numpy through ``stable_baselines3.common.utils.set_random_seed``. SuperSuit
-also sets no ``TimeLimit.truncated`` info, so SB3 takes the time-limit end of an episode for a terminal state (no
-bootstrapping from ``terminal_observation``) unless the env's infos carry that key.
+(sub-env i gets seed + i) and torch / numpy through ``stable_baselines3.common.utils.set_random_seed``. SuperSuit's
+SB3 wrapper folds truncations into ``dones``, and the envs carry no legacy ``TimeLimit.truncated`` info, so SB3
+would take the time-limit end of an episode for a terminal state (no bootstrapping from ``terminal_observation``):
+``envs.sb3_time_limit.sb3_time_limit_v0`` adds SB3's key before SuperSuit.
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import VecMonitor
 
 from dynenv_ros.envs.robocup_v0 import parallel_env
+from dynenv_ros.envs.sb3_time_limit import sb3_time_limit_v0
 
 PLAYERS_PER_TEAM = 2
 AGENTS = 2 * PLAYERS_PER_TEAM
@@ -36,7 +38,7 @@ def make_env():
 
 def make_vec_env(env):
     """The standard route: one vector slot per agent, COPIES worlds side by side, SB3's VecEnv interface."""
-    vec_env = ss.pettingzoo_env_to_vec_env_v1(env)
+    vec_env = ss.pettingzoo_env_to_vec_env_v1(sb3_time_limit_v0(env))
     return ss.concat_vec_envs_v1(vec_env, num_vec_envs=COPIES, num_cpus=0, base_class="stable_baselines3")
 
 
@@ -83,6 +85,20 @@ def test_supersuit_batch_is_the_envs_own_observations():
             expected_rewards += [ref_rewards[agent] for agent in ref.possible_agents]
         np.testing.assert_allclose(rewards, expected_rewards, rtol=1e-6)
         assert not terminations.any() and not truncations.any()
+
+
+def test_sb3_sees_the_time_limit_as_a_truncation_with_its_final_observation():
+    """What SB3's rollout collection reads to bootstrap: ``TimeLimit.truncated`` and ``terminal_observation``."""
+    vec_env = make_vec_env(make_env())
+    vec_env.venv.reset(seed=3)
+    action_space = vec_env.action_space
+    action_space.seed(3)
+    periods = make_env().config.episode_periods
+    for period in range(1, periods + 1):
+        _, _, dones, infos = vec_env.step(np.stack([action_space.sample() for _ in range(vec_env.num_envs)]))
+        assert dones.all() == (period == periods) and dones.any() == dones.all()
+        assert all(info["TimeLimit.truncated"] is (period == periods) for info in infos)
+    assert all(info["terminal_observation"] is not None for info in infos)
 
 
 # SB3 asks the batch for render_mode through get_attr, which SuperSuit's gymnasium vector env lacks; it falls back

@@ -103,7 +103,9 @@ class BagWriter:
 
     def add_topic(self, name: str, msgtype: str, qos: Sequence[Qos] = (SIM_STREAM_QOS,)) -> None:
         """Register a topic before writing to it; the type must be known to the typestore (its definition is
-        embedded in the bag). Adding a topic again with the same type is a no-op; another type is refused."""
+        embedded in the bag). ``qos``: the profiles its publishers offer, one each (``offered_qos_profiles``, what
+        the player republishes with; the recorder passes what discovery reported, the default is the simulator's
+        stepped stream). Adding a topic again with the same type is a no-op; another type is refused."""
         writer = self._open_writer()
         known = self._connections.get(name)
         if known is not None:

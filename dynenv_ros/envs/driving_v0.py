@@ -1,4 +1,5 @@
-"""Urban driving through PettingZoo's Parallel API: ``parallel_env(**config)``.
+"""Urban driving through PettingZoo: ``parallel_env(**config)`` (Parallel API), ``env(**config)`` (AEC API,
+PettingZoo's standard conversion and wrappers) and ``raw_env(**config)`` (AEC without wrappers).
 
 | | |
 |---|---|
@@ -21,7 +22,7 @@ Actions of cars that have left ``env.agents`` are ignored (a wrapper may keep se
 A car that reached its destination but waits for its team's bonus stays an agent with its actions ignored, so the
 bonus reaches it (the original kept every finished car to the end with zero rewards).
 
-``infos[agent]``: ``reward_terms``, ``TimeLimit.truncated``, ``events`` (this car's events of the period, as
+``infos[agent]``: ``reward_terms``, ``events`` (this car's events of the period, as
 ``"kind"`` or ``"kind: detail"``, e.g. ``"crash: building"``), ``finished``, ``crashed``, ``at_goal`` and whatever
 the observation mode adds.
 """
@@ -34,7 +35,9 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from dynenv_ros.driving.cars import ACCELERATION_CHOICES, BRAKE, STEERING_CHOICES
 from dynenv_ros.driving.config import DrivingConfig
@@ -123,9 +126,8 @@ class DrivingParallelEnv(AgentSpaces, ParallelEnv):
             rewards[agent] = float(totals[i])
             terminations[agent] = result.terminated or ended[i]
             truncations[agent] = result.truncated and not terminations[agent]
-            # Gymnasium's key for "ended by the time limit, bootstrap from the final observation".
             infos[agent] = {"reward_terms": {name: float(result.rewards[t, i]) for t, name in enumerate(TERMS)},
-                            "TimeLimit.truncated": truncations[agent], "events": events.get(i, []),
+                            "events": events.get(i, []),
                             **self._status(i), **self.observations.infos(i)}
         self.agents = [a for a in self.agents if not (terminations[a] or truncations[a])]
         return obs, rewards, terminations, truncations, infos
@@ -151,7 +153,22 @@ class DrivingParallelEnv(AgentSpaces, ParallelEnv):
 
 
 def parallel_env(**config: Any) -> DrivingParallelEnv:
+    """The Parallel env: every live car acts at once, as the world steps."""
     return DrivingParallelEnv(**config)
 
 
-__all__ = ["DrivingParallelEnv", "parallel_env", "action_space", "TERMS"]
+def raw_env(**config: Any) -> AECEnv:
+    """The AEC env without wrappers (PettingZoo's ``parallel_to_aec_wrapper``): agents act in turn and the world
+    steps once the last live agent has acted, so it plays exactly the Parallel env's episode."""
+    return parallel_to_aec_wrapper(parallel_env(**config))
+
+
+def env(**config: Any) -> AECEnv:
+    """The AEC env as PettingZoo's docs use it: ``raw_env`` under ``OrderEnforcingWrapper`` (what
+    ``pettingzoo.utils.conversions.parallel_to_aec`` applies). No out-of-bounds wrapper: the world already refuses
+    a bad action with ValueError naming the agent and field, and clipping would accept what the Parallel env
+    refuses. ``aec_to_parallel(env(...))`` hands back the Parallel env."""
+    return OrderEnforcingWrapper(raw_env(**config))
+
+
+__all__ = ["DrivingParallelEnv", "parallel_env", "env", "raw_env", "action_space", "TERMS"]

@@ -1,4 +1,5 @@
-"""RoboCup SPL soccer through PettingZoo's Parallel API: ``parallel_env(**config)``.
+"""RoboCup SPL soccer through PettingZoo: ``parallel_env(**config)`` (Parallel API), ``env(**config)`` (AEC API,
+PettingZoo's standard conversion and wrappers) and ``raw_env(**config)`` (AEC without wrappers).
 
 | | |
 |---|---|
@@ -30,7 +31,9 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from dynenv_ros.envs.soccer_observations import LOCALIZATION_OPTIONS, SoccerObservations
 from dynenv_ros.envs.soccer_session import kickoff_team
@@ -110,9 +113,7 @@ class RoboCupParallelEnv(AgentSpaces, ParallelEnv):
             rewards[agent] = totals[i]
             terminations[agent] = result.terminated
             truncations[agent] = result.truncated
-            # Gymnasium's key for "ended by the time limit, bootstrap from the final observation", which
-            # SuperSuit's vector env passes on and Stable-Baselines3 reads.
-            infos[agent] = {"reward_terms": terms[i], "TimeLimit.truncated": result.truncated and not result.terminated}
+            infos[agent] = {"reward_terms": terms[i]}
             if self.observations.mode == "padded":
                 infos[agent]["dropped_detections"] = int(self.observations.dropped_rows[i])
         if result.terminated or result.truncated:
@@ -135,4 +136,22 @@ class RoboCupParallelEnv(AgentSpaces, ParallelEnv):
 
 
 def parallel_env(**config: Any) -> RoboCupParallelEnv:
+    """The Parallel env: every robot acts at once, as the world steps."""
     return RoboCupParallelEnv(**config)
+
+
+def raw_env(**config: Any) -> AECEnv:
+    """The AEC env without wrappers (PettingZoo's ``parallel_to_aec_wrapper``): agents act in turn and the world
+    steps once the last live agent has acted, so it plays exactly the Parallel env's episode."""
+    return parallel_to_aec_wrapper(parallel_env(**config))
+
+
+def env(**config: Any) -> AECEnv:
+    """The AEC env as PettingZoo's docs use it: ``raw_env`` under ``OrderEnforcingWrapper`` (what
+    ``pettingzoo.utils.conversions.parallel_to_aec`` applies). No out-of-bounds wrapper: the world already refuses
+    a bad action with ValueError naming the agent and field, and clipping would accept what the Parallel env
+    refuses. ``aec_to_parallel(env(...))`` hands back the Parallel env."""
+    return OrderEnforcingWrapper(raw_env(**config))
+
+
+__all__ = ["RoboCupParallelEnv", "parallel_env", "env", "raw_env"]

@@ -16,8 +16,15 @@ Parameters:
 A topic whose type is not installed here (no generated Python class) or whose definition in the bag cannot be
 used is skipped with a warning naming it; the rest plays.
 
-Publishers use the simulator's reliable KEEP_ALL QoS. When not looping the node waits for every message to be
-acknowledged by the subscribers (at most ACK_TIMEOUT_S) and exits 0.
+Each topic is republished with the QoS its recorded publishers offered (``offered_qos_profiles`` in the bag's
+metadata, ``bags.qos.playback_qos``): the same reliability, durability, deadline, lifespan and liveliness, so every
+reader they matched matches the player; transient-local topics (/tf_static, latched topics) keep their played
+messages for readers that join later (a late RViz or tf2 listener gets the static frames), volatile ones are
+KEEP_ALL so a slow reader slows playback instead of losing messages. A topic whose metadata holds no usable profile
+(bags recorded before issue 28, or written without QoS) plays reliable, volatile, KEEP_ALL as before — but
+``tf_static`` always plays transient local, as tf2 requires. ``qos_by_topic`` holds each topic's profile (logged
+for the non-default ones). When not looping the node waits for every message to be acknowledged by the subscribers
+(at most ACK_TIMEOUT_S) and exits 0; latched messages are served only while the player runs.
 
 A topic recorded with an older definition of its type than the installed one (the RIHS01 hash the bag embeds
 differs, e.g. a DetectionArray from before ``self_kicking`` and the GameController fields) cannot be republished
@@ -35,12 +42,15 @@ from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
 from rosidl_parser.definition import AbstractNestedType, NamespacedType
 
 from dynenv_ros.bags.inspect import BagError, BagReader, open_bag
+from dynenv_ros.bags.qos import playback_qos
 from dynenv_ros.bags.typestore import dynenv_typestore
 from dynenv_ros.nodes.recorder import RCLError, message_class, run_until_signal
+from dynenv_ros.ros.bag_qos import describe, ros_qos
 from dynenv_ros.ros.node_runner import NodeExit
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.qos import sim_stream
@@ -115,12 +125,17 @@ class BagPlayer(Node):
             raise ParameterException(f"nothing to play: topics {sorted(wanted)} not in the bag (it has {in_bag})",
                                      ["topics"])
         self.publishers_by_topic: dict[str, Any] = {}
+        self.qos_by_topic: dict[str, QoSProfile] = {}   # what each topic is republished with
         self.converted: dict[str, type] = {}            # topics recorded with an older definition: rebuilt
         store = dynenv_typestore()
         for connection in self.connections:
             if connection.topic not in self.publishers_by_topic:
+                qos = self._playback_qos(connection.topic)
+                self.qos_by_topic[connection.topic] = qos
                 self.publishers_by_topic[connection.topic] = self.create_publisher(
-                    message_class(connection.msgtype), connection.topic, sim_stream())
+                    message_class(connection.msgtype), connection.topic, qos)
+                if describe(qos) != describe(sim_stream()):
+                    self.get_logger().info(f"{connection.topic}: {describe(qos)}")
             digest = getattr(connection, "digest", "")
             if (connection.msgtype in store.fielddefs and digest.startswith("RIHS01_")
                     and digest != store.hash_rihs01(connection.msgtype)):
@@ -129,6 +144,12 @@ class BagPlayer(Node):
             self.get_logger().warning(f"{topic} was recorded with an older definition of {cls.__name__}: its "
                                       "messages are rebuilt as the installed type; fields the bag lacks keep "
                                       "their defaults")
+
+    def _playback_qos(self, topic: str) -> QoSProfile:
+        """The topic's recorded offers (every connection of it in the bag) → the profile to publish with."""
+        connections = [c for c in self.connections if c.topic == topic]
+        offered = [q for c in connections for q in getattr(c.ext, "offered_qos_profiles", None) or []]
+        return ros_qos(playback_qos(topic, offered, sum(c.msgcount for c in connections)))
 
     def _subscribers_ready(self) -> bool:
         if self.wait_for_subscribers == 0:
@@ -193,8 +214,8 @@ class BagPlayer(Node):
             except RCLError as error:
                 if not self.context.ok():
                     return
-                # KEEP_ALL reliable: a subscriber that does not keep up fills the writer's history and publish
-                # fails after the middleware's blocking time. Keep the message and retry on the next tick.
+                # KEEP_ALL reliable (volatile topics): a subscriber that does not keep up fills the writer's history
+                # and publish fails after the middleware's blocking time. Keep the message and retry on the next tick.
                 self.stalls += 1
                 self.get_logger().warning(f"publishing on {connection.topic} stalled ({error}); retrying",
                                           throttle_duration_sec=5.0)
@@ -205,7 +226,7 @@ class BagPlayer(Node):
     def _finish(self, status: int) -> None:
         self.finished = True
         self._timer.cancel()
-        for publisher in self.publishers_by_topic.values():   # volatile topics: deliver before the process ends
+        for publisher in self.publishers_by_topic.values():   # deliver before the process ends
             publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
         lines = "\n".join(f"  {topic}: {count}" for topic, count in sorted(self.published.items()))
         stalled = f" ({self.stalls} stalled publishes retried)" if self.stalls else ""

@@ -20,9 +20,12 @@ While recording, the same topic says OK with the counts.
 
 Bag time of a message is its receive time in ns, like ``ros2 bag record``: wall time, or with ``use_sim_time:=true``
 (``--use-sim-time``) the latest /clock value recorded; the sim time
-stays in each message's header.stamp. Subscriptions use the simulator's reliable KEEP_ALL QoS, so a recorder that
-falls behind holds the publisher back instead of silently losing messages (once the writer's history is full, the
-publisher's publish() fails after Fast DDS's blocking time rather than dropping). The bag is finished (MCAP footer,
+stays in each message's header.stamp. Subscriptions are KEEP_ALL, reliable and transient local when every
+publisher of the topic offers it (as rosbag2 adapts them), so a recorder that falls behind holds a reliable publisher
+back instead of silently losing messages (once the writer's history is full, the publisher's publish() fails after
+Fast DDS's blocking time rather than dropping), and latched messages (/tf_static) are received however late the
+recorder starts. Each topic's metadata records the profile every publisher discovered on it offers
+(``offered_qos_profiles``, rosbag2 version 9), which the player republishes with. The bag is finished (MCAP footer,
 metadata.yaml) on every exit path and a summary (messages per topic) is logged. SIGINT/SIGTERM first drain what is
 already on its way (until no message arrived for DRAIN_QUIET_S, at most DRAIN_MAX_S), then finish the bag and exit 0; a second
 signal finishes at once.
@@ -54,6 +57,7 @@ from dynenv_ros.bags.mcap import CHUNK_MAX_AGE_S, FLUSH_PERIOD_S
 from dynenv_ros.bags.recovery import RecoveryError, reindex
 from dynenv_ros.bags.typestore import dynenv_typestore
 from dynenv_ros.bags.writer import BagWriter
+from dynenv_ros.ros.bag_qos import bag_qos, describe
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_float, declare_str, declare_str_list
 from dynenv_ros.ros.qos import recording_qos
@@ -155,26 +159,34 @@ class Recorder(Node):
                 return
             if topic in self.subscribed or not self._wanted(topic, types):
                 continue
-            # As rosbag2: a topic is subscribed once it has a publisher, with QoS adapted to what they offer.
-            offered = [info.qos_profile.durability for info in self.get_publishers_info_by_topic(topic)]
+            # As rosbag2: a topic is subscribed once it has a publisher, with QoS adapted to what they offer, and
+            # the bag records each publisher's offered profile (the player republishes with them).
+            offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
             if not offered:
                 continue
             key = (topic, tuple(types))
             if key in self._ignored:
                 continue
-            reason = self._subscribe(topic, types, recording_qos(offered))
+            reason = self._subscribe(topic, types, offered)
             if reason:
                 self._ignored.add(key)
                 self.get_logger().warning(f"not recording {topic}: {reason}")
 
-    def _subscribe(self, topic: str, types: list[str], qos: QoSProfile) -> str:
-        """Start recording ``topic``; returns why not, or "" on success."""
+    def _subscribe(self, topic: str, types: list[str], offered: list[QoSProfile]) -> str:
+        """Start recording ``topic`` from publishers offering ``offered``; returns why not, or "" on success."""
         if len(types) != 1:
             return f"it has several types {types}"
         msgtype = types[0]
+        qos = recording_qos(offered)
+        for policy in ("reliability", "durability"):
+            kinds = {getattr(p, policy) for p in offered}
+            if len(kinds) > 1:   # as rosbag2 warns: the weaker request matches all, the stronger offers lose
+                self.get_logger().warning(
+                    f"{topic}: publishers differ in {policy} ({', '.join(sorted(k.name.lower() for k in kinds))});"
+                    f" recording {getattr(qos, policy).name.lower()}, which matches them all")
         try:
             cls = message_class(msgtype)
-            self.bag.add_topic(topic, msgtype)
+            self.bag.add_topic(topic, msgtype, [bag_qos(p) for p in offered])
         except (ImportError, ValueError, KeyError) as error:
             return str(error)
         except OSError as error:   # its definition could not be written: the bag is full or broken
@@ -187,10 +199,10 @@ class Recorder(Node):
             event_callbacks=SubscriptionEventCallbacks(
                 matched=lambda _info: self.publish_diagnostics(),
                 incompatible_qos=lambda _info, name=topic: self.get_logger().warning(
-                    f"{name}: a publisher's QoS does not match this recording's "
-                    f"({qos.durability.name.lower()}); its messages are not recorded", throttle_duration_sec=5.0))))
+                    f"{name}: a publisher's QoS does not match this recording's ({describe(qos)}); its messages "
+                    "are not recorded", throttle_duration_sec=5.0))))
         self.subscribed[topic] = msgtype
-        self.get_logger().info(f"recording {topic} [{msgtype}]")
+        self.get_logger().info(f"recording {topic} [{msgtype}] ({describe(qos)})")
         return ""
 
     def _on_message(self, topic: str, data: bytes) -> None:

@@ -66,11 +66,14 @@ def action_stream() -> QoSProfile:
                       reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def recording_qos(offered_durabilities: list[DurabilityPolicy]) -> QoSProfile:
-    """The recorder's subscription to a topic, adapted to its publishers as rosbag2 does: lossless (reliable,
-    KEEP_ALL), and transient local when every publisher offers it, so their kept history (latched /tf_static, the
-    policies' first actions) reaches it; volatile otherwise, which matches any publisher."""
+def recording_qos(offered: list[QoSProfile]) -> QoSProfile:
+    """The recorder's subscription to a topic, adapted to its publishers' ``offered`` profiles as rosbag2 does:
+    KEEP_ALL; reliable when every publisher offers it (best effort otherwise, which matches them all); transient
+    local when every publisher offers it, so their kept history (latched /tf_static, the policies' first actions)
+    reaches it (volatile otherwise, which matches any publisher)."""
     profile = sim_stream()
-    if offered_durabilities and all(d == DurabilityPolicy.TRANSIENT_LOCAL for d in offered_durabilities):
+    if offered and not all(p.reliability == ReliabilityPolicy.RELIABLE for p in offered):
+        profile.reliability = ReliabilityPolicy.BEST_EFFORT
+    if offered and all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in offered):
         profile.durability = DurabilityPolicy.TRANSIENT_LOCAL
     return profile
