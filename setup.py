@@ -21,6 +21,23 @@ NODES = [
     "vision_adapter = dynenv_ros.nodes.vision_adapter:main",
     "trainer_node = dynenv_ros.nodes.trainer_node:main",
 ]
+# Runtime Python dependencies, for pip (`pip install .`); ROS packages (rclpy, the message packages) come from ROS
+# (package.xml, rosdep) and are not on PyPI under these names. Lower bounds only where an older major version lacks
+# what the code uses; the exact tested set is requirements.lock, which tools/bootstrap.py installs with --no-deps
+# (so these lists never change what `make run` / `make test` install). torch: pip resolves it from the configured
+# index (PyPI's Linux default is the CUDA build); install the CPU wheel first for a CPU-only machine (README).
+INSTALL_REQUIRES = [
+    "numpy>=2", "PyYAML", "scipy", "torch>=2.8", "pymunk>=7", "numba", "rosbags>=0.11", "pettingzoo>=1.24",
+    "gymnasium>=1", "pillow", "onnx", "onnxscript", "onnxruntime", "safetensors", "tensorboard", "tqdm",
+    "matplotlib", "cryptography",
+]
+EXTRAS_REQUIRE = {
+    # Training on a cluster (backend: ray, dynenv-sweep) and BEST comparisons (dynenv-eval): imported lazily.
+    "train": ["ray", "pymc"],
+    # The test suite beyond the runtime: RL libraries' route (test_rl_libraries) and the colcon build test.
+    "test": ["pytest", "pytest-xdist", "supersuit", "stable-baselines3", "catkin-pkg", "colcon-core", "colcon-ros",
+             "colcon-package-selection"],
+}
 TOOLS = [
     "dynenv-run = dynenv_ros.main_job:main",
     "dynenv-bench = benchmarks.__main__:main",
@@ -31,12 +48,14 @@ TOOLS = [
     "dynenv-train = dynenv_ros.learning.train_cli:main",
     "dynenv-sweep = dynenv_ros.experiments.sweep:main",
     "dynenv-pretrain = dynenv_ros.learning.pretrain:main",
+    "dynenv-keys = dynenv_ros.security.keys_cli:main",
 ]
 
 setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=["dynenv_ros*", "policy_node*", "benchmarks*"]),
+    package_data={"dynenv_ros.ros": ["*.xml"]},           # the policy node's Fast DDS profiles (ros/dds_profiles.py)
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -46,7 +65,8 @@ setup(
         (f"share/{PACKAGE}/pretrained/eval", glob("policy_node/pretrained/eval/*.json")),
         (f"share/{PACKAGE}/config/train", glob("config/train/*.yaml")),
     ],
-    install_requires=["setuptools"],
+    install_requires=INSTALL_REQUIRES,
+    extras_require=EXTRAS_REQUIRE,
     zip_safe=True,
     maintainer="dynenv_ros maintainers",
     maintainer_email="maintainers@dynenv-ros.org",

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
           "policy": "policy", "train": "train", "learner": "learner", "soak": "soak",
-          "flood": "flood", "ros-train": "ros_train", "cores": "cores"}
+          "flood": "flood", "ros-train": "ros_train", "cores": "cores", "auth": "auth"}
 # suites whose one run lasts minutes: one run unless --repeat asks for more
 LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1}
 # suites that do not repeat their measurement (yet)
@@ -58,7 +58,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "ros-train":
             from benchmarks.ros_train import add_arguments as add_ros_train_arguments
             add_ros_train_arguments(sub)
-        if name in ("msgs", "setup"):
+        if name in ("msgs", "setup", "auth"):
             sub.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
         if name == "ros":
             sub.add_argument("--sim-seconds", type=float, default=60.0, help="sim seconds per stepped game")

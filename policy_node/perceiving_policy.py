@@ -31,6 +31,7 @@ from rclpy.node import Node
 from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
+from dynenv_ros.ros.authentication import action_tagger
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_float, declare_int, declare_str
 from dynenv_ros.ros.pose_estimates import PoseHistory, declare_pose_input, pose_problem, stamp_ns
@@ -62,6 +63,7 @@ class PerceivingPolicyNode(Node):
             raise ParameterException(f"robot must be one of {', '.join(names)} (players_per_team {players}), got "
                                      f"{self.robot!r}", ["robot"])
         self.robot_id = names.index(self.robot)
+        self.tag_action = action_tagger(self, [self.robot])      # secrets_dir: its team's secret (issue 27)
         self.policy = perceiving_team(players, period)[self.robot_id]
         self.role = type(self.policy.inner).__name__
         self.history = PoseHistory()
@@ -154,6 +156,7 @@ class PerceivingPolicyNode(Node):
         msg = cv.action_msg(action, robot_id=self.robot_id, episode_id=last.episode_id,
                             motion_period=last.motion_period + 1, stamp=last.header.stamp)
         msg.header.frame_id = base_frame(self.robot)      # stamped with the observation it answers (sim time)
+        self.tag_action(self.robot, msg, self.action_pub)
         self.action_pub.publish(msg)
         self.actions_sent += 1
         self.previous = action

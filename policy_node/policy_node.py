@@ -8,7 +8,10 @@ State resets at episode boundaries. Weights come from a policy file (safetensors
 or an ONNX file, at start or through the LoadPolicy service; either way the policy is checked first
 (``agent.export.check_policy``: bounded sizes, finite weights, a trial decision on the last frames received giving
 actions the simulator accepts) and a failing one is refused with the reason — at start a one-line error and exit
-status 2, at run time a refusal that keeps the current policy. Swaps happen between two decisions.
+status 2, at run time a refusal that keeps the current policy. Swaps happen between two decisions. A trainer's
+weights are taken only when signed by a key in ``trusted_weights_keys`` and newer than those acting: announced on
+``/trainer/weights_announcement``, fetched in chunks without blocking decisions and checked against the signed
+SHA-256 (``ros.weights_follower``; docs/ros_graph.md, "Who may change the weights").
 
 Driving (``scenario:=driving``): the node acts for cars ``car_0`` … ``car_<n_cars-1>`` with a driving policy
 (``DynEnvAgent(scenario='driving')``, a .safetensors or .onnx file): each car's one frame per period is packed into
@@ -31,7 +34,7 @@ waiting, so it always acts on the newest complete period; older ones are dropped
 """
 from __future__ import annotations
 
-import hashlib
+import json
 import math
 import statistics
 import time
@@ -42,7 +45,7 @@ from typing import Any
 import numpy as np
 import torch
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from dynenv_msgs.msg import Action, DetectionArray, PolicyWeights
+from dynenv_msgs.msg import Action, DetectionArray
 from dynenv_msgs.srv import LoadPolicy
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.clock import Clock, ClockType
@@ -53,15 +56,17 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.envs.pose_features import POSE_KEY
 from dynenv_ros.ros import topics
+from dynenv_ros.ros.authentication import action_tagger
 from dynenv_ros.ros.node_runner import NodeExit, run_node
-from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str
+from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.pose_estimates import (HISTORY_DEPTH, LOST_ROW, PoseHistory, declare_pose_input, pose_batch,
                                            pose_problem, stamp_ns)
-from dynenv_ros.ros.qos import action_stream, latched
+from dynenv_ros.ros.qos import action_stream
 from dynenv_ros.ros.tf import base_frame
 from dynenv_ros.soccer.config import MotionConfig, SoccerConfig, robot_names
 from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.checkpoint import MAX_POLICY_BYTES, load_policy, policy_from_bytes, sha256
+from dynenv_ros.agent.checkpoint import (MAX_POLICY_BYTES, agent_config, check_agent_config, load_policy,
+                                         policy_from_bytes, sha256)
 from dynenv_ros.agent.export import (MAX_FRAMES, TorchPolicy, behaviour_log_probs, check_driving_policy,
                                      check_policy, check_scenario, sample_actions)
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
@@ -69,6 +74,11 @@ from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.driving.config import MAX_CARS, DrivingConfig, car_names
 from dynenv_ros.envs.driving_observations import driving_layout_spec
 from dynenv_ros.envs.padded_layout import SOCCER
+from dynenv_ros.ros.dds_profiles import use_bounded_profiles
+from dynenv_ros.ros.weights_follower import WeightsFollower
+from dynenv_ros.security.keys import KeyFileError, load_trusted_keys
+from dynenv_ros.security.weights_order import ReleaseOrder
+from dynenv_ros.security.weights_signing import Announcement
 from policy_node.periods import PeriodMemory, file_frame, period_problem
 
 RUNTIMES = ("torch", "onnxruntime")
@@ -157,15 +167,28 @@ class PolicyNode(Node):
         self.greedy = declare_bool(self, "greedy", False, "Take the most likely action instead of sampling.")
         diagnostics_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.",
                                       read_only=True)
-        weights_topic = declare_str(self, "weights_topic", topics.WEIGHTS, "PolicyWeights from a trainer node, "
-                                    "swapped in between two decisions (torch runtime); empty: never.", read_only=True)
+        weights_topic = declare_str(self, "weights_topic", topics.WEIGHTS_ANNOUNCEMENT, "A trainer's signed "
+                                    "WeightsAnnouncements; the weights are fetched, checked and swapped in between "
+                                    "two decisions (torch runtime); empty: never.", read_only=True)
+        weights_service = declare_str(self, "weights_service", topics.FETCH_WEIGHTS, "The trainer's FetchWeights "
+                                      "service the announced weights are fetched from.", read_only=True)
+        trusted_keys = declare_str_list(self, "trusted_weights_keys", [], "Ed25519 public keys (.pub files, or "
+                                        "directories of them) whose signed weights are taken; none: a trainer's "
+                                        "weights are refused.", read_only=True)
+        max_weights = declare_int(self, "max_weights_bytes", MAX_POLICY_BYTES, 1, MAX_POLICY_BYTES, "Largest "
+                                  "announced policy file fetched, bytes (refused before any byte travels).",
+                                  read_only=True)
+        weights_state = declare_str(self, "weights_state_file", "", "JSON file keeping the last accepted release "
+                                    "(run, version, stamp) across restarts, so a replay stays refused; empty: "
+                                    "kept in memory only.", read_only=True)
         self.weights_run = declare_str(self, "weights_run_id", "", "Take weights from this trainer run only "
-                                       "(PolicyWeights.run_id); empty: any run.", read_only=True)
+                                       "(WeightsAnnouncement.run_id); empty: any run.", read_only=True)
         self.pose_max_age, self.pose_frame = declare_pose_input(self, "Robocup, a policy that takes the pose "
                                                                 "estimate")
         everyone = car_names(n_cars) if self.driving else robot_names(players)
         self.names = [name for name in everyone if not team or name[5] == team]
         self.ids = {name: everyone.index(name) for name in self.names}
+        self.tag_action = action_tagger(self, self.names)    # secrets_dir: team secrets, Action.mac (issue 27)
         self.memory = {name: RobotMemory(self.idle) for name in self.names}
         self.teams = {name: 1 if name.startswith("team_a") else -1 for name in self.names}   # robocup's team signs
         self.pose_histories = {name: PoseHistory() for name in self.names}
@@ -176,7 +199,7 @@ class PolicyNode(Node):
         self.latencies_ms: list[float] = []
         self.actions_sent = 0
         self.dropped_detections = 0          # rows beyond the maxima, farthest first
-        # Version of the weights acting (Action.policy_version): a trainer's PolicyWeights.version, else 1 + the
+        # Version of the weights acting (Action.policy_version): a trainer's announced version, else 1 + the
         # update count a trained policy file records (1 if it records none); 0 for the untrained smoke-test
         # weights, which no trainer should learn from (docs/interfaces.md).
         self.policy_version = 0
@@ -201,8 +224,8 @@ class PolicyNode(Node):
                                                            detection_qos()) for n in self.names}
         self._subscribe_poses()
         self.load_srv = self.create_service(LoadPolicy, "~/load_policy", self._on_load)
-        self.weights_sub = (self.create_subscription(PolicyWeights, weights_topic, self._on_weights, latched(1))
-                            if weights_topic else None)
+        self.weights = (self._follow_weights(weights_topic, weights_service, trusted_keys, max_weights,
+                                             weights_state, diagnostics_s) if weights_topic else None)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "~/diagnostics", QoSProfile(depth=10))
         self._diagnostics_sent = 0
         self._reported: Counter[str] = Counter()
@@ -296,52 +319,61 @@ class PolicyNode(Node):
         self.policy, self.checkpoint_sha256, self.policy_version = policy, digest, version
         self._subscribe_poses()
 
-    def _on_weights(self, msg: PolicyWeights) -> None:
-        """A trainer's new weights: checked like a file (and against the message's own checksum), swapped in, or
-        refused with the reason (counted, logged, in diagnostics) while the current weights keep playing."""
+    def _follow_weights(self, topic: str, service: str, key_paths: list[str], max_bytes: int, state_file: str,
+                        report_s: float) -> WeightsFollower:
+        """Signed weights from a trainer (``ros.weights_follower``): only releases a trusted key signed, newer than
+        the one acting, fitting this node, fetched without blocking decisions."""
         try:
-            policy, digest = self._weights_policy(msg)
+            trusted = load_trusted_keys(key_paths)
+        except KeyFileError as error:
+            raise ParameterException(str(error), ["trusted_weights_keys"]) from None
+        try:
+            order = ReleaseOrder(state_file or None)
         except ValueError as error:
-            self.counts["weights_refused"] += 1
-            self.weights_refusal = f"version {msg.version}: {_one_line(error)}"
-            self.get_logger().warning(f"PolicyWeights refused, kept version {self.policy_version}: "
-                                      f"{self.weights_refusal}", throttle_duration_sec=5.0)
-            return
-        if policy is None:
-            return
-        self._swap(policy, digest, int(msg.version))
-        self.counts["weights_loaded"] += 1
-        self.get_logger().info(f"weights version {msg.version} of run {msg.run_id or '?'} (sha256 {digest[:12]})",
-                               throttle_duration_sec=10.0)
+            raise ParameterException(str(error), ["weights_state_file"]) from None
+        if trusted:       # the first shape check on torch's meta device imports ~70 MB of torch (2-3 s): now, not
+            with torch.device("meta"):          # as a stall of the decisions when the first weights arrive
+                DynEnvAgent(feature_size=1)
+        return WeightsFollower(self, topic=topic, service=service, accept_service="~/accept_older_weights",
+                               trusted=trusted, max_bytes=max_bytes, order=order, fits=self._announced_network,
+                               install=self._install_weights, counts=self.counts,
+                               note=lambda text: setattr(self, "weights_refusal", text), run_filter=self.weights_run,
+                               report_period_s=report_s)
 
-    def _weights_policy(self, msg: PolicyWeights):
-        """(policy, sha256) of an acceptable message, (None, '') for one to ignore (another run's, or the weights
-        acting already: a duplicate); ValueError with the reason for one that cannot be used. A lower version of
-        the same run is taken: the trainer restarted from an earlier checkpoint, and the trainer decides."""
-        if self.weights_run and msg.run_id != self.weights_run:
-            self.counts["weights_other_run"] += 1
-            return None, ""
-        if (msg.run_id, msg.version) == self.weights_acting:
-            self.counts["weights_duplicate"] += 1
-            return None, ""
+    def _announced_network(self, metadata_json: str) -> None:
+        """ValueError unless an announced network (its signed metadata: the policy file's config) can play here:
+        checked before the weights are fetched."""
         if self.runtime_name != "torch":
             raise ValueError(f"weights need the torch runtime; this node runs {self.runtime_name}")
-        if not 1 <= len(msg.data) <= MAX_POLICY_BYTES:
-            raise ValueError(f"{len(msg.data)} bytes of data, expected 1..{MAX_POLICY_BYTES}")
-        data = bytes(msg.data)
-        digest = hashlib.sha256(data).hexdigest()
-        if msg.sha256 and msg.sha256.lower() != digest:
-            raise ValueError(f"data sha256 {digest[:12]} differs from the message's {msg.sha256[:12]} (damaged)")
+        try:
+            meta = json.loads(metadata_json)
+            config = check_agent_config(meta["config"])
+        except (ValueError, KeyError, TypeError) as error:
+            raise ValueError(f"metadata_json does not describe a network: {_one_line(error)}") from None
+        scenario, mine = config.get("scenario", "soccer"), "driving" if self.driving else "soccer"
+        if scenario != mine:
+            raise ValueError(f"it is a {scenario} policy and this node plays {mine}")
+        if self.driving and config.get("action_mode") != self.action_mode:
+            raise ValueError(f"it is a {config.get('action_mode')} driving policy and the simulator's action_mode "
+                             f"is {self.action_mode}")
+
+    def _install_weights(self, data: bytes, announcement: Announcement) -> str:
+        """Swap in fetched weights whose bytes matched the signed SHA-256, after the checks a policy file gets and
+        the check that they are the network announced; ValueError with the reason otherwise (the current weights
+        keep playing). Returns the file's SHA-256."""
         try:
             agent, _ = policy_from_bytes(data, "weights")
             policy = TorchPolicy(agent)
-        except ValueError:
-            raise
+        except ValueError as error:
+            raise ValueError(_one_line(error)) from None
         except Exception as error:           # anything else hostile bytes provoke: refused, not fatal
             raise ValueError(f"{type(error).__name__}: {_one_line(error)}") from None
+        if agent_config(agent) != json.loads(announcement.metadata_json)["config"]:
+            raise ValueError(f"the file's network {agent_config(agent)} is not the one announced")
         self._validate(policy)
-        self.weights_acting = (msg.run_id, msg.version)
-        return policy, digest
+        self._swap(policy, announcement.sha256, int(announcement.version))
+        self.weights_acting = (announcement.run_id, int(announcement.version))
+        return announcement.sha256
 
     # -- pose estimates --------------------------------------------------------------------------------------------
     def _subscribe_poses(self) -> None:
@@ -476,6 +508,7 @@ class PolicyNode(Node):
                     msg.log_prob, msg.value = float(log_probs[b]), float(values[b])
                 msg.header.stamp = frame.header.stamp          # the observation acted on (sim time in the sim)
                 msg.header.frame_id = base_frame(name)
+                self.tag_action(name, msg, self.action_pubs[name])
                 self.action_pubs[name].publish(msg)
                 self.actions_sent += 1
                 if same_episode:
@@ -579,6 +612,8 @@ class PolicyNode(Node):
                     "fallback_actions", "failed_decisions", "weights_loaded", "weights_refused", "weights_duplicate",
                     "weights_other_run", "pose_used", "pose_missing", "pose_stale", "pose_malformed"):
             values[key] = str(self.counts.get(key, 0))
+        if self.weights is not None:                 # refusals by reason, the fetch running (ros.weights_follower)
+            values.update(self.weights.diagnostics())
         values["pose_input"] = "yes" if self.pose_wanted else "no"
         values["pose_refusal"] = self.pose_refusal
         values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"
@@ -643,6 +678,7 @@ def _empty_period(frames: int) -> list[DetectionArray]:
 
 
 def main(args: Sequence[str] | None = None) -> int:
+    use_bounded_profiles()        # before rclpy.init: DDS drops oversized announcements (ros/dds_profiles.py)
     return run_node(PolicyNode, args)
 
 

@@ -24,6 +24,7 @@ from dynenv_ros.driving.config import MAX_CARS, DrivingConfig, car_names
 from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
+from dynenv_ros.ros.authentication import action_tagger
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.qos import action_stream, sim_stream
@@ -46,6 +47,7 @@ class ScriptedDriverNode(Node):
         if unknown:
             raise ParameterException(f"unknown cars {unknown}; cars are {names}", ["cars"])
         self.cars = cars or names
+        self.tag_action = action_tagger(self, self.cars)       # secrets_dir: cars.secret (issue 27)
         self.config = DrivingConfig(n_cars=n_cars, action_mode=mode)
         self.driver = ScriptedDriver(self.config, cruise_speed=cruise)
         self._truth: OrderedDict[tuple[int, int, int], WorldState] = OrderedDict()
@@ -113,6 +115,7 @@ class ScriptedDriverNode(Node):
                      throttle=throttle, brake=brake, steering=steering)
         msg.header.stamp = frame.header.stamp            # the observation it answers (sim time)
         msg.header.frame_id = base_frame(car)
+        self.tag_action(car, msg, self.action_pubs[car])
         self.action_pubs[car].publish(msg)
         self.actions_sent += 1
 

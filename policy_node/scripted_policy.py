@@ -19,6 +19,7 @@ from rclpy.node import Node
 
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
+from dynenv_ros.ros.authentication import action_tagger
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_int, declare_str
 from dynenv_ros.ros.qos import action_stream, sim_stream
@@ -38,6 +39,7 @@ class ScriptedPolicyNode(Node):
         parts = self.robot.split("_")
         if len(parts) != 3 or parts[0] != "team" or parts[1] not in "ab" or not parts[2].isdigit():
             raise ParameterException(f"robot must look like team_a_0, got {self.robot!r}", ["robot"])
+        self.tag_action = action_tagger(self, [self.robot])      # secrets_dir: its team's secret (issue 27)
         self.policy = {"chaser": lambda: ChaserPolicy(), "keeper": lambda: GoalkeeperPolicy(),
                        "random": lambda: RandomPolicy(np.random.default_rng(seed))}[kind]()
         self.robot_id: int | None = None       # learned from the first detection message (depends on team size)
@@ -82,6 +84,7 @@ class ScriptedPolicyNode(Node):
         msg = cv.action_msg(action, robot_id=frame.robot_id, episode_id=frame.episode_id,
                             motion_period=frame.motion_period + 1, stamp=frame.header.stamp)
         msg.header.frame_id = base_frame(self.robot)      # stamped with the observation it answers (sim time)
+        self.tag_action(self.robot, msg, self.action_pub)
         self.action_pub.publish(msg)
         self.actions_sent += 1
 

@@ -8,7 +8,7 @@ import sys
 import time
 
 import rclpy
-from dynenv_msgs.msg import Action, DetectionArray, StepFeedback, PolicyWeights
+from dynenv_msgs.msg import Action, DetectionArray, StepFeedback, WeightsAnnouncement
 
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.qos import action_stream, latched, sim_stream
@@ -20,7 +20,7 @@ def main(robot: str, seconds: float) -> None:
     actions = node.create_publisher(Action, f"/{robot}/action", action_stream())
     feedback = node.create_publisher(StepFeedback, f"/{robot}/feedback", sim_stream())
     version = [1]
-    node.create_subscription(PolicyWeights, topics.WEIGHTS,
+    node.create_subscription(WeightsAnnouncement, topics.WEIGHTS_ANNOUNCEMENT,     # the current version, in clear
                              lambda m: version.__setitem__(0, int(m.version)), latched(1))
     sent = [0]
 

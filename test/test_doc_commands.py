@@ -78,6 +78,8 @@ SKIPPED_EXTERNAL: dict[tuple[str, ...], str] = {
     ("cd",): "the colcon-workspace route changes into ~/ws (outside the repository)",
     ("source",): "sources a ROS 2 install (/opt/ros/jazzy, a colcon install/) that CI does not have",
     ("pip",): "installs from the package index (network); the bootstrap installs the same lock",
+    ("rosdep",): "installs system packages (apt, network) on a ROS 2 install; test/test_package_dependencies.py checks "
+                 "the package.xml keys it resolves against the code's imports",
     ("colcon",): "the colcon workspace build; test/test_colcon_build.py runs exactly this build against the venv",
     ("make", "lock"): "re-resolves requirements.in into a throw-away venv from the package index (network, minutes)",
     (".venv/bin/ray", "start"): "starts a node of the user's Ray cluster (other machines); test/test_ray_cluster.py "

@@ -11,6 +11,7 @@ from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.nodes.trainer_node import TrainerNode
 from policy_node.policy_node import PolicyNode
 from ros_harness import spin_until
+from weights_helpers import key_pair
 
 TRAINER = dict(scenario="driving", n_cars=2, sequence_length=4, batch_sequences=2, ppo_epochs=1, ppo_minibatches=1,
                feature_size=16, variant="pred")
@@ -23,15 +24,20 @@ def _params(**values):
 def _driving_graph(make_node, executor, tmp_path, action_mode, **trainer_values):
     """The trainer, then a stepped 2-car game (2 s episodes) whose policy node drives both cars with the trainer's
     weights; the game starts once the policy node and the trainer read every car's detections."""
+    private, public = key_pair(tmp_path / "keys")
     trainer = make_node(TrainerNode, parameter_overrides=_params(
-        **{**TRAINER, "action_mode": action_mode, "run_dir": str(tmp_path / "run"), **trainer_values}))
+        **{**TRAINER, "action_mode": action_mode, "run_dir": str(tmp_path / "run"), "signing_key": str(private),
+           **trainer_values}))
+    policy = make_node(PolicyNode, parameter_overrides=_params(scenario="driving", n_cars=2, action_mode=action_mode,
+                                                               seed=5, trusted_weights_keys=[str(public)]))
+    executor.add_node(trainer)
+    executor.add_node(policy)
+    # the trainer's first weights act from the first period (fetched: a round trip or two before the game starts)
+    assert spin_until(executor, lambda: policy.weights_acting is not None, 60.0), policy.counts
     sim = make_node(SimNode, parameter_overrides=_params(
         scenario="driving", n_cars=2, action_mode=action_mode, seed=4, episode_seconds=2.0, publish_markers=False,
         wait_for_subscribers=2))
-    policy = make_node(PolicyNode, parameter_overrides=_params(scenario="driving", n_cars=2, action_mode=action_mode,
-                                                               seed=5))
-    for node in (trainer, sim, policy):
-        executor.add_node(node)
+    executor.add_node(sim)
     return trainer, sim, policy
 
 
@@ -59,13 +65,15 @@ def test_driving_weights_flow_back_and_the_policy_drives_with_new_versions(make_
     trainer, sim, policy = _driving_graph(make_node, executor, tmp_path, "continuous", learning_rate=1e-3,
                                           max_policy_lag=2)
     # a policy node of the other action mode (in a namespace of its own, no game) gets the same weights
-    other = make_node(PolicyNode, namespace="/other", parameter_overrides=_params(scenario="driving", n_cars=2))
+    other = make_node(PolicyNode, namespace="/other", parameter_overrides=_params(
+        scenario="driving", n_cars=2, trusted_weights_keys=[str(tmp_path / "keys" / "trainer.pub")]))
     executor.add_node(other)
     assert spin_until(executor, lambda: policy.policy_version >= 3, 120.0), (policy.policy_version, policy.counts,
                                                                           trainer.diagnostics())
     assert policy.weights_acting[0] == trainer.run_id and policy.counts["weights_refused"] == 0
     assert spin_until(executor, lambda: other.counts["weights_refused"] >= 1, 10.0), other.counts
     assert "continuous driving policy" in other.weights_refusal and other.policy_version == 0
+    assert other.counts["weights_refused_wrong_network"] >= 1          # refused before anything was fetched
     assert trainer.learner.agent.action_mode == "continuous" and trainer.learner.last_stats["lag_versions_max"] <= 2
     periods = sim.periods_run
     assert spin_until(executor, lambda: sim.periods_run >= periods + 5, 30.0)     # still driving on new weights

@@ -14,6 +14,8 @@ import uuid
 
 import pytest
 
+from dynenv_ros.security.keys import generate_key_pair
+
 NETNS_TIMEOUT_S = 150.0
 
 
@@ -68,14 +70,16 @@ def _received_bytes(ns: str, dev: str) -> int:
 def test_experience_and_weights_cross_a_network_boundary(linked_namespaces, tmp_path):
     sim_ns, trainer_ns, trainer_dev = linked_namespaces
     run = tmp_path / "run"
+    private, public = generate_key_pair(tmp_path / "keys")       # signed weights, as a deployment runs them
     logs = {name: open(tmp_path / f"{name}.log", "w") for name in ("sim", "policy", "trainer")}
     processes = [
         _start(trainer_ns, "10.213.7.1", "dynenv_ros.nodes.trainer_node", logs["trainer"], "players_per_team:=1",
                "sequence_length:=4", "batch_sequences:=2", "ppo_epochs:=1", "ppo_minibatches:=1",
-               "variant:=baseline", f"run_dir:={run}", "max_minutes:=0.6"),
+               "variant:=baseline", f"run_dir:={run}", "max_minutes:=0.6", f"signing_key:={private}"),
         _start(sim_ns, "10.213.7.2", "dynenv_ros.nodes.sim_node", logs["sim"], "players_per_team:=1",
                "wait_for_subscribers:=2", "publish_markers:=false"),
-        _start(sim_ns, "10.213.7.2", "policy_node.policy_node", logs["policy"], "players_per_team:=1")]
+        _start(sim_ns, "10.213.7.2", "policy_node.policy_node", logs["policy"], "players_per_team:=1",
+               f"trusted_weights_keys:=[{public}]")]
     trainer = processes[0]
     try:
         trainer.wait(timeout=NETNS_TIMEOUT_S)

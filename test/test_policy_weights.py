@@ -1,6 +1,7 @@
-"""What the policy node tells a trainer (Action's learning fields) and how it takes a trainer's weights
-(PolicyWeights on /trainer/weights: swapped in between decisions, refused with a reason and the old weights kept
-playing, delivered at once to a node that starts late)."""
+"""What the policy node tells a trainer (Action's learning fields) and how it takes a trainer's signed weights
+(an announcement on /trainer/weights_announcement, the bytes fetched from /trainer/fetch_weights: swapped in between
+decisions, refused with a reason and the old weights kept playing, delivered at once to a node that starts late).
+The attacks from another process are in test_weights_attacks.py."""
 from __future__ import annotations
 
 import hashlib
@@ -8,14 +9,13 @@ import math
 
 import pytest
 import torch
-from dynenv_msgs.msg import PolicyWeights
 from rclpy.parameter import Parameter
 
 from dynenv_ros.agent.checkpoint import policy_bytes, save_policy
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.ros import topics
-from dynenv_ros.ros.qos import latched
 from ros_harness import spin_until
+from weights_helpers import SignedTrainer, key_pair, network_metadata
+from policy_node.policy_node import PolicyNode
 from test_policy_node_faults import Feeder, _policy_node
 
 # Logits of each action head (walk 5, turn 3, kick 3, head 2·3+1 discrete steps of 37.5°/3) and the critic's output,
@@ -61,67 +61,95 @@ def test_actions_carry_the_behaviour_log_probability_value_and_version(make_node
     assert policy.policy_version == 42
 
 
-class WeightsSource:
-    """A stand-in trainer: publishes PolicyWeights latched, as the trainer node does."""
-
-    def __init__(self, make_node, executor):
-        self.node = make_node("fake_trainer")
-        self.pub = self.node.create_publisher(PolicyWeights, topics.WEIGHTS, latched(1))
-        executor.add_node(self.node)
-
-    def publish(self, data: bytes, version: int, run_id: str = "run", sha256: str | None = None) -> None:
-        msg = PolicyWeights(version=version, run_id=run_id, data=data,
-                            sha256=hashlib.sha256(data).hexdigest() if sha256 is None else sha256)
-        self.pub.publish(msg)
+def _following(make_node, executor, tmp_path, **params):
+    """A trusted stand-in trainer and a policy node that trusts its key."""
+    private, public = key_pair(tmp_path / "keys")
+    source = SignedTrainer(make_node, executor, private)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)], **params)
+    return source, policy
 
 
-def test_weights_from_the_trainer_are_swapped_in_and_bad_ones_refused(make_node, executor):
-    source = WeightsSource(make_node, executor)
-    policy = _policy_node(make_node, executor)
+def test_signed_weights_are_fetched_and_swapped_in_and_bad_ones_refused(make_node, executor, tmp_path):
+    source, policy = _following(make_node, executor, tmp_path)
     feeder = Feeder(make_node, executor)
     feeder.wait_for()
-    assert spin_until(executor, lambda: source.pub.get_subscription_count() >= 1, 10.0)
     assert feeder.act(0)["team_a_0"].policy_version == 0           # untrained smoke-test weights: not learnt from
-    good = policy_bytes(_fixed_policy(), {"updates": 6})
-    source.publish(good, version=7)
-    assert spin_until(executor, lambda: policy.policy_version == 7, 10.0), policy.counts
+    agent = _fixed_policy()
+    good = policy_bytes(agent, {"updates": 6})
+    meta = network_metadata(agent)
+    source.release(good, version=7, metadata_json=meta)
+    assert spin_until(executor, lambda: policy.policy_version == 7, 20.0), policy.counts
     assert policy.checkpoint_sha256 == hashlib.sha256(good).hexdigest()
+    assert source.weights.served_chunks == 1                          # 0.87 MB: one chunk
     action = feeder.act(1)["team_a_0"]
     assert action.policy_version == 7 and action.value == pytest.approx(VALUE, abs=1e-5)
 
     wide = DynEnvAgent(head_max=math.radians(80.0))       # beyond the simulator's head bound
-    bad = {"damaged": (good[:-10] + b"0123456789", None, "cannot be read safely"),
-           "checksum": (good, "0" * 64, "differs from the message's"),
-           "empty": (b"", None, "0 bytes"),
-           "not a policy": (b"\x00" * 64, None, "cannot be read safely"),
-           "head bound": (policy_bytes(wide), None, "head_max")}
-    for number, (name, (data, digest, reason)) in enumerate(bad.items()):
-        refused = policy.counts["weights_refused"]
-        source.publish(data, version=8 + number, sha256=digest)
-        assert spin_until(executor, lambda: policy.counts["weights_refused"] == refused + 1, 10.0), name
-        assert reason in policy.weights_refusal, (name, policy.weights_refusal)
+    bad = {"damaged": (good[:-10] + b"0123456789", meta, "load_failed", "cannot be read safely"),
+           "not a policy": (b"\x00" * 64, meta, "load_failed", "cannot be read safely"),
+           "another network": (policy_bytes(DynEnvAgent(feature_size=32)), meta, "load_failed", "not the one announced"),
+           "head bound": (policy_bytes(wide), network_metadata(wide), "load_failed", "head_max"),
+           "driving": (good, network_metadata(DynEnvAgent(scenario="driving")), "wrong_network",
+                       "this node plays soccer"),
+           "no network": (good, "{}", "wrong_network", "does not describe a network")}
+    for number, (name, (data, metadata, reason, text)) in enumerate(bad.items()):
+        refused = policy.counts[f"weights_refused_{reason}"]
+        source.release(data, version=8 + number, metadata_json=metadata)
+        assert spin_until(executor, lambda: policy.counts[f"weights_refused_{reason}"] == refused + 1, 20.0), name
+        assert text in policy.weights_refusal, (name, policy.weights_refusal)
         assert policy.policy_version == 7
         assert feeder.act(2 + number)["team_a_0"].policy_version == 7       # still playing the old weights
-    assert policy.diagnostics()["weights_refused"] == str(len(bad))
+    diagnostics = policy.diagnostics()
+    assert diagnostics["weights_refused"] == str(len(bad)) and diagnostics["weights_refused_load_failed"] == "4"
+    # bytes that are not the ones signed: fetched (three times), never loaded
+    source.release(good, version=20, metadata_json=meta)
+    source.weights.held[("run", 20)] = policy_bytes(DynEnvAgent(), {"updates": 19})
+    assert spin_until(executor, lambda: policy.counts["weights_refused_hash_mismatch"] == 3, 30.0), policy.counts
+    assert policy.policy_version == 7 and policy.checkpoint_sha256 == hashlib.sha256(good).hexdigest()
 
 
-def test_a_policy_node_that_starts_late_gets_the_latest_weights_at_once(make_node, executor):
-    source = WeightsSource(make_node, executor)
-    data = policy_bytes(_fixed_policy())
-    source.publish(data, version=3, run_id="first")
-    source.publish(data, version=5, run_id="first")          # depth 1: only this one is kept for late joiners
-    policy = _policy_node(make_node, executor, weights_run_id="first")
-    assert spin_until(executor, lambda: policy.policy_version == 5, 10.0), policy.counts
-    assert policy.counts["weights_loaded"] == 1
+def test_a_policy_node_that_starts_late_gets_the_latest_weights_at_once(make_node, executor, tmp_path):
+    private, public = key_pair(tmp_path / "keys")
+    source = SignedTrainer(make_node, executor, private, run_id="first")
+    agent = _fixed_policy()
+    data = policy_bytes(agent)
+    source.release(data, version=3, metadata_json=network_metadata(agent))
+    source.release(data, version=5, metadata_json=network_metadata(agent))   # depth 1: only this one is kept
+    policy = _policy_node(make_node, executor, weights_run_id="first", trusted_weights_keys=[str(tmp_path / "keys")])
+    assert spin_until(executor, lambda: policy.policy_version == 5, 20.0), policy.counts
+    assert policy.counts["weights_loaded"] == 1 and policy.weights_acting == ("first", 5)
     other = policy.counts["weights_other_run"]
-    source.publish(policy_bytes(DynEnvAgent()), version=9, run_id="second")   # another run: ignored
+    source.weights.run_id = "second"
+    source.release(policy_bytes(DynEnvAgent()), version=9, metadata_json=network_metadata(agent))   # ignored
     assert spin_until(executor, lambda: policy.counts["weights_other_run"] == other + 1, 10.0)
     assert policy.policy_version == 5
 
 
-def test_a_node_with_weights_topic_empty_never_follows_a_trainer(make_node, executor):
-    source = WeightsSource(make_node, executor)
-    source.publish(policy_bytes(_fixed_policy()), version=4)
-    policy = _policy_node(make_node, executor, weights_topic="")
-    assert policy.weights_sub is None
+def test_without_a_trusted_key_a_trainers_weights_are_refused(make_node, executor, tmp_path):
+    private, _ = key_pair(tmp_path / "keys")
+    source = SignedTrainer(make_node, executor, private)
+    agent = _fixed_policy()
+    source.release(policy_bytes(agent), version=4, metadata_json=network_metadata(agent))
+    policy = _policy_node(make_node, executor)
+    assert spin_until(executor, lambda: policy.counts["weights_refused_untrusted_key"] >= 1, 10.0), policy.counts
+    assert policy.policy_version == 0 and source.weights.served_chunks == 0
+    assert "not trusted" in policy.weights_refusal
+
+
+def test_a_node_with_weights_topic_empty_never_follows_a_trainer(make_node, executor, tmp_path):
+    private, public = key_pair(tmp_path / "keys")
+    source = SignedTrainer(make_node, executor, private)
+    agent = _fixed_policy()
+    source.release(policy_bytes(agent), version=4, metadata_json=network_metadata(agent))
+    policy = _policy_node(make_node, executor, weights_topic="", trusted_weights_keys=[str(public)])
+    assert policy.weights is None
     assert not spin_until(executor, lambda: policy.policy_version != 0, 1.0)
+
+
+def test_bad_key_parameters_stop_the_node_with_one_line(make_node, tmp_path):
+    from rclpy.exceptions import ParameterException
+    with pytest.raises(ParameterException, match="does not exist"):
+        make_node(PolicyNode, parameter_overrides=[Parameter("trusted_weights_keys", value=[str(tmp_path / "x.pub")])])
+    (tmp_path / "state.json").write_text("[")
+    with pytest.raises(ParameterException, match="cannot be read"):
+        make_node(PolicyNode, parameter_overrides=[Parameter("weights_state_file", value=str(tmp_path / "state.json"))])

@@ -235,10 +235,15 @@ def test_realtime_mode_publishes_at_vision_rate_in_sim_time(make_node, executor)
 
 
 @pytest.mark.parametrize("preset", sorted(p.name for p in (REPO / "config").glob("sim_*.yaml")))
-def test_every_parameter_preset_starts_the_simulator(make_node, preset):
+def test_every_parameter_preset_starts_the_simulator(make_node, preset, tmp_path):
     import yaml
     values = yaml.safe_load((REPO / "config" / preset).read_text())["/**"]["ros__parameters"]
+    if values.get("secrets_dir"):           # a deployment profile: its secrets made here (docs/ros_graph.md)
+        from dynenv_ros.security.action_auth import write_game_secrets
+        from dynenv_ros.soccer.config import robot_names
+        values["secrets_dir"] = str(write_game_secrets(tmp_path / "secrets", robot_names(values["players_per_team"])))
     sim = make_node(SimNode, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+    assert (sim.secrets is not None) == bool(values.get("secrets_dir"))
     assert sim.scenario == values.get("scenario", "robocup") and sim.mode == values["mode"]
     if sim.scenario == "robocup":
         assert sim.config.players_per_team == values["players_per_team"]

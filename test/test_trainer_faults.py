@@ -11,13 +11,15 @@ import warnings
 
 from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
 from rclpy.parameter import Parameter
+from std_srvs.srv import Trigger
 
 from dynenv_ros.learning import checkpoints
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.nodes.trainer_node import TrainerNode
 from dynenv_ros.ros.qos import action_stream, sim_stream
 from policy_node.policy_node import PolicyNode
-from ros_harness import spin_until
+from ros_harness import call_idempotent, spin_until
+from weights_helpers import key_pair
 from test_trainer_node import _game, _params, _trainer
 
 TRAINER = dict(players_per_team=1, sequence_length=4, batch_sequences=2, ppo_epochs=1, ppo_minibatches=1,
@@ -25,8 +27,10 @@ TRAINER = dict(players_per_team=1, sequence_length=4, batch_sequences=2, ppo_epo
 
 
 def _trainer_process(run_dir, resume=False) -> subprocess.Popen:
+    """A trainer process signing with the key pair in run_dir's parent folder ``keys``."""
+    private, _ = key_pair(run_dir.parent / "keys")
     args = [sys.executable, "-m", "dynenv_ros.nodes.trainer_node", "--ros-args"]
-    for key, value in {**TRAINER, "run_dir": str(run_dir), "resume": resume}.items():
+    for key, value in {**TRAINER, "run_dir": str(run_dir), "resume": resume, "signing_key": str(private)}.items():
         literal = ("true" if value else "false") if isinstance(value, bool) else value
         args += ["-p", f"{key}:={literal}"]
     return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -36,7 +40,7 @@ def test_a_killed_trainer_leaves_the_robots_playing_and_a_restarted_one_resumes(
     run = tmp_path / "run"
     trainer = _trainer_process(run)
     try:
-        sim, policy = _game(make_node, executor)
+        sim, policy = _game(make_node, executor, trusted=tmp_path / "keys")
         assert spin_until(executor, lambda: policy.policy_version >= 4 and checkpoints.list_checkpoints(run),
                           120.0), (policy.policy_version, policy.counts)
         trainer.send_signal(signal.SIGKILL)
@@ -48,10 +52,15 @@ def test_a_killed_trainer_leaves_the_robots_playing_and_a_restarted_one_resumes(
         with warnings.catch_warnings():     # the kill may land while `latest` is replaced: the newest valid one
             warnings.simplefilter("ignore", checkpoints.CheckpointWarning)
             saved = checkpoints.read_checkpoint_meta(run)["updates"]
-        loaded = policy.counts["weights_loaded"]
+        loaded, rollbacks = policy.counts["weights_loaded"], policy.counts["weights_refused_rollback"]
         trainer = _trainer_process(run, resume=True)
-        # the restarted trainer hands out its checkpoint's weights at once (version 1 + its updates), then learns on
-        assert spin_until(executor, lambda: policy.counts["weights_loaded"] > loaded, 60.0)
+        # the restarted trainer hands out its checkpoint's weights at once (version 1 + its updates): older than the
+        # version acting, so refused as a rollback until the operator allows it once; then it learns on
+        if saved + 1 <= version:
+            assert spin_until(executor, lambda: policy.counts["weights_refused_rollback"] > rollbacks, 60.0)
+            accept = policy.create_client(Trigger, "/policy_node/accept_older_weights")
+            assert "accepted, once" in call_idempotent(executor, accept, Trigger.Request()).message
+        assert spin_until(executor, lambda: policy.counts["weights_loaded"] > loaded, 60.0), policy.counts
         assert policy.weights_acting[1] >= saved + 1
         assert spin_until(executor, lambda: policy.policy_version > saved + 2, 120.0), policy.policy_version
     finally:
@@ -62,11 +71,13 @@ def test_a_killed_trainer_leaves_the_robots_playing_and_a_restarted_one_resumes(
 
 def test_a_killed_simulator_leaves_the_trainer_learning_from_the_other_games(make_node, executor, tmp_path):
     trainer = _trainer(make_node, executor, tmp_path / "run", batch_sequences=2, variant="baseline", feature_size=16)
-    _game(make_node, executor, "/game_2", seed=7)
+    _game(make_node, executor, "/game_2", seed=7, trusted=tmp_path / "keys")
     sim_1 = subprocess.Popen([sys.executable, "-m", "dynenv_ros.nodes.sim_node", "--ros-args", "-r", "__ns:=/game_1",
                               "-p", "players_per_team:=1", "-p", "wait_for_subscribers:=2", "-p",
                               "publish_markers:=false"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    policy_1 = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=9), namespace="/game_1")
+    policy_1 = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=9,
+                                                                 trusted_weights_keys=[str(tmp_path / "keys")]),
+                         namespace="/game_1")
     executor.add_node(policy_1)
     try:
         assert spin_until(executor, lambda: {s for s, _ in trainer.learner.states} == {"/game_1", "/game_2"},
@@ -109,7 +120,7 @@ def test_hostile_experience_is_dropped_and_counted(make_node, executor, tmp_path
         trainer.assembler.counts
     assert trainer.received["errors"] == 0 and not trainer.background.error
     # and the graph still trains: a real game after the attack
-    sim, policy = _game(make_node, executor, seed=5)
+    sim, policy = _game(make_node, executor, seed=5, trusted=tmp_path / "keys")
     assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
 
 
@@ -122,8 +133,9 @@ def test_bad_settings_and_files_at_start_are_refused_with_the_reason(make_node, 
              "initial_policy": dict(initial_policy=str(tmp_path / "bad.safetensors")),
              "resume": dict(resume=True, run_dir=str(tmp_path / "empty")),
              "batch_sequences": dict(batch_sequences=2, ppo_minibatches=4)}
+    private, _ = key_pair(tmp_path / "keys")
     for key, values in cases.items():
-        params = {**TRAINER, "run_dir": str(tmp_path / key), **values}
+        params = {**TRAINER, "run_dir": str(tmp_path / key), "signing_key": str(private), **values}
         try:
             make_node(TrainerNode, parameter_overrides=_params(**params))
         except ParameterException as error:

@@ -4,34 +4,45 @@ apart."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+import pytest
 from rclpy.parameter import Parameter
 
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.nodes.trainer_node import TrainerNode
 from policy_node.policy_node import PolicyNode
 from ros_harness import spin_until
+from weights_helpers import key_pair
 
 
 def _params(**values):
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-def _game(make_node, executor, namespace=None, seed=3):
-    """A stepped 1v1 game whose policy node plays both robots; it starts once the policy node and the trainer
-    read every robot's detections, so the trainer sees each episode from its start."""
+def _game(make_node, executor, namespace=None, seed=3, trusted=None):
+    """A stepped 1v1 game whose policy node plays both robots (following the weights signed by the keys in folder
+    ``trusted``, if given); it starts once the policy node and the trainer read every robot's detections, so the
+    trainer sees each episode from its start."""
     options = {"namespace": namespace} if namespace else {}
+    keys = {"trusted_weights_keys": [str(trusted)]} if trusted else {}
+    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=seed + 1, **keys), **options)
+    if trusted:     # the trainer's first weights act from the first period (they are fetched: a round trip or two)
+        executor.add_node(policy)
+        assert spin_until(executor, lambda: policy.weights_acting is not None, 60.0), policy.counts
     sim = make_node(SimNode, parameter_overrides=_params(players_per_team=1, seed=seed, falls_enabled=False,
                                                          publish_markers=False, wait_for_subscribers=2), **options)
-    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=seed + 1), **options)
     executor.add_node(sim)
-    executor.add_node(policy)
+    if not trusted:
+        executor.add_node(policy)
     return sim, policy
 
 
 def _trainer(make_node, executor, run_dir, **values):
+    """A trainer node signing with the key pair in ``run_dir``'s parent folder ``keys`` (made if missing)."""
+    private, _ = key_pair(Path(run_dir).parent / "keys")
     params = dict(players_per_team=1, sequence_length=4, batch_sequences=2, ppo_epochs=1, ppo_minibatches=1,
-                  run_dir=str(run_dir), variant="pred")
+                  run_dir=str(run_dir), variant="pred", signing_key=str(private))
     params.update(values)
     trainer = make_node(TrainerNode, parameter_overrides=_params(**params))
     executor.add_node(trainer)
@@ -45,7 +56,7 @@ def test_the_trainer_rebuilds_what_the_policy_saw_and_chose(make_node, executor,
     trainer = _trainer(make_node, executor, tmp_path / "run", learning_rate=1e-7)
     for group in trainer.learner.optimizer.param_groups:
         group["lr"] = 0.0
-    sim, policy = _game(make_node, executor)
+    sim, policy = _game(make_node, executor, trusted=tmp_path / "keys")
     assert spin_until(executor, lambda: trainer.learner.updates >= 3, 90.0), str(trainer.diagnostics())
     stats = trainer.learner.last_stats
     assert stats["behaviour_log_prob_error"] < 1e-3, stats
@@ -56,7 +67,7 @@ def test_the_trainer_rebuilds_what_the_policy_saw_and_chose(make_node, executor,
 
 def test_weights_flow_back_and_the_policy_acts_with_new_versions(make_node, executor, tmp_path):
     trainer = _trainer(make_node, executor, tmp_path / "run", learning_rate=1e-3, max_policy_lag=2)
-    sim, policy = _game(make_node, executor)
+    sim, policy = _game(make_node, executor, trusted=tmp_path / "keys")
     assert spin_until(executor, lambda: trainer.learner.updates >= 4, 120.0), trainer.diagnostics()
     assert spin_until(executor, lambda: policy.policy_version >= 3, 30.0), (policy.policy_version, policy.counts)
     assert policy.weights_acting[0] == trainer.run_id and policy.counts["weights_refused"] == 0
@@ -74,8 +85,8 @@ def test_weights_flow_back_and_the_policy_acts_with_new_versions(make_node, exec
 
 def test_several_games_in_their_namespaces_feed_one_trainer(make_node, executor, tmp_path):
     trainer = _trainer(make_node, executor, tmp_path / "run", batch_sequences=4)
-    _game(make_node, executor, "/game_1", seed=3)
-    _game(make_node, executor, "/game_2", seed=7)
+    _game(make_node, executor, "/game_1", seed=3, trusted=tmp_path / "keys")
+    _game(make_node, executor, "/game_2", seed=7, trusted=tmp_path / "keys")
     assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
     assert trainer.games == {"/game_1", "/game_2"}
     assert {(g, r) for g, r in trainer.learner.states} == {(g, r) for g in ("/game_1", "/game_2")
@@ -104,9 +115,26 @@ def test_parameters_are_checked_on_set_and_reach_the_learner(make_node, executor
     # learning_team "a": both robots are discovered, only team A's experience is learnt (the trainer reads team B's
     # detections not at all, so this game starts with one reader per robot)
     sim = make_node(SimNode, parameter_overrides=_params(players_per_team=1, seed=3, publish_markers=False))
-    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=4))
+    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=4,
+                                                               trusted_weights_keys=[str(tmp_path / "keys")]))
     executor.add_node(sim)
     executor.add_node(policy)
     assert spin_until(executor, lambda: trainer.assembler.counts["sequences"] >= 2, 60.0), trainer.diagnostics()
     assert {robot for _, robot in trainer.robots} == {"team_a_0", "team_b_0"}
     assert {robot for _, robot in trainer.assembler.streams} == {"team_a_0"}
+
+
+def test_a_trainer_without_a_signing_key_refuses_to_start(make_node, tmp_path, monkeypatch):
+    from rclpy.exceptions import ParameterException
+    monkeypatch.setenv("DYNENV_KEYS_DIR", str(tmp_path / "no_keys"))
+    with pytest.raises(ParameterException, match=r"no signing key: run `dynenv-keys generate .*no_keys`"):
+        make_node(TrainerNode, parameter_overrides=_params(players_per_team=1, run_dir=str(tmp_path / "run")))
+    assert not (tmp_path / "run").exists()                      # refused before anything was written
+    private, _ = key_pair(tmp_path / "no_keys")
+    private.chmod(0o640)
+    with pytest.raises(ParameterException, match="has mode 0640"):
+        make_node(TrainerNode, parameter_overrides=_params(players_per_team=1, run_dir=str(tmp_path / "run")))
+    private.chmod(0o600)                                         # the default folder's trainer.key, no parameter
+    trainer = make_node(TrainerNode, parameter_overrides=_params(players_per_team=1, run_dir=str(tmp_path / "run"),
+                                                                 variant="baseline", feature_size=16))
+    assert trainer.weights.held and trainer.weights_published == 1

@@ -259,7 +259,7 @@ def agent_config(model: DynEnvAgent) -> dict[str, Any]:
 
 
 def policy_bytes(model: DynEnvAgent, meta: Mapping[str, Any] | None = None) -> bytes:
-    """A policy file's content (what ``save_policy`` writes; what the trainer node streams in PolicyWeights)."""
+    """A policy file's content (what ``save_policy`` writes; what the trainer node announces and serves)."""
     tensors = tensors_for_saving(model.state_dict())
     refuse_non_finite(tensors, "the policy to save or publish")
     metadata = {"format": FORMAT, "config": json_dumps(agent_config(model), "the agent's config"),
@@ -303,7 +303,7 @@ def load_policy(path: str | os.PathLike[str]) -> tuple[DynEnvAgent, dict[str, An
 
 
 def policy_from_bytes(data: bytes, source: str = "policy") -> tuple[DynEnvAgent, dict[str, Any]]:
-    """``load_policy`` on bytes (a PolicyWeights message's ``data``); ``source`` names them in the errors."""
+    """``load_policy`` on bytes (weights fetched from a trainer); ``source`` names them in the errors."""
     try:
         tensors, metadata = read_safetensors(data)
     except ValueError as error:

@@ -20,6 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch
+from dynenv_ros.soccer.config import robot_names
+from dynenv_ros.security.action_auth import write_game_secrets
+from dynenv_ros.security.keys import generate_key_pair
 
 # The trainer's settings for the demonstration (the node's defaults are the paper's).
 TRAINER_SETTINGS = {"variant": "baseline", "feature_size": 32, "learning_rate": 3e-3, "gamma": 0.9,
@@ -30,9 +33,16 @@ TRAINER_SETTINGS = {"variant": "baseline", "feature_size": 32, "learning_rate": 
 
 def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
     players = config.players_per_team
+    # A key pair of this run (run_dir/keys): the trainer signs its weights with it, the policy nodes trust its
+    # public half only, so the demonstration runs with signed weights as a deployment does (docs/ros_graph.md).
+    signing_key, public_key = generate_key_pair(run_dir / "keys")
+    # ... and secrets of this run (run_dir/secrets): the teams' and the simulator's, so only the policy nodes' actions
+    # are run and learnt, and only the simulators' feedback (authenticated actions, docs/ros_graph.md "Who may act").
+    secrets = str(write_game_secrets(run_dir / "secrets", robot_names(players)))
     trainer = NodeLaunch("trainer", "dynenv_ros.nodes.trainer_node", {
         **TRAINER_SETTINGS, "players_per_team": players, "run_dir": str(run_dir / "trainer"), "seed": config.seed,
-        "batch_sequences": config.games * 2 * players, "max_minutes": config.train_minutes}, ends_run=True)
+        "batch_sequences": config.games * 2 * players, "max_minutes": config.train_minutes,
+        "signing_key": str(signing_key), "secrets_dir": secrets}, ends_run=True)
     nodes: list[NodeLaunch] = []
     topics = ["/trainer/diagnostics"]
     for game in range(1, config.games + 1):
@@ -40,9 +50,10 @@ def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
         nodes.append(NodeLaunch(f"sim_game_{game}", "dynenv_ros.nodes.sim_node", {
             "players_per_team": players, "seed": config.seed + game, "perception_preset": config.perception,
             "mode": "stepped", "episode_seconds": config.episode_seconds, "auto_reset": True,
-            "publish_markers": False, "wait_for_subscribers": 2}, namespace=namespace))
+            "publish_markers": False, "wait_for_subscribers": 2, "secrets_dir": secrets}, namespace=namespace))
         nodes.append(NodeLaunch(f"policy_game_{game}", "policy_node.policy_node", {
-            "players_per_team": players, "seed": config.seed + 100 + game}, namespace=namespace))
+            "players_per_team": players, "seed": config.seed + 100 + game,
+            "trusted_weights_keys": [str(public_key)], "secrets_dir": secrets}, namespace=namespace))
         for team in "ab":
             for slot in range(players):
                 topics += [f"{namespace}/team_{team}_{slot}/action", f"{namespace}/team_{team}_{slot}/feedback"]
@@ -73,6 +84,12 @@ def summarise_train(outcome: GraphOutcome, run_dir: Path, config: Any) -> bool:
           f"missing {diag['missing']}, malformed {diag['malformed']}, cut {diag['cuts']}, stale "
           f"{diag.get('stale_sequences', '0')}, queue dropped {diag.get('queue_dropped', '0')}")
     print(f"  policy lag at the last update: {diag['lag_versions_mean']} versions, {diag['lag_seconds_mean']} s")
+    refused = {k: diag.get(k, "0") for k in ("action_mac_missing", "action_mac_invalid", "feedback_mac_missing",
+                                             "feedback_mac_invalid") if diag.get(k, "0") != "0"}
+    print(f"  authenticated actions: {diag.get('action_authentication', 'off')}; refused "
+          f"{', '.join(f'{k} {v}' for k, v in refused.items()) or 'none'}; rival answers "
+          f"{diag.get('rival_answers', '0')} (resolved by the feedback's digest {diag.get('rivals_resolved', '0')}),"
+          f" unmatched {diag.get('unmatched_action', '0')}, not run {diag.get('not_executed', '0')}")
     episodes = summary["episodes"]
     if len(episodes) < 6:
         print(f"  only {len(episodes)} whole episodes learnt from: too few for a curve")

@@ -37,12 +37,28 @@ newer slot's messages; still used), ``malformed`` (fields out of range, non-fini
 ``actions_rounded`` (a learnt action the learner's action space holds only approximately — a head turn between the
 discrete head's steps, a driving command that is not one of the nine discrete ones — taken to the nearest),
 ``out_of_range`` (learning fields or rewards beyond the bounds ``LOG_PROB_MIN``, ``VALUE_BOUND``,
-``REWARD_BOUND``: refused), ``early_replaced`` and ``contested`` (rival answers for one slot, ``_rival``),
-``not_learning`` (an answer without learning fields: a scripted or foreign policy — its steps cannot be corrected
-off-policy), and ``missing``: a slot that never completes (a lost message, a killed node) once the stream has
-moved ``patience`` periods past it. A missing slot *cuts* the sequence: the steps gathered since the last emitted
-sequence are discarded (``steps_discarded``) and the stream restarts at its next complete slot as if an episode
-started there (recurrent state zeroed: the learner cannot know the state the policy had).
+``REWARD_BOUND``: refused), ``beyond_horizon`` (an answer or feedback more than ``horizon`` periods ahead of the
+stream's frames: refused, so forged far-future messages cannot fill the bounded slots), the answer resolution's
+counters (below), ``not_learning`` (an answer without learning fields: a scripted or foreign policy — its steps
+cannot be corrected off-policy), and ``missing``: a slot that never completes (a lost message, a killed node) once
+the stream has moved ``patience`` periods past it. A missing slot *cuts* the sequence: the steps gathered since the
+last emitted sequence are discarded (``steps_discarded``) and the stream restarts at its next complete slot as if
+an episode started there (recurrent state zeroed: the learner cannot know the state the policy had).
+
+Which answer is learnt (issue 27): a slot keeps up to ``MAX_CANDIDATES`` distinct answers (by digest; a byte-equal
+copy is a ``duplicate``, one more is refused as ``candidates_full``), and the step is the answer the simulator ran:
+the one whose digest (``security.action_auth.action_digest``, bound to the action topic) the next period's
+feedback names in ``StepFeedback.action_digest``. A second, different answer is counted ``rival_answers`` and
+``rivals_resolved`` once the feedback picked one; a feedback that names an answer the trainer never got cuts the
+sequence once the stream moved ``patience`` periods on (``unmatched_action``); an empty digest from a simulator that
+names actions (the stream has seen a digest) means the robot acted by default — the answer did not run, so the slot
+is no step (``not_executed``). Feedback without digests (a simulator or bag from before issue 27) keeps the older
+rule, whose counters are ``early_replaced`` and ``contested`` (``_rival``): an answer that arrived before its
+period's frames gives way to one that came after them; two that cannot be told apart make the slot no step.
+
+With ``secrets`` (``security.action_auth.GameSecrets``) an Action must carry its team's MAC and a StepFeedback the
+simulator's, else it is refused before anything else is read: ``action_mac_missing``, ``action_mac_invalid``,
+``feedback_mac_missing``, ``feedback_mac_invalid``.
 """
 from __future__ import annotations
 
@@ -57,6 +73,7 @@ from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.envs.learning_targets import LearningTargets, empty_targets
 from dynenv_ros.learning.experience_scenarios import ExperienceScenario
 from dynenv_ros.learning.rollout import STEP_ARRAYS, StepArrays
+from dynenv_ros.security.action_auth import GameSecrets, action_digest, check_action, check_feedback
 
 STATUS_FALLEN = 1                 # ObjectState.STATUS_FALLEN
 KEPT_ENDS = 8                     # per stream: the last episodes whose per-agent end is remembered
@@ -65,6 +82,11 @@ KEPT_ENDS = 8                     # per stream: the last episodes whose per-agen
 LOG_PROB_MIN = -50.0              # Action.log_prob of a discrete action in [LOG_PROB_MIN, 0]; a density's |.| <= 50
 VALUE_BOUND = 1e4                 # |Action.value| (discounted return, reward units)
 REWARD_BOUND = 1e4                # |each StepFeedback reward term| per period
+MAX_CANDIDATES = 4                # distinct answers kept per slot until the feedback names the one that ran
+HORIZON = 8                       # periods an answer or feedback may be ahead of the stream's newest frame
+# The refusals a trainer reports (counted, and summarised in its log once per diagnostics period).
+REFUSALS = ("malformed", "out_of_range", "beyond_horizon", "candidates_full", "unknown_robot", "action_mac_missing",
+            "action_mac_invalid", "feedback_mac_missing", "feedback_mac_invalid")
 ANSWER_FIELDS = ("walk", "turn", "kick", "head_yaw_delta", "throttle", "brake", "steering", "policy_version",
                  "log_prob", "value")
 
@@ -88,10 +110,12 @@ class Slot:
     """What one observation slot (episode, period) of one stream has received."""
     frames: dict[int, Any] = field(default_factory=dict)
     frames_per_period: int = 0
-    answer: Any = None
+    answer: Any = None            # the answer learnt: the one the feedback named (or, without digests, _rival's)
+    answers: list[tuple[bytes, Any]] = field(default_factory=list)   # distinct candidates (digest, Action)
     feedback: Any = None
     answer_early: bool = False    # the answer arrived before this period's frames were all here
     contested: bool = False       # two different answers that cannot be told apart: the slot is no step
+    resolved: bool = False        # the next period's feedback named one of the answers
 
     @property
     def observed(self) -> bool:
@@ -130,6 +154,8 @@ class _Stream:
     emitted: int = 0
     restart_after: tuple[int, int] | None = None   # after a cut: restart at the first observed slot after this
     ends: dict[int, int] = field(default_factory=dict)   # episode -> the first period its feedback ended (driving)
+    frames_newest: tuple[int, int] | None = None   # the newest slot with a frame (the horizon is counted from it)
+    digests_seen: bool = False                  # its simulator names the actions it ran (StepFeedback.action_digest)
 
 
 class ExperienceAssembler:
@@ -137,10 +163,12 @@ class ExperienceAssembler:
     ``SoccerExperience(players_per_team, frames, head_max, head_units)`` or ``DrivingExperience(config)``, module
     ``learning.experience_scenarios``) names the agents, fixes the observation layout and converts actions;
     ``with_targets`` builds the self-supervised targets from ground truth (soccer). ``learns(robot_name)`` picks
-    which agents' experience is kept (all by default)."""
+    which agents' experience is kept (all by default). ``secrets``: authenticated actions and feedback required
+    (module docstring); ``horizon``: periods an answer or feedback may run ahead of its stream's frames."""
 
     def __init__(self, steps: int, scenario: ExperienceScenario, with_targets: bool = False, patience: int = 8,
-                 learns=None, max_slots: int = 256, require_learning_fields: bool = True) -> None:
+                 learns=None, max_slots: int = 256, require_learning_fields: bool = True,
+                 secrets: GameSecrets | None = None, horizon: int = HORIZON) -> None:
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
         if with_targets and not scenario.supports_targets:
@@ -152,6 +180,7 @@ class ExperienceAssembler:
         # False: every answer is a step, whoever chose it (behaviour cloning from bags; an Action recorded before
         # the learning fields existed reads as version 0)
         self.require_learning_fields = require_learning_fields
+        self.secrets, self.horizon = secrets, horizon
         self.streams: dict[tuple[str, str], _Stream] = {}
         self.truth: dict[str, dict[tuple[int, int], Any]] = {}     # source -> (episode, stamp ns) -> WorldState
         self.names = list(scenario.names)
@@ -172,6 +201,27 @@ class ExperienceAssembler:
         if not self.learns(robot):
             return None
         return self.streams.setdefault((source, robot), _Stream())
+
+    @staticmethod
+    def topic(source: str, robot: str, kind: str) -> str:
+        """The topic a robot's ``kind`` (action, feedback) is published on, which MACs and digests are bound to:
+        ``<source>/<robot>/<kind>``; a source may carry a prefix up to ':' that keeps games apart (``dynenv-train
+        --from-bag``'s bag index), not part of the topic."""
+        return f"{source.rpartition(':')[2]}/{robot}/{kind}"
+
+    def _refuse(self, count: str, why: str) -> None:
+        self.counts[count] += 1
+        self.last_refused = why
+
+    def _beyond_horizon(self, stream: _Stream, key: tuple[int, int]) -> bool:
+        """``key`` lies more than ``horizon`` periods ahead of the stream's newest frame (the next episode's first
+        periods count from 0); nothing is ahead before the first frame."""
+        front = stream.frames_newest
+        if front is None or key <= front:
+            return False
+        if key[0] == front[0]:
+            return key[1] > front[1] + self.horizon
+        return key[0] > front[0] + 1 or key[1] > self.horizon
 
     def _slot(self, stream: _Stream, key: tuple[int, int]) -> Slot | None:
         """The slot for ``key``, or None when the stream has passed it (counted late) or the agent's episode ended
@@ -202,7 +252,9 @@ class ExperienceAssembler:
         if frame_problem(msg) or msg.robot_id != self.names.index(robot) or msg.frames_per_period != self.frames:
             self.counts["malformed"] += 1
             return
-        slot = self._slot(stream, (int(msg.episode_id), int(msg.motion_period)))
+        key = (int(msg.episode_id), int(msg.motion_period))
+        stream.frames_newest = key if stream.frames_newest is None else max(stream.frames_newest, key)
+        slot = self._slot(stream, key)
         if slot is None:
             return
         if slot.frames_per_period and msg.frame_index in slot.frames:
@@ -216,6 +268,13 @@ class ExperienceAssembler:
         stream = self._stream(source, robot)
         if stream is None:
             return
+        topic = self.topic(source, robot, "action")
+        if self.secrets is not None:
+            problem = check_action(msg, topic, self.secrets.for_agent(robot))
+            if problem:
+                self._refuse(f"action_{problem}", f"{source or '/'} {robot} action for period {msg.motion_period}: "
+                                                  f"{problem}")
+                return
         if msg.motion_period == 0 or msg.robot_id != self.names.index(robot) or self._action_problem(msg):
             self.counts["malformed"] += 1
             return
@@ -224,12 +283,23 @@ class ExperienceAssembler:
             self.counts["out_of_range"] += 1
             self.last_refused = f"{source or '/'} {robot} action for period {msg.motion_period}: {problem}"
             return
-        self._file(source, robot, stream, (int(msg.episode_id), int(msg.motion_period) - 1), "answer", msg)
+        try:
+            digest = action_digest(msg, topic)
+        except ValueError:                  # a value no Action can hold (a plain object's, never rclpy's)
+            self.counts["malformed"] += 1
+            return
+        self._file(source, robot, stream, (int(msg.episode_id), int(msg.motion_period) - 1), "answer", msg, digest)
 
     def add_feedback(self, source: str, robot: str, msg: Any) -> None:
         stream = self._stream(source, robot)
         if stream is None:
             return
+        if self.secrets is not None:
+            problem = check_feedback(msg, self.topic(source, robot, "feedback"), self.secrets.simulator)
+            if problem:
+                self._refuse(f"feedback_{problem}", f"{source or '/'} {robot} feedback of period "
+                                                    f"{msg.motion_period}: {problem}")
+                return
         terms = (msg.reward_primary, msg.reward_rule, msg.reward_auxiliary, msg.reward_observation)
         if msg.robot_id != self.names.index(robot) or not all(math.isfinite(v) for v in terms):
             self.counts["malformed"] += 1
@@ -242,32 +312,57 @@ class ExperienceAssembler:
         self._file(source, robot, stream, (int(msg.episode_id), int(msg.motion_period)), "feedback", msg)
 
     def _file(self, source: str, robot: str, stream: _Stream, key: tuple[int, int], field_name: str,
-              msg: Any) -> None:
-        """An answer or feedback into its slot (the first one wins; a second is a duplicate)."""
+              msg: Any, digest: bytes = b"") -> None:
+        """An answer into its slot's candidates (``digest``: its action digest), or the feedback into its slot (the
+        first one wins; a second is a duplicate)."""
+        if self._beyond_horizon(stream, key):
+            what = f"action for period {key[1] + 1}" if field_name == "answer" else f"feedback of period {key[1]}"
+            self._refuse("beyond_horizon", f"{source or '/'} {robot} {what} of episode {key[0]}: more than "
+                                           f"{self.horizon} periods ahead of its frames")
+            return
         slot = self._slot(stream, key)
         if slot is None:
             return
-        if field_name == "answer" and slot.answer is not None:
-            self._rival(slot, msg)
-            return
-        if getattr(slot, field_name) is not None:
+        if field_name == "answer":
+            if any(known == digest for known, _ in slot.answers):
+                self.counts["duplicate"] += 1
+                return
+            if len(slot.answers) >= MAX_CANDIDATES:
+                self._refuse("candidates_full", f"{source or '/'} {robot} action for period {key[1] + 1}: "
+                                                f"{MAX_CANDIDATES} different answers are waiting already")
+                return
+            slot.answers.append((digest, msg))
+            if len(slot.answers) > 1:
+                if stream.digests_seen:         # the feedback will say which one ran
+                    self.counts["rival_answers"] += 1
+                else:
+                    self._rival(slot, msg)
+                self._advance(source, robot, stream)
+                return
+        elif getattr(slot, field_name) is not None:
             self.counts["duplicate"] += 1
             return
         setattr(slot, field_name, msg)
         if field_name == "answer":
             slot.answer_early = not slot.observed
+        if field_name == "feedback" and len(getattr(msg, "action_digest", ())):
+            stream.digests_seen = True
         if field_name == "feedback" and self.scenario.per_agent_ends and (msg.terminated or msg.truncated):
             self._end_episode(stream, key)
         self._advance(source, robot, stream)
 
     def _rival(self, slot: Slot, msg: Any) -> None:
-        """A second answer for a slot. The same content: a duplicate. A different one: the simulator accepts an
-        answer only once its period's frames are out (an earlier one is refused as ``early``), so an answer that
-        came before the frames gives way to one that came after them (``early_replaced``); two that cannot be told
-        apart make the slot no step (``contested``: the step is cut, never learnt from a guess)."""
+        """While the stream's feedback has named no action (module docstring): a second answer for a slot, the
+        rule feedback without a digest falls back on. The same content: a duplicate. A different one: the simulator
+        accepts an answer only once its period's frames are out (an earlier one is refused as ``early``), so an
+        answer that came before the frames gives way to one that came after them (``early_replaced``); two that
+        cannot be told apart make the slot no step (``contested``: the step is cut, never learnt from a guess).
+        Every different one is a ``rival_answers``."""
         if answer_content(msg) == answer_content(slot.answer):
             self.counts["duplicate"] += 1
-        elif slot.answer_early and slot.observed and not slot.contested:
+            return
+        self.counts["rival_answers"] += 1
+        if slot.answer_early and slot.observed and not slot.contested:
             slot.answer, slot.answer_early = msg, False
             self.counts["early_replaced"] += 1
         else:
@@ -296,7 +391,7 @@ class ExperienceAssembler:
             del stream.ends[min(stream.ends)]
         for k in [k for k in stream.slots if k[0] == episode and k[1] > period]:
             slot = stream.slots.pop(k)
-            self.counts["after_end"] += len(slot.frames) + (slot.answer is not None) + (slot.feedback is not None)
+            self.counts["after_end"] += len(slot.frames) + len(slot.answers) + (slot.feedback is not None)
         if not stream.chain and stream.cursor is not None and stream.cursor[0] == episode \
                 and stream.cursor[1] > period:
             stream.restart_after = key
@@ -329,7 +424,7 @@ class ExperienceAssembler:
         pending = 0
         for stream in self.streams.values():
             key = stream.chain[-1] if stream.chain else stream.cursor
-            waiting = key is not None and len(stream.chain) < self.steps and bool(self._step_ready(stream, key))
+            waiting = key is not None and len(stream.chain) < self.steps and self._step_ready(stream, key) is True
             pending += len(stream.chain) + waiting       # + a step whose successor (a next episode) never came
         return pending
 
@@ -344,17 +439,82 @@ class ExperienceAssembler:
         later = [k for k in stream.slots if k[0] > key[0] and k[1] == 0]
         return min(later) if later else None
 
-    def _step_ready(self, stream: _Stream, key: tuple[int, int]) -> bool | None:
-        """True: slot ``key`` is a complete step; False: not yet; None: it cannot be learnt from (cut)."""
+    def _step_ready(self, stream: _Stream, key: tuple[int, int]) -> bool | str:
+        """True: slot ``key`` is a complete step; False: not yet; a counter name: it cannot be learnt from (cut,
+        counted under that name)."""
         slot = stream.slots.get(key)
-        if slot is None or not slot.observed or slot.answer is None:
+        if slot is None or not slot.observed or not slot.answers:
             return False
-        if slot.contested:
-            return None
-        if self.require_learning_fields and version(slot.answer) == 0:
-            return None
+        state, answer = self._executed(stream, key)      # the next feedback decides, digest or not
+        if state != "ok":
+            return False if state == "wait" else answer
+        if self.require_learning_fields and version(answer) == 0:
+            return "not_learning"
+        return True
+
+    def _named(self, stream: _Stream, key: tuple[int, int]) -> tuple[Any, bytes]:
+        """The feedback of period key + 1, which names the answer of slot ``key`` that ran, and that digest."""
         following = stream.slots.get((key[0], key[1] + 1))
-        return following is not None and following.feedback is not None
+        feedback = None if following is None else following.feedback
+        return feedback, b"" if feedback is None else bytes(getattr(feedback, "action_digest", b""))
+
+    def _executed(self, stream: _Stream, key: tuple[int, int]) -> tuple[str, Any]:
+        """The answer of slot ``key`` that its period ran: ("ok", Action), ("wait", None) while that is not known
+        yet (no feedback, or the named answer has not arrived), or ("cut", counter) when no answer is learnt."""
+        slot = stream.slots.get(key)
+        feedback, named = self._named(stream, key)
+        if slot is None or not slot.answers or feedback is None:
+            return "wait", None
+        if named:
+            for digest, answer in slot.answers:
+                if digest == named:
+                    if not slot.resolved:
+                        slot.resolved = True
+                        self.counts["rivals_resolved"] += len(slot.answers) > 1
+                    slot.answer = answer
+                    return "ok", answer
+            return "wait", None
+        if stream.digests_seen:                 # a simulator that names actions ran none of these
+            return "cut", "not_executed"
+        if slot.contested:
+            return "cut", "contested_cuts"
+        return "ok", slot.answer
+
+    def _unmatched(self, stream: _Stream, key: tuple[int, int]) -> bool:
+        """The feedback names an answer of slot ``key`` the stream never got."""
+        slot = stream.slots.get(key)
+        _, named = self._named(stream, key)
+        return bool(named) and slot is not None and all(d != named for d, _ in slot.answers)
+
+    def _bootstrap_answer(self, stream: _Stream, key: tuple[int, int]) -> Any:
+        """The answer whose value is V of a sequence's last observation (slot ``key``), or None while unknown: the
+        one that ran; without digests, the slot's answer as it stands; an answer that did not run (the robot acted
+        by default) when it is the slot's only one — its value is still the policy's estimate."""
+        slot = stream.slots.get(key)
+        if slot is None or not slot.observed or not slot.answers:
+            return None
+        state, answer = self._executed(stream, key)
+        if state == "ok":
+            return answer
+        if not stream.digests_seen:
+            return slot.answer
+        if state == "cut" and len(slot.answers) == 1:
+            return slot.answer
+        return None
+
+    def _shown(self, stream: _Stream, key: tuple[int, int]) -> Any:
+        """The answer of slot ``key`` as the previous action the next observation shows (the policy shows what it
+        sent): the one that ran, else the slot's only answer (or, without digests, its uncontested one); None:
+        unknown (idle is shown)."""
+        state, answer = self._executed(stream, key)
+        if state == "ok":
+            return answer
+        slot = stream.slots.get(key)
+        if slot is None or not slot.answers:
+            return None
+        if len(slot.answers) == 1 or (not stream.digests_seen and not slot.contested):
+            return slot.answer
+        return None
 
     def _advance(self, source: str, robot: str, stream: _Stream) -> None:
         if stream.cursor is None:         # the stream starts at its first observed slot; answers and feedback of
@@ -383,16 +543,17 @@ class ExperienceAssembler:
                 self._cut(stream, key)
                 continue
             if len(stream.chain) == self.steps:               # the chain has its T steps; key is slot T
-                slot = stream.slots.get(key)
-                if slot is not None and slot.observed and slot.answer is not None:
-                    self._emit(source, robot, stream)
+                bootstrap = self._bootstrap_answer(stream, key)
+                if bootstrap is not None:
+                    self._emit(source, robot, stream, bootstrap)
                     continue
                 if not self._give_up(stream, key):
                     return
+                self.counts["unmatched_action"] += self._unmatched(stream, key)
                 self._cut(stream, key)
                 continue
             ready = self._step_ready(stream, key)
-            if ready:
+            if ready is True:
                 ended = self._ended(stream, key)
                 following = self._next_key(stream, key, ended)
                 if following is None:                          # the next episode has not begun yet
@@ -402,13 +563,13 @@ class ExperienceAssembler:
                     continue
                 stream.chain.append(following)
                 continue
-            if ready is None:
-                self.counts["contested_cuts" if stream.slots[key].contested else "not_learning"] += 1
+            if ready is not False:                             # a counter: no step can be learnt here
+                self.counts[ready] += 1
                 self._cut(stream, key)
                 continue
             if not self._give_up(stream, key):
                 return
-            self.counts["missing"] += 1
+            self.counts["unmatched_action" if self._unmatched(stream, key) else "missing"] += 1
             self.last_missing = f"{source or '/'} {robot} episode {key[0]} period {key[1]}: {self._lacks(stream, key)}"
             self._cut(stream, key)
 
@@ -425,7 +586,8 @@ class ExperienceAssembler:
         slot = stream.slots.get(key, Slot())
         following = stream.slots.get((key[0], key[1] + 1))
         lacking = [f"frames {sorted(slot.frames)}" if not slot.observed else "",
-                   "answer" if slot.answer is None else "",
+                   "answer" if not slot.answers else "",
+                   "the answer its feedback names" if self._unmatched(stream, key) else "",
                    "next period's feedback" if following is None or following.feedback is None else ""]
         return ", ".join(x for x in lacking if x)
 
@@ -452,7 +614,8 @@ class ExperienceAssembler:
         stream.chain, stream.restart_after = [], key
         stream.chain_starts_episode, stream.continues = True, False
 
-    def _emit(self, source: str, robot: str, stream: _Stream) -> None:
+    def _emit(self, source: str, robot: str, stream: _Stream, bootstrap: Any) -> None:
+        """The chain's sequence; ``bootstrap``: slot T's answer (``_bootstrap_answer``), whose value is V(s_T)."""
         keys = [stream.cursor] + stream.chain            # T + 1 observation slots
         slots = [stream.slots[k] for k in keys]
         T = self.steps
@@ -460,8 +623,7 @@ class ExperienceAssembler:
         for t, (key, slot) in enumerate(zip(keys, slots)):
             if key[1] == 0 or (t == 0 and stream.chain_starts_episode):
                 starts[t] = True
-            before = stream.slots.get((key[0], key[1] - 1))
-            answer = before.answer if before is not None and key[1] > 0 else None
+            answer = self._shown(stream, (key[0], key[1] - 1)) if key[1] > 0 else None
             previous.append(self.scenario.idle if answer is None else self.scenario.previous_row(answer))
         periods = [[s.frames[k] for k in range(s.frames_per_period)] for s in slots]
         stats: Counter[str] = Counter()
@@ -473,7 +635,8 @@ class ExperienceAssembler:
         actions = np.array([kind.action_row(s.answer) for s in slots[:T]], kind.action_dtype)
         self.counts["actions_rounded"] += sum(kind.off_grid(s.answer) for s in slots[:T])
         log_probs = np.array([getattr(s.answer, "log_prob", 0.0) for s in slots[:T]], np.float32)
-        values = np.array([getattr(s.answer, "value", 0.0) for s in slots], np.float32)
+        values = np.array([getattr(s.answer, "value", 0.0) for s in slots[:T]] + [getattr(bootstrap, "value", 0.0)],
+                          np.float32)
         versions = np.array([version(s.answer) for s in slots[:T]], np.int64)
         feedback = [stream.slots[(k[0], k[1] + 1)].feedback for k in keys[:T]]
         terms = np.array([(f.reward_primary, f.reward_rule, f.reward_auxiliary, f.reward_observation)
@@ -482,8 +645,10 @@ class ExperienceAssembler:
         truncated = np.array([f.truncated and not f.terminated for f in feedback], bool)
         final_values = np.zeros(T, np.float32)
         for t in np.flatnonzero(truncated):
-            final = stream.slots.get((keys[t][0], keys[t][1] + 1))
-            if final is not None and final.answer is not None and version(final.answer) and not final.contested:
+            final = stream.slots.get((keys[t][0], keys[t][1] + 1))     # never runs: no feedback names its answer
+            sure = final is not None and (len(final.answers) == 1 or (not stream.digests_seen and final.answers
+                                                                      and not final.contested))
+            if sure and version(final.answer):
                 final_values[t] = final.answer.value
             else:       # a stepped policy node often skips the final observation (the next episode is already
                 final_values[t] = values[t]     # there): V(s) of the last step stands in, counted

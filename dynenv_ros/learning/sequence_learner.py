@@ -44,7 +44,7 @@ MAX_QUEUE = 4096          # sequences waiting for the learner; beyond, the oldes
 
 class SequenceLearner:
     """Updates on batches of ``batch_sequences`` sequences. ``version`` = 1 + updates: what the weights it hands
-    out are called (``PolicyWeights.version``, ``Action.policy_version``)."""
+    out are called (``WeightsAnnouncement.version``, ``Action.policy_version``)."""
 
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, batch_sequences: int = 8,
                  max_policy_lag: int = 4, log: bool = True, reward_weights=(1.0, 1.0, 1.0, 1.0),
@@ -261,12 +261,12 @@ class SequenceLearner:
                 "numpy_rng": np.random.default_rng(self.cfg.seed + self.updates).bit_generator.state}
 
     def weights(self) -> bytes:
-        """The current policy as a policy file's bytes (``PolicyWeights.data``); its meta's updates give
+        """The current policy as a policy file's bytes (what the trainer node announces and serves); its meta's updates give
         ``version_of`` = ``self.version``."""
         return policy_bytes(self.agent, self.policy_meta())
 
     def policy_meta(self) -> dict[str, Any]:
-        """What a policy file or PolicyWeights carries of the run (no config, no generator state)."""
+        """What a policy file carries of the run (no config, no generator state)."""
         return {k: v for k, v in self.meta().items() if k not in ("config", "numpy_rng")}
 
     def log(self, scalars: dict[str, float]) -> None:

@@ -5,7 +5,9 @@ Publishes per robot (car) its detections at vision rate, the ground truth and ``
 step feedback at motion rate, diagnostics and RViz markers; subscribes to each robot's actions. Stepped mode runs a
 motion period as soon as every controlled robot has acted (or on ``/sim/step``); real-time mode is paced by a wall
 timer. All game logic is in the sessions (``envs/soccer_session.py``, ``envs/driving_session.py``); this file only
-converts and publishes (docs/ros_graph.md).
+converts and publishes (docs/ros_graph.md). Each feedback names the action its robot's period ran
+(``StepFeedback.action_digest``); with ``secrets_dir`` only actions carrying their team's MAC, for a (robot, episode,
+period) not acted on before, are run, and the feedback is tagged with the simulator's secret (``security.action_auth``).
 """
 from __future__ import annotations
 
@@ -39,6 +41,8 @@ from dynenv_ros.ros import driving_markers, markers, topics
 from dynenv_ros.ros.cdr import detection_array_cdr
 from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
+from dynenv_ros.ros.authentication import secrets_for
+from dynenv_ros.security.action_auth import ReplayGuard, action_digest, check_action, tag_feedback
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.pose_estimates import EmulatedOdometry, pose_message, stamp_ns
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list,
@@ -176,6 +180,13 @@ class SimNode(Node):
                                     **session_options)
         self.map = self.session.world.map if driving else None
         self.names = names
+        # Authenticated actions (issue 27, security/action_auth.py): with secrets_dir, an action counts only with its
+        # team's MAC and a nonce not used before, and the feedback carries the simulator's MAC. Either way the
+        # feedback names the action each robot's period ran (StepFeedback.action_digest).
+        self.secrets = secrets_for(self, names, simulator=True)
+        self.replay_guard = ReplayGuard()
+        self._accepted_digests: dict[int, bytes] = {}          # robot -> digest, for the period being collected
+        self._executed_digests: dict[tuple[int, int], dict[int, bytes]] = {}   # (episode, period) run -> digests
         self._seed = None if seed < 0 else seed
         self.session.missed_for = names.index(self.marker_robot) if self.marker_robot else None
         # Stepped mode is lossless (KEEP_ALL: a slow reader slows the simulation down); real time cannot wait, so
@@ -197,6 +208,9 @@ class SimNode(Node):
         # In real time, actions arrive on a participant and thread of their own (ros/action_inbox.py): a flood on
         # one robot's topic cannot drop this node's service requests. Both modes queue a bounded number (qos.py).
         realtime = self.mode == "realtime"
+        # The topics the MACs and digests are bound to (fully qualified: the namespace is part of a robot's identity).
+        self.action_topics = [self.resolve_topic_name(local(topics.action(n))) for n in names]
+        self.feedback_topics = [p.topic_name for p in self.feedback_pubs]
         self.action_inbox = ActionInbox(self, Action, [local(topics.action(n)) for n in names],
                                         action_queue(realtime), ACTION_HANDOVER_DEPTH, self._screen_action,
                                         self._receive_action, self._count_refusals, own_participant=realtime)
@@ -294,6 +308,8 @@ class SimNode(Node):
         self.odometry.restart()                 # a new episode, a new odometry (odom: the kickoff pose)
         self.episodes_started += 1
         self._buffer.clear()
+        self._accepted_digests.clear()
+        self._executed_digests.clear()
         self._emit(self.session.initial())
 
     def _on_reset(self, request: ResetSimulation.Request, response: ResetSimulation.Response):
@@ -360,6 +376,10 @@ class SimNode(Node):
         if msg.robot_id != robot:
             return "rejected_unknown_robot", (f"unknown_robot: robot_id {msg.robot_id} on "
                                               f"{topics.action(self.names[robot])} (expected {robot})")
+        if self.secrets is not None:
+            problem = self._authentication_problem(robot, msg)
+            if problem:
+                return refusal_key(problem), f"{self.names[robot]}: {problem}"
         reason = self.session.check(msg.robot_id, msg.episode_id, msg.motion_period, *self._action_fields(msg))
         return (refusal_key(reason), f"{self.names[robot]}: {reason}") if reason else ("", "")
 
@@ -369,6 +389,16 @@ class SimNode(Node):
             return float(msg.throttle), float(msg.brake), float(msg.steering)
         return msg.walk, msg.turn, msg.kick, float(msg.head_yaw_delta)
 
+    def _authentication_problem(self, robot: int, msg: Action) -> str:
+        """Why ``msg`` is not its robot's team's own, fresh action: "" (it is), ``mac_missing``, ``mac_invalid``
+        (forged, altered, another team's secret or another topic's) or ``replayed`` (its nonce was used)."""
+        problem = check_action(msg, self.action_topics[robot], self.secrets.for_agent(self.names[robot]))
+        if problem:
+            return f"{problem}: episode {msg.episode_id} period {msg.motion_period}"
+        if self.replay_guard.used((msg.robot_id, msg.episode_id, msg.motion_period)):
+            return f"replayed: episode {msg.episode_id} period {msg.motion_period} was acted on already"
+        return ""
+
     def _receive_action(self, robot: int, msg: Action) -> None:
         """On this node's thread: an action that passed the screen; the period may have moved on since."""
         accepted, reason = self.session.submit(msg.robot_id, msg.episode_id, msg.motion_period,
@@ -376,6 +406,9 @@ class SimNode(Node):
         if not accepted:
             self._count_refusals(Counter({refusal_key(reason): 1}), f"{self.names[robot]}: {reason}", counted=True)
             return
+        self._accepted_digests[robot] = action_digest(msg, self.action_topics[robot])
+        if self.secrets is not None:
+            self.replay_guard.use((msg.robot_id, msg.episode_id, msg.motion_period))
         if self.mode == "stepped" and self.session.ready():
             self._run_period()
 
@@ -398,7 +431,11 @@ class SimNode(Node):
                 return
             self._reset(None, 1)
             return
+        executed, self._accepted_digests = self._accepted_digests, {}
         output = self.session.step()
+        self._executed_digests[(output.episode_id, output.motion_period)] = executed
+        while len(self._executed_digests) > 8:      # bounded (real time: the feedback follows within a period)
+            del self._executed_digests[next(iter(self._executed_digests))]
         self.periods_run += 1
         now = time.monotonic()
         self._first_period_wall = self._first_period_wall or now
@@ -498,12 +535,17 @@ class SimNode(Node):
 
     def _publish_feedback(self, output: PeriodOutput) -> None:
         stamp = cv.sim_time(self._tick_offset + output.frames[-1].tick, self._tick_s)
+        executed = self._executed_digests.pop((output.episode_id, output.motion_period), {})
         for i, fb in enumerate(output.feedback):
-            self._publish(self.feedback_pubs[i], cv.step_feedback(
+            msg = cv.step_feedback(
                 robot_id=i, episode_id=output.episode_id, motion_period=output.motion_period, rewards=fb.rewards,
                 terminated=output.terminated if fb.terminated is None else fb.terminated,
                 truncated=output.truncated if fb.truncated is None else fb.truncated,
-                seen_object_ids=fb.seen_object_ids, landmarks_seen=fb.landmarks_seen, stamp=stamp))
+                seen_object_ids=fb.seen_object_ids, landmarks_seen=fb.landmarks_seen, stamp=stamp,
+                action_digest=executed.get(i, b""))
+            if self.secrets is not None:
+                msg.mac = tag_feedback(msg, self.feedback_topics[i], self.secrets.simulator)
+            self._publish(self.feedback_pubs[i], msg)
         if output.terminated or output.truncated:
             if self.scenario == "robocup":
                 self.episode_scores.append((self.session.world.state.score[1], self.session.world.state.score[-1]))
@@ -631,7 +673,9 @@ class SimNode(Node):
                   "sim_time_s": f"{sim_now:.2f}", "real_time_factor": f"{(s1 - s0) / wall:.2f}",
                   "vision_frames_per_s": f"{(f1 - f0) / wall:.1f}", "periods_run": str(self.periods_run)}
         counts: Counter[str] = self.session.counts
-        rejected = ("malformed", "out_of_range", "unknown_robot", "wrong_episode", "late", "early", "duplicate")
+        rejected = ("malformed", "out_of_range", "unknown_robot", "wrong_episode", "late", "early", "duplicate",
+                    "mac_missing", "mac_invalid", "replayed")
+        values["action_authentication"] = "off" if self.secrets is None else "on"
         for key in ("accepted", "missing", "ignored_after_episode_end", "publish_failed") + tuple(
                 f"rejected_{r}" for r in rejected):
             values[key] = str(counts.get(key, 0))

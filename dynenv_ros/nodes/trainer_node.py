@@ -11,19 +11,22 @@ policy node it finds on the ROS graph, and streams new weights back to the polic
   subscribes to the robot's detections, actions (with the behaviour policy's learning fields) and step feedback,
   and to the game's ``world_state`` when the variant learns localization or reconstruction (soccer).
   ``learning.experience`` assembles per-robot sequences aligned by episode and motion period, counting what is
-  late, duplicated, out of order, missing or malformed.
+  late, duplicated, out of order, missing or malformed. Each step is the action the simulator ran (its feedback
+  names it by digest); with ``secrets_dir`` only actions carrying their team's MAC and feedback carrying the
+  simulator's are read (``security.action_auth``; refusals counted and logged once per diagnostics period).
 - Learning: ``learning.sequence_learner`` in a thread of its own, so no callback waits for a gradient step; PPO
   against the stored behaviour log-probabilities, sequences older than ``max_policy_lag`` versions dropped
   (docs/decisions.md). Run directory, logs (CSV, TensorBoard) and checkpoints as ``dynenv-train`` writes them.
-- Weights: ``/trainer/weights`` (PolicyWeights, reliable, transient local), the initial ones at start and new ones
-  every ``publish_every_updates`` updates; policy nodes swap them in between two decisions.
+- Weights (``ros.weights_release``): each release, the initial one at start and a new one every
+  ``publish_every_updates`` updates, is signed with the Ed25519 key ``signing_key`` and announced on
+  ``/trainer/weights_announcement`` (reliable, transient local); its bytes are served in chunks on
+  ``/trainer/fetch_weights``. Policy nodes that trust the key fetch, check and swap them in between two decisions.
 - ``/trainer/diagnostics``: experience rate, queue depth, updates/s, version, lag, losses, the counts.
 
 Parameters: ``--help``. docs/ros_graph.md, "Training over ROS", shows the graph and how to spread it over machines.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import re
 import statistics
@@ -34,23 +37,26 @@ from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from dynenv_msgs.msg import Action, DetectionArray, PolicyWeights, StepFeedback, WorldState
+from dynenv_msgs.msg import Action, DetectionArray, StepFeedback, WorldState
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from dynenv_ros.agent.checkpoint import FORMAT, agent_config
 from dynenv_ros.driving.config import MAX_CARS, DrivingConfig
 from dynenv_ros.learning.config import ACTION_MODES, SCENARIOS, VARIANTS, ConfigError, TrainConfig
-from dynenv_ros.learning.experience import ExperienceAssembler
+from dynenv_ros.learning.experience import REFUSALS, ExperienceAssembler
 from dynenv_ros.learning.experience_scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.drain import take
+from dynenv_ros.ros.authentication import declare_secrets_dir, load_secrets
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, refuse_other_scenario
-from dynenv_ros.ros.qos import latched
+from dynenv_ros.ros.weights_release import WeightsRelease
+from dynenv_ros.security.keys import PRIVATE_NAME, KeyFileError, default_keys_dir, load_private_key
 from dynenv_ros.soccer.config import SoccerConfig
 
 DETECTION_TYPE = "dynenv_msgs/msg/DetectionArray"
@@ -60,6 +66,20 @@ DETECTION_TYPE = "dynenv_msgs/msg/DetectionArray"
 FRAME_DEPTH, MESSAGE_DEPTH = 400, 100
 # The parameters only one scenario uses (a value given for the other scenario is refused).
 SCENARIO_PARAMETERS = {"robocup": ("players_per_team", "learning_team"), "driving": ("n_cars", "action_mode")}
+
+
+def _signing_key(path: str):
+    """The trainer's Ed25519 private key; without one it refuses to start (a ParameterException, one line):
+    unsigned weights would be refused by every policy node that checks them."""
+    file = Path(path).expanduser() if path else default_keys_dir() / PRIVATE_NAME
+    if not path and not file.exists():
+        raise ParameterException(f"no signing key: run `dynenv-keys generate {default_keys_dir()}` (or give "
+                                 "-p signing_key:=FILE); the policy nodes get the trainer.pub beside it",
+                                 ["signing_key"])
+    try:
+        return load_private_key(file)
+    except KeyFileError as error:
+        raise ParameterException(str(error), ["signing_key"]) from None
 
 
 def detections_pattern(agent_pattern: str) -> re.Pattern[str]:
@@ -134,6 +154,11 @@ class TrainerNode(Node):
         threads = declare_int(self, "torch_threads", 1, 1, 256, "torch threads of the learner.", **fixed)
         diagnostics_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.",
                                       **fixed)
+        secrets_dir = declare_secrets_dir(self, "the learnt teams' secrets and simulator.secret: only actions with "
+                                          "their team's MAC and feedback with the simulator's are learnt")
+        signing_key = declare_str(self, "signing_key", "", "Ed25519 private key (PEM, mode 0600) that signs every "
+                                  "weights release; empty: trainer.key in $DYNENV_KEYS_DIR or "
+                                  "~/.config/dynenv_ros/keys (make one with `dynenv-keys generate`).", **fixed)
         game = ({"scenario": "driving", "n_cars": n_cars, "action_mode": action_mode} if driving
                 else {"players_per_team": players})
         try:
@@ -145,6 +170,7 @@ class TrainerNode(Node):
                                    torch_threads=threads, log_every_updates=1)
         except ConfigError as error:
             raise ParameterException(str(error), [error.key]) from None
+        self.signing_key = _signing_key(signing_key)     # before the run directory exists: nothing left behind
         self.run_dir = Path(run_dir or f"runs/trainer-{time.strftime('%Y%m%d-%H%M%S')}")
         try:
             self.learner = SequenceLearner(self.cfg, self.run_dir, resume=resume,
@@ -163,9 +189,11 @@ class TrainerNode(Node):
                                       soccer.motion.head_units)
             learns = self._learns
         self.detections = detections_pattern(agents.agent_pattern)
+        self.secrets = load_secrets(secrets_dir, [n for n in agents.names if learns is None or learns(n)], True)
         self.assembler = ExperienceAssembler(steps, agents, with_targets=self._needs_targets(), patience=patience,
-                                             learns=learns)
-        self.weights_pub = self.create_publisher(PolicyWeights, topics.WEIGHTS, latched(1))
+                                             learns=learns, secrets=self.secrets)
+        self._refusals_logged: Counter[str] = Counter()      # the refusals already summarised in the log
+        self.weights = WeightsRelease(self, self.signing_key, self.run_id)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.TRAINER_DIAGNOSTICS,
                                                      QoSProfile(depth=10))
         self.received: Counter[str] = Counter()
@@ -283,11 +311,10 @@ class TrainerNode(Node):
             self.learner.counts["weights_refused"] += 1
             self.get_logger().error(f"weights not published: {error}")
             return
-        msg = PolicyWeights(version=self.learner.version, run_id=self.run_id, data=data,
-                            sha256=hashlib.sha256(data).hexdigest(),
-                            metadata_json=json.dumps(self.learner.policy_meta()))
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.weights_pub.publish(msg)
+        # the network's shape, so a policy node checks it before fetching (a policy file's format and config)
+        metadata = {"format": FORMAT, "config": agent_config(self.learner.agent),
+                    "updates": self.learner.policy_meta()["updates"]}
+        self.weights.release(self.learner.version, data, json.dumps(metadata, sort_keys=True))
         self.weights_published += 1
 
     # -- parameters, diagnostics, shutdown ---------------------------------------------------------------------
@@ -325,8 +352,11 @@ class TrainerNode(Node):
         for key in ("steps", "sequences", "late", "duplicate", "out_of_order", "missing", "malformed",
                     "not_learning", "cuts", "steps_discarded", "unknown_robot", "targets_missing",
                     "bootstrap_estimated", "after_end", "actions_rounded", "out_of_range", "early_replaced",
-                    "contested", "contested_cuts"):
+                    "contested", "contested_cuts", "rival_answers", "rivals_resolved", "unmatched_action",
+                    "not_executed", "beyond_horizon", "candidates_full", "action_mac_missing", "action_mac_invalid",
+                    "feedback_mac_missing", "feedback_mac_invalid"):
             values[key] = str(counts.get(key, 0))
+        values["action_authentication"] = "off" if self.secrets is None else "on"
         for key, value in list(self.learner.counts.items()) + list(self.background.counts.items()):
             values[key] = str(value)
         for key, value in self.received.items():
@@ -342,6 +372,18 @@ class TrainerNode(Node):
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diagnostics_pub.publish(msg)
+        self._log_refusals()
+
+    def _log_refusals(self) -> None:
+        """One line per diagnostics period with the messages refused since the last one, by reason, and the last
+        refusal: a flood of forged messages costs a counter each, never a log line each."""
+        counts = self.assembler.counts
+        new = {k: counts[k] - self._refusals_logged[k] for k in REFUSALS if counts[k] > self._refusals_logged[k]}
+        if new:
+            self._refusals_logged.update(new)
+            summary = ", ".join(f"{n} {k}" for k, n in sorted(new.items()))
+            self.get_logger().warning(f"messages refused since the last report: {summary}; last: "
+                                      f"{self.assembler.last_refused}")
 
     def summary(self) -> dict[str, Any]:
         """Mean episode return per policy version (of the episode's last step), and the counts."""

@@ -70,12 +70,15 @@ def world_state(snapshot: WorldSnapshot, stamp: Time) -> WorldState:
 
 def step_feedback(*, robot_id: int, episode_id: int, motion_period: int, rewards: dict[str, float],
                   terminated: bool, truncated: bool, seen_object_ids: Sequence[int], landmarks_seen: float,
-                  stamp: Time) -> StepFeedback:
+                  stamp: Time, action_digest: bytes = b"") -> StepFeedback:
+    """``action_digest``: which Action the period ran for this robot (``security.action_auth``); empty when it
+    acted by default."""
     msg = StepFeedback(robot_id=robot_id, episode_id=episode_id, motion_period=motion_period,
                        reward_primary=rewards["primary"], reward_rule=rewards["rule"],
                        reward_auxiliary=rewards["auxiliary"], reward_observation=rewards["observation"],
                        reward_total=sum(rewards.values()), terminated=terminated, truncated=truncated,
-                       seen_object_ids=[i for i in seen_object_ids if i >= 0], landmarks_seen=landmarks_seen)
+                       seen_object_ids=[i for i in seen_object_ids if i >= 0], landmarks_seen=landmarks_seen,
+                       action_digest=action_digest)
     msg.header.stamp = stamp
     return msg
 

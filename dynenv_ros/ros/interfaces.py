@@ -23,8 +23,8 @@ from dynenv_msgs import srv as dynenv_srv
 
 PACKAGE = "dynenv_msgs"
 MESSAGE_NAMES = ("Detection", "DetectionArray", "ObjectState", "WorldState", "Action", "StepFeedback",
-                 "PolicyWeights")
-SERVICE_NAMES = ("ResetSimulation", "StepSimulation", "LoadPolicy")
+                 "WeightsAnnouncement")
+SERVICE_NAMES = ("ResetSimulation", "StepSimulation", "LoadPolicy", "FetchWeights")
 # Sequences in samples get 0..MAX_SAMPLE_SEQUENCE elements, so empty and several-element lists are both covered.
 MAX_SAMPLE_SEQUENCE = 4
 
@@ -115,7 +115,10 @@ def _value(slot: Any, rng: np.random.Generator) -> Any:
         module = __import__(".".join(slot.namespaces), fromlist=[slot.name])
         return _fill(getattr(module, slot.name), rng)
     if isinstance(slot, AbstractString):
-        return "".join(rng.choice(list("abcdefghijklmnopqrstuvwxyz_/ 0123456789"), size=int(rng.integers(1, 24))))
+        length = int(rng.integers(1, 24))
+        if slot.has_maximum_size():          # bounded strings (string<=16) stay within their bound
+            length = min(length, slot.maximum_size)
+        return "".join(rng.choice(list("abcdefghijklmnopqrstuvwxyz_/ 0123456789"), size=length))
     typename = slot.typename
     if typename == "boolean":
         return bool(rng.integers(0, 2))

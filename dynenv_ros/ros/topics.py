@@ -17,7 +17,9 @@ DETECTION_MARKERS = "/sim/markers/detections"     # visualization_msgs/MarkerArr
 RESET_SERVICE = "/sim/reset"                      # dynenv_msgs/srv/ResetSimulation
 STEP_SERVICE = "/sim/step"                        # dynenv_msgs/srv/StepSimulation
 # The training graph (docs/ros_graph.md, "Training over ROS"): absolute, one trainer serves every game's policies.
-WEIGHTS = "/trainer/weights"                      # dynenv_msgs/PolicyWeights, reliable, transient local, depth 1
+WEIGHTS_ANNOUNCEMENT = "/trainer/weights_announcement"  # dynenv_msgs/WeightsAnnouncement, signed; reliable,
+#                                                  transient local, depth 1
+FETCH_WEIGHTS = "/trainer/fetch_weights"          # dynenv_msgs/srv/FetchWeights: an announced file's chunks
 TRAINER_DIAGNOSTICS = "/trainer/diagnostics"      # diagnostic_msgs/DiagnosticArray, about 1 Hz
 
 
