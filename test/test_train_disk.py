@@ -180,3 +180,45 @@ def test_eval_out_read_only_is_refused_in_one_line_exit_2_before_evaluating(read
     assert eval_main(["compare", str(a), str(a), "--out", str(out)]) == 2
     assert _one_line(capsys.readouterr().err).startswith(f"dynenv-eval: --out {out}")
     assert nothing_left()
+
+
+def test_a_disk_too_small_for_the_runs_checkpoints_is_refused_in_one_line_and_nothing_is_made(tmp_path, capsys,
+                                                                                              monkeypatch):
+    """A disk with room for the probe but not for the run (keep_checkpoints + 1 checkpoints, the policy files, the
+    logs) is refused up front, exit 2, naming what is needed and what is free; no folder is made. Free space is
+    faked at 5 MB, the size that used to leave a run folder with no checkpoint."""
+    import shutil
+    from collections import namedtuple
+    from dynenv_ros.core import writable
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(writable.shutil, "disk_usage", lambda path: usage(10 * 2**20, 5 * 2**20, 5 * 2**20))
+    run_dir = tmp_path / "runs" / "small_disk"
+    code = main(["--config", "quick", "--run-dir", str(run_dir), "--no-progress", *TINY])
+    assert code == 2
+    line = _one_line(capsys.readouterr().err)
+    assert line.startswith(f"dynenv-train: --run-dir {run_dir}: needs about ") and "5.0 MB free" in line, line
+    assert "checkpoints of" in line
+    assert not (tmp_path / "runs").exists()
+    assert shutil.disk_usage is not None
+
+
+def test_the_disk_estimate_covers_what_a_run_writes(tmp_path):
+    """The estimate of one checkpoint is within 10 % of a real checkpoint folder's size for a variant that trains
+    every head (pred: Adam then holds moments of every parameter; a baseline run's unused heads have none, so its
+    estimate errs on the safe side), and the estimate of the whole run is at least what a finished run left."""
+    from dynenv_ros.learning.config import load_config
+    from dynenv_ros.learning.disk_budget import LOG_BYTES, run_disk_bytes
+    from dynenv_ros.learning.train_cli import preset_path
+    run_dir = tmp_path / "run"
+    pred = [*TINY, "--set", "variant=pred"]
+    assert main(["--config", "quick", "--run-dir", str(run_dir), "--no-progress", *pred,
+                 "--set", "total_env_steps=16"]) == 0
+    cfg = load_config(preset_path("quick"), [item for item in pred if item != "--set"])
+    needed, _ = run_disk_bytes(cfg)
+    folder = max(checkpoints.list_checkpoints(run_dir), key=lambda path: path.name)   # after updates: Adam's state
+    checkpoint = sum(f.stat().st_size for f in folder.iterdir())
+    per_checkpoint = (needed - LOG_BYTES - 2 * (run_dir / "policy.safetensors").stat().st_size) \
+        / (cfg.keep_checkpoints + 1)
+    assert abs(per_checkpoint - checkpoint) < 0.10 * checkpoint, (per_checkpoint, checkpoint)
+    written = sum(f.stat().st_size for f in run_dir.rglob("*") if f.is_file())
+    assert written <= needed

@@ -142,3 +142,30 @@ def test_bad_settings_and_files_at_start_are_refused_with_the_reason(make_node, 
             assert str(error).startswith(f"{key}: ") and str(error).endswith(f"['{key}']"), (key, str(error))
         else:
             raise AssertionError(f"{key}: the trainer started")
+
+
+def test_a_disk_too_small_is_refused_and_a_started_trainer_checkpoints_at_once(make_node, tmp_path, monkeypatch):
+    """Issue 27 item 4 for the trainer node: a run directory on a disk without room for the run's checkpoints is
+    refused at start naming run_dir, leaving no folder; a trainer that starts writes its first checkpoint before any
+    experience arrives, so a SIGKILL a moment later still leaves a run that resume:=true continues."""
+    from collections import namedtuple
+    from rclpy.exceptions import ParameterException
+    from dynenv_ros.core import writable
+    private, _ = key_pair(tmp_path / "keys")
+    usage = namedtuple("usage", "total used free")
+    real = writable.shutil.disk_usage
+    monkeypatch.setattr(writable.shutil, "disk_usage", lambda path: usage(10 * 2**20, 5 * 2**20, 5 * 2**20))
+    small = tmp_path / "small" / "run"
+    try:
+        make_node(TrainerNode, parameter_overrides=_params(**{**TRAINER, "run_dir": str(small),
+                                                               "signing_key": str(private)}))
+    except ParameterException as error:
+        assert str(error).startswith(f"run_dir {small}: needs about ") and "5.0 MB free" in str(error), str(error)
+    else:
+        raise AssertionError("the trainer started on a 5 MB disk")
+    assert not (tmp_path / "small").exists()
+    monkeypatch.setattr(writable.shutil, "disk_usage", real)
+    run_dir = tmp_path / "run"
+    make_node(TrainerNode, parameter_overrides=_params(**{**TRAINER, "run_dir": str(run_dir),
+                                                          "signing_key": str(private)}))
+    assert len(checkpoints.list_checkpoints(run_dir)) == 1

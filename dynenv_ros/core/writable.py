@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import errno
 import os
+import shutil
 import uuid
 from pathlib import Path
 
@@ -70,3 +71,48 @@ def check_writable_file(path: str | os.PathLike[str], what: str = "file") -> Non
     if not path.parent.is_dir():
         raise NotWritable(f"{what} {path}: folder {path.parent} does not exist")
     check_writable_dir(path.parent, f"{what} {path}: folder", probe_bytes=4096)
+
+
+
+def check_run_dir(folder: str | os.PathLike[str], needed_bytes: int, needs: str = "", what: str = "folder") -> Path:
+    """``check_writable_dir``, then ``needed_bytes`` free on its file system: a read-only folder is refused as not
+    writable, a disk too small for the run (it would fill part-way) as short of space; either way in one line, and
+    no folder this made is left behind."""
+    folder = Path(folder)
+    missing = []
+    current = folder.absolute()
+    while not current.exists() and current != current.parent:
+        missing.append(current)
+        current = current.parent
+    check_writable_dir(folder, what)
+    try:
+        check_free_space(folder, needed_bytes, what, needs)
+    except NotWritable:
+        for path in missing:                    # innermost first; they are empty: the probe removed its file
+            try:
+                path.rmdir()
+            except OSError:
+                pass
+        raise
+    return folder
+
+
+def check_free_space(folder: str | os.PathLike[str], needed_bytes: int, what: str = "folder",
+                     needs: str = "") -> None:
+    """The file system that holds (or will hold) ``folder`` must have ``needed_bytes`` free: a run that would fill
+    the disk part-way is refused up front, in one line."""
+    current = Path(folder).absolute()
+    while not current.exists() and current != current.parent:
+        current = current.parent
+    try:
+        free = shutil.disk_usage(current).free
+    except OSError as error:
+        raise NotWritable(f"{what} {folder}: cannot read its free space: {describe_os_error(error)}") from None
+    if free < needed_bytes:
+        why = f" ({needs})" if needs else ""
+        raise NotWritable(f"{what} {folder}: needs about {_megabytes(needed_bytes)}{why}, the disk has "
+                          f"{_megabytes(free)} free")
+
+
+def _megabytes(count: int) -> str:
+    return f"{count / 2**20:.1f} MB"

@@ -89,8 +89,10 @@ def main(argv: list[str] | None = None) -> int:
         _check_device(cfg.device)
         from dynenv_ros.learning.resources import check_machine
         check_machine(cfg)                 # cores, memory, shared memory, the Ray cluster: before anything starts
-        from dynenv_ros.core.writable import check_writable_dir
-        check_writable_dir(run_dir, "--resume" if args.resume else "--run-dir")   # read-only, full: refused now
+        from dynenv_ros.core.writable import check_run_dir
+        from dynenv_ros.learning.disk_budget import run_disk_bytes
+        # read-only, full, or too small for the run's checkpoints: refused now, nothing left behind
+        check_run_dir(run_dir, *run_disk_bytes(cfg), what="--resume" if args.resume else "--run-dir")
     except (ConfigError, ValueError) as error:
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
@@ -135,9 +137,10 @@ def _from_bags(args: argparse.Namespace) -> int:
         run_dir = Path(args.run_dir or f"runs/from_bag_s{cfg.seed}")
         if (run_dir / "checkpoints").exists():
             raise ValueError(f"{run_dir} already holds a run; choose another --run-dir")
-        from dynenv_ros.core.writable import check_writable_dir
+        from dynenv_ros.core.writable import check_run_dir
+        from dynenv_ros.learning.disk_budget import run_disk_bytes
         fresh = not run_dir.exists()
-        check_writable_dir(run_dir, "--run-dir")
+        check_run_dir(run_dir, *run_disk_bytes(cfg), what="--run-dir")
         learns = (lambda name: name[5] == args.team) if args.team else None
         try:
             summary = train_from_bags(cfg, args.from_bag, run_dir, epochs=args.epochs,

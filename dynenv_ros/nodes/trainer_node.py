@@ -47,6 +47,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from dynenv_ros.agent.checkpoint import FORMAT, agent_config
 from dynenv_ros.driving.config import MAX_CARS, DrivingConfig
 from dynenv_ros.learning.config import ACTION_MODES, SCENARIOS, VARIANTS, ConfigError, TrainConfig
+from dynenv_ros.core.writable import NotWritable, check_run_dir
+from dynenv_ros.learning.checkpoints import list_checkpoints
+from dynenv_ros.learning.disk_budget import run_disk_bytes
 from dynenv_ros.learning.experience import REFUSALS, ExperienceAssembler
 from dynenv_ros.learning.experience_scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
@@ -172,6 +175,10 @@ class TrainerNode(Node):
             raise ParameterException(str(error), [error.key]) from None
         self.signing_key = _signing_key(signing_key)     # before the run directory exists: nothing left behind
         self.run_dir = Path(run_dir or f"runs/trainer-{time.strftime('%Y%m%d-%H%M%S')}")
+        try:        # a read-only disk, or one too small for the run's checkpoints: refused now, nothing written
+            check_run_dir(self.run_dir, *run_disk_bytes(self.cfg), what="run_dir")
+        except NotWritable as error:
+            raise ParameterException(str(error), ["run_dir"]) from None
         try:
             self.learner = SequenceLearner(self.cfg, self.run_dir, resume=resume,
                                            batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag,
@@ -179,6 +186,8 @@ class TrainerNode(Node):
                                            max_batch_sequences=max_batch or None)
         except ConfigError as error:            # every refusal names its parameter
             raise ParameterException(str(error), [error.key]) from None
+        if not list_checkpoints(self.run_dir):
+            self.learner.save_checkpoint()      # the first one at once: a kill from now on leaves a run to resume
         self.run_id = self.run_dir.resolve().name
         if driving:
             agents: ExperienceScenario = DrivingExperience(DrivingConfig(n_cars=n_cars, action_mode=action_mode))
