@@ -6,8 +6,9 @@ policy node) or scripted, team B by one scripted policy node per robot (``policy
 ``perceiving_policy`` node per robot, on its detections and pose estimate), and the recorder, for ``duration_s`` of sim
 time; it prints achieved rates, message counts and the score, leaves the bag and a GIF in the run directory, and
 checks the bag holds every message the simulator published and every action it accepted. With
-``scenario: driving`` the same graph plays urban driving instead: the simulator with ``n_cars`` cars, one
-``scripted_driver`` node driving them all, and the recorder; it prints cars home, crashes, pedestrians hit and the
+``scenario: driving`` the same graph plays urban driving instead: the simulator with ``n_cars`` cars, a policy node
+driving ``car_0`` with the shipped driving policy (``car_0``: another file, or ``scripted``), one ``scripted_driver``
+node driving the others, and the recorder; it prints cars home, crashes, pedestrians hit and the
 reward per car. ``selfcheck`` — every dynenv_msgs interface across processes. ``--help`` lists the settings and the
 graphs (and scenarios) that use them.
 """
@@ -28,6 +29,7 @@ import yaml
 from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch, run_graph
 from dynenv_ros.graph.train_graph import summarise_train, train_graph
 from dynenv_ros.ros.selfcheck import format_report
+from dynenv_ros.driving.config import car_names
 from dynenv_ros.soccer.config import robot_names
 
 REPO_CONFIG = Path(__file__).resolve().parent.parent / "config" / "main_job.yaml"
@@ -51,6 +53,7 @@ SCENARIOS = ("robocup", "driving")
 ACTION_MODES = ("discrete", "continuous")
 PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
 SHIPPED_POLICY = "policy_node/pretrained/policy.onnx"     # relative to the repository (see team_a_policy)
+SHIPPED_DRIVING_POLICY = "policy_node/pretrained/driving/policy.onnx"     # discrete actions
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,8 @@ class MainJobConfig:
     games: int = 2                   # train graph: simulator games feeding the trainer
     train_minutes: float = 3.0       # train graph: the trainer's wall-time budget
     episode_seconds: float = 10.0    # train graph: sim seconds per episode
-    n_cars: int = 2                  # driving: cars, each driven by the scripted driver
+    n_cars: int = 2                  # driving: cars; car_0 by car_0's policy, the others by the scripted driver
+    car_0: str = SHIPPED_DRIVING_POLICY   # driving: a policy file of the run's action_mode, or 'scripted'
     action_mode: str = "discrete"    # driving: discrete | continuous
 
     @classmethod
@@ -126,6 +130,15 @@ class MainJobConfig:
             raise ConfigError(f"n_cars must be in [1, 10], got {self.n_cars}")
         if self.action_mode not in ACTION_MODES:
             raise ConfigError(f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}")
+        if self.car_0 != "scripted":
+            path = team_a_policy(self.car_0)
+            if path.suffix not in (".onnx", ".safetensors"):
+                raise ConfigError(f"car_0 must be 'scripted' or a .onnx / .safetensors policy file, got {self.car_0!r}")
+            if not path.is_file():
+                raise ConfigError(f"car_0: policy file {path} does not exist")
+            if self.car_0 == SHIPPED_DRIVING_POLICY and self.action_mode != "discrete" and self.scenario == "driving":
+                raise ConfigError("car_0: the shipped driving policy takes discrete actions; with action_mode "
+                                  "continuous set car_0=scripted or a continuous policy file")
         if self.team_a != "scripted":
             path = team_a_policy(self.team_a)
             if path.suffix not in (".onnx", ".safetensors"):
@@ -161,12 +174,15 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
     "samples_per_type": ("messages per type and calls per service that must arrive intact, 1..1000",
                          ("selfcheck",)),
     "n_cars": ("cars, 1..10 (scenario driving)", ("soccer",)),
+    "car_0": ("a trained driving policy file for car_0 (.onnx: onnxruntime, .safetensors: torch; default the shipped "
+              "one, discrete actions) or 'scripted' (scenario driving; the other cars: scripted drivers)",
+              ("soccer",)),
     "action_mode": ("discrete | continuous: the cars' actions (scenario driving)", ("soccer",)),
 }
 # Settings of the soccer graph that only one scenario uses (a --set for the other scenario is refused).
 SCENARIO_SETTINGS: dict[str, str] = {"players_per_team": "robocup", "policy": "robocup", "team_a": "robocup",
                                      "localization": "robocup",
-                                     "n_cars": "driving", "action_mode": "driving"}
+                                     "n_cars": "driving", "action_mode": "driving", "car_0": "driving"}
 
 
 def check_overrides_apply(config: "MainJobConfig", overrides: dict[str, Any]) -> None:
@@ -279,18 +295,29 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
 
 
 def driving_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
-    """The simulator (scenario driving, stepped), one scripted_driver node for every car, and the recorder."""
+    """The simulator (scenario driving, stepped), a policy node driving car_0 with ``car_0``'s policy (unless
+    'scripted'), one scripted_driver node for the other cars, and the recorder."""
     sim = NodeLaunch("sim_node", "dynenv_ros.nodes.sim_node", {
         "scenario": "driving", "n_cars": config.n_cars, "action_mode": config.action_mode, "seed": config.seed,
         "perception_preset": config.perception, "mode": "stepped", "episode_seconds": config.duration_s,
         "auto_reset": False, "exit_when_finished": True, "report_path": str(run_dir / "sim_report.json"),
         "wait_for_subscribers": 2, "wait_for_ground_truth_subscribers": 2, "wait_for_recorder": True},
         ends_run=True)
-    driver = NodeLaunch("scripted_driver", "policy_node.scripted_driver",
-                        {"n_cars": config.n_cars, "action_mode": config.action_mode})
+    drivers = []
+    scripted = car_names(config.n_cars)
+    if config.car_0 != "scripted":
+        path = team_a_policy(config.car_0)
+        drivers.append(NodeLaunch("policy_car_0", "policy_node.policy_node", {
+            "scenario": "driving", "n_cars": config.n_cars, "action_mode": config.action_mode, "cars": ["car_0"],
+            "checkpoint": str(path), "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch",
+            "seed": config.seed}))
+        scripted = scripted[1:]
+    if scripted:
+        drivers.append(NodeLaunch("scripted_driver", "policy_node.scripted_driver",
+                                  {"n_cars": config.n_cars, "action_mode": config.action_mode, "cars": scripted}))
     recorder = NodeLaunch("recorder", "dynenv_ros.nodes.recorder", {"output": str(run_dir / "bag"),
                                                                      "use_sim_time": True})
-    return [recorder, driver, sim]
+    return [recorder, *drivers, sim]
 
 
 def missing_from_bag(report: dict[str, Any], info: dict[str, Any]) -> dict[str, tuple[int, int]]:
@@ -349,7 +376,9 @@ def summarise_driving(outcome: GraphOutcome, run_dir: Path, config: MainJobConfi
     diag = report["diagnostics"]
     rejected = sum(int(v) for k, v in diag.items() if k.startswith("rejected_"))
     episodes = report.get("episodes", [])
-    print(f"  driving: {config.n_cars} cars ({config.action_mode} actions), scripted drivers, perception "
+    who = ("scripted drivers" if config.car_0 == "scripted"
+           else f"car_0 by {config.car_0}, {'the others by scripted drivers' if config.n_cars > 1 else 'alone'}")
+    print(f"  driving: {config.n_cars} cars ({config.action_mode} actions), {who}, perception "
           f"'{config.perception}'")
     if episodes:
         last = episodes[-1]

@@ -146,14 +146,15 @@ class PolicyNode(Node):
                               read_only=True)
         team = declare_str(self, "team", "", "Control team 'a', team 'b', or both ('') (robocup).", read_only=True,
                            choices=("", "a", "b"))
-        n_cars = declare_int(self, "n_cars", 2, 1, MAX_CARS, "Cars in the game, all controlled (driving).",
-                             read_only=True)
+        n_cars = declare_int(self, "n_cars", 2, 1, MAX_CARS, "Cars in the game (driving).", read_only=True)
+        cars = declare_str_list(self, "cars", [], "Cars to drive (car_0, …; driving); empty: all n_cars — the "
+                                "others may be driven by other nodes, e.g. scripted_driver.", read_only=True)
         self.action_mode = declare_str(self, "action_mode", "discrete", "The simulator's action_mode (driving): the "
                                        "policy's must be the same.", choices=("discrete", "continuous"),
                                        read_only=True)
         self.driving = self.scenario == "driving"
         if self.driving and team:
-            raise ParameterException("team applies to robocup; a driving node controls all n_cars cars", ["team"])
+            raise ParameterException("team applies to robocup; a driving node picks its cars with cars", ["team"])
         driving_config = DrivingConfig(n_cars=n_cars, action_mode=self.action_mode)
         self.spec = driving_layout_spec(driving_config) if self.driving else SOCCER
         self.max_yaw_rate = driving_config.cars.max_yaw_rate
@@ -186,7 +187,12 @@ class PolicyNode(Node):
         self.pose_max_age, self.pose_frame = declare_pose_input(self, "Robocup, a policy that takes the pose "
                                                                 "estimate")
         everyone = car_names(n_cars) if self.driving else robot_names(players)
-        self.names = [name for name in everyone if not team or name[5] == team]
+        unknown = [c for c in cars if c not in everyone] if self.driving else []
+        if cars and not self.driving:
+            raise ParameterException("cars is a driving parameter (robocup picks robots with team)", ["cars"])
+        if unknown:
+            raise ParameterException(f"unknown cars {unknown}; cars are {everyone}", ["cars"])
+        self.names = [name for name in everyone if (not team or name[5] == team) and (not cars or name in cars)]
         self.ids = {name: everyone.index(name) for name in self.names}
         self.tag_action = action_tagger(self, self.names)    # secrets_dir: team secrets, Action.mac (issue 27)
         self.memory = {name: RobotMemory(self.idle) for name in self.names}

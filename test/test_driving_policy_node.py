@@ -115,3 +115,27 @@ def test_a_soccer_node_refuses_a_driving_policy_at_start(make_node, tmp_path):
     with pytest.raises(ParameterException, match="team applies to robocup"):
         make_node(PolicyNode, parameter_overrides=[Parameter("scenario", value="driving"),
                                                    Parameter("team", value="a")])
+
+
+def test_a_policy_node_drives_its_cars_and_a_scripted_driver_the_others(make_node, executor, tmp_path):
+    """``cars``: the policy node drives car_0 only and scripted_driver car_1 (the main job's driving graph with the
+    shipped policy); every period both cars have an accepted action and nothing is refused. Unknown cars, and
+    ``cars`` on a soccer node, are refused naming the parameter."""
+    from rclpy.exceptions import ParameterException
+    from policy_node.scripted_driver import ScriptedDriverNode
+    torch.manual_seed(8)
+    drive = tmp_path / "drive.safetensors"
+    save_policy(DynEnvAgent(feature_size=16, scenario="driving"), drive)
+    sim, policy = _game(make_node, executor, "discrete", checkpoint=str(drive), cars=["car_0"])
+    driver = make_node(ScriptedDriverNode, parameter_overrides=[Parameter(k, value=v) for k, v in dict(
+        n_cars=2, action_mode="discrete", cars=["car_1"]).items()])
+    executor.add_node(driver)
+    assert policy.names == ["car_0"] and driver.cars == ["car_1"]
+    assert spin_until(executor, lambda: sim.session.finished, 60.0), dict(sim.session.counts)
+    counts = sim.session.counts
+    assert counts["accepted"] == 2 * 30 and counts["missing"] == 0, dict(counts)
+    assert not any(k.startswith("rejected") and v for k, v in counts.items()), dict(counts)
+    for params, words in ((dict(scenario="driving", n_cars=2, cars=["car_7"]), r"unknown cars \['car_7'\]"),
+                          (dict(players_per_team=1, cars=["car_0"]), "cars is a driving parameter")):
+        with pytest.raises(ParameterException, match=words):
+            make_node(PolicyNode, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])

@@ -46,7 +46,8 @@ def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
 def test_main_job_plays_records_and_replays_a_driving_game(tmp_path, capsys):
     """`make run ARGS="--set scenario=driving"`: simulator (driving), scripted drivers, recorder; lossless bag,
     GIF, and the summary's cars home, crashes, reward per car and action counts."""
-    output = _run_main(tmp_path, capsys, "scenario=driving", "duration_s=3", "n_cars=3", "action_mode=continuous")
+    output = _run_main(tmp_path, capsys, "scenario=driving", "duration_s=3", "n_cars=3", "action_mode=continuous",
+                       "car_0=scripted")
     report = json.loads((tmp_path / "sim_report.json").read_text())
     assert report["scenario"] == "driving" and report["robots"] == ["car_0", "car_1", "car_2"]
     assert report["diagnostics"]["periods_run"] == "30" and report["diagnostics"]["missing"] == "0"
@@ -76,9 +77,19 @@ def test_scenario_settings_are_checked_and_refused_for_the_other_scenario():
         load_config(REPO_CONFIG, {"graph": "train", "scenario": "driving"})
     config = load_config(REPO_CONFIG, {"scenario": "driving", "n_cars": 4})
     nodes = {n.name: n for n in soccer_graph(config, Path("/tmp/run"))}
-    assert set(nodes) == {"recorder", "scripted_driver", "sim_node"}
+    assert set(nodes) == {"recorder", "policy_car_0", "scripted_driver", "sim_node"}
     assert nodes["sim_node"].parameters["scenario"] == "driving" and nodes["sim_node"].parameters["n_cars"] == 4
-    assert nodes["scripted_driver"].parameters == {"n_cars": 4, "action_mode": "discrete"}
+    assert nodes["scripted_driver"].parameters == {"n_cars": 4, "action_mode": "discrete",
+                                                   "cars": ["car_1", "car_2", "car_3"]}
+    shipped = nodes["policy_car_0"].parameters        # the shipped driving policy drives car_0 (issue 26)
+    assert shipped["cars"] == ["car_0"] and shipped["runtime"] == "onnxruntime"
+    assert shipped["checkpoint"].endswith("policy_node/pretrained/driving/policy.onnx")
+    scripted = load_config(REPO_CONFIG, {"scenario": "driving", "n_cars": 1, "car_0": "scripted"})
+    assert {n.name for n in soccer_graph(scripted, Path("/tmp/run"))} == {"recorder", "scripted_driver", "sim_node"}
+    with pytest.raises(ConfigError, match="car_0: the shipped driving policy takes discrete actions"):
+        load_config(REPO_CONFIG, {"scenario": "driving", "action_mode": "continuous"})
+    with pytest.raises(ConfigError, match="car_0: not used by scenario 'robocup'"):
+        load_config(REPO_CONFIG, {"car_0": "scripted"})
 
 
 def test_main_job_plays_a_trained_policy_for_team_a(tmp_path, capsys):
