@@ -36,12 +36,11 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
-from pettingzoo.utils.conversions import parallel_to_aec_wrapper
-from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from dynenv_ros.driving.cars import ACCELERATION_CHOICES, BRAKE, STEERING_CHOICES
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.world import DrivingWorld
+from dynenv_ros.envs.aec import raw_aec, wrapped_aec
 from dynenv_ros.envs.driving_observations import DrivingGroundTruth, observation_builder
 from dynenv_ros.envs.parallel_agents import AgentSpaces, check_step_actions
 from dynenv_ros.sim.reward_terms import RewardTerm
@@ -158,17 +157,13 @@ def parallel_env(**config: Any) -> DrivingParallelEnv:
 
 
 def raw_env(**config: Any) -> AECEnv:
-    """The AEC env without wrappers (PettingZoo's ``parallel_to_aec_wrapper``): agents act in turn and the world
-    steps once the last live agent has acted, so it plays exactly the Parallel env's episode."""
-    return parallel_to_aec_wrapper(parallel_env(**config))
+    """The AEC env without wrappers (``envs.aec``): plays exactly the Parallel env's episode, agents in turn."""
+    return raw_aec(parallel_env(**config))
 
 
 def env(**config: Any) -> AECEnv:
-    """The AEC env as PettingZoo's docs use it: ``raw_env`` under ``OrderEnforcingWrapper`` (what
-    ``pettingzoo.utils.conversions.parallel_to_aec`` applies). No out-of-bounds wrapper: the world already refuses
-    a bad action with ValueError naming the agent and field, and clipping would accept what the Parallel env
-    refuses. ``aec_to_parallel(env(...))`` hands back the Parallel env."""
-    return OrderEnforcingWrapper(raw_env(**config))
+    """The AEC env as PettingZoo's docs use it: ``raw_env`` under ``OrderEnforcingWrapper`` (``envs.aec``)."""
+    return wrapped_aec(parallel_env(**config))
 
 
 __all__ = ["DrivingParallelEnv", "parallel_env", "env", "raw_env", "action_space", "TERMS"]
