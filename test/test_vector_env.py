@@ -297,28 +297,31 @@ def test_bad_actions_are_refused_before_any_world_moves(backend):
         SoccerVectorEnv(2, backend="subprocess", parent_steps="no")
 
 
-def test_scripted_team_b_plays_in_the_worlds_and_ignores_given_rows():
-    """Team B driven by the worlds' chasers: the rows given for team B make no difference, the chasers reach the
-    ball (they score against a team that stands still), and both backends agree."""
+@pytest.mark.parametrize("kind, perception, periods", [("chaser", "none", 120), ("perceiving", "realistic", 240)])
+def test_scripted_team_b_plays_in_the_worlds_and_ignores_given_rows(kind, perception, periods):
+    """Team B driven by the worlds' chasers (ground truth), or by the perceiving team (each robot on its own
+    detections and pose estimate): the rows given for team B make no difference, both backends agree, and team B
+    scores against a team that stands still (the perceiving team does so in dynenv-eval too: docs/results.md, "The
+    perceiving scripted team", 75:0 in 50 games against random)."""
     import numpy as np
     from dynenv_ros.envs.vector import SoccerVectorEnv
     config = {"players_per_team": 1, "episode_seconds": 60.0}
     results = []
     for backend, junk in (("inprocess", 0), ("inprocess", 4), ("subprocess", 2)):
-        with SoccerVectorEnv(2, backend=backend, config=config, perception="none",
-                             scripted_team_b="chaser") as env:
+        with SoccerVectorEnv(2, backend=backend, config=config, perception=perception,
+                             scripted_team_b=kind) as env:
             env.reset(seed=11)
             actions = np.zeros((2, 2, 4), np.int64)
             actions[:, 0] = [0, 1, 0, 3]          # team A stands still, head centred
             actions[:, 1] = [junk, 0, junk % 3, junk]
             total = np.zeros((2, 4, 2))
-            for _ in range(120):
+            for _ in range(periods):
                 total += env.step(actions).reward_terms
             results.append(total)
     np.testing.assert_array_equal(results[0], results[1])
     np.testing.assert_array_equal(results[0], results[2])
     primary = results[0][:, 0].sum(axis=0)        # (robots,): goal rewards over both worlds
-    assert primary[1] > 0 > primary[0]            # the chaser scored against the team standing still
+    assert primary[1] > 0 > primary[0]            # team B scored against the team standing still
 
 
 def test_scripted_team_b_refuses_unknown_kinds():
@@ -326,30 +329,5 @@ def test_scripted_team_b_refuses_unknown_kinds():
     from dynenv_ros.envs.vector import SoccerVectorEnv
     with pytest.raises(ValueError, match="scripted_team_b"):
         SoccerVectorEnv(1, backend="inprocess", scripted_team_b="random")
-
-
-def test_perceiving_team_b_plays_in_the_worlds_on_its_own_perception():
-    """Team B as the perceiving keeper_and_chasers team (each robot on its own detections and pose estimate): the
-    rows given for team B make no difference, both backends agree, and it scores against a team standing still —
-    as it does in dynenv-eval (docs/results.md, "The perceiving scripted team": 75:0 in 50 games against random)."""
-    import numpy as np
-    from dynenv_ros.envs.vector import SoccerVectorEnv
-    config = {"players_per_team": 1, "episode_seconds": 60.0}
-    results = []
-    for backend, junk in (("inprocess", 0), ("inprocess", 4), ("subprocess", 2)):
-        with SoccerVectorEnv(2, backend=backend, config=config, perception="realistic",
-                             scripted_team_b="perceiving") as env:
-            env.reset(seed=11)
-            actions = np.zeros((2, 2, 4), np.int64)
-            actions[:, 0] = [0, 1, 0, 3]          # team A stands still, head centred
-            actions[:, 1] = [junk, 0, junk % 3, junk]
-            total = np.zeros((2, 4, 2))
-            for _ in range(240):
-                total += env.step(actions).reward_terms
-            results.append(total)
-    np.testing.assert_array_equal(results[0], results[1])
-    np.testing.assert_array_equal(results[0], results[2])
-    primary = results[0][:, 0].sum(axis=0)
-    assert primary[1] > 0 > primary[0]            # the perceiving robot scored against the team standing still
     with pytest.raises(ValueError, match="needs observation='padded'"):
         SoccerVectorEnv(1, backend="inprocess", observation="full", scripted_team_b="perceiving")
