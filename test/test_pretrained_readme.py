@@ -57,3 +57,26 @@ def test_check_mode_reports_a_stale_readme(tool, folder, tmp_path, monkeypatch, 
     monkeypatch.setattr(tool, "ROOT", tmp_path)
     assert tool.main(["--check"]) == 1
     assert "is not what the files give" in capsys.readouterr().err
+
+
+def test_training_stages_must_give_the_policys_training_config(tool, tmp_path):
+    """train_stages.json (a run trained on after a change of settings) is checked: its stages, applied in order,
+    must give exactly the training config in the policy file's header; a stage left out, or a first stage that
+    does not start a run, is refused."""
+    from dynenv_ros.learning.config import load_config
+    config = load_config(tool.ROOT / tool.PRESETS / "async_teacher.yaml",
+                         ["opponent=perceiving", "total_env_steps=1000000", "seed=3"]).to_dict()
+    stages = [{"train": ["--config", "async_teacher", "--seed", "3", "--set", "total_env_steps=700000"], "why": "a"},
+              {"train": ["--resume", "run", "--set", "opponent=perceiving", "--set", "total_env_steps=1000000"],
+               "why": "b"}]
+    here = tmp_path / "pretrained"
+    here.mkdir()
+    assert tool.training_stages(here, config) is None                  # no file: one command, as before
+    (here / "train_stages.json").write_text(json.dumps({"stages": stages}))
+    assert [stage["why"] for stage in tool.training_stages(here, config)] == ["a", "b"]
+    (here / "train_stages.json").write_text(json.dumps({"stages": stages[:1]}))
+    with pytest.raises(tool.ReadmeError, match="do not give the training config"):
+        tool.training_stages(here, config)
+    (here / "train_stages.json").write_text(json.dumps({"stages": stages[::-1]}))
+    with pytest.raises(tool.ReadmeError, match="the first stage must start a run"):
+        tool.training_stages(here, config)

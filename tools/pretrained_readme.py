@@ -116,6 +116,35 @@ def training_preset(root: Path, config: Mapping[str, Any]) -> tuple[str, list[st
     return name, arguments
 
 
+def training_stages(here: Path, config: Mapping[str, Any]) -> list[dict[str, Any]] | None:
+    """The stages of ``train_stages.json`` (a run trained on after a change of settings, e.g. self-play and then
+    against another opponent), checked: the first stage's ``train`` arguments start a run (``--config``, ``--seed``,
+    ``--set``), each later one resumes it (``--resume``, ``--set``), and applying them in order gives exactly the
+    training config. None without the file."""
+    from dynenv_ros.learning.config import load_config
+    path = here / "train_stages.json"
+    if not path.is_file():
+        return None
+    stages = json.loads(path.read_text())["stages"]
+    cfg = None
+    for k, stage in enumerate(stages):
+        args = list(stage["train"])
+        options = dict(zip(args[0::2], args[1::2]))
+        overrides = [v for key, v in zip(args[0::2], args[1::2]) if key == "--set"]
+        if k == 0:
+            if "--config" not in options:
+                raise ReadmeError(f"{path}: the first stage must start a run with --config")
+            seed = [f"seed={options['--seed']}"] if "--seed" in options else []
+            cfg = load_config(ROOT / PRESETS / f"{options['--config']}.yaml", [*overrides, *seed])
+        else:
+            if "--resume" not in options:
+                raise ReadmeError(f"{path}: stage {k + 1} must resume the run (--resume)")
+            cfg = load_config(None, overrides, base=cfg)
+    if cfg is None or cfg.to_dict() != dict(config):
+        raise ReadmeError(f"{path}: its stages do not give the training config in {POLICY}'s header")
+    return stages
+
+
 def _yaml(value: Any) -> str:
     if value is None:
         return "null"
@@ -197,7 +226,8 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
         if meta.get(key) != summary.get(key):
             raise ReadmeError(f"train_summary.json's {key} {summary.get(key)} is not the header's {meta.get(key)}")
     evaluations = load_evaluations(here, digest)
-    preset, arguments = training_preset(root, config)
+    stages = training_stages(here, config)
+    preset, arguments = training_preset(root, config) if stages is None else ("", [])
     revision = meta["code_revision"]
     losses = {k: v for k, v in _losses(config).as_dict().items() if v}
     teacher = config.get("teacher")
@@ -215,19 +245,31 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
             + (f", **plus imitation of the scripted `{teacher}`** (imitation weight {_n(config['imitation_coef'])}: "
                f"the {teacher} labels the states the learner reaches; not in the paper, docs/training.md)"
                if teacher else ", pure reinforcement learning (no teacher)") + ";",
-            f"- {'self-play' if self_play else 'against ' + str(config.get('opponent'))}, "
+            f"- {'in stages (below)' if stages else 'self-play' if self_play else 'against ' + str(config.get('opponent'))}, "
             f"{config['players_per_team']} per team, `{config['perception']}` perception, seed {config['seed']};",
             f"- **{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
             f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes on `{config['device']}` "
             f"with {config['torch_threads']} torch "
-            f"thread{'s' if config['torch_threads'] != 1 else ''};",
-            f"- training preset **`{preset}`** (config/train/{preset}.yaml) with these overrides, at code revision "
-            f"`{revision}`:", "", "```bash",
-            f"git checkout {revision}",
-            shlex.join([".venv/bin/dynenv-train", "--config", preset, *arguments, "--no-progress"]),
-            "```", "",
-            f"  The run stops after `max_minutes` of wall time, so the env steps it reaches (and its weights) depend "
-            f"on the machine: the command reproduces the recipe, not the file.", ""]
+            f"thread{'s' if config['torch_threads'] != 1 else ''};"]
+    if stages is None:
+        out += [f"- training preset **`{preset}`** (config/train/{preset}.yaml) with these overrides, at code "
+                f"revision `{revision}`:", "", "```bash",
+                f"git checkout {revision}",
+                shlex.join([".venv/bin/dynenv-train", "--config", preset, *arguments, "--no-progress"]),
+                "```", "",
+                f"  The run stops after `max_minutes` of wall time, so the env steps it reaches (and its weights) "
+                f"depend on the machine: the command reproduces the recipe, not the file.", ""]
+    else:
+        out += [f"- trained in {len(stages)} stages (`train_stages.json`, checked to give the training config; the "
+                f"header records code revision `{revision}`, that of the last process that trained it):", ""]
+        out += [f"  {k + 1}. {stage['why']}" for k, stage in enumerate(stages)]
+        out += ["", "```bash", f"git checkout {stages[0].get('revision', revision)}"]
+        for k, stage in enumerate(stages):
+            if k and stage.get("revision"):         # a stage that needs code the header's revision lacks
+                out.append(f"git checkout {stage['revision']}")
+            out.append(shlex.join([".venv/bin/dynenv-train", *stage["train"], "--no-progress"]))
+        out += ["```", "", "  A budget in env steps: the commands reproduce the recipe; the weights depend on the "
+                "machine's timing (the asynchronous workers' policy lag).", ""]
 
     out += ["## What it is not", ""]
     listed = listed_sha256s(root)
