@@ -54,6 +54,20 @@ ACTION_MODES = ("discrete", "continuous")
 PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
 SHIPPED_POLICY = "policy_node/pretrained/policy.onnx"     # relative to the repository (see team_a_policy)
 SHIPPED_DRIVING_POLICY = "policy_node/pretrained/driving/policy.onnx"     # discrete actions
+AUTO_DOMAIN, ISOLATED_DOMAIN = -1, -2      # domain_id: the user's ROS_DOMAIN_ID, else isolated; always isolated
+
+
+def choose_domain(domain_id: int, environ: dict[str, str]) -> tuple[int, bool, str]:
+    """(ROS domain of the graph, whether to isolate it — discovery on this host only —, why, for the summary). A
+    user who set ROS_DOMAIN_ID wants their own tools to see the graph; parallel runs without one must not meet."""
+    if domain_id >= 0:
+        return domain_id, False, "domain_id"
+    mine = environ.get("ROS_DOMAIN_ID", "").strip()
+    if domain_id == AUTO_DOMAIN and mine:
+        if not mine.isdigit() or not 0 <= int(mine) <= 101:
+            raise ConfigError(f"ROS_DOMAIN_ID={mine!r} in your environment is not a domain id in [0, 101]")
+        return int(mine), False, "your ROS_DOMAIN_ID"
+    return 1 + os.getpid() % 100, True, "isolated: picked from the process id, discovery on this host only"
 
 
 @dataclass(frozen=True)
@@ -70,7 +84,7 @@ class MainJobConfig:
     team_a: str = SHIPPED_POLICY     # soccer: a policy file (.onnx/.safetensors) or 'scripted' (the policy above)
     gif: bool = True
     timeout_s: float = 180.0
-    domain_id: int = -1  # -1: pick one from the process id, so parallel runs do not meet
+    domain_id: int = -1  # -1: the user's ROS_DOMAIN_ID if set, else an isolated one; -2: always isolated
     games: int = 2                   # train graph: simulator games feeding the trainer
     train_minutes: float = 3.0       # train graph: the trainer's wall-time budget
     episode_seconds: float = 10.0    # train graph: sim seconds per episode
@@ -103,8 +117,9 @@ class MainJobConfig:
             raise ConfigError(f"samples_per_type must be in [1, 1000], got {self.samples_per_type}")
         if not 0 < self.timeout_s <= 86400:
             raise ConfigError(f"timeout_s must be in (0, 86400], got {self.timeout_s}")
-        if not (self.domain_id == -1 or 0 <= self.domain_id <= 101):
-            raise ConfigError(f"domain_id must be -1 (auto) or in [0, 101], got {self.domain_id}")
+        if not (self.domain_id in (AUTO_DOMAIN, ISOLATED_DOMAIN) or 0 <= self.domain_id <= 101):
+            raise ConfigError(f"domain_id must be -1 (yours, else isolated), -2 (isolated) or in [0, 101], got "
+                              f"{self.domain_id}")
         if not 0 <= self.seed < 2**31:
             raise ConfigError(f"seed must be in [0, 2^31), got {self.seed}")
         if not 0.5 <= self.duration_s <= 3600:
@@ -156,7 +171,8 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
     "seed": ("world seed (soccer, train) / sample seed (selfcheck), 0..2^31-1", ("soccer", "train", "selfcheck")),
     "timeout_s": ("wall-clock limit of the whole run, s (train: beyond train_minutes)",
                   ("soccer", "train", "selfcheck")),
-    "domain_id": ("ROS_DOMAIN_ID of the graph, 0..101; -1 picks one from the process id",
+    "domain_id": ("ROS_DOMAIN_ID of the graph, 0..101; -1: your ROS_DOMAIN_ID if set, else an isolated one (picked "
+                  "from the process id, discovery on this host only); -2: isolated whatever ROS_DOMAIN_ID says",
                   ("soccer", "train", "selfcheck")),
     "duration_s": ("sim seconds to play, 0.5..3600", ("soccer",)),
     "players_per_team": ("robots per team, 1..5", ("soccer", "train")),
@@ -470,12 +486,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"dynenv-run: configuration error: {error}", file=sys.stderr)
         return 2
     run_dir = args.output_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    domain_id = config.domain_id if config.domain_id >= 0 else 1 + os.getpid() % 100
+    try:
+        domain_id, isolate, why = choose_domain(config.domain_id, dict(os.environ))
+    except ConfigError as error:
+        print(f"dynenv-run: configuration error: {error}", file=sys.stderr)
+        return 2
     graph = GRAPHS[config.graph]
     played = f" (scenario '{config.scenario}')" if config.graph == "soccer" and config.scenario != "robocup" else ""
-    print(f"dynenv-run: graph '{config.graph}'{played} on ROS domain {domain_id}; logs in {run_dir}")
+    print(f"dynenv-run: graph '{config.graph}'{played} on ROS domain {domain_id} ({why}); logs in {run_dir}")
     timeout_s = config.timeout_s + (60.0 * config.train_minutes if config.graph == "train" else 0.0)
-    outcome = run_graph(graph.build(config, run_dir), run_dir, domain_id, timeout_s)
+    outcome = run_graph(graph.build(config, run_dir), run_dir, domain_id, timeout_s, isolate=isolate)
     for node in outcome.nodes:
         state = "stopped" if node.stopped_by_graph else f"exit {node.exit_code}"
         print(f"  node {node.name:<24} {state:<10} log {node.log_path}")

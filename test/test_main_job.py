@@ -302,3 +302,25 @@ def test_the_train_summary_says_the_last_third_is_above_only_beyond_two_standard
     _summary_with(tmp_path / "down", [1.0, 1.2, 0.8, 1.1, 0.9, 0.5, 0.5, 0.5, 0.0, 0.2, -0.2, 0.1, -0.1, 0.0, 1.0])
     assert not summarise_train(None, tmp_path / "down", None)
     assert "NOT clearly above" in capsys.readouterr().out
+
+
+def test_the_users_ros_domain_id_is_respected_and_isolation_only_without_one_or_on_request():
+    """Issue 28: dynenv-run ignored a ROS_DOMAIN_ID the user set, so their own tools could not see the graph. Now
+    domain_id -1 takes the user's (discovery as the user has it), isolates (a domain from the process id,
+    discovery on this host only) only when none is set, -2 isolates always, an explicit id is used as given, and a
+    bad ROS_DOMAIN_ID is refused in one line."""
+    from dynenv_ros.graph.process_graph import graph_environment, isolated_environment
+    from dynenv_ros.main_job import choose_domain
+    picked = 1 + os.getpid() % 100
+    assert choose_domain(-1, {"ROS_DOMAIN_ID": "42"})[:2] == (42, False)
+    assert choose_domain(-1, {})[:2] == (picked, True)
+    assert choose_domain(-1, {"ROS_DOMAIN_ID": " "})[:2] == (picked, True)
+    assert choose_domain(-2, {"ROS_DOMAIN_ID": "42"})[:2] == (picked, True)
+    assert choose_domain(7, {"ROS_DOMAIN_ID": "42"})[:2] == (7, False)
+    with pytest.raises(ConfigError, match="ROS_DOMAIN_ID='300' in your environment"):
+        choose_domain(-1, {"ROS_DOMAIN_ID": "300"})
+    assert isolated_environment(5)["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert graph_environment(5)["ROS_DOMAIN_ID"] == "5"
+    assert graph_environment(5).get("ROS_AUTOMATIC_DISCOVERY_RANGE") == os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
+    with pytest.raises(ConfigError, match="domain_id must be -1"):
+        MainJobConfig.from_mapping({"domain_id": -3})

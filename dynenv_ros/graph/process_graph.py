@@ -64,19 +64,25 @@ def _parameter_literal(value: Any) -> str:
 
 def isolated_environment(domain_id: int) -> dict[str, str]:
     """The caller's environment on its own ROS domain, discovery limited to this host."""
+    return dict(graph_environment(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+
+
+def graph_environment(domain_id: int) -> dict[str, str]:
+    """The caller's environment on ROS domain ``domain_id``, discovery as the caller has it (the user's own tools —
+    RViz, ros2 topic, a second machine — see the graph)."""
     if not 0 <= domain_id <= 101:
         raise ValueError(f"ROS domain id must be in [0, 101], got {domain_id}")
-    return dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-                PYTHONUNBUFFERED="1")
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED="1")
 
 
-def run_graph(nodes: list[NodeLaunch], run_dir: Path, domain_id: int, timeout_s: float) -> GraphOutcome:
+def run_graph(nodes: list[NodeLaunch], run_dir: Path, domain_id: int, timeout_s: float,
+              isolate: bool = True) -> GraphOutcome:
     if not any(n.ends_run for n in nodes):
         raise ValueError("a graph needs at least one node with ends_run=True, or it never finishes")
     if len({n.name for n in nodes}) != len(nodes):
         raise ValueError("node names in a graph must be unique")
     run_dir.mkdir(parents=True, exist_ok=True)
-    env = isolated_environment(domain_id)
+    env = isolated_environment(domain_id) if isolate else graph_environment(domain_id)
     started = time.monotonic()
     processes: dict[str, subprocess.Popen] = {}
     logs: dict[str, Path] = {}
