@@ -322,6 +322,21 @@ def test_every_node_run_through_the_node_runner_answers_help(module, tmp_path):
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("module, typo, meant", [("dynenv_ros.nodes.sim_node", "player_per_team", "players_per_team"),
+                                                 ("policy_node.policy_node", "runtim", "runtime")])
+def test_a_mistyped_parameter_is_refused_naming_the_known_ones(module, typo, meant, tmp_path):
+    """Issue 28: `-p player_per_team:=2` was silently ignored (the node ran with the default). The node runner now
+    refuses a parameter the node never declared, exit 2, one line naming it and the node's parameters."""
+    import subprocess
+    import sys
+    result = subprocess.run([sys.executable, "-m", module, "--ros-args", "-p", f"{typo}:=2"], capture_output=True,
+                            text=True, timeout=90, cwd=tmp_path)
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    line = next(line for line in result.stderr.splitlines() if line.startswith("parameter error:"))
+    assert f"unknown parameter {typo} for node " in line and f" {meant}," in line, line
+    assert "Traceback" not in result.stderr
+
+
 def test_a_recorder_that_stops_writing_turns_the_simulator_diagnostics_to_error(make_node, executor, capfd):
     """The recorder's latched ERROR (disk full) is repeated where an operator watching the game looks."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus

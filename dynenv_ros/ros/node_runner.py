@@ -34,6 +34,7 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
     status = 0
     try:
         node = make_node()
+        refuse_unknown_overrides(node)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
@@ -52,6 +53,17 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
             node.destroy_node()
         rclpy.try_shutdown()
     return status
+
+
+def refuse_unknown_overrides(node: Node) -> None:
+    """A ``-p name:=value`` or params-file entry the node never declared would be ignored without a word (a typo such
+    as ``player_per_team``): refused instead, naming the node's parameters. ``use_sim_time`` and the other
+    parameters rclpy declares itself count as declared."""
+    unknown = sorted(set(node._parameter_overrides) - set(node._parameters))
+    if unknown:
+        known = ", ".join(sorted(node._parameters))
+        raise ParameterException(f"unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} for "
+                                 f"node {node.get_name()}; its parameters: {known}", unknown)
 
 
 def wants_help(args: Sequence[str]) -> bool:
