@@ -370,3 +370,29 @@ def test_the_action_inbox_takes_only_the_enclave_from_the_command_line():
     assert enclave_arguments(["sim_node", "--ros-args", "-e", "/x"]) == ["--ros-args", "--enclave", "/x"]
     assert enclave_arguments(["sim_node", "--ros-args", "-p", "seed:=3"]) == []
     assert enclave_arguments(["sim_node", "--enclave", "/x"]) == []      # not a ROS argument
+
+
+def test_params_files_resolve_from_the_package_config_folder_anywhere(tmp_path, monkeypatch):
+    """Issue 28: `--params-file config/…` worked only from the repository root (elsewhere a 16-line traceback).
+    A relative path or bare name is now looked up in the working directory, then the package's config folder
+    (source tree or installed share directory); a file found nowhere is refused in one line, exit 2."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    from dynenv_ros.ros.node_runner import resolve_params_files
+    repo_config = Path(__file__).resolve().parent.parent / "config"
+    monkeypatch.chdir(tmp_path)
+    args = ["sim_node", "--ros-args", "--params-file", "config/sim_2v2_realistic.yaml", "-p", "seed:=3"]
+    resolved = resolve_params_files(args)
+    assert Path(resolved[3]) in (repo_config / "sim_2v2_realistic.yaml",
+                                 Path(sys.prefix) / "share" / "dynenv_ros" / "config" / "sim_2v2_realistic.yaml")
+    assert resolved[:3] == args[:3] and resolved[4:] == args[4:]
+    assert Path(resolve_params_files(["x", "--params-file", "sim_driving.yaml"])[2]).name == "sim_driving.yaml"
+    (tmp_path / "config").mkdir()
+    mine = tmp_path / "config" / "sim_2v2_realistic.yaml"
+    mine.write_text("/**:\n  ros__parameters:\n    seed: 1\n")
+    assert resolve_params_files(args)[3] == "config/sim_2v2_realistic.yaml"          # the user's own file first
+    result = subprocess.run([sys.executable, "-m", "dynenv_ros.nodes.sim_node", "--ros-args", "--params-file",
+                             "config/nope.yaml"], capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.strip().startswith("parameter error: --params-file config/nope.yaml: no such file here")

@@ -7,6 +7,7 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import rclpy
@@ -29,6 +30,11 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
     if wants_help(sys.argv[1:] if args is None else args):
         print(parameter_help(make_node))
         return 0
+    try:
+        args = resolve_params_files(sys.argv if args is None else list(args))
+    except FileNotFoundError as error:
+        print(f"parameter error: {error}", file=sys.stderr, flush=True)
+        return 2
     rclpy.init(args=args)
     node = None
     status = 0
@@ -53,6 +59,36 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
             node.destroy_node()
         rclpy.try_shutdown()
     return status
+
+
+PACKAGE = "dynenv_ros"
+
+
+def params_file_candidates(given: str) -> list[Path]:
+    """Where ``--params-file GIVEN`` may be: as given (from the working directory), else — a relative path such as
+    ``config/sim_2v2_realistic.yaml``, or a bare file name — in the package's source tree or its installed share
+    directory (``<prefix>/share/dynenv_ros/config``), as ``ros2 run`` users expect of a package's presets."""
+    path = Path(given).expanduser()
+    if path.is_absolute():
+        return [path]
+    roots = [Path(__file__).resolve().parents[2], Path(sys.prefix) / "share" / PACKAGE]
+    relative = [path] if path.parts[:1] == ("config",) else [path, Path("config") / path]
+    return [path, *[root / r for root in roots for r in relative]]
+
+
+def resolve_params_files(args: list[str]) -> list[str]:
+    """``args`` with each ``--params-file`` argument replaced by the first existing candidate
+    (``params_file_candidates``); FileNotFoundError, one line naming where it looked, if there is none."""
+    out = list(args)
+    for k, word in enumerate(out[:-1]):
+        if word == "--params-file":
+            candidates = params_file_candidates(out[k + 1])
+            found = next((c for c in candidates if c.is_file()), None)
+            if found is None:
+                raise FileNotFoundError(f"--params-file {out[k + 1]}: no such file here, in the package's config "
+                                        f"folder or its share directory ({', '.join(map(str, candidates[1:]))})")
+            out[k + 1] = str(found)
+    return out
 
 
 def refuse_unknown_overrides(node: Node) -> None:
