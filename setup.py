@@ -64,6 +64,7 @@ setup(
         (f"share/{PACKAGE}/pretrained", [f for f in glob("policy_node/pretrained/*") if Path(f).is_file()]),
         (f"share/{PACKAGE}/pretrained/eval", glob("policy_node/pretrained/eval/*.json")),
         (f"share/{PACKAGE}/config/train", glob("config/train/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=INSTALL_REQUIRES,
     extras_require=EXTRAS_REQUIRE,

@@ -923,7 +923,36 @@ def plan(argv: list[str], inline: bool) -> Plan:
                     lambda: _refuse(f"ros2 run of package {args[1]!r}: this repository's package is dynenv_ros"))
     if program == "ros2" and args[:2] == ["service", "call"]:
         return Plan("check", "ros2 service call", lambda: check_service_call(args[2:]))
+    if program == "ros2" and args[:2] == ["launch", "dynenv_ros"] and len(args) >= 3:
+        return Plan("check", "ros2 launch", lambda: check_launch(args[2], args[3:]))
     return Plan("unlisted", f"no checker for {program!r} and not in SKIPPED_EXTERNAL / SHELL_SYNTAX")
+
+
+def check_launch(filename: str, args: list[str]) -> str:
+    """`ros2 launch dynenv_ros FILE NAME:=VALUE …` (no `launch` here): the file is one of launch/, every argument
+    is one it declares, and the main job accepts the settings they make (test/test_launch_file.py runs the file
+    itself with stand-ins for launch)."""
+    path = REPO / "launch" / filename
+    if not path.is_file():
+        raise DocCommandError(f"launch file {filename} is not in launch/ ({sorted(p.name for p in (REPO / 'launch').glob('*.py'))})")
+    source = path.read_text()
+    common = ast.literal_eval(re.search(r"^COMMON = (\{.*?\})$", source, re.M).group(1))
+    declared = {*common, *re.findall(r'DeclareLaunchArgument\("(\w+)"', source)}
+    overrides: dict[str, Any] = {}
+    for arg in args:
+        name, sep, value = arg.partition(":=")
+        if not sep or name not in declared:
+            raise DocCommandError(f"{arg}: not a NAME:=VALUE of a declared argument ({sorted(declared)})")
+        if name == "set":
+            overrides.update({k: yaml.safe_load(v) for k, _, v in (p.partition("=") for p in value.split())})
+        elif name in common:
+            overrides[name] = yaml.safe_load(value)
+    from dynenv_ros.main_job import ConfigError, default_config_path, load_config
+    try:
+        load_config(default_config_path(), overrides)
+    except ConfigError as error:
+        raise DocCommandError(f"the main job refuses {overrides}: {error}") from None
+    return f"launch file {filename} with {overrides or 'its defaults'}"
 
 
 def check_command(command: DocCommand) -> list[str]:
@@ -1061,7 +1090,11 @@ def test_checkers_accept_right_node_commands() -> None:
 
 
 def test_an_unlisted_external_command_is_not_silently_accepted() -> None:
-    assert plan(["ros2", "launch", "dynenv_ros", "game.launch.py"], inline=False).kind == "unlisted"
+    assert plan(["ros2", "launch", "other_pkg", "game.launch.py"], inline=False).kind == "unlisted"
+    with pytest.raises(DocCommandError, match="launch file game.launch.py is not in launch/"):
+        plan(["ros2", "launch", "dynenv_ros", "game.launch.py"], inline=False).run()
+    with pytest.raises(DocCommandError, match="not a NAME:=VALUE of a declared argument"):
+        plan(["ros2", "launch", "dynenv_ros", "dynenv.launch.py", "player_per_team:=2"], inline=False).run()
     assert plan(["docker", "run", "x"], inline=True).kind == "unlisted"
     assert plan(["ros2", "bag", "info", "x"], inline=False).kind == "skip"
 

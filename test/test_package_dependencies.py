@@ -16,13 +16,13 @@ import pytest
 from catkin_pkg.package import parse_package
 
 REPO = Path(__file__).resolve().parent.parent
-PACKAGE_DIRS = ("dynenv_ros", "policy_node", "benchmarks")      # what setup.py installs
+PACKAGE_DIRS = ("dynenv_ros", "policy_node", "benchmarks", "launch")   # what setup.py installs (launch: share)
 OWN = {"dynenv_ros", "policy_node", "benchmarks"}
 
 # ROS packages imported as Python modules: the package.xml key is the package's own name.
 ROS_PACKAGES = {"rclpy", "rcl_interfaces", "rosidl_parser", "ament_index_python", "builtin_interfaces", "std_msgs",
-                "std_srvs", "geometry_msgs", "rosgraph_msgs", "visualization_msgs", "diagnostic_msgs", "tf2_msgs",
-                "vision_msgs", "dynenv_msgs"}
+                "std_srvs", "geometry_msgs", "rosgraph_msgs", "sensor_msgs", "visualization_msgs", "diagnostic_msgs",
+                "tf2_msgs", "vision_msgs", "dynenv_msgs", "launch", "launch_ros"}
 # Python modules: (rosdep key from rosdistro's rosdep/python.yaml or None where it has none, pip distribution).
 PYTHON_MODULES: dict[str, tuple[str | None, str]] = {
     "numpy": ("python3-numpy", "numpy"),
