@@ -12,9 +12,9 @@ from collections.abc import Sequence
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
           "policy": "policy", "train": "train", "learner": "learner", "soak": "soak",
-          "flood": "flood", "ros-train": "ros_train", "cores": "cores", "auth": "auth"}
+          "flood": "flood", "ros-train": "ros_train", "cores": "cores", "auth": "auth", "camera": "camera"}
 # suites whose one run lasts minutes: one run unless --repeat asks for more
-LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1}
+LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1, "camera": 1}
 # suites that do not repeat their measurement (yet)
 RUNS_ONCE = {"ros-train"}
 
@@ -55,6 +55,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "cores":   # numpy only, in its worker processes
             from benchmarks.cores import add_arguments as add_cores_arguments
             add_cores_arguments(sub)
+        if name == "camera":   # declaring its options starts nothing
+            from benchmarks.camera import add_arguments as add_camera_arguments
+            add_camera_arguments(sub)
         if name == "ros-train":
             from benchmarks.ros_train import add_arguments as add_ros_train_arguments
             add_ros_train_arguments(sub)

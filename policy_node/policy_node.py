@@ -31,6 +31,11 @@ Real time degrades gracefully (docs/deploy.md, "Slow policies"): the detection s
 ``DETECTION_DEPTH`` messages per robot (bounded), and before each decision the node takes every frame already
 waiting, so it always acts on the newest complete period; older ones are dropped and counted, and the counts go to
 ``~/diagnostics`` and, periodically, the log.
+
+A real camera drops and delays frames (docs/deploy.md, "A real camera's timing"): with ``decision_deadline`` ≥ 0
+the node does not wait for a complete period forever — it acts on what has arrived once the period's last frame is
+``decision_deadline`` seconds overdue on its clock, or a newer period's frame arrives, with each missing frame an
+empty one (``partial_periods``); off (−1) by default, as a stepped game always delivers complete periods.
 """
 from __future__ import annotations
 
@@ -79,7 +84,8 @@ from dynenv_ros.ros.weights_follower import WeightsFollower
 from dynenv_ros.security.keys import KeyFileError, load_trusted_keys
 from dynenv_ros.security.weights_order import ReleaseOrder
 from dynenv_ros.security.weights_signing import Announcement
-from policy_node.periods import PeriodMemory, file_frame, period_problem
+from policy_node.partial_periods import FrameInterval, due_ns, fill
+from policy_node.periods import PeriodMemory, close_period, file_frame, period_problem
 
 RUNTIMES = ("torch", "onnxruntime")
 # The simulator refuses a head turn beyond this per period (docs/ros_graph.md): a policy must stay inside it.
@@ -94,6 +100,7 @@ DETECTION_DEPTH = 2 * MAX_FRAMES
 STAND_STILL = (0, 0, 0, 0.0)       # the fallback action of a robot whose decision failed or was not finite
 BRAKE = driving_actions.BRAKE_COMMAND  # driving's: [throttle, brake, steering] (also the previous action at reset)
 SCENARIOS = ("robocup", "driving")
+DEADLINE_TICK_S = 0.01             # how often (node clock) overdue periods are looked for: the deadline's resolution
 
 
 def pose_qos() -> QoSProfile:
@@ -186,6 +193,12 @@ class PolicyNode(Node):
                                        "(WeightsAnnouncement.run_id); empty: any run.", read_only=True)
         self.pose_max_age, self.pose_frame = declare_pose_input(self, "Robocup, a policy that takes the pose "
                                                                 "estimate")
+        deadline = declare_float(self, "decision_deadline", -1.0, -1.0, 60.0, "Seconds (node clock) after a "
+                                 "period's last frame is due by which the node acts on the frames that arrived, "
+                                 "missing ones empty; a newer period's frame closes it too. Negative: wait for "
+                                 "complete periods (stepped games).", read_only=True)
+        self.deadline_ns = round(deadline * 1e9) if deadline >= 0 else None
+        self.frame_interval = FrameInterval()       # learnt from the stamps (partial_periods)
         everyone = car_names(n_cars) if self.driving else robot_names(players)
         unknown = [c for c in cars if c not in everyone] if self.driving else []
         if cars and not self.driving:
@@ -238,6 +251,9 @@ class PolicyNode(Node):
         self._window_latencies: list[float] = []
         self.diagnostics_timer = self.create_timer(diagnostics_s, self._publish_diagnostics,
                                                    clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # On the node's clock (ROS time: sim time where use_sim_time is set), like the frames' arrival it measures.
+        self.deadline_timer = (self.create_timer(DEADLINE_TICK_S, self._on_deadline_tick)
+                               if self.deadline_ns is not None else None)
         self.get_logger().info(f"controlling {', '.join(self.names)} with {self.runtime_name}"
                                f"{'; the policy takes the pose estimates' if self.pose_wanted else ''}")
 
@@ -435,7 +451,9 @@ class PolicyNode(Node):
                 self._store(name, msg)
 
     def _store(self, name: str, msg: DetectionArray) -> None:
-        """File one frame (``periods.file_frame``); a new episode resets the robot."""
+        """File one frame (``periods.file_frame``); a new episode resets the robot. With a decision deadline, an
+        incomplete period's due time is kept (``partial_periods.due_ns``: the earliest its frames say)."""
+        self.counts["frames_received"] += 1
         memory = self.memory[name]
         problem = frame_problem(msg) or period_problem(memory, msg)
         if problem:
@@ -446,7 +464,32 @@ class PolicyNode(Node):
         if memory.episode != msg.episode_id:                 # a new episode: forget everything
             memory.__init__(self.idle)
             memory.episode = msg.episode_id
-        file_frame(memory, msg, self.counts)
+        if self.deadline_ns is None:
+            file_frame(memory, msg, self.counts)
+            return
+        self.frame_interval.observe(name, msg)
+        interval = self.frame_interval.ns
+        if file_frame(memory, msg, self.counts, self._close) and interval is not None:
+            due = due_ns(self.get_clock().now().nanoseconds, msg.frame_index, msg.frames_per_period, interval)
+            memory.due = due if memory.due is None else min(memory.due, due)
+
+    def _close(self, frames: dict[int, DetectionArray]) -> list[DetectionArray]:
+        """An incomplete period with its gaps filled by empty frames (``partial_periods.fill``), counted."""
+        period, missing = fill(frames, next(iter(frames.values())).frames_per_period, self.frame_interval.ns,
+                               _empty_like)
+        self.counts["frames_missing"] += missing
+        return period
+
+    def _on_deadline_tick(self) -> None:
+        """Close every robot's period whose deadline passed (after taking the frames already waiting, which may
+        complete a period too), then decide on whatever is ready."""
+        self._drain()
+        now = self.get_clock().now().nanoseconds
+        for memory in self.memory.values():
+            if memory.frames and memory.due is not None and now >= memory.due + self.deadline_ns:
+                close_period(memory, self.counts, self._close)
+        while self._decide_if_ready():
+            pass
 
     # -- decisions -------------------------------------------------------------------------------------------------
     def _decide_if_ready(self) -> bool:
@@ -613,10 +656,11 @@ class PolicyNode(Node):
                   "policy_version": str(self.policy_version), "weights_refusal": self.weights_refusal,
                   "robots": str(len(self.names)), "actions_sent": str(self.actions_sent),
                   "detections_dropped": str(self.dropped_detections)}
-        for key in ("decisions", "periods_dropped", "actions_delayed", "actions_superseded", "frames_stale",
-                    "frames_malformed", "detections_malformed", "values_malformed", "self_missing",
-                    "fallback_actions", "failed_decisions", "weights_loaded", "weights_refused", "weights_duplicate",
-                    "weights_other_run", "pose_used", "pose_missing", "pose_stale", "pose_malformed"):
+        for key in ("decisions", "periods_dropped", "actions_delayed", "actions_superseded", "frames_received",
+                    "frames_stale", "frames_duplicate", "periods_partial", "frames_missing", "frames_malformed",
+                    "detections_malformed", "values_malformed", "self_missing", "fallback_actions",
+                    "failed_decisions", "weights_loaded", "weights_refused", "weights_duplicate", "weights_other_run",
+                    "pose_used", "pose_missing", "pose_stale", "pose_malformed"):
             values[key] = str(self.counts.get(key, 0))
         if self.weights is not None:                 # refusals by reason, the fetch running (ros.weights_follower)
             values.update(self.weights.diagnostics())
@@ -628,9 +672,9 @@ class PolicyNode(Node):
 
     def _publish_diagnostics(self) -> None:
         values = self.diagnostics()
-        watched = ("periods_dropped", "frames_malformed", "detections_malformed", "values_malformed",
-                   "fallback_actions", "failed_decisions", "weights_refused", "pose_missing", "pose_stale",
-                   "pose_malformed")
+        watched = ("periods_dropped", "frames_duplicate", "frames_missing", "frames_malformed",
+                   "detections_malformed", "values_malformed", "fallback_actions", "failed_decisions",
+                   "weights_refused", "pose_missing", "pose_stale", "pose_malformed")
         new = {k: int(values[k]) - self._reported[k] for k in watched if int(values[k]) > self._reported[k]}
         self._reported.update(new)
         status = DiagnosticStatus(level=DiagnosticStatus.WARN if new else DiagnosticStatus.OK, name="dynenv_policy",
@@ -677,6 +721,19 @@ def _waiting(sub: Any, limit: int):
         if taken is None:
             return
         yield taken[0]
+
+
+def _empty_like(like: DetectionArray, index: int, stamp_ns: int) -> DetectionArray:
+    """A frame that never came: ``like``'s robot, period and own state, no detections, its slot's stamp."""
+    msg = DetectionArray(robot_id=like.robot_id, episode_id=like.episode_id, motion_period=like.motion_period,
+                         frame_index=index, frames_per_period=like.frames_per_period, head_yaw=like.head_yaw,
+                         self_fallen=like.self_fallen, self_penalized=like.self_penalized,
+                         self_kicking=like.self_kicking, ball_owner=like.ball_owner,
+                         ball_owner_seconds=like.ball_owner_seconds,
+                         game_seconds_remaining=like.game_seconds_remaining)
+    msg.header.frame_id = like.header.frame_id
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+    return msg
 
 
 def _empty_period(frames: int) -> list[DetectionArray]:
