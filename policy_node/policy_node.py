@@ -88,6 +88,11 @@ from policy_node.partial_periods import FrameInterval, due_ns, fill
 from policy_node.periods import PeriodMemory, close_period, file_frame, period_problem
 
 RUNTIMES = ("torch", "onnxruntime")
+
+
+def runtime_of(path: str) -> str:
+    """The runtime a policy file needs: an .onnx file runs in onnxruntime, anything else (safetensors) in torch."""
+    return "onnxruntime" if path.lower().endswith(".onnx") else "torch"
 # The simulator refuses a head turn beyond this per period (docs/ros_graph.md): a policy must stay inside it.
 HEAD_BOUND = MotionConfig().head_max_delta
 DEFAULT_FRAMES = SoccerConfig().rates.frames_per_period      # the trial's frame count before any frame arrived
@@ -166,8 +171,8 @@ class PolicyNode(Node):
         self.spec = driving_layout_spec(driving_config) if self.driving else SOCCER
         self.max_yaw_rate = driving_config.cars.max_yaw_rate
         self.idle = BRAKE if self.driving else STAND_STILL
-        self.runtime_name = declare_str(self, "runtime", "torch", "Inference runtime.", choices=RUNTIMES,
-                                        read_only=True)
+        runtime = declare_str(self, "runtime", "", "Inference runtime; empty: the checkpoint's (.onnx: onnxruntime, "
+                              "else torch).", choices=("", *RUNTIMES), read_only=True)
         checkpoint = declare_str(self, "checkpoint", "", "Weights: a .safetensors policy file (torch) or .onnx "
                                  "file; empty: untrained weights from 'seed' (smoke tests only).", read_only=True)
         self.seed = declare_int(self, "seed", 0, 0, 2**31 - 1, "Seed of action sampling (and untrained weights).",
@@ -224,6 +229,7 @@ class PolicyNode(Node):
         self.policy_version = 0
         self.weights_refusal = ""
         self.weights_acting: tuple[str, int] | None = None     # (run_id, version) of the trainer's weights acting
+        self.runtime_name = runtime or runtime_of(checkpoint)
         try:
             if checkpoint:
                 self.policy, self.checkpoint_sha256, self.policy_version = self._load(checkpoint, self.runtime_name)
@@ -318,7 +324,7 @@ class PolicyNode(Node):
         return (*streams_from_padded(observation), *self._side_inputs(observation, head_max, uses_pose(policy)))
 
     def _on_load(self, request: LoadPolicy.Request, response: LoadPolicy.Response):
-        runtime = request.runtime or self.runtime_name
+        runtime = request.runtime or runtime_of(request.checkpoint_path)
         try:
             policy, digest, version = self._load(request.checkpoint_path, runtime)
         except ValueError as error:

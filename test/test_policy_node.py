@@ -93,3 +93,33 @@ def test_swapping_in_a_network_of_another_size_keeps_playing(make_node, executor
     assert spin_until(executor, future.done, 10.0) and future.result().success
     before = sim.periods_run
     assert spin_until(executor, lambda: sim.periods_run >= before + 2, 30.0)
+
+
+def test_the_runtime_is_inferred_from_the_policy_file(make_node, executor, tmp_path):
+    """Issue 28: an .onnx checkpoint without runtime:=onnxruntime was refused; the runtime now comes from the file
+    (.onnx: onnxruntime, else torch), at start and in LoadPolicy with an empty runtime, while an explicit runtime
+    that does not fit the file is still refused with the reason."""
+    from dynenv_ros.agent.checkpoint import save_policy
+    from dynenv_ros.agent.export import export_onnx
+    torch.manual_seed(6)
+    onnx_file, torch_file = tmp_path / "agent.onnx", tmp_path / "agent.safetensors"
+    export_onnx(DynEnvAgent(), onnx_file)
+    save_policy(DynEnvAgent(), torch_file)
+    sim, policy = _graph(make_node, executor, checkpoint=str(onnx_file))
+    assert policy.runtime_name == "onnxruntime"
+    assert spin_until(executor, lambda: sim.periods_run >= 2, 30.0), sim.session.counts
+    client = policy.create_client(LoadPolicy, "/policy_node/load_policy")
+    assert client.wait_for_service(timeout_sec=5.0)
+
+    def load(path, runtime=""):
+        future = client.call_async(LoadPolicy.Request(checkpoint_path=str(path), runtime=runtime))
+        assert spin_until(executor, future.done, 15.0)
+        return future.result()
+
+    reply = load(torch_file)
+    assert reply.success and policy.runtime_name == "torch", reply.message
+    reply = load(onnx_file, "torch")
+    assert not reply.success and "is an ONNX file: load it with runtime onnxruntime" in reply.message
+    assert load(onnx_file).success and policy.runtime_name == "onnxruntime"
+    before = sim.periods_run
+    assert spin_until(executor, lambda: sim.periods_run >= before + 2, 30.0)
