@@ -32,6 +32,7 @@ from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.authentication import action_tagger
+from dynenv_ros.ros.diagnostics import Heartbeat
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_float, declare_int, declare_str
 from dynenv_ros.ros.pose_estimates import PoseHistory, declare_pose_input, pose_problem, stamp_ns
@@ -70,6 +71,9 @@ class PerceivingPolicyNode(Node):
         self.counts: Counter[str] = Counter()
         self.refusal = ""                    # the last refused frame or estimate and why
         self.actions_sent = 0
+        self.heartbeat = Heartbeat(self, "perceiving policy", lambda: {
+            "robot": self.robot, "role": self.role, "actions_sent": self.actions_sent, **self.counts,
+            "last_refusal": self.refusal})
         self._start_episode(None)
         self.action_pub = self.create_publisher(Action, topics.local(topics.action(self.robot)), action_stream())
         # The estimates' reader is created before the detections': a simulator that has seen the detections' reader

@@ -62,6 +62,7 @@ from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.envs.pose_features import POSE_KEY
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.authentication import action_tagger
+from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.pose_estimates import (HISTORY_DEPTH, LOST_ROW, PoseHistory, declare_pose_input, pose_batch,
@@ -251,7 +252,7 @@ class PolicyNode(Node):
         self.load_srv = self.create_service(LoadPolicy, "~/load_policy", self._on_load)
         self.weights = (self._follow_weights(weights_topic, weights_service, trusted_keys, max_weights,
                                              weights_state, diagnostics_s) if weights_topic else None)
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "~/diagnostics", QoSProfile(depth=10))
+        self.diagnostics_pub = Diagnostics(self, "~/diagnostics")     # and /diagnostics
         self._diagnostics_sent = 0
         self._reported: Counter[str] = Counter()
         self._window_latencies: list[float] = []

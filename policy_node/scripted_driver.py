@@ -25,6 +25,7 @@ from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.authentication import action_tagger
+from dynenv_ros.ros.diagnostics import Heartbeat
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.qos import action_stream, sim_stream
@@ -54,6 +55,8 @@ class ScriptedDriverNode(Node):
         self._waiting: OrderedDict[tuple[int, int, int], dict[str, DetectionArray]] = OrderedDict()
         self._decided: OrderedDict[tuple[int, int, int], list[Any]] = OrderedDict()
         self.actions_sent = 0
+        self.heartbeat = Heartbeat(self, "scripted driver", lambda: {"cars": " ".join(self.cars),
+                                                                     "actions_sent": self.actions_sent})
         qos = sim_stream()
         self.action_pubs = {c: self.create_publisher(Action, topics.local(topics.action(c)), action_stream())
                             for c in self.cars}

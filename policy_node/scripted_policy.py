@@ -20,6 +20,7 @@ from rclpy.node import Node
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.authentication import action_tagger
+from dynenv_ros.ros.diagnostics import Heartbeat
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_int, declare_str
 from dynenv_ros.ros.qos import action_stream, sim_stream
@@ -46,6 +47,8 @@ class ScriptedPolicyNode(Node):
         self._truth: OrderedDict[tuple[int, int], WorldState] = OrderedDict()
         self._waiting: dict[tuple[int, int], DetectionArray] = {}
         self.actions_sent = 0
+        self.heartbeat = Heartbeat(self, "scripted policy", lambda: {"robot": self.robot, "policy": kind,
+                                                                     "actions_sent": self.actions_sent})
         qos = sim_stream()
         self.action_pub = self.create_publisher(Action, topics.local(topics.action(self.robot)), action_stream())
         self.create_subscription(WorldState, topics.local(topics.WORLD_STATE), self._on_truth, qos)

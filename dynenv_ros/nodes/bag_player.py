@@ -51,6 +51,7 @@ from dynenv_ros.bags.qos import playback_qos
 from dynenv_ros.bags.typestore import dynenv_typestore
 from dynenv_ros.nodes.recorder import RCLError, message_class, run_until_signal
 from dynenv_ros.ros.bag_qos import describe, ros_qos
+from dynenv_ros.ros.diagnostics import Heartbeat
 from dynenv_ros.ros.node_runner import NodeExit
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.qos import sim_stream
@@ -91,6 +92,9 @@ class BagPlayer(Node):
         self._origin: tuple[float, int] | None = None   # (monotonic start, first bag timestamp) of this pass
         self._waiting_since = time.monotonic()
         self._timer = self.create_timer(TICK_S, self._play, clock=self._wall)
+        self.heartbeat = Heartbeat(self, "bag player", lambda: {
+            "bag": str(self.bag_path), "messages_published": sum(self.published.values()), "stalls": self.stalls,
+            "finished": self.finished}, lambda: "finished" if self.finished else "playing")
         self.get_logger().info(f"playing {self.bag_path}: {len(self.publishers_by_topic)} topics at "
                                + (f"rate {self.rate:g}" if self.rate > 0 else "full speed")
                                + (", looping" if self.loop else ""))

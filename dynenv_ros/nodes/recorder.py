@@ -5,7 +5,8 @@ Parameters (read-only: they are used once, when the bag is created, so a later c
 silently ignored):
   output    bag directory to create (default ``bags/recording_<UTC time>``); an existing path is refused.
   topics    topics to record; empty = every topic whose type the simulator publishes (``SIM_PUBLISHED_TYPES``)
-            plus policies' ``dynenv_msgs/msg/Action``, except the recorder's own diagnostics. Either way topics
+            plus policies' ``dynenv_msgs/msg/Action``, except the recorder's own diagnostics and ``/diagnostics``
+            (every node's statuses; the simulator's are recorded from its own topic). Either way topics
             are found by polling the ROS graph every 0.5 s, so a topic that appears later is recorded from then on.
   duration  seconds of wall time to record, 0 = until SIGINT/SIGTERM.
 
@@ -61,6 +62,7 @@ from dynenv_ros.ros.bag_qos import bag_qos, describe
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_float, declare_str, declare_str_list
 from dynenv_ros.ros.qos import recording_qos
+from dynenv_ros.ros.diagnostics import STANDARD_TOPIC as STANDARD_DIAGNOSTICS, Diagnostics
 from dynenv_ros.ros.topics import MATCHED_PREFIX, RECORDER_DIAGNOSTICS, SIM_PUBLISHED_TYPES, local
 
 RCLError = _rclpy.RCLError
@@ -119,9 +121,8 @@ class Recorder(Node):
             print(f"recorder: error: cannot create bag {self.output!r}: {error.strerror or error}",
                   file=sys.stderr, flush=True)
             raise NodeExit(2) from None
-        from diagnostic_msgs.msg import DiagnosticArray
 
-        self._diagnostics = self.create_publisher(DiagnosticArray, local(DIAGNOSTICS_TOPIC), QoSProfile(
+        self._diagnostics = Diagnostics(self, local(DIAGNOSTICS_TOPIC), QoSProfile(   # and /diagnostics
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         # With use_sim_time the bag time is the latest /clock value this node recorded (read from the raw bytes,
         # so it never depends on callback order between the clock and the data).
@@ -149,7 +150,10 @@ class Recorder(Node):
     def _wanted(self, topic: str, types: list[str]) -> bool:
         if self.requested:
             return topic in self.requested
-        return not topic.endswith(DIAGNOSTICS_TOPIC) and any(t in RECORDED_TYPES for t in types)
+        # not its own diagnostics, nor /diagnostics (every node's, the simulator's again among them: its own
+        # topic is recorded); --topics /diagnostics records it
+        return (not topic.endswith(DIAGNOSTICS_TOPIC) and topic != STANDARD_DIAGNOSTICS
+                and any(t in RECORDED_TYPES for t in types))
 
     def _discover(self) -> None:
         if self.finished or self.failure:

@@ -13,6 +13,7 @@ from typing import Any
 
 from rclpy.node import Node
 
+from dynenv_ros.ros.diagnostics import Heartbeat
 from dynenv_ros.ros.interfaces import InterfaceType, generated_type_hash, message_types, sample_message, \
     service_types
 from dynenv_ros.ros.node_runner import NodeExit, run_node
@@ -43,6 +44,8 @@ class SelfCheckListener(Node):
         self._pending: list[Any] = []
         self._started = time.monotonic()
         self._timer = self.create_timer(0.05, self._tick)
+        self.heartbeat = Heartbeat(self, "selfcheck listener", lambda: {
+            "interfaces_checked": len(self.checks), "hash_problems": len(self.hash_problems)})
 
     def _receiver(self, interface: InterfaceType):
         check = self.checks[interface.name]

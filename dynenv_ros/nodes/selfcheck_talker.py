@@ -6,6 +6,7 @@ from typing import Any
 
 from rclpy.node import Node
 
+from dynenv_ros.ros.diagnostics import Heartbeat
 from dynenv_ros.ros.interfaces import message_types, service_types
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_int
@@ -21,6 +22,7 @@ class SelfCheckTalker(Node):
         self.samples_per_type = declare_int(self, "samples_per_type", 3, 1, 1000,
                                             "Messages published per message type (kept for late joiners).")
         self.served = 0
+        self.heartbeat = Heartbeat(self, "selfcheck talker", lambda: {"services_answered": self.served})
         self.service_servers = [self.create_service(cls, service_name_for(name), self._answer(cls))
                           for name, cls in service_types().items()]
         self.sample_publishers = []

@@ -39,6 +39,7 @@ from dynenv_ros.perception.params import MODES, PRESETS, load_preset
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import driving_markers, markers, topics
 from dynenv_ros.ros.cdr import detection_array_cdr
+from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
 from dynenv_ros.ros.authentication import secrets_for
@@ -216,8 +217,7 @@ class SimNode(Node):
                                         self._receive_action, self._count_refusals, own_participant=realtime)
         self._refused_since_log: Counter[str] = Counter()   # refusals not yet summarised in the log
         self._last_refusal = ""
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, local(topics.DIAGNOSTICS),
-                                                     QoSProfile(depth=10))
+        self.diagnostics_pub = Diagnostics(self, local(topics.DIAGNOSTICS))     # and /diagnostics
         # A recorder that stopped writing (disk full, I/O error) says so, latched; the simulator repeats it in its
         # own diagnostics and log, where an operator watching the game looks.
         self.recorder_error = ""

@@ -54,6 +54,7 @@ from dynenv_ros.learning.experience import REFUSALS, ExperienceAssembler
 from dynenv_ros.learning.experience_scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from dynenv_ros.ros import topics
+from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.drain import take
 from dynenv_ros.ros.authentication import declare_secrets_dir, load_secrets
 from dynenv_ros.ros.node_runner import NodeExit, run_node
@@ -203,8 +204,7 @@ class TrainerNode(Node):
                                              learns=learns, secrets=self.secrets)
         self._refusals_logged: Counter[str] = Counter()      # the refusals already summarised in the log
         self.weights = WeightsRelease(self, self.signing_key, self.run_id)
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.TRAINER_DIAGNOSTICS,
-                                                     QoSProfile(depth=10))
+        self.diagnostics_pub = Diagnostics(self, topics.TRAINER_DIAGNOSTICS)     # and /diagnostics
         self.received: Counter[str] = Counter()
         self.robots: set[tuple[str, str]] = set()
         self.games: set[str] = set()

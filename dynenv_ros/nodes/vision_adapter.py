@@ -34,6 +34,7 @@ from vision_msgs.msg import Detection3DArray
 
 from dynenv_ros.perception.params import PRESETS, load_preset
 from dynenv_ros.ros import topics
+from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.frame_grid import ACCEPTED, FrameGrid
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
@@ -139,7 +140,7 @@ class VisionAdapter(Node):
                                          self._forward_callback(publisher),
                                          qos)
             self.publishers_by_robot[name] = publisher
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "~/diagnostics", QoSProfile(depth=10))
+        self.diagnostics_pub = Diagnostics(self, "~/diagnostics")     # and /diagnostics
         self._reported: Counter[str] = Counter()
         self.create_timer(diagnostics_s, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"{'reverse' if self.reverse else 'forward'} for {', '.join(self.names)}")
