@@ -48,26 +48,6 @@ WATCHED = ("frames_duplicate", "frames_too_old", "frames_out_of_tolerance", "fra
            "head_yaw_stale", "fallen_stale", "penalized_stale", "game_state_stale", "state_malformed")
 
 
-def detections_3d(robot: str) -> str:
-    return f"{robot}/detections_3d"          # relative: in the node's namespace, like every graph topic
-
-
-def joint_states(robot: str) -> str:
-    return f"{robot}/joint_states"
-
-
-def fallen(robot: str) -> str:
-    return f"{robot}/fallen"
-
-
-def penalized(robot: str) -> str:
-    return f"{robot}/penalized"
-
-
-def game_state(robot: str) -> str:
-    return f"{robot}/game_state"
-
-
 def state_qos() -> QoSProfile:
     """Best effort, keep-last 10: matches reliable and best-effort publishers alike (a robot's joint states and a
     GameController bridge may be either); a lost sample is replaced by the next."""
@@ -132,10 +112,10 @@ class VisionAdapter(Node):
                 self.states[name] = RobotState(self.head_yaw_joint, self.head_yaw_max_age, self.state_max_age,
                                                counts=self.counts)
                 self._subscribe_state(name)
-                self.create_subscription(Detection3DArray, detections_3d(name),
+                self.create_subscription(Detection3DArray, topics.detections_3d(name),
                                          self._reverse_callback(name, robot_id, publisher), qos)
             else:
-                publisher = self.create_publisher(Detection3DArray, detections_3d(name), qos)
+                publisher = self.create_publisher(Detection3DArray, topics.detections_3d(name), qos)
                 self.create_subscription(DetectionArray, topics.local(topics.detections(name)),
                                          self._forward_callback(publisher),
                                          qos)
@@ -151,16 +131,18 @@ class VisionAdapter(Node):
     def _subscribe_state(self, name: str) -> None:
         """The robot's own state topics (``ros.robot_state``), arrivals timed on the node's clock."""
         state, qos = self.states[name], state_qos()
-        self.create_subscription(JointState, joint_states(name),
+        self.create_subscription(JointState, topics.joint_states(name),
                                  lambda msg: state.joint_state(msg, self._now_ns()), qos)
-        self.create_subscription(Bool, fallen(name), lambda msg: state.flag(FALLEN, msg, self._now_ns()), qos)
-        self.create_subscription(Bool, penalized(name), lambda msg: state.flag(PENALIZED, msg, self._now_ns()), qos)
+        self.create_subscription(Bool, topics.fallen(name), lambda msg: state.flag(FALLEN, msg, self._now_ns()),
+                                 qos)
+        self.create_subscription(Bool, topics.penalized(name),
+                                 lambda msg: state.flag(PENALIZED, msg, self._now_ns()), qos)
 
         def game(msg: Float32MultiArray) -> None:
             problem = state.game_state(msg, self._now_ns())
             if problem:
-                self.get_logger().warning(f"{game_state(name)}: refused: {problem}", throttle_duration_sec=5.0)
-        self.create_subscription(Float32MultiArray, game_state(name), game, qos)
+                self.get_logger().warning(f"{topics.game_state(name)}: refused: {problem}", throttle_duration_sec=5.0)
+        self.create_subscription(Float32MultiArray, topics.game_state(name), game, qos)
 
     def _forward_callback(self, publisher):
         def convert(msg: DetectionArray) -> None:
@@ -176,7 +158,7 @@ class VisionAdapter(Node):
             stamp = stamp_of(msg)
             slot = grid.assign(stamp)
             if slot.status != ACCEPTED:
-                self.get_logger().warning(f"{detections_3d(name)}: frames refused so far: "
+                self.get_logger().warning(f"{topics.detections_3d(name)}: frames refused so far: "
                                           f"{self._refusals()}", throttle_duration_sec=5.0)
                 return
             out, dropped = from_vision_msgs(msg, self.params, robot_id=robot_id, episode_id=self.episode_id,

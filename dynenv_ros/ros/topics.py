@@ -44,6 +44,33 @@ def feedback(robot: str) -> str:
     return f"/{robot}/feedback"
 
 
+# A real robot's own topics, read by the reverse vision adapter (nodes/vision_adapter.py, docs/deploy.md): relative,
+# in the adapter's namespace.
+def detections_3d(robot: str) -> str:
+    """vision_msgs/Detection3DArray of one robot: the adapter's output (forward) or a robot's vision stack (reverse)."""
+    return f"{robot}/detections_3d"
+
+
+def joint_states(robot: str) -> str:
+    """sensor_msgs/JointState of one robot (the head yaw joint)."""
+    return f"{robot}/joint_states"
+
+
+def fallen(robot: str) -> str:
+    """std_msgs/Bool: the robot is down."""
+    return f"{robot}/fallen"
+
+
+def penalized(robot: str) -> str:
+    """std_msgs/Bool: the robot is penalized (off the field)."""
+    return f"{robot}/penalized"
+
+
+def game_state(robot: str) -> str:
+    """std_msgs/Float32MultiArray: the GameController state as this robot receives it."""
+    return f"{robot}/game_state"
+
+
 def pose_estimate(robot: str) -> str:
     """geometry_msgs/PoseWithCovarianceStamped: one robot's self-localization estimate, frame "map", vision rate
     (the simulator's with ``localization`` on; a real robot's localization feeds the policy node on the same name)."""
