@@ -52,7 +52,7 @@ PERCEIVING = ("perceiving",)
 SCENARIOS = ("robocup", "driving")
 ACTION_MODES = ("discrete", "continuous")
 PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
-SHIPPED_POLICY = "policy_node/pretrained/policy.onnx"     # relative to the repository (see team_a_policy)
+SHIPPED_POLICY = "policy_node/pretrained/policy.onnx"     # relative to the repository (see policy_file)
 SHIPPED_DRIVING_POLICY = "policy_node/pretrained/driving/policy.onnx"     # discrete actions
 AUTO_DOMAIN, ISOLATED_DOMAIN = -1, -2      # domain_id: the user's ROS_DOMAIN_ID, else isolated; always isolated
 
@@ -145,23 +145,22 @@ class MainJobConfig:
             raise ConfigError(f"n_cars must be in [1, 10], got {self.n_cars}")
         if self.action_mode not in ACTION_MODES:
             raise ConfigError(f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}")
-        if self.car_0 != "scripted":
-            path = team_a_policy(self.car_0)
-            if path.suffix not in (".onnx", ".safetensors"):
-                raise ConfigError(f"car_0 must be 'scripted' or a .onnx / .safetensors policy file, got {self.car_0!r}")
-            if not path.is_file():
-                raise ConfigError(f"car_0: policy file {path} does not exist")
-            if self.car_0 == SHIPPED_DRIVING_POLICY and self.action_mode != "discrete" and self.scenario == "driving":
-                raise ConfigError("car_0: the shipped driving policy takes discrete actions; with action_mode "
-                                  "continuous set car_0=scripted or a continuous policy file")
-        if self.team_a != "scripted":
-            path = team_a_policy(self.team_a)
-            if path.suffix not in (".onnx", ".safetensors"):
-                raise ConfigError(f"team_a must be 'scripted' or a .onnx / .safetensors policy file, "
-                                  f"got {self.team_a!r}")
-            if not path.is_file():
-                raise ConfigError(f"team_a: policy file {path} does not exist")
+        for key in ("car_0", "team_a"):
+            check_policy_setting(key, getattr(self, key))
+        if self.car_0 == SHIPPED_DRIVING_POLICY and self.action_mode != "discrete" and self.scenario == "driving":
+            raise ConfigError("car_0: the shipped driving policy takes discrete actions; with action_mode "
+                              "continuous set car_0=scripted or a continuous policy file")
 
+
+def check_policy_setting(key: str, value: str) -> None:
+    """A setting naming who plays (team_a, car_0): 'scripted', or a policy file that exists."""
+    if value == "scripted":
+        return
+    path = policy_file(value)
+    if path.suffix not in (".onnx", ".safetensors"):
+        raise ConfigError(f"{key} must be 'scripted' or a .onnx / .safetensors policy file, got {value!r}")
+    if not path.is_file():
+        raise ConfigError(f"{key}: policy file {path} does not exist")
 
 # What each setting means (listed by --help) and which graphs use it: a --set of a key the chosen graph does not use
 # is refused, because it would change nothing (the config file may hold every key).
@@ -223,8 +222,8 @@ def settings_epilog() -> str:
     return "\n".join(lines)
 
 
-def team_a_policy(value: str) -> Path:
-    """A policy file named in the config: absolute, or relative to the repository (where the shipped one lies)."""
+def policy_file(value: str) -> Path:
+    """A policy file named in the config (team_a, car_0): absolute, or relative to the repository (where the shipped one lies)."""
     path = Path(value)
     return path if path.is_absolute() else Path(__file__).resolve().parent.parent / path
 
@@ -288,7 +287,7 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         "wait_for_ground_truth_subscribers": truth_readers, "wait_for_recorder": True}, ends_run=True)
     policies = []
     if learned:       # one policy node drives all of team A (onnxruntime for .onnx files)
-        path = team_a_policy(config.team_a)
+        path = policy_file(config.team_a)
         policies.append(NodeLaunch("policy_team_a", "policy_node.policy_node", {
             "players_per_team": config.players_per_team, "team": "a", "checkpoint": str(path),
             "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch", "seed": config.seed}))
@@ -322,7 +321,7 @@ def driving_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
     drivers = []
     scripted = car_names(config.n_cars)
     if config.car_0 != "scripted":
-        path = team_a_policy(config.car_0)
+        path = policy_file(config.car_0)
         drivers.append(NodeLaunch("policy_car_0", "policy_node.policy_node", {
             "scenario": "driving", "n_cars": config.n_cars, "action_mode": config.action_mode, "cars": ["car_0"],
             "checkpoint": str(path), "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch",

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 import tempfile
 import time
@@ -117,7 +118,6 @@ def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str
         run_dir = Path(scratch or temporary) / name
         resume = run_dir.is_dir() and bool(list_checkpoints(run_dir))
         if run_dir.is_dir() and not resume:          # killed before its first checkpoint: nothing to keep
-            import shutil
             shutil.rmtree(run_dir)
         summary = make_trainer(cfg, run_dir, resume=resume, progress=False).run()
         result = _evaluate(cfg, run_dir / "policy.safetensors", evaluation)
