@@ -29,14 +29,14 @@ NODES = [
 INSTALL_REQUIRES = [
     "numpy>=2", "PyYAML", "scipy", "torch>=2.8", "pymunk>=7", "numba", "rosbags>=0.11", "pettingzoo>=1.24",
     "gymnasium>=1", "pillow", "onnx", "onnxscript", "onnxruntime", "safetensors", "tensorboard", "tqdm",
-    "matplotlib", "cryptography",
+    "matplotlib", "cryptography", "foxglove-sdk>=0.30",
 ]
 EXTRAS_REQUIRE = {
     # Training on a cluster (backend: ray, dynenv-sweep) and BEST comparisons (dynenv-eval): imported lazily.
     "train": ["ray", "pymc"],
     # The test suite beyond the runtime: RL libraries' route (test_rl_libraries) and the colcon build test.
     "test": ["pytest", "pytest-xdist", "supersuit", "stable-baselines3", "catkin-pkg", "colcon-core", "colcon-ros",
-             "colcon-package-selection"],
+             "colcon-package-selection", "websockets", "protobuf"],
 }
 TOOLS = [
     "dynenv-run = dynenv_ros.main_job:main",
@@ -64,6 +64,7 @@ setup(
         (f"share/{PACKAGE}/pretrained", [f for f in glob("policy_node/pretrained/*") if Path(f).is_file()]),
         (f"share/{PACKAGE}/pretrained/eval", glob("policy_node/pretrained/eval/*.json")),
         (f"share/{PACKAGE}/config/train", glob("config/train/*.yaml")),
+        (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),    # the live view's layout
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=INSTALL_REQUIRES,

@@ -41,6 +41,7 @@ PYTHON_MODULES: dict[str, tuple[str | None, str]] = {
     "pettingzoo": (None, "pettingzoo"),
     "safetensors": (None, "safetensors"),
     "onnx": (None, "onnx"),
+    "foxglove": (None, "foxglove-sdk"),
 }
 # Imported lazily by training and evaluation tools only: setup.py's "train" extra, not package.xml.
 TRAINING_MODULES = {"ray": "ray", "pymc": "pymc"}
@@ -57,6 +58,8 @@ TEST_MODULES: dict[str, tuple[str | None, str]] = {
     "catkin_pkg": ("python3-catkin-pkg", "catkin-pkg"),
     "stable_baselines3": ("python3-stable-baselines3-pip", "stable-baselines3"),
     "supersuit": (None, "supersuit"),
+    "websockets": ("python3-websockets", "websockets"),
+    "google": ("python3-protobuf", "protobuf"),        # test_foxglove_live decodes the live view's protobuf
 }
 # Test tools used without an import: key or distribution → the evidence in the repository.
 TEST_TOOLS = {"python3-pytest-xdist": ("Makefile", "pytest -n 2"), "pytest-xdist": ("Makefile", "pytest -n 2"),

@@ -2,10 +2,11 @@
 pipeline on ROS 2 topics.
 
 Publishes per robot (car) its detections at vision rate, the ground truth and ``/clock`` at vision rate, per-robot
-step feedback at motion rate, diagnostics and RViz markers; subscribes to each robot's actions. Stepped mode runs a
-motion period as soon as every controlled robot has acted (or on ``/sim/step``); real-time mode is paced by a wall
-timer. All game logic is in the sessions (``envs/soccer_session.py``, ``envs/driving_session.py``); this file only
-converts and publishes (docs/ros_graph.md). Each feedback names the action its robot's period ran
+step feedback at motion rate, diagnostics and RViz markers (with ``foxglove_port``, the same scene to the Foxglove
+app: ``live_view/``); subscribes to each robot's actions. Stepped mode runs a motion period as soon as every
+controlled robot has acted (or on ``/sim/step``); real-time mode is paced by a wall timer. All game logic is in the
+sessions (``envs/soccer_session.py``, ``envs/driving_session.py``); this file only converts and publishes
+(docs/ros_graph.md). Each feedback names the action its robot's period ran
 (``StepFeedback.action_digest``); with ``secrets_dir`` only actions carrying their team's MAC, for a (robot, episode,
 period) not acted on before, are run, and the feedback is tagged with the simulator's secret (``security.action_auth``).
 """
@@ -50,7 +51,8 @@ from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int,
                                        refuse_other_scenario)
 from dynenv_ros.ros.qos import (REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, action_queue, latched,
                                 realtime_stream, sim_stream)
-from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, robot_transforms, static_transforms, tf_qos, tf_static_qos
+from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, static_transforms, tf_message, tf_qos, tf_static_qos
+from dynenv_ros.sim.frames import robot_frames
 from dynenv_ros.sim.seeding import checked_seed
 from dynenv_ros.soccer.config import SoccerConfig, robot_names
 
@@ -146,6 +148,12 @@ class SimNode(Node):
         self.exit_when_finished = declare_bool(self, "exit_when_finished", False, "Exit (status 0) when an episode "
                                                "ends and auto_reset is off, after every subscriber has it.", **fixed)
         self.report_path = declare_str(self, "report_path", "", "Write a JSON summary here on exit.", **fixed)
+        foxglove_port = declare_int(self, "foxglove_port", -1, -1, 65535, "Live view in the Foxglove app "
+                                    "(docs/ros_graph.md): the port of its WebSocket server; -1 off, 0 any free "
+                                    "port (logged).", **fixed)
+        foxglove_host = declare_str(self, "foxglove_host", "127.0.0.1", "The interface the live view listens on "
+                                    "(127.0.0.1: this machine only; 0.0.0.0: every interface, unauthenticated).",
+                                    **fixed)
         rates = {"physics_hz": physics_hz, "vision_period_ticks": vision_ticks, "motion_period_ticks": motion_ticks}
         overrides: dict[str, Any] = {}
         if noise_mode:
@@ -248,6 +256,7 @@ class SimNode(Node):
         self._window = deque(maxlen=2)   # (wall time, sim time, frames) samples for achieved rates
         self._buffer: deque = deque()    # realtime: frames of the current period waiting for their instant
         self._tick_s = config.rates.tick_seconds
+        self.live_view = self._start_live_view(foxglove_port, foxglove_host)
         self.diagnostics_timer = self.create_timer(diag_s, self._publish_diagnostics, clock=self.wall)
         self.vision_timer = self._vision_timer() if self.mode == "realtime" else None
         self.started = False
@@ -264,6 +273,21 @@ class SimNode(Node):
             f"motion), perception '{preset}' mode {params.mode} magnitude {params.noise_magnitude:g}; "
             f"{'cars' if driving else 'robots'} {', '.join(names)}"
             f"{'; self-localization emulated' if self.localization else ''}")
+
+    def _start_live_view(self, port: int, host: str) -> Any:
+        """The Foxglove live view (``live_view/``) on ``port``, or None when it is -1 (off). A port in use or a bad
+        host is refused as a parameter error with the reason."""
+        if port < 0:
+            return None
+        from dynenv_ros.live_view.server import LiveView, LiveViewError
+        geometry = self.map if self.scenario == "driving" else self.config.field
+        try:
+            view = LiveView(geometry, self.names, port=port, host=host, server_name=self.get_fully_qualified_name())
+        except LiveViewError as error:
+            raise ParameterException(str(error), ["foxglove_port", "foxglove_host"]) from None
+        self.get_logger().info(f"live view: open {view.url} in Foxglove (Open connection → Foxglove WebSocket; "
+                               "layout config/foxglove/dynenv_layout.json)")
+        return view
 
     # -- episodes --------------------------------------------------------------------------------------------------
     def _start(self) -> None:
@@ -307,6 +331,8 @@ class SimNode(Node):
             self.session.reset(seed=seed, kickoff_team=kickoff)
         self.odometry.restart()                 # a new episode, a new odometry (odom: the kickoff pose)
         self.episodes_started += 1
+        if self.live_view is not None:
+            self.live_view.log_event(f"episode {self.session.episode_id} started", self._now_ns())
         self._buffer.clear()
         self._accepted_digests.clear()
         self._executed_digests.clear()
@@ -446,6 +472,8 @@ class SimNode(Node):
             if event.kind in logged:
                 who = self.names[event.robot] if event.robot is not None else f"team {'A' if event.team > 0 else 'B'}"
                 self.get_logger().info(f"{event.kind}: {who} {event.detail}")
+                if self.live_view is not None:
+                    self.live_view.log_event(f"{event.kind}: {who} {event.detail}", self._now_ns())
 
     def _realtime_tick(self) -> None:
         if not self._buffer:
@@ -516,7 +544,11 @@ class SimNode(Node):
         tf_ns = stamp_ns(stamp)
         if tf_ns > self._last_tf_ns and last_of_instant:
             self._last_tf_ns = tf_ns
-            self.tf_pub.publish(robot_transforms(self.names, truth, stamp, estimates, odometry))
+            transforms = robot_frames(self.names, truth, estimates, odometry)
+            self.tf_pub.publish(tf_message(transforms, stamp))
+            if self.live_view is not None:   # the same instant and tree, to Foxglove (live_view/server.py)
+                self.live_view.publish_frame(frame.snapshot, frame.robots, tf_ns, motion_period=output.motion_period,
+                                             transforms=transforms)
         if poses is not None:
             for i, publisher in enumerate(self.pose_pubs):
                 self._publish(publisher, pose_message(estimates[i], variances[i], stamp))
@@ -650,10 +682,17 @@ class SimNode(Node):
         """Realtime mode: one frame per vision period of sim time, on the wall clock scaled by the factor."""
         return self.create_timer(self._vision_period_ns() * 1e-9, self._realtime_tick, clock=self.wall)
 
+    def _now_ns(self) -> int:
+        """Sim time now (the stamp of the frame at the world's tick), ns."""
+        return stamp_ns(cv.sim_time(self._tick_offset + self.session.world.tick, self._tick_s))
+
     def destroy_node(self) -> None:
         inbox = getattr(self, "action_inbox", None)
         if inbox is not None:
             inbox.close()
+        live_view = getattr(self, "live_view", None)
+        if live_view is not None:
+            live_view.stop()
         super().destroy_node()
 
     def diagnostics(self) -> dict[str, str]:

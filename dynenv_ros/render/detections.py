@@ -56,6 +56,19 @@ def camera_to_field(observer_pose: tuple[float, float, float], x: np.ndarray | f
     return ox + c * x - s * y, oy + s * x + c * y
 
 
+def classify_rows(d: np.ndarray, observer_pose: tuple[float, float, float]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per detection row (non-empty): reported class, field x and y, false positive (true_id -1) and confused
+    (a real object reported as another class); what the RViz markers and the Foxglove live view draw from."""
+    cls = d["class_id"].astype(int)
+    fx, fy = camera_to_field(observer_pose, d["x"], d["y"])
+    fx, fy = np.atleast_1d(fx), np.atleast_1d(fy)
+    false_positive = d["true_id"] == -1
+    true_class = d["true_class"].astype(int)
+    confused = ~false_positive & (true_class != 0) & (true_class != cls)
+    return cls, fx, fy, false_positive, confused
+
+
 def class_colour(class_id: int, team: int = 0, observer_team: int = 1) -> Colour:
     """Marker colour of a reported class; robots and cars by team relation (own = the observer's team colour)."""
     if class_id in (ObjectClass.ROBOT, ObjectClass.CAR):

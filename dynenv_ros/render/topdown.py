@@ -91,6 +91,13 @@ def phase_name(phase: int) -> str:
         return f"PHASE {phase}"
 
 
+def score_text(snapshot: WorldSnapshot) -> str:
+    """The score line every soccer picture shows (PNG strip, RViz text, Foxglove text): score, clock, phase."""
+    minutes, seconds = divmod(max(0.0, snapshot.game_time), 60.0)
+    return (f"A {snapshot.score_team_a} : {snapshot.score_team_b} B   {int(minutes)}:{seconds:04.1f} "
+            f"({snapshot.time_remaining:.0f} s left)   {phase_name(snapshot.phase)}")
+
+
 def render_snapshot(snapshot: WorldSnapshot, geometry: FieldGeometry, *, pixels_per_metre: float = 60.0,
                     ball_radius: float = 0.05, fov: tuple[int, float] | None = None) -> Image.Image:
     """Draw one instant top-down as an RGB image.
@@ -244,11 +251,8 @@ def _draw_strip(draw: ImageDraw.ImageDraw, view: FieldView, snapshot: WorldSnaps
     if view.strip_height <= 0:
         return
     draw.rectangle((0, 0, view.size[0] - 1, view.strip_height - 1), fill=STRIP)
-    minutes, seconds = divmod(max(0.0, snapshot.game_time), 60.0)
-    text = (f"A {snapshot.score_team_a} : {snapshot.score_team_b} B   {int(minutes)}:{seconds:04.1f} "
-            f"({snapshot.time_remaining:.0f} s left)   {phase_name(snapshot.phase)}")
     font = ImageFont.load_default(size=max(8, view.strip_height - 6))
-    draw.text((4, view.strip_height / 2), text, fill=TEXT, font=font, anchor="lm")
+    draw.text((4, view.strip_height / 2), score_text(snapshot), fill=TEXT, font=font, anchor="lm")
 
 
 def as_array(image: Image.Image) -> np.ndarray:

@@ -8,19 +8,15 @@ from builtin_interfaces.msg import Time
 from dynenv_msgs.msg import Action, Detection, DetectionArray, ObjectState, StepFeedback, WorldState
 from geometry_msgs.msg import Point
 
+from dynenv_ros.sim.frames import WORLD_FRAME, camera_frame  # noqa: F401  (re-exported)
 from dynenv_ros.sim.ground_truth import WorldSnapshot, snapshot_from_msg  # noqa: F401  (re-exported)
 from dynenv_ros.soccer.actions import SoccerAction
 
-WORLD_FRAME = "map"
 
 
 def sim_time(tick: int, tick_seconds: float) -> Time:
     ns = round(tick * tick_seconds * 1e9)
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
-def camera_frame(robot_name: str) -> str:
-    return f"{robot_name}/camera"
 
 
 def detections_to_msgs(rows: np.ndarray) -> list[Detection]:

@@ -27,9 +27,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
 from dynenv_ros.render.detections import (DEFAULT_MARKER_SIZE, ERROR, GOALPOST, LINE_DETECTION, MARK, MARKER_SIZE,
                                           MISSED, MISSED_RADIUS, OTHER, camera_to_field, missed_positions)
+from dynenv_ros.render.detections import classify_rows as _classify_rows   # shared with the Foxglove live view
 from dynenv_ros.render.topdown import (BALL, CARPET, DEFAULT_ROBOT_RADIUS, FALLEN_OUTLINE, HEAD, HEADING, LINE,
-                                       TEAM_COLOURS, Colour, phase_name)
+                                       TEAM_COLOURS, Colour, score_text)
 from dynenv_ros.ros.conversions import WORLD_FRAME
+from dynenv_ros.sim.frames import yaw_quaternion
 from dynenv_ros.sim.ground_truth import WorldSnapshot
 from dynenv_ros.soccer.field import FieldGeometry
 
@@ -75,9 +77,8 @@ def _mix(a: Colour, b: Colour, t: float = 0.5) -> Colour:
 
 def _quaternion(yaw: float = 0.0, pitch: float = 0.0) -> Quaternion:
     """Rotation yaw about z, then pitch about the new y axis (ZYX order, no roll)."""
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    return Quaternion(x=-sy * sp, y=cy * sp, z=sy * cp, w=cy * cp)
+    x, y, z, w = yaw_quaternion(yaw, pitch)
+    return Quaternion(x=x, y=y, z=z, w=w)
 
 
 def _scale(x: float, y: float | None = None, z: float | None = None) -> Vector3:
@@ -147,12 +148,6 @@ def field_markers(geometry: FieldGeometry, stamp: Time) -> MarkerArray:
 def ground_truth_marker_id(object_id: int, slot: int = _BODY) -> int:
     """Id of one of an object's ground-truth markers (slot 0 body, 1 heading arrow, 2 head arrow)."""
     return int(object_id) * _SLOTS + slot
-
-
-def score_text(snapshot: WorldSnapshot) -> str:
-    minutes, seconds = divmod(max(0.0, snapshot.game_time), 60.0)
-    return (f"A {snapshot.score_team_a} : {snapshot.score_team_b} B   {int(minutes)}:{seconds:04.1f} "
-            f"({snapshot.time_remaining:.0f} s left)   {phase_name(snapshot.phase)}")
 
 
 def ground_truth_markers(snapshot: WorldSnapshot, geometry: FieldGeometry, stamp: Time, *,
@@ -243,19 +238,6 @@ def _delete_all(namespaces: Iterable[str], stamp: Time) -> list[Marker]:
         clear.pose.orientation = Quaternion(w=1.0)
         markers.append(clear)
     return markers
-
-
-def _classify_rows(d: np.ndarray, observer_pose: tuple[float, float, float]
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per detection row (non-empty): reported class, field x and y, false positive (true_id -1) and confused
-    (a real object reported as another class); what the soccer and driving detection markers draw from."""
-    cls = d["class_id"].astype(int)
-    fx, fy = camera_to_field(observer_pose, d["x"], d["y"])
-    fx, fy = np.atleast_1d(fx), np.atleast_1d(fy)
-    false_positive = d["true_id"] == -1
-    true_class = d["true_class"].astype(int)
-    confused = ~false_positive & (true_class != 0) & (true_class != cls)
-    return cls, fx, fy, false_positive, confused
 
 
 def detection_markers(rows: np.ndarray, observer_pose: tuple[float, float, float], stamp: Time, *,

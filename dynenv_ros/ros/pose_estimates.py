@@ -34,6 +34,8 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from dynenv_ros.envs.pose_features import POSE_BOUND, POSE_COLUMNS, pose_features
 from dynenv_ros.ros.conversions import WORLD_FRAME
 from dynenv_ros.ros.parameters import declare_float, declare_str
+from dynenv_ros.sim.frames import (compose, ground_truth_frame, inverse, odom_frame,  # noqa: F401
+                                   yaw_quaternion)
 
 COV_X, COV_Y, COV_YAW = 0, 7, 35            # the variances' slots in the row-major 6x6 (x, y, z, roll, pitch, yaw)
 UNUSED_SLOTS = (14, 21, 28)                  # z, roll, pitch
@@ -48,33 +50,6 @@ CARRIED_SPEED = 2.0                          # m/s
 CARRIED_MIN_STEP = 0.2                       # m: the threshold never drops below this (fast vision rates)
 CARRIED_TURN = math.pi / 2                   # rad within one frame
 HISTORY_DEPTH = 128                          # estimates kept per robot (two periods of the largest frame count)
-
-
-def odom_frame(robot: str) -> str:
-    return f"{robot}/odom"
-
-
-def ground_truth_frame(robot: str) -> str:
-    """The robot's true pose (map → this), beside the estimate's chain: no name shared with it."""
-    return f"{robot}/ground_truth/base_link"
-
-
-def compose(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float]:
-    """Planar poses x, y, yaw: ``a ∘ b`` (b expressed in a's frame, brought to a's parent). Plain floats: the
-    simulator composes a few per robot and frame, where numpy's per-call cost dominated."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], _wrapped(a[2] + b[2]))
-
-
-def inverse(a: Sequence[float]) -> tuple[float, float, float]:
-    """The inverse of a planar pose: ``compose(a, inverse(a))`` is the identity."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
-
-
-def _wrapped(a: float) -> float:
-    """An angle in [−π, π)."""
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 class EmulatedOdometry:
@@ -129,7 +104,7 @@ def pose_message(estimate: Sequence[float], variances: Sequence[float], stamp: T
     msg.header.frame_id = frame_id
     x, y, yaw = (float(v) for v in estimate)
     msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
-    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+    _, _, msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = yaw_quaternion(yaw)
     covariance = _COVARIANCE_TEMPLATE.copy()
     covariance[[COV_X, COV_Y, COV_YAW]] = variances
     msg.pose.covariance = covariance

@@ -9,11 +9,11 @@ the robot's pose *estimate* (``ros/pose_estimates.py``), and the truth is ``map 
 localization and reconstruction outputs use (team B's is turned by π, so each team attacks along its +x).
 
 Everything lies on the ground plane (z = 0): detections are 2D, so a camera frame lifted to a head height would
-show every detection floating that high. Quaternions are yaw-only (REP 103: z up, yaw counter-clockwise).
+show every detection floating that high. Quaternions are yaw-only (REP 103: z up, yaw counter-clockwise). The tree
+itself is built ROS-free in ``sim/frames.py`` (the Foxglove live view streams the same one); this module stamps it.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 from builtin_interfaces.msg import Time
@@ -21,16 +21,11 @@ from geometry_msgs.msg import TransformStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
-from dynenv_ros.ros.conversions import WORLD_FRAME, camera_frame
-from dynenv_ros.ros.pose_estimates import compose, ground_truth_frame, inverse, odom_frame
+from dynenv_ros.sim.frames import (TEAM_FRAMES, PlanarTransform, base_frame, robot_frames,  # noqa: F401
+                                   static_frames, yaw_quaternion)
 
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
-TEAM_FRAMES = {"team_a/field": 0.0, "team_b/field": math.pi}
-
-
-def base_frame(robot_name: str) -> str:
-    return f"{robot_name}/base_link"
 
 
 def tf_qos() -> QoSProfile:
@@ -53,9 +48,13 @@ def planar_transform(parent: str, child: str, x: float, y: float, yaw: float, st
     t.child_frame_id = child
     t.transform.translation.x = float(x)
     t.transform.translation.y = float(y)
-    t.transform.rotation.z = math.sin(yaw / 2.0)
-    t.transform.rotation.w = math.cos(yaw / 2.0)
+    _, _, t.transform.rotation.z, t.transform.rotation.w = yaw_quaternion(float(yaw))
     return t
+
+
+def tf_message(transforms: Sequence[PlanarTransform], stamp: Time) -> TFMessage:
+    """The planar transforms of ``sim.frames`` (the tree the live view streams too), stamped."""
+    return TFMessage(transforms=[planar_transform(*t, stamp) for t in transforms])
 
 
 def robot_transforms(names: Sequence[str], poses: Sequence[tuple[float, float, float, float]],
@@ -65,24 +64,10 @@ def robot_transforms(names: Sequence[str], poses: Sequence[tuple[float, float, f
 
     Without ``estimates``: ``map → base_link`` is the truth. With ``estimates`` and ``odometry`` ((n, 3) x, y, yaw
     each: the pose estimates in map, the odometry poses in odom): ``map → odom`` (estimate ∘ odometry⁻¹),
-    ``odom → base_link`` (the odometry), so base_link sits at the estimate, and ``map → ground_truth/base_link``."""
-    if len(names) != len(poses):
-        raise ValueError(f"{len(names)} robot names but {len(poses)} poses")
-    if (estimates is None) != (odometry is None):
-        raise ValueError("estimates and odometry come together")
-    transforms = []
-    for i, (name, (x, y, yaw, head_yaw)) in enumerate(zip(names, poses)):
-        if estimates is None:
-            transforms.append(planar_transform(WORLD_FRAME, base_frame(name), x, y, yaw, stamp))
-        else:
-            correction = compose(estimates[i], inverse(odometry[i]))          # map → odom
-            transforms.append(planar_transform(WORLD_FRAME, odom_frame(name), *correction, stamp))
-            transforms.append(planar_transform(odom_frame(name), base_frame(name), *odometry[i], stamp))
-            transforms.append(planar_transform(WORLD_FRAME, ground_truth_frame(name), x, y, yaw, stamp))
-        transforms.append(planar_transform(base_frame(name), camera_frame(name), 0.0, 0.0, head_yaw, stamp))
-    return TFMessage(transforms=transforms)
+    ``odom → base_link`` (the odometry), so base_link sits at the estimate, and ``map → ground_truth/base_link``
+    (``sim.frames.robot_frames``)."""
+    return tf_message(robot_frames(names, poses, estimates, odometry), stamp)
 
 
 def static_transforms(stamp: Time) -> TFMessage:
-    return TFMessage(transforms=[planar_transform(WORLD_FRAME, frame, 0.0, 0.0, yaw, stamp)
-                                 for frame, yaw in TEAM_FRAMES.items()])
+    return tf_message(static_frames(), stamp)
