@@ -86,11 +86,13 @@ class MainJobConfig:
     timeout_s: float = 180.0
     domain_id: int = -1  # -1: the user's ROS_DOMAIN_ID if set, else an isolated one; -2: always isolated
     games: int = 2                   # train graph: simulator games feeding the trainer
-    train_minutes: float = 3.0       # train graph: the trainer's wall-time budget
+    train_updates: int = 60          # train graph: the trainer's budget, in updates (the same on any machine)
+    train_minutes: float = 20.0      # train graph: a wall-time cap (a run that reaches it fails)
     episode_seconds: float = 10.0    # train graph: sim seconds per episode
     n_cars: int = 2                  # driving: cars; car_0 by car_0's policy, the others by the scripted driver
     car_0: str = SHIPPED_DRIVING_POLICY   # driving: a policy file of the run's action_mode, or 'scripted'
     action_mode: str = "discrete"    # driving: discrete | continuous
+    foxglove_port: int = -1          # soccer graph: the simulator's Foxglove live view port; -1 off, 0 any free port
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> "MainJobConfig":
@@ -130,6 +132,8 @@ class MainJobConfig:
             raise ConfigError(f"perception must be one of {PERCEPTION_PRESETS}, got {self.perception!r}")
         if not 1 <= self.games <= 8:
             raise ConfigError(f"games must be in [1, 8], got {self.games}")
+        if not 1 <= self.train_updates <= 1_000_000:
+            raise ConfigError(f"train_updates must be in [1, 1000000], got {self.train_updates}")
         if not 0.2 <= self.train_minutes <= 1440:
             raise ConfigError(f"train_minutes must be in [0.2, 1440], got {self.train_minutes}")
         if not 1.0 <= self.episode_seconds <= 600:
@@ -147,6 +151,9 @@ class MainJobConfig:
             raise ConfigError(f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}")
         for key in ("car_0", "team_a"):
             check_policy_setting(key, getattr(self, key))
+        if not -1 <= self.foxglove_port <= 65535:
+            raise ConfigError(f"foxglove_port must be -1 (off), 0 (any free port) or a port in [1, 65535], got "
+                              f"{self.foxglove_port}")
         if self.car_0 == SHIPPED_DRIVING_POLICY and self.action_mode != "discrete" and self.scenario == "driving":
             raise ConfigError("car_0: the shipped driving policy takes discrete actions; with action_mode "
                               "continuous set car_0=scripted or a continuous policy file")
@@ -177,7 +184,10 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
     "players_per_team": ("robots per team, 1..5", ("soccer", "train")),
     "perception": ("perception preset: " + " | ".join(PERCEPTION_PRESETS), ("soccer", "train")),
     "games": ("simulator games (each with its policy node) feeding the trainer, 1..8", ("train",)),
-    "train_minutes": ("the trainer's wall-time budget, minutes", ("train",)),
+    "train_updates": ("the trainer's budget in updates, 1..10^6: the run ends after this many, however long "
+                      "they take (a busy machine is slower, not worse)", ("train",)),
+    "train_minutes": ("a wall-time cap on the trainer, minutes, 0.2..1440: a run that reaches it before "
+                      "train_updates stops and fails", ("train",)),
     "episode_seconds": ("sim seconds per training episode, 1..600", ("train",)),
     "policy": ("scripted team(s): " + " | ".join(POLICIES) + " (perceiving: keeper_and_chasers on each robot's own "
                "detections and pose estimate, never the ground truth)", ("soccer",)),
@@ -193,6 +203,9 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
               "one, discrete actions) or 'scripted' (scenario driving; the other cars: scripted drivers)",
               ("soccer",)),
     "action_mode": ("discrete | continuous: the cars' actions (scenario driving)", ("soccer",)),
+    "foxglove_port": ("live view in the Foxglove app: the simulator streams field, robots (cars), detections, TF and "
+                      "score on ws://127.0.0.1:PORT; -1 off, 0 any free port (the simulator's log names it), "
+                      "1..65535 that port", ("soccer",)),
 }
 # Settings of the soccer graph that only one scenario uses (a --set for the other scenario is refused).
 SCENARIO_SETTINGS: dict[str, str] = {"players_per_team": "robocup", "policy": "robocup", "team_a": "robocup",
@@ -284,7 +297,8 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         "players_per_team": config.players_per_team, "seed": config.seed, "perception_preset": config.perception,
         "localization": config.localization, "mode": "stepped", "episode_seconds": config.duration_s, "auto_reset": False, "exit_when_finished": True,
         "report_path": str(run_dir / "sim_report.json"), "wait_for_subscribers": 2,
-        "wait_for_ground_truth_subscribers": truth_readers, "wait_for_recorder": True}, ends_run=True)
+        "wait_for_ground_truth_subscribers": truth_readers, "wait_for_recorder": True,
+        "foxglove_port": config.foxglove_port}, ends_run=True)
     policies = []
     if learned:       # one policy node drives all of team A (onnxruntime for .onnx files)
         path = policy_file(config.team_a)
@@ -316,8 +330,8 @@ def driving_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         "scenario": "driving", "n_cars": config.n_cars, "action_mode": config.action_mode, "seed": config.seed,
         "perception_preset": config.perception, "mode": "stepped", "episode_seconds": config.duration_s,
         "auto_reset": False, "exit_when_finished": True, "report_path": str(run_dir / "sim_report.json"),
-        "wait_for_subscribers": 2, "wait_for_ground_truth_subscribers": 2, "wait_for_recorder": True},
-        ends_run=True)
+        "wait_for_subscribers": 2, "wait_for_ground_truth_subscribers": 2, "wait_for_recorder": True,
+        "foxglove_port": config.foxglove_port}, ends_run=True)
     drivers = []
     scripted = car_names(config.n_cars)
     if config.car_0 != "scripted":
@@ -493,6 +507,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     graph = GRAPHS[config.graph]
     played = f" (scenario '{config.scenario}')" if config.graph == "soccer" and config.scenario != "robocup" else ""
     print(f"dynenv-run: graph '{config.graph}'{played} on ROS domain {domain_id} ({why}); logs in {run_dir}")
+    if config.graph == "soccer" and config.foxglove_port >= 0:
+        where = (f"ws://127.0.0.1:{config.foxglove_port}" if config.foxglove_port else
+                 f"the port the simulator's log ({run_dir}/sim_node.log) names")
+        print(f"  live view: open {where} in the Foxglove app (Open connection → Foxglove WebSocket), layout "
+              "config/foxglove/dynenv_layout.json")
     timeout_s = config.timeout_s + (60.0 * config.train_minutes if config.graph == "train" else 0.0)
     outcome = run_graph(graph.build(config, run_dir), run_dir, domain_id, timeout_s, isolate=isolate)
     for node in outcome.nodes:

@@ -57,6 +57,8 @@ __all__ = ["FORMAT", "POLICY_FORMAT", "CheckpointWarning", "save_training_checkp
 FORMAT = "dynenv_training/1"
 CHECKPOINTS = "checkpoints"
 LATEST = "latest"
+# In a fresh run's directory (the trainer node's): the policy file it starts from, to measure what it learnt against.
+START_POLICY = "policy_start.safetensors"
 MODEL_FILE, OPTIMIZER_FILE, EXTRA_FILE, META_FILE = ("model.safetensors", "optimizer.safetensors",
                                                      "extra.safetensors", "meta.json")
 _STEP_DIR = re.compile(r"^step_(\d{12,})$")

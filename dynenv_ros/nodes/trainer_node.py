@@ -16,7 +16,9 @@ policy node it finds on the ROS graph, and streams new weights back to the polic
   simulator's are read (``security.action_auth``; refusals counted and logged once per diagnostics period).
 - Learning: ``learning.sequence_learner`` in a thread of its own, so no callback waits for a gradient step; PPO
   against the stored behaviour log-probabilities, sequences older than ``max_policy_lag`` versions dropped
-  (docs/decisions.md). Run directory, logs (CSV, TensorBoard) and checkpoints as ``dynenv-train`` writes them.
+  (docs/decisions.md). Run directory, logs (CSV, TensorBoard) and checkpoints as ``dynenv-train`` writes them,
+  plus ``policy_start.safetensors``, the policy a fresh run starts from (what it learnt is measured against it).
+- Budget: ``max_updates`` and/or ``max_minutes``; the first reached ends the run (checkpoint, policy, summary).
 - Weights (``ros.weights_release``): each release, the initial one at start and a new one every
   ``publish_every_updates`` updates, is signed with the Ed25519 key ``signing_key`` and announced on
   ``/trainer/weights_announcement`` (reliable, transient local); its bytes are served in chunks on
@@ -48,7 +50,7 @@ from dynenv_ros.agent.checkpoint import FORMAT, agent_config
 from dynenv_ros.driving.config import MAX_CARS, DrivingConfig
 from dynenv_ros.learning.config import ACTION_MODES, SCENARIOS, VARIANTS, ConfigError, TrainConfig
 from dynenv_ros.core.writable import NotWritable, check_run_dir
-from dynenv_ros.learning.checkpoints import list_checkpoints
+from dynenv_ros.learning.checkpoints import START_POLICY, list_checkpoints
 from dynenv_ros.learning.disk_budget import run_disk_bytes
 from dynenv_ros.learning.experience import REFUSALS, ExperienceAssembler
 from dynenv_ros.learning.experience_scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
@@ -128,6 +130,9 @@ class TrainerNode(Node):
                         "(all ones: the simulator's total).", read_only=True)).value
         max_minutes = declare_float(self, "max_minutes", 0.0, 0.0, 1e6, "Stop (checkpoint, policy file, summary) "
                                     "after this many wall minutes; 0 = until stopped.", **fixed)
+        self.max_updates = declare_int(self, "max_updates", 0, 0, 10**9, "Stop (checkpoint, policy file, summary) "
+                                       "after this many updates, however long they take; 0 = until stopped.",
+                                       **fixed)
         self.batch_sequences = declare_int(self, "batch_sequences", 8, 1, 4096, "Sequences per update (at most one "
                                            "per robot stream).", **fixed)
         max_batch = declare_int(self, "max_batch_sequences", 0, 0, 65536, "Most sequences per update: a learner "
@@ -189,6 +194,9 @@ class TrainerNode(Node):
             raise ParameterException(str(error), [error.key]) from None
         if not list_checkpoints(self.run_dir):
             self.learner.save_checkpoint()      # the first one at once: a kill from now on leaves a run to resume
+            # the policy it starts from, so that what was learnt can be measured against it on held-out episodes
+            from dynenv_ros.agent.checkpoint import save_policy
+            save_policy(self.learner.agent, str(self.run_dir / START_POLICY), self.learner.policy_meta())
         self.run_id = self.run_dir.resolve().name
         if driving:
             agents: ExperienceScenario = DrivingExperience(DrivingConfig(n_cars=n_cars, action_mode=action_mode))
@@ -221,8 +229,8 @@ class TrainerNode(Node):
         self.discovery_timer = self.create_timer(0.5, self._discover, clock=wall)
         self.diagnostics_timer = self.create_timer(diagnostics_s, self._publish_diagnostics, clock=wall)
         self.deadline = time.monotonic() + 60.0 * max_minutes if max_minutes > 0 else None
-        if self.deadline is not None:
-            self.budget_timer = self.create_timer(1.0, self._check_budget, clock=wall)
+        if self.deadline is not None or self.max_updates:
+            self.budget_timer = self.create_timer(0.2, self._check_budget, clock=wall)
         self._discover()
         who = (f"{n_cars} cars ({action_mode})" if driving else
                "both teams" if not self.team else "team " + self.team)
@@ -238,8 +246,11 @@ class TrainerNode(Node):
         return losses.localization or losses.reconstruction
 
     def _check_budget(self) -> None:
-        if time.monotonic() >= self.deadline:
-            self.get_logger().info(f"time budget spent: version {self.learner.version}, "
+        """Either budget ends the run: updates make a run comparable across machine speeds, minutes cap it."""
+        spent = ("update budget" if self.max_updates and self.learner.updates >= self.max_updates else
+                 "time budget" if self.deadline is not None and time.monotonic() >= self.deadline else None)
+        if spent is not None:
+            self.get_logger().info(f"{spent} spent: version {self.learner.version}, "
                                    f"{self.learner.updates} updates, {self.learner.env_steps} steps learnt")
             raise NodeExit(0)
 
