@@ -33,8 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def measure(games: int, args: Any, work: Path) -> dict[str, Any]:
     from dynenv_ros.graph.process_graph import run_graph
     from dynenv_ros.graph.train_graph import train_graph
+    # train_updates 0: no update budget, the trainer runs for --minutes of wall time (what is measured)
     config = SimpleNamespace(players_per_team=args.players, seed=0, perception="realistic", games=games,
-                             train_minutes=args.minutes, episode_seconds=10.0)
+                             train_updates=0, train_minutes=args.minutes, episode_seconds=10.0)
     nodes = [n for n in train_graph(config, work) if n.name != "recorder"]
     outcome = run_graph(nodes, work, 1 + (os.getpid() + games) % 100, 60.0 * args.minutes + 120.0)
     summary = json.loads((work / "trainer" / "summary.json").read_text())
