@@ -120,13 +120,17 @@ class LiveView:
         """One vision frame. ``stamp_ns``: its sim time; ``transforms``: the robots' part of the TF tree (the sim
         node passes the one it publishes on ``/tf``; default: the truth, ``sim.frames.robot_frames``)."""
         self._last_stamp_ns = stamp_ns
+        self.frames_published += 1
         robots_truth = snapshot.objects[:len(self.names)]
-        if transforms is None:
-            transforms = robot_frames(self.names, [(o.x, o.y, o.yaw, o.head_yaw) for o in robots_truth])
-        all_transforms = list(transforms) + (static_frames() if self.soccer else [])
-        self.tf.log(scene.frame_transforms(all_transforms, stamp_ns), log_time=stamp_ns)
-        self.game_state.log(scene.game_state(snapshot, motion_period=motion_period, sim_time_s=stamp_ns * 1e-9),
-                            log_time=stamp_ns)
+        # every message is built only for a channel somebody watches: with no viewer a frame costs next to nothing
+        if self.tf.has_sinks():
+            if transforms is None:
+                transforms = robot_frames(self.names, [(o.x, o.y, o.yaw, o.head_yaw) for o in robots_truth])
+            all_transforms = list(transforms) + (static_frames() if self.soccer else [])
+            self.tf.log(scene.frame_transforms(all_transforms, stamp_ns), log_time=stamp_ns)
+        if self.game_state.has_sinks():
+            self.game_state.log(scene.game_state(snapshot, motion_period=motion_period,
+                                                 sim_time_s=stamp_ns * 1e-9), log_time=stamp_ns)
         if self.ground_truth.has_sinks():
             self.ground_truth.log(scene.ground_truth_scene(snapshot, self.names, stamp_ns,
                                                            text_position=self._text_position), log_time=stamp_ns)
@@ -137,7 +141,6 @@ class LiveView:
             channel.log(scene.detection_scene(name, robot.detections, (me.x, me.y, me.yaw + me.head_yaw), stamp_ns,
                                               missed=missed, observer_team=me.team if me.team in (1, -1) else 1),
                         log_time=stamp_ns)
-        self.frames_published += 1
 
     def log_event(self, text: str, stamp_ns: int, level: LogLevel = LogLevel.Info) -> None:
         """A line for the Log panel (goals, penalties, episode starts)."""
