@@ -396,3 +396,40 @@ def test_params_files_resolve_from_the_package_config_folder_anywhere(tmp_path, 
                              "config/nope.yaml"], capture_output=True, text=True, timeout=60, cwd=tmp_path)
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert result.stderr.strip().startswith("parameter error: --params-file config/nope.yaml: no such file here")
+
+
+SIGINT_DURING_START = """
+import os, signal, sys, threading, time
+from dynenv_ros.nodes import sim_node
+point = sys.argv[1]
+def interrupt():
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.5)                                  # the KeyboardInterrupt lands here
+if point == "inbox_thread_started":                  # inside ActionInbox(), its thread and participant running
+    start = threading.Thread.start
+    def start_then_interrupt(self):
+        start(self)
+        if self.name == "action_inbox":
+            interrupt()
+    threading.Thread.start = start_then_interrupt
+else:                                                # the constructor's next step after the inbox
+    diagnostics = sim_node.Diagnostics
+    def interrupt_then_diagnostics(*args, **kwargs):
+        interrupt()
+        return diagnostics(*args, **kwargs)
+    sim_node.Diagnostics = interrupt_then_diagnostics
+sys.exit(sim_node.main(["sim_node", "--ros-args", "-p", "mode:=realtime", "-p", "players_per_team:=1"]))
+"""
+
+
+@pytest.mark.parametrize("point", ["inbox_thread_started", "after_the_inbox"])
+def test_a_sigint_while_the_realtime_simulator_starts_stops_it_cleanly(point, tmp_path):
+    """CI saw `sim_node --params-file config/sim_2v2_deploy.yaml` abort on Ctrl-C ("terminate called without an
+    active exception", exit -6): a SIGINT while the constructor ran left the action inbox's thread waiting in rcl,
+    and the interpreter's finalization unwound it through C++. Ctrl-C at any point of start-up is a stop: exit 0."""
+    import subprocess
+    import sys
+    result = subprocess.run([sys.executable, "-c", SIGINT_DURING_START, point], capture_output=True, text=True,
+                            timeout=90, cwd=tmp_path)
+    assert result.returncode == 0, (result.returncode, result.stderr[-2000:])
+    assert "terminate called" not in result.stderr and "Traceback" not in result.stderr, result.stderr[-2000:]

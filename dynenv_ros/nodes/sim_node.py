@@ -223,56 +223,62 @@ class SimNode(Node):
         self.action_inbox = ActionInbox(self, Action, [local(topics.action(n)) for n in names],
                                         action_queue(realtime), ACTION_HANDOVER_DEPTH, self._screen_action,
                                         self._receive_action, self._count_refusals, own_participant=realtime)
-        self._refused_since_log: Counter[str] = Counter()   # refusals not yet summarised in the log
-        self._last_refusal = ""
-        self.diagnostics_pub = Diagnostics(self, local(topics.DIAGNOSTICS))     # and /diagnostics
-        # A recorder that stopped writing (disk full, I/O error) says so, latched; the simulator repeats it in its
-        # own diagnostics and log, where an operator watching the game looks.
-        self.recorder_error = ""
-        self.recorder_matched: dict[str, int] = {}      # topic -> publishers the recorder has matched
-        self.recorder_sub = self.create_subscription(DiagnosticArray, local(topics.RECORDER_DIAGNOSTICS),
-                                                     self._on_recorder_diagnostics, latched(1))
-        # TF (ros/tf.py): the robots and their heads per frame; the team frames once, latched.
-        self.tf_pub = self.create_publisher(TFMessage, local(TF_TOPIC), tf_qos())
-        self.tf_static_pub = self.create_publisher(TFMessage, local(TF_STATIC_TOPIC), tf_static_qos())
-        if not driving:               # the team frames of soccer's localization outputs
-            self.tf_static_pub.publish(static_transforms(cv.sim_time(0, config.rates.tick_seconds)))
-        self._last_tf_ns = -1
-        self.truth_marker_pub = self.create_publisher(MarkerArray, local(topics.GROUND_TRUTH_MARKERS),
-                                                      QoSProfile(depth=5))
-        self.detection_marker_pub = self.create_publisher(MarkerArray, local(topics.DETECTION_MARKERS),
+        # Everything from here on runs with the inbox's thread and participant (and later the live view's server)
+        # already started: a constructor that fails (a port in use, a signal during start-up) stops them.
+        try:
+            self._refused_since_log: Counter[str] = Counter()   # refusals not yet summarised in the log
+            self._last_refusal = ""
+            self.diagnostics_pub = Diagnostics(self, local(topics.DIAGNOSTICS))     # and /diagnostics
+            # A recorder that stopped writing (disk full, I/O error) says so, latched; the simulator repeats it in its
+            # own diagnostics and log, where an operator watching the game looks.
+            self.recorder_error = ""
+            self.recorder_matched: dict[str, int] = {}      # topic -> publishers the recorder has matched
+            self.recorder_sub = self.create_subscription(DiagnosticArray, local(topics.RECORDER_DIAGNOSTICS),
+                                                         self._on_recorder_diagnostics, latched(1))
+            # TF (ros/tf.py): the robots and their heads per frame; the team frames once, latched.
+            self.tf_pub = self.create_publisher(TFMessage, local(TF_TOPIC), tf_qos())
+            self.tf_static_pub = self.create_publisher(TFMessage, local(TF_STATIC_TOPIC), tf_static_qos())
+            if not driving:               # the team frames of soccer's localization outputs
+                self.tf_static_pub.publish(static_transforms(cv.sim_time(0, config.rates.tick_seconds)))
+            self._last_tf_ns = -1
+            self.truth_marker_pub = self.create_publisher(MarkerArray, local(topics.GROUND_TRUTH_MARKERS),
                                                           QoSProfile(depth=5))
-        self.reset_srv = self.create_service(ResetSimulation, local(topics.RESET_SERVICE), self._on_reset)
-        self.step_srv = self.create_service(StepSimulation, local(topics.STEP_SERVICE), self._on_step)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.wall = Clock(clock_type=ClockType.STEADY_TIME)
-        self.frames_published = 0
-        self.periods_run = 0
-        self.episodes_started = 0
-        self._diagnostics_sent = 0
-        self._tick_offset = 0
-        self._first_period_wall = self._last_period_wall = 0.0
-        self.episode_scores: list[tuple[int, int]] = []
-        self._window = deque(maxlen=2)   # (wall time, sim time, frames) samples for achieved rates
-        self._buffer: deque = deque()    # realtime: frames of the current period waiting for their instant
-        self._tick_s = config.rates.tick_seconds
-        self.live_view = self._start_live_view(foxglove_port, foxglove_host)
-        self.diagnostics_timer = self.create_timer(diag_s, self._publish_diagnostics, clock=self.wall)
-        self.vision_timer = self._vision_timer() if self.mode == "realtime" else None
-        self.started = False
-        self._started_wall = time.monotonic()
-        if self.mode == "stepped" and (self.wait_for_subscribers > 0 or self.wait_for_recorder
-                                       or self.wait_for_truth_readers > 0):
-            self.start_timer = self.create_timer(0.05, self._start_when_subscribed, clock=self.wall)
-        else:
-            self._start()
-        world = (f"driving, {n_cars} cars ({config.action_mode} actions)" if driving
-                 else f"{players}v{players}")
-        self.get_logger().info(
-            f"{world} {self.mode} ({config.rates.vision_hz:g} Hz vision, {config.rates.motion_hz:g} Hz "
-            f"motion), perception '{preset}' mode {params.mode} magnitude {params.noise_magnitude:g}; "
-            f"{'cars' if driving else 'robots'} {', '.join(names)}"
-            f"{'; self-localization emulated' if self.localization else ''}")
+            self.detection_marker_pub = self.create_publisher(MarkerArray, local(topics.DETECTION_MARKERS),
+                                                              QoSProfile(depth=5))
+            self.reset_srv = self.create_service(ResetSimulation, local(topics.RESET_SERVICE), self._on_reset)
+            self.step_srv = self.create_service(StepSimulation, local(topics.STEP_SERVICE), self._on_step)
+            self.add_on_set_parameters_callback(self._on_set_parameters)
+            self.wall = Clock(clock_type=ClockType.STEADY_TIME)
+            self.frames_published = 0
+            self.periods_run = 0
+            self.episodes_started = 0
+            self._diagnostics_sent = 0
+            self._tick_offset = 0
+            self._first_period_wall = self._last_period_wall = 0.0
+            self.episode_scores: list[tuple[int, int]] = []
+            self._window = deque(maxlen=2)   # (wall time, sim time, frames) samples for achieved rates
+            self._buffer: deque = deque()    # realtime: frames of the current period waiting for their instant
+            self._tick_s = config.rates.tick_seconds
+            self.live_view = self._start_live_view(foxglove_port, foxglove_host)
+            self.diagnostics_timer = self.create_timer(diag_s, self._publish_diagnostics, clock=self.wall)
+            self.vision_timer = self._vision_timer() if self.mode == "realtime" else None
+            self.started = False
+            self._started_wall = time.monotonic()
+            if self.mode == "stepped" and (self.wait_for_subscribers > 0 or self.wait_for_recorder
+                                           or self.wait_for_truth_readers > 0):
+                self.start_timer = self.create_timer(0.05, self._start_when_subscribed, clock=self.wall)
+            else:
+                self._start()
+            world = (f"driving, {n_cars} cars ({config.action_mode} actions)" if driving
+                     else f"{players}v{players}")
+            self.get_logger().info(
+                f"{world} {self.mode} ({config.rates.vision_hz:g} Hz vision, {config.rates.motion_hz:g} Hz "
+                f"motion), perception '{preset}' mode {params.mode} magnitude {params.noise_magnitude:g}; "
+                f"{'cars' if driving else 'robots'} {', '.join(names)}"
+                f"{'; self-localization emulated' if self.localization else ''}")
+        except BaseException:
+            self.destroy_node()
+            raise
 
     def _start_live_view(self, port: int, host: str) -> Any:
         """The Foxglove live view (``live_view/``) on ``port``, or None when it is -1 (off). A port in use or a bad

@@ -10,6 +10,7 @@ bounded queue and a guard condition, so the game state is only ever changed on t
 """
 from __future__ import annotations
 
+import atexit
 import sys
 import threading
 from collections import Counter, deque
@@ -23,6 +24,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from dynenv_ros.ros.drain import take
+from dynenv_ros.ros.node_runner import shutdown_quietly
 
 # Messages read per callback beyond the one the executor handed in: the executor takes one per wake-up (a few
 # hundred a second), far below a flood's rate; a batch of this size costs ~10 ms of screening.
@@ -64,6 +66,7 @@ class ActionInbox:
         self._last_reason = ""
         self._context: Context | None = None
         self._thread: threading.Thread | None = None
+        self._closed = False
         if not own_participant:
             self._node = owner
             self.subscriptions = [owner.create_subscription(msg_type, name, self._receiver(i), qos)
@@ -84,6 +87,10 @@ class ActionInbox:
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self._node)
         self._thread = threading.Thread(target=self._spin, name="action_inbox", daemon=True)
+        # A daemon thread still waiting in rcl when the interpreter finalizes is unwound through C++ frames that
+        # cannot be, and the process aborts (exit -6). An owner that never got to close the inbox (a signal while
+        # a constructor ran, this one included) leaves that to exit; atexit runs before finalization.
+        atexit.register(self.close)
         self._thread.start()
 
     def _spin(self) -> None:
@@ -133,9 +140,13 @@ class ActionInbox:
             self._report_refused(refused, last)
 
     def close(self) -> None:
-        if self._context is None:
+        """Stop the inbox's thread and participant; again is a no-op."""
+        if self._context is None or self._closed:
             return                          # the owner's subscriptions go with the owner
+        atexit.unregister(self.close)
+        self._closed = True
         self._executor.shutdown(timeout_sec=1.0)
-        self._context.try_shutdown()
-        self._thread.join(timeout=2.0)
+        shutdown_quietly(self._context)
+        if self._thread.ident is not None:          # started
+            self._thread.join(timeout=2.0)
         self._node.destroy_node()

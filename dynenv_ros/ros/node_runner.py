@@ -11,9 +11,11 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
+from rclpy.context import Context
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import uninstall_signal_handlers
 
 
 class NodeExit(Exception):
@@ -51,14 +53,29 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
         status = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except Exception as error:  # a signal during a callback: the next wait finds the context already shut down
-        if type(error).__name__ != "RCLError" or (node is not None and node.context.ok()):
+    except Exception as error:
+        # A signal during start-up or a callback: what ran next found the context already shut down. A stop asked
+        # for, not a failure; any other error is one.
+        if type(error).__name__ != "RCLError" or rclpy.ok():
             raise
     finally:
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        shutdown_quietly()
+        # rclpy.try_shutdown leaves rclpy's signal-handling thread running; a thread still joinable when the
+        # process exits aborts it ("terminate called without an active exception", exit -6 after a SIGINT).
+        uninstall_signal_handlers()
     return status
+
+
+def shutdown_quietly(context: Context | None = None) -> None:
+    """Shut ``context`` (default: rclpy's) down unless it is already. rclpy checks, then shuts down; its
+    signal-handling thread can shut the context down in between, and the second shutdown raises RCLError."""
+    try:
+        rclpy.try_shutdown(context=context)
+    except Exception as error:
+        if type(error).__name__ != "RCLError" or (context.ok() if context is not None else rclpy.ok()):
+            raise
 
 
 PACKAGE = "dynenv_ros"
