@@ -42,7 +42,7 @@ def main(mode: str, seconds: float, *args: str) -> None:
     publisher = node.create_publisher(WeightsAnnouncement, topics.WEIGHTS_ANNOUNCEMENT, latched(1))
     report = {"mode": mode, "published": 0, "fetch_requests": 0}
     served: dict[tuple[str, int], bytes] = {}
-    messages: list = []             # what is published every REPEAT_S (messages, or raw bytes)
+    messages: list = []             # published in turn, one every REPEAT_S (messages, or raw bytes)
 
     def on_fetch(request, response):
         report["fetch_requests"] += 1
@@ -104,12 +104,14 @@ def main(mode: str, seconds: float, *args: str) -> None:
     print("ready", flush=True)                      # publishers and server exist
     stop = [False]
     signal.signal(signal.SIGTERM, lambda *_: stop.__setitem__(0, True))
-    deadline, next_publish = time.monotonic() + seconds, 0.0
+    deadline, next_publish, turn = time.monotonic() + seconds, 0.0, 0
     while not stop[0] and time.monotonic() < deadline:
-        if time.monotonic() >= next_publish:
-            for message in messages:
-                publisher.publish(message)
-                report["published"] += 1
+        if time.monotonic() >= next_publish and messages:
+            # one message a period, in turn: the topic keeps the last one only (depth 1), so two published back to
+            # back would let the second replace the first before a loaded subscriber takes it
+            publisher.publish(messages[turn % len(messages)])
+            turn += 1
+            report["published"] += 1
             next_publish = time.monotonic() + (FLOOD_REPEAT_S if mode == "flood" else REPEAT_S)
         rclpy.spin_once(node, timeout_sec=0.05)
     print(json.dumps(report), flush=True)
