@@ -61,6 +61,9 @@ def _graph(args: Any, work: Path):
     return [recorder, *policies, sim]
 
 
+STARTUP_TIMEOUT_S = 90.0     # from starting the nodes to the simulator's first diagnostics (2-core machine, loaded)
+
+
 class _Watcher:
     """Subscribes to every node's diagnostics; keeps the latest values per node and the frame-rate series."""
 
@@ -117,13 +120,25 @@ def soak(args: Any, work: Path) -> dict[str, Any]:
             processes[node.name] = subprocess.Popen(node.command(), env=env, stdout=log, stderr=subprocess.STDOUT)
     watcher = _Watcher(domain)
     samples: list[dict[str, float]] = []
-    started = time.monotonic()
+
+    def check_alive() -> None:
+        dead = [name for name, p in processes.items() if p.poll() is not None]
+        if dead:
+            raise RuntimeError(f"nodes exited during the soak: {dead} (logs in {work})")
+
     try:
+        # The clock starts at the simulator's first diagnostics: start-up (imports, discovery) is not the soak.
+        deadline = time.monotonic() + STARTUP_TIMEOUT_S
+        while "/sim/diagnostics" not in watcher.latest:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"no /sim/diagnostics within {STARTUP_TIMEOUT_S:.0f} s of starting the graph "
+                                   f"(logs in {work})")
+            watcher.spin_for(0.5)
+            check_alive()
+        started = time.monotonic()
         while time.monotonic() - started < 60 * args.minutes:
             watcher.spin_for(args.sample_s)
-            dead = [name for name, p in processes.items() if p.poll() is not None]
-            if dead:
-                raise RuntimeError(f"nodes exited during the soak: {dead} (logs in {work})")
+            check_alive()
             samples.append({"t": time.monotonic() - started,
                             **{name: _rss_mib(p.pid) for name, p in processes.items()},
                             **{f"{name}_cpu_s": process_cpu_seconds(p.pid) for name, p in processes.items()}})
@@ -177,6 +192,11 @@ def _number(text: Any) -> Any:
 
 
 def run(args: Any) -> int:
+    if (min(args.minutes, args.sample_s) <= 0 or args.warmup_s < 0
+            or 60 * args.minutes < args.warmup_s + args.sample_s):
+        raise SystemExit(f"dynenv-bench soak: --minutes {args.minutes:g} ({60 * args.minutes:g} s) must be at least "
+                         f"--warmup-s {args.warmup_s:g} plus one --sample-s {args.sample_s:g}, --minutes and "
+                         "--sample-s positive (the RSS baseline is the first sample after the warm-up)")
     runs = runs_in_folders(lambda folder: soak(args, folder), args.repeat, args.keep)
     result = combine(runs, plain=("players_per_team", "minutes", "warmup_s"))
     if args.json:
