@@ -12,7 +12,8 @@ from collections.abc import Sequence
 # suite name -> module in this package with ``add_arguments(parser)`` and ``run(args) -> int``
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
           "policy": "policy", "train": "train", "learner": "learner", "soak": "soak",
-          "flood": "flood", "ros-train": "ros_train", "cores": "cores", "auth": "auth", "camera": "camera"}
+          "flood": "flood", "ros-train": "ros_train", "cores": "cores", "auth": "auth", "camera": "camera",
+          "live-view": "live_view"}
 # suites whose one run lasts minutes: one run unless --repeat asks for more
 LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1, "camera": 1}
 # suites that do not repeat their measurement (yet)
@@ -58,6 +59,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "camera":   # declaring its options starts nothing
             from benchmarks.camera import add_arguments as add_camera_arguments
             add_camera_arguments(sub)
+        if name == "live-view":   # declaring its options starts nothing
+            from benchmarks.live_view import add_arguments as add_live_view_arguments
+            add_live_view_arguments(sub)
         if name == "ros-train":
             from benchmarks.ros_train import add_arguments as add_ros_train_arguments
             add_ros_train_arguments(sub)

@@ -1174,6 +1174,7 @@ BENCH_SHORT: dict[str, list[tuple[str, list[str]]]] = {   # suite -> (option, va
     "flood": [("--calm-s", ["1"]), ("--flood-s", ["1"])],
     "ros-train": [("--games", ["1"]), ("--minutes", ["0.2"])],
     "camera": [("--periods", ["8"]), ("--repeat", ["1"]), ("--profiles", ["jitter_drops_late"])],
+    "live-view": [("--frames", ["20"]), ("--repeat", ["1"])],
 }
 
 
