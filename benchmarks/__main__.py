@@ -13,7 +13,7 @@ from collections.abc import Sequence
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
           "policy": "policy", "train": "train", "learner": "learner", "soak": "soak",
           "flood": "flood", "ros-train": "ros_train", "cores": "cores", "auth": "auth", "camera": "camera",
-          "live-view": "live_view"}
+          "live-view": "live_view", "localization": "localization"}
 # suites whose one run lasts minutes: one run unless --repeat asks for more
 LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1, "camera": 1}
 # suites that do not repeat their measurement (yet)
@@ -59,6 +59,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "camera":   # declaring its options starts nothing
             from benchmarks.camera import add_arguments as add_camera_arguments
             add_camera_arguments(sub)
+        if name == "localization":   # declaring its options imports nothing
+            from benchmarks.localization import add_arguments as add_localization_arguments
+            add_localization_arguments(sub)
         if name == "live-view":   # declaring its options starts nothing
             from benchmarks.live_view import add_arguments as add_live_view_arguments
             add_live_view_arguments(sub)

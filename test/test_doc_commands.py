@@ -1175,6 +1175,7 @@ BENCH_SHORT: dict[str, list[tuple[str, list[str]]]] = {   # suite -> (option, va
     "ros-train": [("--games", ["1"]), ("--minutes", ["0.2"])],
     "camera": [("--periods", ["8"]), ("--repeat", ["1"]), ("--profiles", ["jitter_drops_late"])],
     "live-view": [("--frames", ["20"]), ("--repeat", ["1"])],
+    "localization": [("--steps", ["5"]), ("--calls", ["10"]), ("--repeat", ["1"])],
 }
 
 
@@ -1249,8 +1250,6 @@ SHORTER: dict[tuple[str, ...], Shorter] = {
     ("dynenv-record",): Shorter("--duration 1", lambda a: _replace(a, "--duration", ["1"])),
     ("python", "-m", "benchmarks.agent"): Shorter("--envs 2 --iterations 2 --repeat 1", lambda a: _replace(_replace(
         _replace(a, "--envs", ["2"]), "--iterations", ["2"]), "--repeat", ["1"])),
-    ("python", "tools/localization_timing.py"): Shorter("--steps 5 --repeat 1", lambda a: _replace(
-        _replace(a, "--steps", ["5"]), "--repeat", ["1"])),
     ("python", "tools/perception_statistics.py"): Shorter("--periods 5 --audit-periods 5 --layout-periods 5",
                                                           lambda a: _replace(_replace(_replace(
                                                               a, "--periods", ["5"]), "--audit-periods", ["5"]),
