@@ -13,9 +13,9 @@ from collections.abc import Sequence
 SUITES = {"msgs": "messages", "setup": "setup_cost", "sim": "sim", "vector": "vector", "ros": "ros_graph",
           "policy": "policy", "train": "train", "learner": "learner", "soak": "soak",
           "flood": "flood", "ros-train": "ros_train", "cores": "cores", "auth": "auth", "camera": "camera",
-          "live-view": "live_view", "localization": "localization"}
+          "live-view": "live_view", "localization": "localization", "weights-flood": "weights_flood"}
 # suites whose one run lasts minutes: one run unless --repeat asks for more
-LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1, "camera": 1}
+LONG_SUITES = {"soak": 1, "flood": 1, "ros-train": 1, "camera": 1, "weights-flood": 1}
 # suites that do not repeat their measurement (yet)
 RUNS_ONCE = {"ros-train"}
 
@@ -59,6 +59,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if name == "camera":   # declaring its options starts nothing
             from benchmarks.camera import add_arguments as add_camera_arguments
             add_camera_arguments(sub)
+        if name == "weights-flood":   # declaring its options starts nothing
+            from benchmarks.weights_flood import add_arguments as add_weights_flood_arguments
+            add_weights_flood_arguments(sub)
         if name == "localization":   # declaring its options imports nothing
             from benchmarks.localization import add_arguments as add_localization_arguments
             add_localization_arguments(sub)

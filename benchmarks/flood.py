@@ -58,7 +58,7 @@ def flood(seconds: float) -> None:
     rclpy.try_shutdown()
 
 
-class _Probe:
+class Probe:
     """Calls the simulator's get_parameters service every 0.2 s and keeps its diagnostics."""
 
     def __init__(self) -> None:
@@ -96,7 +96,7 @@ class _Probe:
         self.rclpy.try_shutdown()
 
 
-def _phase(probe: _Probe, start: float, end: float, latencies: list[float], sim_cpu_s: float) -> dict[str, Any]:
+def phase_figures(probe: Probe, start: float, end: float, latencies: list[float], sim_cpu_s: float) -> dict[str, Any]:
     window = [(t, d) for t, d in probe.diagnostics if start <= t <= end and "accepted" in d]
     first, last = window[0][1], window[-1][1]
     periods = int(last["periods_run"]) - int(first["periods_run"])
@@ -124,14 +124,14 @@ def measure(args: Any, work: Path) -> dict[str, Any]:
     for node in nodes:
         with (work / f"{node.name}.log").open("w") as log:
             processes.append(subprocess.Popen(node.command(), env=env, stdout=log, stderr=subprocess.STDOUT))
-    probe = _Probe()
+    probe = Probe()
     sim_pid = processes[0].pid
 
     def phase(seconds: float) -> dict[str, Any]:
         latencies: list[float] = []
         start, cpu = time.monotonic(), process_cpu_seconds(sim_pid)
         probe.spin(seconds, latencies)
-        return _phase(probe, start, time.monotonic(), latencies, process_cpu_seconds(sim_pid) - cpu)
+        return phase_figures(probe, start, time.monotonic(), latencies, process_cpu_seconds(sim_pid) - cpu)
     try:
         probe.spin(5.0, [])                                   # start-up and discovery
         phases = {"before": phase(args.calm_s)}

@@ -1065,6 +1065,10 @@ PARSE_ONLY: list[tuple[str, str]] = [
                         "update per run; test/test_sweep_scratch.py runs sweeps"),
     (r"^(dynenv-bench |make bench ARGS=)(ros|soak)( |$)", "starts the ROS graph 4 times (ros: 36 s at 2 sim s) / "
                                                            "needs a started graph's diagnostics (soak: > 30 s)"),
+    (r"^(dynenv-bench |make bench ARGS=)weights-flood( |$)",
+     "a real-time game with a learned-policy node (torch start-up) plus the flooding process: 10 s of start-up before "
+     "any phase; test_weights_attacks.py::test_an_oversized_flood_costs_neither_memory_nor_a_period floods a policy "
+     "node the same way (benchmarks.weights_flood.oversized_announcement) and bounds its memory"),
     (r"^(dynenv-bench |make bench ARGS=)(learner|train --config async)( |$)",
      "the async preset's learner and worker processes: 16 s each even at one update; dynenv-train --config async "
      "(README.md) runs that runner"),

@@ -25,8 +25,8 @@ import rclpy
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from dynenv_msgs.msg import WeightsAnnouncement
 from dynenv_msgs.srv import FetchWeights
-from rclpy.serialization import serialize_message
 
+from benchmarks.weights_flood import oversized_announcement
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.qos import latched
 from dynenv_ros.ros.weights_release import from_message, to_message
@@ -91,13 +91,8 @@ def main(mode: str, seconds: float, *args: str) -> None:
         fields = json.loads(Path(args[0]).read_text())
         fields["signature"] = bytes.fromhex(fields["signature"])
         messages.append(to_message(Announcement(**fields)))
-    elif mode == "flood":
-        size = int(float(args[0]) * 1_000_000)
-        header = serialize_message(WeightsAnnouncement())[:4]          # the CDR encapsulation
-        # stamp, an empty frame_id, then run_id claiming `size` characters, and as many bytes: a 'message' DDS must
-        # reassemble before the type's bound (128) could refuse it
-        messages.append(header + bytes(8) + (1).to_bytes(4, "little") + bytes(4) + size.to_bytes(4, "little")
-                        + b"r" * size)
+    elif mode == "flood":               # a run_id of that many bytes: DDS must reassemble it before the bound refuses
+        messages.append(oversized_announcement(int(float(args[0]) * 1_000_000)))
     else:
         raise SystemExit(f"unknown mode {mode!r}")
 
