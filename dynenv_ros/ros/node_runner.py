@@ -62,8 +62,8 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
         if node is not None:
             node.destroy_node()
         shutdown_quietly()
-        # rclpy.try_shutdown leaves rclpy's signal-handling thread running; a thread still joinable when the
-        # process exits aborts it ("terminate called without an active exception", exit -6 after a SIGINT).
+        # rclpy.shutdown would also uninstall rclpy's signal handlers, try_shutdown does not: without them a signal
+        # after the node is gone gets Python's own handling, and rclpy's signal thread does not outlive the node.
         uninstall_signal_handlers()
     return status
 
