@@ -25,7 +25,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks.timing import combine, format_stat, print_table, process_cpu_seconds, runs_in_folders
+from benchmarks.timing import (combine, format_stat, print_table, process_cpu_seconds, process_rss_mib,
+                               runs_in_folders)
 
 SHIPPED = Path(__file__).resolve().parent.parent / "policy_node" / "pretrained"
 
@@ -39,13 +40,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="runtime of both policy nodes (torch: the slow case the issue describes)")
     parser.add_argument("--keep", metavar="DIR", help="keep logs and the bag in DIR (default: a temporary dir)")
     parser.add_argument("--json", action="store_true")
-
-
-def _rss_mib(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def _graph(args: Any, work: Path):
@@ -140,7 +134,7 @@ def soak(args: Any, work: Path) -> dict[str, Any]:
             watcher.spin_for(args.sample_s)
             check_alive()
             samples.append({"t": time.monotonic() - started,
-                            **{name: _rss_mib(p.pid) for name, p in processes.items()},
+                            **{name: process_rss_mib(p.pid) for name, p in processes.items()},
                             **{f"{name}_cpu_s": process_cpu_seconds(p.pid) for name, p in processes.items()}})
             sim = watcher.latest.get("/sim/diagnostics", {})
             print(f"[soak] {samples[-1]['t']:6.0f} s  sim RSS {samples[-1]['sim_node']:.1f} MiB  "

@@ -63,6 +63,14 @@ def process_cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / _TICKS
 
 
+def process_rss_mib(pid: int) -> float:
+    """Resident memory of a live process, MiB, from ``/proc/<pid>/status``. Raises ``OSError`` when it is gone."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise OSError(f"no VmRSS for process {pid} (a zombie?)")
+
+
 def children_cpu_seconds() -> float:
     """User + system CPU seconds of this process's children that have been waited for."""
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)

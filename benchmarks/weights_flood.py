@@ -23,7 +23,8 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.flood import Probe, phase_figures
-from benchmarks.timing import combine, format_stat, print_table, process_cpu_seconds, runs_in_folders
+from benchmarks.timing import (combine, format_stat, print_table, process_cpu_seconds, process_rss_mib,
+                               runs_in_folders)
 
 FLOOD_REPEAT_S = 1.0        # one oversized sample a second: handing 300 MB to DDS takes this machine most of that
 EMPTY_PROFILES = """<?xml version="1.0" encoding="UTF-8"?>
@@ -73,23 +74,16 @@ def flood(seconds: float, megabytes: float) -> None:
     rclpy.try_shutdown()
 
 
-def rss_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    raise OSError(f"no VmRSS for process {pid}")
-
-
 class _PeakMemory:
     """The highest RSS of a process, sampled every 50 ms on a thread of its own while the block runs."""
 
     def __init__(self, pid: int) -> None:
-        self.pid, self.peak, self._stop = pid, rss_mb(pid), threading.Event()
+        self.pid, self.peak, self._stop = pid, process_rss_mib(pid), threading.Event()
         self._thread = threading.Thread(target=self._sample, daemon=True)
 
     def _sample(self) -> None:
         while not self._stop.wait(0.05):
-            self.peak = max(self.peak, rss_mb(self.pid))
+            self.peak = max(self.peak, process_rss_mib(self.pid))
 
     def __enter__(self) -> "_PeakMemory":
         self._thread.start()
@@ -131,7 +125,7 @@ def measure(args: Any, work: Path) -> dict[str, Any]:
         with _PeakMemory(policy_pid) as memory:
             probe.spin(seconds, latencies)
         figures = phase_figures(probe, start, time.monotonic(), latencies, process_cpu_seconds(sim_pid) - cpu)
-        return {"policy_rss_mb_end": round(rss_mb(policy_pid), 1), "policy_rss_mb_peak": round(memory.peak, 1),
+        return {"policy_rss_mb_end": round(process_rss_mib(policy_pid), 1), "policy_rss_mb_peak": round(memory.peak, 1),
                 **{k: figures[k] for k in ("periods", "accepted_share", "frames_per_s")}}
     try:
         probe.spin(10.0, [])                                  # start-up (torch), discovery
@@ -164,7 +158,8 @@ def run(args: Any) -> int:
         return 0
     rows = [("flood", f"{format_stat(result['samples_published'])} samples of {result['megabytes']:g} MB, one a "
                       f"second; Fast DDS profiles {result['profiles']}"),
-            ("policy node RSS: growth during the flood", f"{format_stat(result['policy_rss_growth_mb'], '{:+.1f}')} MB")]
+            ("policy node RSS: growth during the flood",
+             f"{format_stat(result['policy_rss_growth_mb'], '{:+.1f}')} MB")]
     for phase in ("before", "flood", "after"):
         p = result[phase]
         rows.append((f"{phase}: policy node RSS end / peak", f"{format_stat(p['policy_rss_mb_end'], '{:.1f}')} / "

@@ -20,6 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import QoSProfile
 from std_srvs.srv import Trigger
 
+from benchmarks.timing import process_rss_mib
 from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.ros.weights_release import to_message
@@ -180,13 +181,6 @@ class _Diagnostics:
         self.values = {kv.key: kv.value for kv in msg.status[0].values}
 
 
-def _rss_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    raise AssertionError(f"no VmRSS for {pid}")
-
-
 def test_an_oversized_flood_costs_neither_memory_nor_a_period(make_node, executor, tmp_path):
     """The policy node is a process of its own (its memory measured alone, its Fast DDS profiles applied as
     ``ros2 run`` applies them). While it plays, the attacker publishes 300 MB of raw bytes on the announcement topic
@@ -213,7 +207,7 @@ def test_an_oversized_flood_costs_neither_memory_nor_a_period(make_node, executo
             period += 1
             spin_until(executor, lambda: False, MOTION_PERIOD_S)
             assert period < 60, diagnostics.values
-        baseline = peak = _rss_mb(node.pid)
+        baseline = peak = process_rss_mib(node.pid)
         attacker = _attacker("flood", 120, FLOOD_MB)
         assert attacker.stdout.readline().strip() == "ready"
         trainer.release(genuine[1][0], 2, genuine[1][1])   # fetched while the junk server answers too
@@ -223,7 +217,7 @@ def test_an_oversized_flood_costs_neither_memory_nor_a_period(make_node, executo
             action = feeder.act(period, timeout=10.0)["team_a_0"]
             latencies.append(time.monotonic() - sent)
             assert action.policy_version in (1, 2)         # the genuine weights, never junk
-            peak = max(peak, _rss_mb(node.pid))
+            peak = max(peak, process_rss_mib(node.pid))
             period, answered = period + 1, answered + 1
             spin_until(executor, lambda: False, max(0.0, MOTION_PERIOD_S - (time.monotonic() - sent)))
         report = _finish(attacker)
