@@ -266,6 +266,23 @@ def test_perceiving_team_beats_random_team_on_either_side():
     assert result["counts"]["losses"] == 0
 
 
+def test_perceiving_chasers_team_plays_chasers_in_every_slot_where_perceiving_keeps_goal():
+    """The imitation teacher as a team: no goalkeeper, every robot a perceiving chaser; ``perceiving`` keeps a
+    goalkeeper in each team's slot 0 (soccer/scripted.py)."""
+    from dynenv_ros.soccer.scripted import ChaserPolicy, GoalkeeperPolicy
+    env = parallel_env(players_per_team=2, observation="padded", perception="realistic")
+    env.reset(seed=0)
+    chasers, keeper = make_team_policy("perceiving_chasers"), make_team_policy("perceiving")
+    chasers.reset(env, [2, 3], np.random.SeedSequence(0))
+    keeper.reset(env, [2, 3], np.random.SeedSequence(0))
+    assert [type(p.inner) for p in chasers.policies] == [ChaserPolicy, ChaserPolicy]
+    assert [type(p.inner) for p in keeper.policies] == [GoalkeeperPolicy, ChaserPolicy]
+    assert [p.team for p in chasers.policies] == [-1, -1]
+    result = evaluate("perceiving_chasers", "random", episodes=1, seeds=[0], perception="realistic",
+                      env_config={"episode_seconds": 5.0})
+    assert result["evaluated"]["kind"] == "perceiving_chasers"
+
+
 def test_the_pose_estimates_are_stepped_only_for_a_team_that_needs_them_and_change_no_episode(monkeypatch):
     """Localization draws from a generator of its own: switching it on leaves every episode as it was."""
     kw = dict(episodes=2, seeds=[3], perception="realistic", env_config={"episode_seconds": 10.0})

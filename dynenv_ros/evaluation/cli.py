@@ -15,9 +15,9 @@ episodes; there is no opponent (--opponent is refused): "against random / script
 evaluations of the same episodes (evaluation/driving.py).
 
 The evaluated team and the opponent are each a checkpoint path, "random", "scripted" (= keeper_and_chasers),
-"chaser", "eager_chaser", "keeper_and_chasers" (these read the ground truth) or "perceiving" (keeper_and_chasers on
-each robot's own detections and self-pose estimate). The evaluated team plays team A in the even episodes of each
-seed and team B in the odd ones (--sides). Seeds are the statistical unit: the per-seed means go into the JSON and
+"chaser", "eager_chaser", "keeper_and_chasers" (these read the ground truth), "perceiving" (keeper_and_chasers on
+each robot's own detections and self-pose estimate) or "perceiving_chasers" (the same, chasers in every slot). The
+evaluated team plays team A in the even episodes of each seed and team B in the odd ones (--sides). Seeds are the statistical unit: the per-seed means go into the JSON and
 the table, and "compare" runs BEST on them (the second file is the proposal: P(improvement) = P(mean of B > mean of A)).
 Bad arguments exit with code 2 and a one-line reason.
 """
@@ -43,12 +43,13 @@ class _Parser(argparse.ArgumentParser):
 def _eval_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("policy", help="checkpoint path, or random / scripted / chaser / eager_chaser / "
-                                       "keeper_and_chasers / perceiving (driving: random / scripted / a driving checkpoint)")
+                                       "keeper_and_chasers / perceiving / perceiving_chasers (driving: random / scripted / "
+                                       "a driving checkpoint)")
     parser.add_argument("--scenario", choices=("robocup", "driving"), default="robocup",
                         help="robocup (default) or driving (the policy drives every car; no opponent)")
     parser.add_argument("--opponent", default=None,
                         help="checkpoint path, or random / scripted / chaser / eager_chaser / keeper_and_chasers "
-                             "/ perceiving (default scripted; robocup only)")
+                             "/ perceiving / perceiving_chasers (default scripted; robocup only)")
     parser.add_argument("--cars", type=int, help="driving: cars per world (default 2)")
     parser.add_argument("--action-mode", choices=("discrete", "continuous"),
                         help="driving: the env's action mode for random / scripted (a checkpoint brings its own)")

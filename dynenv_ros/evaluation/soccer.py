@@ -16,7 +16,8 @@ Policies (``make_team_policy``):
   of one is a chaser), the default of ``dynenv-play`` and the nearer to a real SPL line-up; ``"chaser"`` and
   ``"keeper_and_chasers"`` name a kind explicitly.
 - ``"perceiving"``: ``keeper_and_chasers`` on each robot's own padded observation and self-pose estimate
-  (``soccer.perceiving``): the fair opponent of a learning agent, which sees no ground truth either.
+  (``soccer.perceiving``): the fair opponent of a learning agent, which sees no ground truth either;
+  ``"perceiving_chasers"``: the same with chasers in every slot, the imitation teacher ``perceiving`` as a team.
 - ``"random"``: every action dimension uniform over the env's action space, from a seeded generator.
 
 Sides: with ``sides="alternate"`` (default) the evaluated team is team A in the even episodes of a seed and team B
@@ -49,7 +50,7 @@ OBSERVATION = RewardTerm.OBSERVATION.name.lower()
 SIDES = ("alternate", "a", "b")
 RESULTS = ("win", "draw", "loss")
 # The team names make_team_policy knows (anything else is a checkpoint path).
-TEAM_NAMES = ("random", "scripted", *SCRIPTED_KINDS, "perceiving")
+TEAM_NAMES = ("random", "scripted", *SCRIPTED_KINDS, "perceiving", "perceiving_chasers")
 # Per-seed numbers (means over the seed's episodes); ``compare`` metrics are these names.
 SEED_METRICS = ("total", "paper_metric", "positive", *TERMS, "goals_for", "goals_against", "goal_difference",
                 "win_rate", "draw_rate", "loss_rate", "falls", "penalties", "opponent_total",
@@ -150,11 +151,13 @@ class PerceivingTeam(TeamPolicy):
 
     kind = "perceiving"
     needs_localization = True
+    roles = "keeper_and_chasers"
 
     def reset(self, env, robots, seed):
         from dynenv_ros.soccer.perceiving import perceiving_team
         c = env.config
-        team = perceiving_team(c.players_per_team, c.period_seconds, field=c.field, motion=c.motion)
+        team = perceiving_team(c.players_per_team, c.period_seconds, field=c.field, motion=c.motion,
+                               kind=self.roles)
         self.robots = list(robots)
         self.policies = [team[i] for i in self.robots]
         for policy in self.policies:
@@ -164,6 +167,14 @@ class PerceivingTeam(TeamPolicy):
         estimate = env.observations.vision.estimate
         return [policy.act(observation, estimate[i])
                 for policy, i, observation in zip(self.policies, self.robots, observations)]
+
+
+class PerceivingChasersTeam(PerceivingTeam):
+    """Perceiving chasers in every slot: the imitation teacher ``perceiving`` (``envs.teacher``) played as a team,
+    so that what imitating it can reach is measured against the perceiving keeper and chasers."""
+
+    kind = "perceiving_chasers"
+    roles = "chaser"
 
 
 class AgentTeam(TeamPolicy):
@@ -241,6 +252,8 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
         return ScriptedTeam(DEFAULT_SCRIPTED)
     if spec == "perceiving":
         return PerceivingTeam()
+    if spec == "perceiving_chasers":
+        return PerceivingChasersTeam()
     if spec in SCRIPTED_KINDS:
         return ScriptedTeam(spec)
     model, digest = load_evaluated_policy(spec)
@@ -445,6 +458,7 @@ def _mean_sd(stats: Mapping[str, float]) -> str:
     return f"{stats['mean']:.3g} ± {stats['sd']:.2g}"
 
 
-__all__ = ["TeamPolicy", "RandomTeam", "ScriptedTeam", "AgentTeam", "make_team_policy", "play_episode", "evaluate",
+__all__ = ["TeamPolicy", "RandomTeam", "ScriptedTeam", "AgentTeam", "PerceivingTeam",
+           "PerceivingChasersTeam", "make_team_policy", "play_episode", "evaluate",
            "seed_means", "format_table", "positive_part", "positive_reward", "paper_metric", "SEED_METRICS", "RESULTS",
            "SIDES"]
