@@ -82,6 +82,8 @@ class MainJobConfig:
     localization: bool = True        # robocup: the simulator's emulated self-localization (pose estimates)
     policy: str = "keeper_and_chasers"
     team_a: str = SHIPPED_POLICY     # soccer: a policy file (.onnx/.safetensors) or 'scripted' (the policy above)
+    greedy: bool = True              # soccer: team_a's policy takes its most likely action (as the shipped one was
+                                     # chosen and evaluated, docs/results.md); false: sampled
     gif: bool = True
     timeout_s: float = 180.0
     domain_id: int = -1  # -1: the user's ROS_DOMAIN_ID if set, else an isolated one; -2: always isolated
@@ -195,6 +197,8 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
                      ("soccer",)),
     "team_a": ("a trained policy file for team A (.onnx: onnxruntime, .safetensors: torch) or 'scripted'",
                ("soccer",)),
+    "greedy": ("team A's policy takes its most likely action (true, how the shipped policy was chosen and evaluated) "
+               "or samples (false)", ("soccer",)),
     "gif": ("render the recorded bag as game.gif (true | false)", ("soccer",)),
     "samples_per_type": ("messages per type and calls per service that must arrive intact, 1..1000",
                          ("selfcheck",)),
@@ -209,7 +213,7 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
 }
 # Settings of the soccer graph that only one scenario uses (a --set for the other scenario is refused).
 SCENARIO_SETTINGS: dict[str, str] = {"players_per_team": "robocup", "policy": "robocup", "team_a": "robocup",
-                                     "localization": "robocup",
+                                     "localization": "robocup", "greedy": "robocup",
                                      "n_cars": "driving", "action_mode": "driving", "car_0": "driving"}
 
 
@@ -304,7 +308,8 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         path = policy_file(config.team_a)
         policies.append(NodeLaunch("policy_team_a", "policy_node.policy_node", {
             "players_per_team": config.players_per_team, "team": "a", "checkpoint": str(path),
-            "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch", "seed": config.seed}))
+            "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch", "seed": config.seed,
+            "greedy": config.greedy}))
     for i, name in enumerate(names):
         if learned and i < config.players_per_team:
             continue

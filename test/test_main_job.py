@@ -128,6 +128,11 @@ def test_the_perceiving_graph_and_its_need_for_localization():
     assert nodes["policy_team_b_0"].module == "policy_node.perceiving_policy"
     assert nodes["policy_team_b_2"].parameters == {"robot": "team_b_2", "players_per_team": 3}
     assert "policy_team_a" in nodes and "policy_team_a_0" not in nodes          # team A: the shipped policy
+    assert nodes["policy_team_a"].parameters["greedy"] is True       # as docs/results.md chose and evaluated it
+    sampled = {n.name: n for n in soccer_graph(load_config(REPO_CONFIG, {"greedy": False}), Path("/r"))}
+    assert sampled["policy_team_a"].parameters["greedy"] is False
+    with pytest.raises(ConfigError, match="greedy: not used by scenario 'driving'"):
+        load_config(REPO_CONFIG, {"scenario": "driving", "greedy": False})
     sim = nodes["sim_node"].parameters
     assert sim["localization"] is True and sim["wait_for_ground_truth_subscribers"] == 1     # the recorder only
     scripted = {n.name: n for n in soccer_graph(load_config(REPO_CONFIG, {"team_a": "scripted"}), Path("/r"))}

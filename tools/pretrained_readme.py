@@ -323,10 +323,13 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     for path, result in evaluations:
         out += [format_table(result), ""]
 
+    greedy = bool(evaluations) and all(r["settings"]["greedy"] for _, r in evaluations)
     out += ["## Play it", "",
             "`make run` (team A, through the policy node and onnxruntime, against the scripted team B), or "
             "`ros2 run dynenv_ros policy_node --ros-args -p checkpoint:=policy_node/pretrained/policy.onnx "
-            "-p runtime:=onnxruntime`.", ""]
+            "-p runtime:=onnxruntime" + (" -p greedy:=true" if greedy else "") + "`."
+            + (" It was evaluated on its most likely actions (`greedy`), as `make run` plays it (its `greedy` "
+               "setting, true by default); sampled actions play worse (docs/results.md)." if greedy else ""), ""]
     return "\n".join(out)
 
 
