@@ -9,6 +9,7 @@
     dynenv-eval --scenario driving scripted --episodes 4 --seeds 0 1 2 --out scripted.json
     dynenv-eval compare random.json pred.json --metric total
     dynenv-eval merge pred_s0.json pred_s1.json pred_s2.json --out pred.json   # the runs as BEST's units
+    dynenv-eval training-best runs/driving/pred_s0     # the paper's statistic: best moving average in training
 
 Driving: the policy ("random", "scripted" or a driving checkpoint) drives every car (--cars) of the same seeded
 episodes; there is no opponent (--opponent is refused): "against random / scripted" is the comparison of the
@@ -92,6 +93,34 @@ def _merge_parser() -> argparse.ArgumentParser:
     parser.add_argument("results", type=Path, nargs="+", help="dynenv-eval result JSONs, one per training run")
     parser.add_argument("--out", type=Path, required=True, help="write the merged result (JSON) here")
     return parser
+
+
+def _training_best_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=f"{PROG} training-best", description="The paper's driving statistic from a run's "
+                     "training log: the best moving average of an episode metric during training, over consecutive "
+                     "logging windows (evaluation/training_statistic.py). It flatters; quote it beside a held-out "
+                     "evaluation, never instead.")
+    parser.add_argument("runs", type=Path, nargs="+", help="run folders (or their metrics.csv)")
+    parser.add_argument("--metric", default="episode/return", help="logged episode metric (default episode/return)")
+    parser.add_argument("--window", type=int, default=10, help="logging windows per average (default 10)")
+    return parser
+
+
+def run_training_best(args: argparse.Namespace) -> int:
+    from dynenv_ros.evaluation.training_statistic import training_statistic
+    try:
+        found = [training_statistic(path, args.metric, args.window) for path in args.runs]
+    except (ValueError, OSError) as error:
+        return _fail(str(error))
+    for result in found:
+        print(f"{result['path']}: best {result['window']}-window moving average of {result['metric']} "
+              f"{result['best']:.4g} (at {result['at_env_steps']:,} env steps; {result['windows']} windows)")
+    if len(found) > 1:
+        values = [r["best"] for r in found]
+        mean = sum(values) / len(values)
+        sd = (sum((v - mean) ** 2 for v in values) / (len(values) - 1)) ** 0.5
+        print(f"mean over {len(found)} runs: {mean:.4g} ± {sd:.2g} (sd)")
+    return 0
 
 
 def run_merge(args: argparse.Namespace) -> int:
@@ -212,6 +241,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_compare(_compare_parser().parse_args(argv[1:]))
     if argv and argv[0] == "merge":
         return run_merge(_merge_parser().parse_args(argv[1:]))
+    if argv and argv[0] == "training-best":
+        return run_training_best(_training_best_parser().parse_args(argv[1:]))
     return run_eval(_eval_parser().parse_args(argv))
 
 
