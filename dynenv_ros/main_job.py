@@ -444,7 +444,8 @@ def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig
     diag = report["diagnostics"]
     rejected = sum(int(v) for k, v in diag.items() if k.startswith("rejected_"))
     scores = report["episode_scores"]
-    team_a = config.policy if config.team_a == "scripted" else f"{config.team_a} (policy node)"
+    team_a = config.policy if config.team_a == "scripted" else \
+        f"{config.team_a} (policy node, {'greedy' if config.greedy else 'sampled'} actions)"
     played = "scripted, on its detections and pose estimates" if config.policy in PERCEIVING else "scripted"
     print(f"  teams: A {team_a}, B {config.policy} ({played})")
     print(f"  game: {diag['sim_time_s']} s of sim time in {diag['periods_run']} periods, "

@@ -106,7 +106,7 @@ def test_main_job_plays_a_trained_policy_for_team_a(tmp_path, capsys):
     output = _run_main(run_dir, capsys, "duration_s=3", "players_per_team=1", f"team_a={policy}", "gif=false")
     report = json.loads((run_dir / "sim_report.json").read_text())
     assert report["diagnostics"]["periods_run"] == "6" and report["diagnostics"]["missing"] == "0"
-    assert f"teams: A {policy} (policy node)" in output and "dynenv-run: OK" in output
+    assert f"teams: A {policy} (policy node, greedy actions)" in output and "dynenv-run: OK" in output
 
 
 def test_main_job_plays_the_perceiving_team_on_detections_and_pose_estimates(tmp_path, capsys):
