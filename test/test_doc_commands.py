@@ -1158,7 +1158,7 @@ def _short_train(args: list[str]) -> list[str]:
 
 
 def _short_eval(args: list[str]) -> list[str]:
-    if args[:1] == ["merge"]:
+    if args[:1] in (["merge"], ["training-best"]):     # reads files only: fast as written
         return args
     if args[:1] == ["compare"]:   # one chain: PyMC samples it in this process (two: a process each, 15 s)
         return _replace(_replace(_replace(args, "--draws", ["100"]), "--tune", ["100"]), "--chains", ["1"])
@@ -1232,7 +1232,8 @@ SHORTER: dict[tuple[str, ...], Shorter] = {
     ("dynenv-train",): Shorter("one update of two worlds: --set total_env_steps=1 --set num_envs=2 (async presets "
                                "also --set workers=1); --from-bag: --epochs 1; --resume: one update more than the "
                                "run holds", _short_train),
-    ("dynenv-eval",): Shorter("--episodes 1 --episode-seconds 2; compare: --draws 100 --tune 100 --chains 1",
+    ("dynenv-eval",): Shorter("--episodes 1 --episode-seconds 2; compare: --draws 100 --tune 100 --chains 1; "
+                              "merge, training-best: as written",
                               _short_eval),
     ("dynenv-bench",): Shorter("each suite's smallest run (BENCH_SHORT): e.g. sim --steps 10 --repeat 1",
                                _short_bench),
@@ -2156,6 +2157,8 @@ def test_shortening_is_the_documented_table() -> None:
     assert shorten(["taskset", "-c", "1", ".venv/bin/dynenv-eval", "random", "--episodes", "10", "--seeds", "0",
                     "1"]) == ["dynenv-eval", "random", "--episodes", "1", "--seeds", "0", "1", "--episode-seconds",
                               "2"]
+    assert shorten(["dynenv-eval", "training-best", "runs/a", "--window", "10"]) == [
+        "dynenv-eval", "training-best", "runs/a", "--window", "10"]
     assert shorten(["dynenv-train", "--config", "async", "--set", "total_env_steps=700000"]) == [
         "dynenv-train", "--config", "async", "--set", "total_env_steps=700000", "--set", "total_env_steps=1",
         "--set", "num_envs=2", "--set", "workers=1"]
