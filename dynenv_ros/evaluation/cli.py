@@ -107,6 +107,7 @@ def _training_best_parser() -> argparse.ArgumentParser:
 
 
 def run_training_best(args: argparse.Namespace) -> int:
+    import statistics
     from dynenv_ros.evaluation.training_statistic import training_statistic
     try:
         found = [training_statistic(path, args.metric, args.window) for path in args.runs]
@@ -117,9 +118,7 @@ def run_training_best(args: argparse.Namespace) -> int:
               f"{result['best']:.4g} (at {result['at_env_steps']:,} env steps; {result['windows']} windows)")
     if len(found) > 1:
         values = [r["best"] for r in found]
-        mean = sum(values) / len(values)
-        sd = (sum((v - mean) ** 2 for v in values) / (len(values) - 1)) ** 0.5
-        print(f"mean over {len(found)} runs: {mean:.4g} ± {sd:.2g} (sd)")
+        print(f"mean over {len(found)} runs: {statistics.mean(values):.4g} ± {statistics.stdev(values):.2g} (sd)")
     return 0
 
 
