@@ -53,7 +53,7 @@ def test_an_evaluation_of_another_policy_is_refused(tool, folder, tmp_path):
 def test_check_mode_reports_a_stale_readme(tool, folder, tmp_path, monkeypatch, capsys):
     copy = tmp_path / tool.FOLDER
     shutil.copytree(folder, copy)
-    monkeypatch.setattr(tool, "render", lambda: "something else\n")
+    monkeypatch.setattr(tool, "render", lambda *args: "something else\n")
     monkeypatch.setattr(tool, "ROOT", tmp_path)
     assert tool.main(["--check"]) == 1
     assert "is not what the files give" in capsys.readouterr().err
@@ -80,3 +80,44 @@ def test_training_stages_must_give_the_policys_training_config(tool, tmp_path):
     (here / "train_stages.json").write_text(json.dumps({"stages": stages[::-1]}))
     with pytest.raises(tool.ReadmeError, match="the first stage must start a run"):
         tool.training_stages(here, config)
+
+
+# -- the shipped driving policy (policy_node/pretrained/driving) ---------------------------------------------------
+@pytest.fixture(scope="module")
+def driving_folder(tool):
+    return tool.ROOT / tool.DRIVING_FOLDER
+
+
+def test_the_committed_driving_readme_is_what_its_files_give(tool, driving_folder):
+    assert (driving_folder / "README.md").read_text() == tool.render(tool.ROOT, tool.DRIVING_FOLDER), \
+        "run .venv/bin/python tools/pretrained_readme.py"
+
+
+def test_the_driving_readme_names_its_policy_and_the_paper_statistic_it_is_not(tool, driving_folder):
+    digest, text = sha256(driving_folder / tool.POLICY), (driving_folder / "README.md").read_text()
+    assert f"sha256 `{digest}`" in text
+    evaluation = json.loads((driving_folder / tool.EVAL_DIR / "policy.json").read_text())
+    assert evaluation["evaluated"]["sha256"] == digest
+    assert "--out policy_node/pretrained/driving/eval/policy.json" in text
+    assert "--out policy_node/pretrained/driving/eval/random.json" in text
+    # the paper's Pred (Table 2: 26.47 per car and episode) is named as the friendlier in-training statistic
+    assert "26.47" in text and "moving average" in text
+
+
+def test_a_driving_evaluation_of_another_policy_or_of_other_episodes_is_refused(tool, driving_folder, tmp_path):
+    copy = tmp_path / tool.DRIVING_FOLDER
+    shutil.copytree(driving_folder, copy)
+    path = copy / tool.EVAL_DIR / "policy.json"
+    original = path.read_text()
+    result = json.loads(original)
+    result["evaluated"]["sha256"] = "1" * 64
+    path.write_text(json.dumps(result))
+    with pytest.raises(tool.ReadmeError, match=r"policy.json evaluates another policy: its sha256 is 1{64}"):
+        tool.render(tmp_path, tool.DRIVING_FOLDER)
+    path.write_text(original)
+    reference = copy / tool.EVAL_DIR / "random.json"
+    result = json.loads(reference.read_text())
+    result["settings"]["seeds"] = [0, 1, 2, 3, 4]
+    reference.write_text(json.dumps(result))
+    with pytest.raises(tool.ReadmeError, match=r"random.json drove other episodes than policy.json: its seeds differ"):
+        tool.render(tmp_path, tool.DRIVING_FOLDER)

@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""policy_node/pretrained/README.md from the files beside it, so that what it says about the shipped policy can
-never drift from the policy.
+"""policy_node/pretrained/README.md and policy_node/pretrained/driving/README.md from the files beside them, so that
+what they say about the shipped policies can never drift from the policies.
 
 Usage::
 
-    .venv/bin/python tools/pretrained_readme.py           # write policy_node/pretrained/README.md
-    .venv/bin/python tools/pretrained_readme.py --check   # exit 1 if the README is not what the files give
+    .venv/bin/python tools/pretrained_readme.py           # write both READMEs
+    .venv/bin/python tools/pretrained_readme.py --check   # exit 1 if a README is not what its files give
 
 Every figure and name in the README comes from a file: the policy file's safetensors header (the agent's config,
 the training metadata: variant, training config, env steps, the code revision it was trained at), the SHA-256 of
@@ -34,11 +34,15 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 FOLDER = Path("policy_node") / "pretrained"
+DRIVING_FOLDER = FOLDER / "driving"
+FOLDERS = (FOLDER, DRIVING_FOLDER)
 POLICY, ONNX = "policy.safetensors", "policy.onnx"
 EVAL_DIR = "eval"
 RESULTS_DOC = Path("docs") / "results.md"
 PRESETS = Path("config") / "train"
 OPPONENT_ORDER = ("random", "scripted", "perceiving")
+DRIVING_POLICY_EVAL = "policy.json"      # the driving policy's evaluation; the other files: reference drivers
+PAPER_DRIVING_PRED = 26.47               # the paper's Pred, reward per car and episode (its Table 2)
 # Fixes to training that a policy trained at an earlier revision lacks: (commit, what was wrong, whether the policy's
 # training config was affected by it).
 FIXES = (
@@ -211,11 +215,38 @@ def eval_command(path: str, result: Mapping[str, Any]) -> str:
     return shlex.join([*words, "--quiet", "--out", path])
 
 
-def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
-    """The README of ``root/folder``'s policy, from its files (``ReadmeError`` when they disagree)."""
+def training_recipe(root: Path, here: Path, config: Mapping[str, Any], revision: str) -> list[str]:
+    """The README's lines on how the policy was trained: its preset and overrides as one ``dynenv-train`` command,
+    or the commands of ``train_stages.json``; and why they reproduce the recipe, not the file."""
+    stages = training_stages(here, config)
+    if stages is None:
+        preset, arguments = training_preset(root, config)
+        budget = (f"The run stops after `max_minutes` of wall time, so the env steps it reaches (and its weights) "
+                  f"depend on the machine: the command reproduces the recipe, not the file."
+                  if config.get("max_minutes") is not None else
+                  "A budget in env steps: the command reproduces the recipe; the weights depend on the machine's "
+                  "timing" + (" (the asynchronous workers' policy lag)." if config.get("runner") == "async" else "."))
+        return [f"- training preset **`{preset}`** (config/train/{preset}.yaml) with these overrides, at code "
+                f"revision `{revision}`:", "", "```bash",
+                f"git checkout {revision}",
+                shlex.join([".venv/bin/dynenv-train", "--config", preset, *arguments, "--no-progress"]),
+                "```", "", f"  {budget}", ""]
+    out = [f"- trained in {len(stages)} stages (`train_stages.json`, checked to give the training config; the "
+           f"header records code revision `{revision}`, that of the last process that trained it):", ""]
+    out += [f"  {k + 1}. {stage['why']}" for k, stage in enumerate(stages)]
+    out += ["", "```bash", f"git checkout {stages[0].get('revision', revision)}"]
+    for k, stage in enumerate(stages):
+        if k and stage.get("revision"):         # a stage that needs code the header's revision lacks
+            out.append(f"git checkout {stage['revision']}")
+        out.append(shlex.join([".venv/bin/dynenv-train", *stage["train"], "--no-progress"]))
+    return out + ["```", "", "  A budget in env steps: the commands reproduce the recipe; the weights depend on the "
+                  "machine's timing (the asynchronous workers' policy lag).", ""]
+
+
+def shipped_files(here: Path) -> tuple[str, str, dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """(policy sha256, ONNX sha256, agent config, training meta, training config) of the policy in ``here``,
+    with ``train_config.json`` and ``train_summary.json`` checked against the policy file's header."""
     from dynenv_ros.agent.checkpoint import sha256
-    from dynenv_ros.evaluation.soccer import format_table
-    here = root / folder
     digest, onnx_digest = sha256(here / POLICY), sha256(here / ONNX)
     agent, meta = policy_header(here / POLICY)
     config = json.loads((here / "train_config.json").read_text())
@@ -225,9 +256,19 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     for key in ("env_steps", "updates", "episodes"):
         if meta.get(key) != summary.get(key):
             raise ReadmeError(f"train_summary.json's {key} {summary.get(key)} is not the header's {meta.get(key)}")
+    return digest, onnx_digest, agent, meta, config
+
+
+def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
+    """The README of ``root/folder``'s policy, from its files (``ReadmeError`` when they disagree): the soccer
+    README or, for a driving agent, ``render_driving``'s."""
+    if policy_header(root / folder / POLICY)[0].get("scenario", "robocup") == "driving":
+        return render_driving(root, folder)
+    from dynenv_ros.evaluation.soccer import format_table
+    here = root / folder
+    digest, onnx_digest, agent, meta, config = shipped_files(here)
     evaluations = load_evaluations(here, digest)
     stages = training_stages(here, config)
-    preset, arguments = training_preset(root, config) if stages is None else ("", [])
     revision = meta["code_revision"]
     losses = {k: v for k, v in _losses(config).as_dict().items() if v}
     teacher = config.get("teacher")
@@ -251,25 +292,7 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
             f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes on `{config['device']}` "
             f"with {config['torch_threads']} torch "
             f"thread{'s' if config['torch_threads'] != 1 else ''};"]
-    if stages is None:
-        out += [f"- training preset **`{preset}`** (config/train/{preset}.yaml) with these overrides, at code "
-                f"revision `{revision}`:", "", "```bash",
-                f"git checkout {revision}",
-                shlex.join([".venv/bin/dynenv-train", "--config", preset, *arguments, "--no-progress"]),
-                "```", "",
-                f"  The run stops after `max_minutes` of wall time, so the env steps it reaches (and its weights) "
-                f"depend on the machine: the command reproduces the recipe, not the file.", ""]
-    else:
-        out += [f"- trained in {len(stages)} stages (`train_stages.json`, checked to give the training config; the "
-                f"header records code revision `{revision}`, that of the last process that trained it):", ""]
-        out += [f"  {k + 1}. {stage['why']}" for k, stage in enumerate(stages)]
-        out += ["", "```bash", f"git checkout {stages[0].get('revision', revision)}"]
-        for k, stage in enumerate(stages):
-            if k and stage.get("revision"):         # a stage that needs code the header's revision lacks
-                out.append(f"git checkout {stage['revision']}")
-            out.append(shlex.join([".venv/bin/dynenv-train", *stage["train"], "--no-progress"]))
-        out += ["```", "", "  A budget in env steps: the commands reproduce the recipe; the weights depend on the "
-                "machine's timing (the asynchronous workers' policy lag).", ""]
+    out += training_recipe(root, here, config, revision)
 
     out += ["## What it is not", ""]
     listed = listed_sha256s(root)
@@ -333,26 +356,167 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     return "\n".join(out)
 
 
+# -- the driving policy ------------------------------------------------------------------------------------------
+def load_driving_evaluations(folder: Path, digest: str) -> tuple[tuple[Path, dict[str, Any]],
+                                                                  list[tuple[Path, dict[str, Any]]]]:
+    """(the policy's evaluation ``eval/policy.json``, the reference drivers' evaluations: every other file in
+    ``eval/``), each a driving evaluation; the policy's must be of the file whose SHA-256 is ``digest``, and every
+    reference must have driven the same episodes (seeds, episodes, cars, perception, episode settings)."""
+    from dynenv_ros.evaluation.results import load_evaluation
+    policy, references = None, []
+    for path in sorted((folder / EVAL_DIR).glob("*.json")):
+        result = load_evaluation(path)
+        if result.get("scenario") != "driving":
+            raise ReadmeError(f"{path} is not a driving evaluation")
+        evaluated = result.get("evaluated", {})
+        if path.name == DRIVING_POLICY_EVAL:
+            if evaluated.get("kind") != "checkpoint" or evaluated.get("sha256") != digest:
+                raise ReadmeError(f"{path} evaluates another policy: its sha256 is {evaluated.get('sha256')}, "
+                                  f"{folder / POLICY}'s is {digest}; re-run its command (README) to evaluate this one")
+            policy = (path, result)
+        elif evaluated.get("kind") == "checkpoint":
+            raise ReadmeError(f"{path}: a reference must be a scripted or random driver, not a policy file "
+                              f"(this policy's evaluation is {DRIVING_POLICY_EVAL})")
+        else:
+            references.append((path, result))
+    if policy is None:
+        raise ReadmeError(f"no {DRIVING_POLICY_EVAL} in {folder / EVAL_DIR}: run the dynenv-eval commands first")
+    same = ("episodes", "seeds", "n_cars", "perception", "env_config")
+    for path, result in references:
+        differ = [key for key in same if result["settings"].get(key) != policy[1]["settings"].get(key)]
+        if differ:
+            raise ReadmeError(f"{path} drove other episodes than {DRIVING_POLICY_EVAL}: its {', '.join(differ)} "
+                              f"differ")
+    return policy, references
+
+
+def driving_eval_command(path: str, result: Mapping[str, Any]) -> str:
+    """The ``dynenv-eval --scenario driving`` command that writes ``result`` to ``path`` (from its own settings)."""
+    settings = result["settings"]
+    words = [".venv/bin/dynenv-eval", "--scenario", "driving", result["evaluated"].get("path") or
+             result["evaluated"]["spec"], "--cars", str(settings["n_cars"])]
+    if result["evaluated"].get("kind") != "checkpoint":       # a checkpoint brings its own action mode
+        words += ["--action-mode", settings["action_mode"]]
+    perception = settings["perception"]
+    if isinstance(perception, Mapping):
+        words += ["--perception", perception["preset"], "--noise-magnitude", _yaml(perception["noise_magnitude"])]
+    else:
+        words += ["--perception", str(perception)]
+    words += ["--episodes", str(settings["episodes"]), "--seeds", *map(str, settings["seeds"])]
+    env_config = dict(settings.get("env_config") or {})
+    if "episode_seconds" in env_config:
+        words += ["--episode-seconds", _yaml(env_config.pop("episode_seconds"))]
+    if env_config:
+        raise ReadmeError(f"{path}: env_config {sorted(env_config)} has no dynenv-eval option")
+    if settings.get("greedy"):
+        words.append("--greedy")
+    return shlex.join([*words, "--quiet", "--out", path])
+
+
+def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
+    """The README of a shipped driving policy, from its files (``ReadmeError`` when they disagree)."""
+    from dynenv_ros.evaluation.driving import format_driving_table
+    here = root / folder
+    digest, onnx_digest, agent, meta, config = shipped_files(here)
+    (policy_path, policy), references = load_driving_evaluations(here, digest)
+    revision = meta["code_revision"]
+    losses = {k: v for k, v in _losses(config).as_dict().items() if v}
+    teacher = config.get("teacher")
+    settings = policy["settings"]
+    summary = policy["summary"]
+
+    out = ["# The shipped driving policy", "",
+           "<!-- Written by tools/pretrained_readme.py from the files of this folder; do not edit by hand. "
+           "Regenerate: .venv/bin/python tools/pretrained_readme.py -->", ""]
+    out += ["## What it is", "",
+            f"`{POLICY}` (torch runtime; sha256 `{digest}`) and `{ONNX}` (onnxruntime; sha256 `{onnx_digest}`) hold "
+            f"one trained driving agent (feature size {agent['feature_size']}, {agent['action_mode']} actions). From "
+            f"the policy file's header (`train_config.json` and `train_summary.json` are the same):", "",
+            f"- **{config['algorithm'].upper()}, variant `{config['variant']}`** (its losses: "
+            f"{', '.join(f'`{k}`' for k in losses) or 'none'})"
+            + (f", **plus imitation of {'the scripted driver' if teacher == 'scripted' else f'the scripted `{teacher}`'}"
+               f", which reads the ground truth** (imitation "
+               f"weight {_n(config['imitation_coef'])}): not the paper's pure-RL Pred, and not a policy that learned "
+               f"to drive from reward alone" if teacher else
+               ", **pure reinforcement learning** (no teacher, no imitation): the paper's Pred") + ";",
+            f"- {config['n_cars']} cars per world, every car learning, `{config['perception']}` perception, seed "
+            f"{config['seed']};",
+            f"- **{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
+            f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes of wall time on `{config['device']}` (the sum "
+            f"over its training processes, resumes included);"]
+    out += training_recipe(root, here, config, revision)
+
+    out += ["## What it is not", ""]
+    listed = listed_sha256s(root)
+    mine = [prefix for prefix in listed if digest.startswith(prefix)]
+    if mine:
+        out.append(f"- Its sha256 is among those {RESULTS_DOC} lists (`{mine[0]}`): that page's figures for that "
+                   f"run are about this file.")
+    elif listed:
+        out.append(f"- It is **not one of the runs of {RESULTS_DOC}**: its sha256 begins with none of the "
+                   f"{len(listed)} policy sha256s that page lists, so none of its figures is about this file.")
+    home, crashed = summary["home_rate"]["mean"], summary["crash_rate"]["mean"]
+    out.append(f"- Not a solved task: on the held-out episodes below {home * 100:.0f} % of its cars get home and "
+               f"{crashed * 100:.0f} % crash.")
+    out.append(f"- Its figure below is a held-out evaluation, not the paper's statistic (the best 10-episode "
+               f"moving average during training, a friendlier one): the paper's Pred reached "
+               f"{PAPER_DRIVING_PRED} per car and episode that way.")
+    out.append("")
+
+    out += ["## How it drives (held-out seeds)", "",
+            f"Each driver drives all {settings['n_cars']} cars of the same {len(policy['episodes'])} "
+            f"episodes ({settings['episodes']} per seed, seeds {', '.join(map(str, settings['seeds']))}), "
+            f"`{settings['perception']}` perception; reward per car and episode (driving's paper's metric is its "
+            f"total: it has no observation reward), mean ± sd over the seeds (the unit).", "",
+            "| driver | actions | reward per car and episode | share of cars home | share of cars crashed |",
+            "|---|---|---:|---:|---:|"]
+    for path, result in [(policy_path, policy), *references]:
+        s = result["summary"]
+        name = "this policy" if result is policy else f"`{result['evaluated']['spec']}`"
+        acting = ("greedy" if result["settings"].get("greedy") else "sampled") if result is policy else "—"
+        bold = "**" if result is policy else ""
+        out.append(f"| {name} | {acting} | {bold}{_mean_sd(s['total'])}{bold} | {_mean_sd(s['home_rate'])} | "
+                   f"{_mean_sd(s['crash_rate'])} |")
+    out += ["", "### Reproduce", "",
+            "Each file in `eval/` is the output of one command (run from the repository root; same code, same "
+            "file), and this README is regenerated from them:", "", "```bash"]
+    out += [driving_eval_command(str(folder / EVAL_DIR / path.name), result)
+            for path, result in [(policy_path, policy), *references]]
+    out += [".venv/bin/python tools/pretrained_readme.py", "```", "",
+            f"`git log -- {folder / EVAL_DIR}` gives the commit each file was made at.", "", "### Per seed", ""]
+    for _, result in [(policy_path, policy), *references]:
+        out += [format_driving_table(result), ""]
+
+    out += ["## Play it", "",
+            '`make run ARGS="--set scenario=driving"`: a policy node drives `car_0` with `policy.onnx` '
+            "(onnxruntime), a `scripted_driver` node the other cars (`--set car_0=scripted` for scripted drivers "
+            "only" + ("; the main job refuses this discrete policy with `--set action_mode=continuous`)."
+                      if agent["action_mode"] == "discrete" else ")."), ""]
+    return "\n".join(out)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="exit 1 if the README is not what the files give")
     args = parser.parse_args(argv)
-    target = ROOT / FOLDER / "README.md"
-    try:
-        text = render()
-    except (ReadmeError, OSError) as error:
-        print(f"pretrained_readme: {error}", file=sys.stderr)
-        return 2
-    if args.check:
-        if not target.is_file() or target.read_text() != text:
+    stale = 0
+    for folder in FOLDERS:
+        target = ROOT / folder / "README.md"
+        try:
+            text = render(ROOT, folder)
+        except (ReadmeError, OSError) as error:
+            print(f"pretrained_readme: {folder}: {error}", file=sys.stderr)
+            return 2
+        if not args.check:
+            target.write_text(text)
+            print(f"wrote {target}")
+        elif not target.is_file() or target.read_text() != text:
             print(f"{target} is not what the files give: run .venv/bin/python tools/pretrained_readme.py",
                   file=sys.stderr)
-            return 1
-        print(f"{target} is up to date")
-        return 0
-    target.write_text(text)
-    print(f"wrote {target}")
-    return 0
+            stale = 1
+        else:
+            print(f"{target} is up to date")
+    return stale
 
 
 if __name__ == "__main__":
