@@ -63,6 +63,8 @@ setup(
         (f"share/{PACKAGE}/config/perception", glob("config/perception/*.yaml")),
         (f"share/{PACKAGE}/pretrained", [f for f in glob("policy_node/pretrained/*") if Path(f).is_file()]),
         (f"share/{PACKAGE}/pretrained/eval", glob("policy_node/pretrained/eval/*.json")),
+        (f"share/{PACKAGE}/pretrained/driving", [f for f in glob("policy_node/pretrained/driving/*") if Path(f).is_file()]),
+        (f"share/{PACKAGE}/pretrained/driving/eval", glob("policy_node/pretrained/driving/eval/*.json")),
         (f"share/{PACKAGE}/config/train", glob("config/train/*.yaml")),
         (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),    # the live view's layout
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),

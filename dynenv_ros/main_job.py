@@ -239,10 +239,22 @@ def settings_epilog() -> str:
     return "\n".join(lines)
 
 
+SHIPPED_FOLDER = Path("policy_node") / "pretrained"
+INSTALLED_SHIPPED = Path(sys.prefix) / "share" / "dynenv_ros" / "pretrained"     # setup.py's data_files
+
+
 def policy_file(value: str) -> Path:
-    """A policy file named in the config (team_a, car_0): absolute, or relative to the repository (where the shipped one lies)."""
+    """A policy file named in the config (team_a, car_0): absolute, or relative to the repository (where the
+    shipped ones lie); in a colcon / pip install without the repository, a shipped one is read from share/."""
     path = Path(value)
-    return path if path.is_absolute() else Path(__file__).resolve().parent.parent / path
+    if path.is_absolute():
+        return path
+    in_repo = Path(__file__).resolve().parent.parent / path
+    if not in_repo.exists() and path.parts[:2] == SHIPPED_FOLDER.parts:
+        installed = INSTALLED_SHIPPED.joinpath(*path.parts[2:])
+        if installed.exists():
+            return installed
+    return in_repo
 
 
 def load_config(path: Path, overrides: dict[str, Any]) -> MainJobConfig:

@@ -357,3 +357,24 @@ def test_the_users_ros_domain_id_is_respected_and_isolation_only_without_one_or_
     assert graph_environment(5).get("ROS_AUTOMATIC_DISCOVERY_RANGE") == os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
     with pytest.raises(ConfigError, match="domain_id must be -1"):
         MainJobConfig.from_mapping({"domain_id": -3})
+
+
+def test_shipped_policies_resolve_in_the_repository_and_else_in_the_installed_share(tmp_path, monkeypatch):
+    """A colcon / pip install has no policy_node/pretrained/ beside the package: setup.py installs the shipped
+    policies (soccer and driving) under share/dynenv_ros/pretrained/, and the config's repository-relative names
+    must find them there."""
+    from pathlib import Path
+
+    import dynenv_ros.main_job as main_job
+    repo = Path(main_job.__file__).resolve().parent.parent
+    assert main_job.policy_file(main_job.SHIPPED_DRIVING_POLICY) == repo / "policy_node/pretrained/driving/policy.onnx"
+    assert main_job.policy_file(main_job.SHIPPED_DRIVING_POLICY).is_file()
+    share = tmp_path / "share" / "dynenv_ros" / "pretrained"
+    (share / "driving").mkdir(parents=True)
+    (share / "driving" / "elsewhere.onnx").write_bytes(b"onnx")
+    monkeypatch.setattr(main_job, "INSTALLED_SHIPPED", share)
+    assert main_job.policy_file("policy_node/pretrained/driving/elsewhere.onnx") == share / "driving/elsewhere.onnx"
+    # anything else stays repository-relative (and absent: the caller's missing-file error names that path)
+    assert main_job.policy_file("runs/elsewhere.onnx") == repo / "runs/elsewhere.onnx"
+    assert main_job.policy_file("policy_node/pretrained/missing.onnx") == repo / "policy_node/pretrained/missing.onnx"
+    assert main_job.policy_file(str(tmp_path / "abs.onnx")) == tmp_path / "abs.onnx"
