@@ -165,6 +165,19 @@ def listed_sha256s(root: Path) -> list[str]:
     return list(dict.fromkeys(re.findall(r"`([0-9a-f]{12,64})`", doc.read_text()))) if doc.is_file() else []
 
 
+def results_listing(root: Path, digest: str) -> list[str]:
+    """The README's line on whether docs/results.md's figures are about this policy file (by its sha256)."""
+    listed = listed_sha256s(root)
+    mine = [prefix for prefix in listed if digest.startswith(prefix)]
+    if mine:
+        return [f"- Its sha256 is among those {RESULTS_DOC} lists (`{mine[0]}`): that page's figures for that run "
+                f"are about this file."]
+    if listed:
+        return [f"- It is **not one of the runs of {RESULTS_DOC}**: its sha256 begins with none of the "
+                f"{len(listed)} policy sha256s that page lists, so none of its figures is about this file."]
+    return []
+
+
 def includes_fix(root: Path, fix: str, revision: str) -> bool:
     """Whether ``revision`` has ``fix`` among its ancestors (git); GitUnknown when git cannot tell."""
     try:
@@ -196,15 +209,23 @@ def _totals(result: Mapping[str, Any]) -> tuple[int, int]:
 def eval_command(path: str, result: Mapping[str, Any]) -> str:
     """The ``dynenv-eval`` command that writes ``result`` to ``path`` (from its own settings)."""
     settings = result["settings"]
-    perception = settings["perception"]
     words = [".venv/bin/dynenv-eval", result["evaluated"]["path"], "--opponent", result["opponent"]["spec"],
              "--episodes", str(settings["episodes"]), "--seeds", *map(str, settings["seeds"]),
-             "--players-per-team", str(settings["players_per_team"])]
+             "--players-per-team", str(settings["players_per_team"]), *_perception_words(settings),
+             "--sides", settings["sides"]]
+    return shlex.join([*words, *_closing_words(path, settings)])
+
+
+def _perception_words(settings: Mapping[str, Any]) -> list[str]:
+    perception = settings["perception"]
     if isinstance(perception, Mapping):
-        words += ["--perception", perception["preset"], "--noise-magnitude", _yaml(perception["noise_magnitude"])]
-    else:
-        words += ["--perception", str(perception)]
-    words += ["--sides", settings["sides"]]
+        return ["--perception", perception["preset"], "--noise-magnitude", _yaml(perception["noise_magnitude"])]
+    return ["--perception", str(perception)]
+
+
+def _closing_words(path: str, settings: Mapping[str, Any]) -> list[str]:
+    """An evaluation command's episode length, greedy flag and output (``settings``: the evaluation's)."""
+    words = []
     env_config = dict(settings.get("env_config") or {})
     if "episode_seconds" in env_config:
         words += ["--episode-seconds", _yaml(env_config.pop("episode_seconds"))]
@@ -212,7 +233,7 @@ def eval_command(path: str, result: Mapping[str, Any]) -> str:
         raise ReadmeError(f"{path}: env_config {sorted(env_config)} has no dynenv-eval option")
     if settings.get("greedy"):
         words.append("--greedy")
-    return shlex.join([*words, "--quiet", "--out", path])
+    return [*words, "--quiet", "--out", path]
 
 
 def training_recipe(root: Path, here: Path, config: Mapping[str, Any], revision: str) -> list[str]:
@@ -295,14 +316,7 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     out += training_recipe(root, here, config, revision)
 
     out += ["## What it is not", ""]
-    listed = listed_sha256s(root)
-    mine = [prefix for prefix in listed if digest.startswith(prefix)]
-    if mine:
-        out.append(f"- Its sha256 is among those {RESULTS_DOC} lists (`{mine[0]}`): that page's figures for that "
-                   f"run are about this file.")
-    elif listed:
-        out.append(f"- It is **not one of the runs of {RESULTS_DOC}**: its sha256 begins with none of the "
-                   f"{len(listed)} policy sha256s that page lists, so none of its figures is about this file.")
+    out += results_listing(root, digest)
     for fix, what, applies in FIXES:
         if applies(config) and not includes_fix(root, fix, revision):
             out.append(f"- It was trained **before the fix of `{fix}`**, at `{revision[:7]}`: {what}. It is a "
@@ -394,23 +408,11 @@ def driving_eval_command(path: str, result: Mapping[str, Any]) -> str:
     """The ``dynenv-eval --scenario driving`` command that writes ``result`` to ``path`` (from its own settings)."""
     settings = result["settings"]
     words = [".venv/bin/dynenv-eval", "--scenario", "driving", result["evaluated"].get("path") or
-             result["evaluated"]["spec"], "--cars", str(settings["n_cars"])]
+             result["evaluated"]["spec"], "--episodes", str(settings["episodes"]), "--seeds",
+             *map(str, settings["seeds"]), "--cars", str(settings["n_cars"])]
     if result["evaluated"].get("kind") != "checkpoint":       # a checkpoint brings its own action mode
         words += ["--action-mode", settings["action_mode"]]
-    perception = settings["perception"]
-    if isinstance(perception, Mapping):
-        words += ["--perception", perception["preset"], "--noise-magnitude", _yaml(perception["noise_magnitude"])]
-    else:
-        words += ["--perception", str(perception)]
-    words += ["--episodes", str(settings["episodes"]), "--seeds", *map(str, settings["seeds"])]
-    env_config = dict(settings.get("env_config") or {})
-    if "episode_seconds" in env_config:
-        words += ["--episode-seconds", _yaml(env_config.pop("episode_seconds"))]
-    if env_config:
-        raise ReadmeError(f"{path}: env_config {sorted(env_config)} has no dynenv-eval option")
-    if settings.get("greedy"):
-        words.append("--greedy")
-    return shlex.join([*words, "--quiet", "--out", path])
+    return shlex.join([*words, *_perception_words(settings), *_closing_words(path, settings)])
 
 
 def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
@@ -447,14 +449,7 @@ def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
     out += training_recipe(root, here, config, revision)
 
     out += ["## What it is not", ""]
-    listed = listed_sha256s(root)
-    mine = [prefix for prefix in listed if digest.startswith(prefix)]
-    if mine:
-        out.append(f"- Its sha256 is among those {RESULTS_DOC} lists (`{mine[0]}`): that page's figures for that "
-                   f"run are about this file.")
-    elif listed:
-        out.append(f"- It is **not one of the runs of {RESULTS_DOC}**: its sha256 begins with none of the "
-                   f"{len(listed)} policy sha256s that page lists, so none of its figures is about this file.")
+    out += results_listing(root, digest)
     home, crashed = summary["home_rate"]["mean"], summary["crash_rate"]["mean"]
     out.append(f"- Not a solved task: on the held-out episodes below {home * 100:.0f} % of its cars get home and "
                f"{crashed * 100:.0f} % crash.")
