@@ -440,7 +440,7 @@ def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
                f", which reads the ground truth** (imitation "
                f"weight {_n(config['imitation_coef'])}): not the paper's pure-RL Pred, and not a policy that learned "
                f"to drive from reward alone" if teacher else
-               ", **pure reinforcement learning** (no teacher, no imitation): the paper's Pred") + ";",
+               ", **pure reinforcement learning** (no teacher, no imitation), as the paper's Pred") + ";",
             f"- {config['n_cars']} cars per world, every car learning, `{config['perception']}` perception, seed "
             f"{config['seed']};",
             f"- **{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
@@ -467,7 +467,9 @@ def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
             "|---|---|---:|---:|---:|"]
     for path, result in [(policy_path, policy), *references]:
         s = result["summary"]
-        name = "this policy" if result is policy else f"`{result['evaluated']['spec']}`"
+        spec = result["evaluated"]["spec"]
+        name = ("this policy" if result is policy else f"`{spec}`" + (" (reads the ground truth)"
+                                                                       if spec == "scripted" else ""))
         acting = ("greedy" if result["settings"].get("greedy") else "sampled") if result is policy else "—"
         bold = "**" if result is policy else ""
         out.append(f"| {name} | {acting} | {bold}{_mean_sd(s['total'])}{bold} | {_mean_sd(s['home_rate'])} | "
