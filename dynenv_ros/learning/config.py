@@ -74,6 +74,7 @@ SIZE_BOUNDS: dict[str, tuple[int, int]] = {
     "torch_threads": (1, 256),
     "snapshot_pool": (1, 100),
     "keep_checkpoints": (1, 100),
+    "best_policy_window": (1, 100_000),
 }
 
 
@@ -276,6 +277,10 @@ class TrainConfig:
     checkpoint_every_minutes: float = _f(5.0, "Write a training checkpoint every this many minutes of wall time, "
                                               "after a first one as the run starts (a kill loses at most this much).")
     keep_checkpoints: int = _f(3, "Training checkpoints kept (the newest ones).")
+    best_policy_window: int | None = _f(None, "Keep best_policy.safetensors, the policy at the best moving average "
+                                              "of this many logged episode returns so far (the training curve's "
+                                              "peak, what dynenv-eval training-best --window reads), for a "
+                                              "held-out evaluation of it; null: only the last policy.")
 
     def __post_init__(self) -> None:
         self.validate()

@@ -27,6 +27,7 @@ def run_disk_bytes(cfg: TrainConfig) -> tuple[int, str]:
     policy = sum(p.numel() for p in learner.agent.parameters())
     checkpoint = FLOAT_BYTES * (parameters + 2 * trainable)
     copies = cfg.keep_checkpoints + 1
-    total = copies * checkpoint + 2 * FLOAT_BYTES * policy + LOG_BYTES
+    policy_files = 2 + (cfg.best_policy_window is not None)        # safetensors, ONNX, best_policy.safetensors
+    total = copies * checkpoint + policy_files * FLOAT_BYTES * policy + LOG_BYTES
     return total, (f"{copies} checkpoints of {checkpoint / 2**20:.1f} MB, the policy files and "
                    f"{LOG_BYTES // 2**20} MB of logs")

@@ -28,6 +28,7 @@ import torch
 from dynenv_ros.learning import checkpoints, compiled
 from dynenv_ros.learning.agents import make_agent
 from dynenv_ros.learning.algorithms import UpdateSettings, update
+from dynenv_ros.learning.best_policy import BestPolicy
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import Rollout
@@ -92,6 +93,10 @@ class Trainer:
             self._resume()
         elif cfg.pretrained_encoder:
             self._load_encoder(cfg.pretrained_encoder)
+        self.best_policy = None
+        if cfg.best_policy_window is not None:
+            self.best_policy = (BestPolicy.resume(self.run_dir, cfg.best_policy_window, self.env_steps) if resume
+                                else BestPolicy(cfg.best_policy_window))
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
         self._start_rollouts()
         self.logger = RunLogger(self.run_dir)
@@ -259,6 +264,13 @@ class Trainer:
             for key in returns[0]:
                 scalars[f"episode/{key}"] = float(np.mean([r[key] for r in returns]))
         self.logger.log(self.env_steps, self.updates, self.wall_before + self._elapsed(), scalars)
+        if self.best_policy is not None and "episode/return" in scalars:
+            # the value as metrics.csv holds it (6 significant digits), so the peak is where training-best finds it
+            average = self.best_policy.observe(float(f"{scalars['episode/return']:.6g}"))
+            if average is not None:         # the curve's new peak: keep this policy
+                meta = {k: v for k, v in self._meta().items() if k != "numpy_rng"}
+                self.best_policy.save(self.run_dir, lambda path, m: checkpoints.save_policy(
+                    self.learner.agent, path, m), meta, average)
         if bar is not None:
             postfix = {"sps": f"{scalars['speed/env_steps_per_second']:.0f}"}
             if returns:
