@@ -144,9 +144,16 @@ def training_stages(here: Path, config: Mapping[str, Any]) -> list[dict[str, Any
             if "--resume" not in options:
                 raise ReadmeError(f"{path}: stage {k + 1} must resume the run (--resume)")
             cfg = load_config(None, overrides, base=cfg)
-    if cfg is None or cfg.to_dict() != dict(config):
+    if cfg is None or cfg.to_dict() != with_later_defaults(config):
         raise ReadmeError(f"{path}: its stages do not give the training config in {POLICY}'s header")
     return stages
+
+
+def with_later_defaults(config: Mapping[str, Any]) -> dict[str, Any]:
+    """``config`` plus the settings added to the trainer after it was written, at their defaults (a new setting's
+    default keeps the behaviour from before it existed, so an older policy's recipe is unchanged by it)."""
+    from dynenv_ros.learning.config import TrainConfig
+    return {**{k: v for k, v in TrainConfig().to_dict().items() if k not in config}, **config}
 
 
 def _yaml(value: Any) -> str:
