@@ -59,6 +59,10 @@ class SequenceLearner:
                              f"got {batch_sequences}")
         if max_policy_lag < 0:
             raise ConfigError("max_policy_lag", f"must be >= 0, got {max_policy_lag}")
+        if cfg.best_policy_window is not None:
+            raise ConfigError("best_policy_window", "dynenv-train's runners (in-process, async) keep the training "
+                                                    "curve's best policy; the trainer node and --from-bag do not: "
+                                                    "use null here")
         if cfg.localization != "none":
             raise ConfigError("localization", "'estimate' trains on the simulator's pose estimates; experience "
                                               "over ROS (the trainer node, --from-bag) carries none yet: use "

@@ -4,7 +4,8 @@ reuses its pieces (``RolloutCollector``, ``update``, ``checkpoints``).
 
 A run directory holds: ``config.json`` (the resolved config), ``metrics.csv`` and ``tensorboard/`` (every scalar),
 ``checkpoints/`` (the last few, safetensors + JSON, see ``checkpoints``), and at the end ``policy.safetensors``,
-``policy.onnx``, ``curves.png`` and ``summary.json``. Resuming (``--resume RUN_DIR``) restores the networks, the
+``policy.onnx``, ``curves.png`` and ``summary.json`` (with ``best_policy_window``, also ``best_policy.safetensors``:
+``learning.best_policy``). Resuming (``--resume RUN_DIR``) restores the networks, the
 optimiser, the step counters and the random generators from the latest checkpoint; the worlds restart with fresh
 episodes seeded from (seed, update), since a world's physics state is not checkpointed — an episode cut by a kill
 is simply not counted.
