@@ -8,7 +8,8 @@ each run evaluated when it ends, the evaluations merged into one result per vari
 Each run is one task with ``--cpus-per-run`` CPUs (default: the async runner's workers plus one for its learner,
 else one): it trains ``--config`` with ``variant`` and ``seed`` set (and every ``--set``) in a scratch folder of the
 node it lands on, evaluates its policy there (soccer: ``--eval-episodes`` episodes per seed against ``--opponent`` on the
-evaluation seeds, sides alternating; driving: the policy drives every car), and sends back its small files: config,
+evaluation seeds, sides alternating; driving: the policy drives every car; actions sampled, or the most likely ones
+with ``--greedy``), and sends back its small files: config,
 summary, metrics, the policy and the evaluation. They are written to ``OUT/<variant>_s<seed>/``, so a sweep over a
 cluster leaves everything on the machine that started it, and a sweep run again skips the runs already there.
 
@@ -64,6 +65,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--eval-episodes", type=int, default=10, help="evaluation episodes per seed (default 10)")
     parser.add_argument("--eval-seeds", type=int, nargs="+", default=[0], help="evaluation seeds of every run "
                         "(default 0: every run plays the same episodes)")
+    parser.add_argument("--greedy", action="store_true", help="evaluate each run's policy on its most likely "
+                        "actions (dynenv-eval --greedy) instead of sampling them, as it was trained")
     parser.add_argument("--reference", help="also evaluate this team (soccer: random, scripted, ...; driving: "
                         "random or scripted) on the same seeds")
     parser.add_argument("--best", action="store_true", help="BEST between each variant and the reference (or the "
@@ -131,15 +134,48 @@ def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str
 
 
 def _evaluate(cfg: Any, policy: str | Path, evaluation: dict[str, Any]) -> dict[str, Any]:
-    seeds = evaluation["seeds"]
+    seeds, greedy = evaluation["seeds"], bool(evaluation.get("greedy", False))    # (greedy: policy files only)
     if cfg.driving:
         from dynenv_ros.evaluation.driving import evaluate_driving
         reference = str(policy) in ("random", "scripted")
         return evaluate_driving(str(policy), episodes=evaluation["episodes"], seeds=seeds, n_cars=cfg.n_cars,
-                                perception=cfg.perception, action_mode=cfg.action_mode if reference else None)
+                                perception=cfg.perception, action_mode=cfg.action_mode if reference else None,
+                                greedy=greedy and not reference)
     from dynenv_ros.evaluation.soccer import evaluate
     return evaluate(str(policy), evaluation["opponent"], episodes=evaluation["episodes"], seeds=seeds,
-                    players_per_team=cfg.players_per_team, perception=cfg.perception, sides="alternate")
+                    players_per_team=cfg.players_per_team, perception=cfg.perception, sides="alternate",
+                    greedy=greedy)
+
+
+def run_evaluation(args: argparse.Namespace) -> dict[str, Any]:
+    """How this sweep evaluates each run (``_evaluate``'s settings)."""
+    return {"episodes": args.eval_episodes, "opponent": args.opponent, "seeds": args.eval_seeds,
+            "greedy": args.greedy}
+
+
+def _check_done_runs(args: argparse.Namespace, planned: dict[str, Any]) -> None:
+    """The runs already in ``--out`` (skipped, then merged) must have been evaluated as this sweep evaluates."""
+    from dynenv_ros.evaluation.results import load_evaluation
+    for name in planned:
+        path = args.out / name / "eval.json"
+        if path.is_file():
+            differ = evaluated_otherwise(load_evaluation(path), run_evaluation(args))
+            if differ:
+                raise ValueError(f"{path} was evaluated with other settings ({differ}): a sweep's runs must be "
+                                 f"evaluated alike; use another --out")
+
+
+def evaluated_otherwise(result: dict[str, Any], evaluation: dict[str, Any]) -> str:
+    """How an evaluation already in the sweep's folder differs from the one this sweep makes ('' when alike)."""
+    settings = result.get("settings", {})
+    differ = [f"{key} {settings.get(key)!r}, not {evaluation[key]!r}" for key in ("episodes", "seeds")
+              if settings.get(key) != evaluation[key]]
+    if bool(settings.get("greedy", False)) != bool(evaluation.get("greedy", False)):
+        differ.append(f"greedy {bool(settings.get('greedy', False))}, not {bool(evaluation.get('greedy', False))}")
+    opponent = (result.get("opponent") or {}).get("spec")
+    if result.get("scenario", "robocup") != "driving" and opponent != evaluation["opponent"]:
+        differ.append(f"opponent {opponent!r}, not {evaluation['opponent']!r}")
+    return "; ".join(differ)
 
 
 def _write_run(out: Path, done: dict[str, Any]) -> None:
@@ -181,6 +217,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ValueError("--scratch is for local sweeps: on a cluster each run lands on another node's disk")
         if args.scratch:
             args.scratch.mkdir(parents=True, exist_ok=True)
+        _check_done_runs(args, planned)
     except (ConfigError, ValueError, OSError) as error:
         print(f"{PROG}: {error}".splitlines()[0], file=sys.stderr)
         return 2
@@ -207,11 +244,11 @@ def _sweep(ray: Any, args: argparse.Namespace, configs: dict[str, Any], planned:
         return 2
     task = ray.remote(max_retries=2)(train_and_evaluate)
     pending, failed = {}, []
+    evaluation = run_evaluation(args)
     for name, (run_cpus, cfg) in planned.items():
         if (args.out / name / "eval.json").is_file():
             print(f"{name}: already in {args.out / name}, skipped")
             continue
-        evaluation = {"episodes": args.eval_episodes, "opponent": args.opponent, "seeds": args.eval_seeds}
         scratch = str(args.scratch.resolve()) if args.scratch else None
         pending[task.options(num_cpus=run_cpus).remote(cfg.to_dict(), name, evaluation, scratch)] = name
     print(f"{len(pending)} runs on {cpus} CPUs ({'cluster ' + args.ray_address if args.ray_address else 'local'})",
