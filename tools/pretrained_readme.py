@@ -172,6 +172,32 @@ def listed_sha256s(root: Path) -> list[str]:
     return list(dict.fromkeys(re.findall(r"`([0-9a-f]{12,64})`", doc.read_text()))) if doc.is_file() else []
 
 
+def _opening(title: str, digest: str, onnx_digest: str, agent: str) -> list[str]:
+    """A README's title, its do-not-edit line and the first lines of "What it is": the files and their sha256s."""
+    return [f"# {title}", "",
+            "<!-- Written by tools/pretrained_readme.py from the files of this folder; do not edit by hand. "
+            "Regenerate: .venv/bin/python tools/pretrained_readme.py -->", "",
+            "## What it is", "",
+            f"`{POLICY}` (torch runtime; sha256 `{digest}`) and `{ONNX}` (onnxruntime; sha256 `{onnx_digest}`) hold "
+            f"one trained {agent}. From the policy file's header (`train_config.json` and `train_summary.json` are "
+            f"the same):", ""]
+
+
+def _recipe_head(config: Mapping[str, Any], losses: Mapping[str, Any]) -> str:
+    return (f"- **{config['algorithm'].upper()}, variant `{config['variant']}`** (its losses: "
+            f"{', '.join(f'`{k}`' for k in losses) or 'none'})")
+
+
+def _budget_line(meta: Mapping[str, Any], how: str) -> str:
+    return (f"- **{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
+            f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes {how};")
+
+
+def recipe_and_listing(root: Path, here: Path, config: Mapping[str, Any], revision: str, digest: str) -> list[str]:
+    """The training recipe, then the "What it is not" heading and whether docs/results.md is about this file."""
+    return [*training_recipe(root, here, config, revision), "## What it is not", "", *results_listing(root, digest)]
+
+
 def results_listing(root: Path, digest: str) -> list[str]:
     """The README's line on whether docs/results.md's figures are about this policy file (by its sha256)."""
     listed = listed_sha256s(root)
@@ -302,28 +328,17 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     teacher = config.get("teacher")
     self_play = config.get("opponent") == "self"
 
-    out = ["# The shipped policy", "",
-           "<!-- Written by tools/pretrained_readme.py from the files of this folder; do not edit by hand. "
-           "Regenerate: .venv/bin/python tools/pretrained_readme.py -->", ""]
-    out += ["## What it is", "",
-            f"`{POLICY}` (torch runtime; sha256 `{digest}`) and `{ONNX}` (onnxruntime; sha256 `{onnx_digest}`) hold "
-            f"one trained agent (feature size {agent['feature_size']}, {agent['head_mode']} head). From the policy "
-            f"file's header (`train_config.json` and `train_summary.json` are the same):", "",
-            f"- **{config['algorithm'].upper()}, variant `{config['variant']}`** (its losses: "
-            f"{', '.join(f'`{k}`' for k in losses) or 'none'})"
+    out = _opening("The shipped policy", digest, onnx_digest,
+                   f"agent (feature size {agent['feature_size']}, {agent['head_mode']} head)")
+    out += [_recipe_head(config, losses)
             + (f", **plus imitation of the scripted `{teacher}`** (imitation weight {_n(config['imitation_coef'])}: "
                f"the {teacher} labels the states the learner reaches; not in the paper, docs/training.md)"
                if teacher else ", pure reinforcement learning (no teacher)") + ";",
             f"- {'in stages (below)' if stages else 'self-play' if self_play else 'against ' + str(config.get('opponent'))}, "
             f"{config['players_per_team']} per team, `{config['perception']}` perception, seed {config['seed']};",
-            f"- **{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
-            f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes on `{config['device']}` "
-            f"with {config['torch_threads']} torch "
-            f"thread{'s' if config['torch_threads'] != 1 else ''};"]
-    out += training_recipe(root, here, config, revision)
-
-    out += ["## What it is not", ""]
-    out += results_listing(root, digest)
+            _budget_line(meta, f"on `{config['device']}` with {config['torch_threads']} torch "
+                               f"thread{'s' if config['torch_threads'] != 1 else ''}")]
+    out += recipe_and_listing(root, here, config, revision, digest)
     for fix, what, applies in FIXES:
         if applies(config) and not includes_fix(root, fix, revision):
             out.append(f"- It was trained **before the fix of `{fix}`**, at `{revision[:7]}`: {what}. It is a "
@@ -434,15 +449,9 @@ def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
     settings = policy["settings"]
     summary = policy["summary"]
 
-    out = ["# The shipped driving policy", "",
-           "<!-- Written by tools/pretrained_readme.py from the files of this folder; do not edit by hand. "
-           "Regenerate: .venv/bin/python tools/pretrained_readme.py -->", ""]
-    out += ["## What it is", "",
-            f"`{POLICY}` (torch runtime; sha256 `{digest}`) and `{ONNX}` (onnxruntime; sha256 `{onnx_digest}`) hold "
-            f"one trained driving agent (feature size {agent['feature_size']}, {agent['action_mode']} actions). From "
-            f"the policy file's header (`train_config.json` and `train_summary.json` are the same):", "",
-            f"- **{config['algorithm'].upper()}, variant `{config['variant']}`** (its losses: "
-            f"{', '.join(f'`{k}`' for k in losses) or 'none'})"
+    out = _opening("The shipped driving policy", digest, onnx_digest,
+                   f"driving agent (feature size {agent['feature_size']}, {agent['action_mode']} actions)")
+    out += [_recipe_head(config, losses)
             + (f", **plus imitation of {'the scripted driver' if teacher == 'scripted' else f'the scripted `{teacher}`'}"
                f", which reads the ground truth** (imitation "
                f"weight {_n(config['imitation_coef'])}): not the paper's pure-RL Pred, and not a policy that learned "
@@ -450,13 +459,9 @@ def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
                ", **pure reinforcement learning** (no teacher, no imitation), as the paper's Pred") + ";",
             f"- {config['n_cars']} cars per world, every car learning, `{config['perception']}` perception, seed "
             f"{config['seed']};",
-            f"- **{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
-            f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes of wall time on `{config['device']}` (the sum "
-            f"over its training processes, resumes included);"]
-    out += training_recipe(root, here, config, revision)
-
-    out += ["## What it is not", ""]
-    out += results_listing(root, digest)
+            _budget_line(meta, f"of wall time on `{config['device']}` (the sum over its training processes, resumes "
+                               f"included)")]
+    out += recipe_and_listing(root, here, config, revision, digest)
     home, crashed = summary["home_rate"]["mean"], summary["crash_rate"]["mean"]
     out.append(f"- Not a solved task: on the held-out episodes below {home * 100:.0f} % of its cars get home and "
                f"{crashed * 100:.0f} % crash.")
