@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Sequence
 
-from dynenv_ros.learning.run_log import CSV_NAME, read_metrics
+from dynenv_ros.learning.run_log import CSV_NAME, read_metrics, series_by_step
 
 DEFAULT_METRIC = "episode/return"
 DEFAULT_WINDOW = 10
@@ -48,9 +48,8 @@ def training_statistic(run: str | Path, metric: str = DEFAULT_METRIC, window: in
     if metric not in series:
         known = sorted(name for name in series if name.startswith("episode/"))
         raise ValueError(f"{path}: no metric {metric!r} logged (episode metrics: {known})")
-    by_step = dict(zip(*series[metric]))          # file order: a re-logged step keeps its later value
-    steps = sorted(by_step)
-    best, at = best_moving_average(steps, [by_step[s] for s in steps], window)
+    steps, values = series_by_step(series[metric])
+    best, at = best_moving_average(steps, values, window)
     return {"path": str(path), "metric": metric, "window": window, "windows": len(steps), "best": best,
             "at_env_steps": at}
 

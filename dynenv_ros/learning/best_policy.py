@@ -16,13 +16,13 @@ since the last checkpoint is trained again and logged again; a policy kept in th
 """
 from __future__ import annotations
 
-import json
 import math
 from collections import deque
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
-from dynenv_ros.learning.run_log import CSV_NAME, read_metrics
+from dynenv_ros.agent.checkpoint import load_policy, save_policy
+from dynenv_ros.learning.run_log import CSV_NAME, read_metrics, series_by_step
 
 BEST_POLICY = "best_policy.safetensors"
 METRIC = "episode/return"
@@ -52,11 +52,10 @@ class BestPolicy:
             return average
         return None
 
-    def save(self, run_dir: Path, save_policy: Callable[[str, Mapping[str, Any]], Any], meta: Mapping[str, Any],
-             average: float) -> None:
-        """Write the policy (``save_policy(path, meta)``, atomic) with the moving average it was kept for."""
-        save_policy(str(Path(run_dir) / BEST_POLICY), {**meta, "best_moving_average": average,
-                                                       "best_window": self.window})
+    def save(self, run_dir: Path, agent: Any, meta: Mapping[str, Any], average: float) -> None:
+        """Write ``agent`` as the kept policy file (atomic) with the moving average it was kept for."""
+        save_policy(agent, Path(run_dir) / BEST_POLICY, {**meta, "best_moving_average": average,
+                                                         "best_window": self.window})
 
     @classmethod
     def resume(cls, run_dir: Path, window: int, env_steps: int) -> "BestPolicy":
@@ -65,23 +64,21 @@ class BestPolicy:
         window is this one)."""
         recent: list[float] = []
         log = Path(run_dir) / CSV_NAME
-        if log.is_file():
-            series = read_metrics(log).get(METRIC)
-            if series is not None:
-                by_step = dict(zip(*series))
-                recent = [by_step[s] for s in sorted(by_step) if s <= env_steps][-window:]
+        series = read_metrics(log).get(METRIC) if log.is_file() else None
+        if series is not None:
+            steps, values = series_by_step(series)
+            recent = [v for s, v in zip(steps, values) if s <= env_steps][-window:]
         return cls(window, recent, kept_average(Path(run_dir) / BEST_POLICY, window))
 
 
 def kept_average(path: Path, window: int) -> float:
-    """The moving average a kept best policy was saved for; −inf when there is none (or it used another window)."""
+    """The moving average a kept best policy was saved for; −inf when there is none, it cannot be read, or it was
+    kept over another window."""
     if not path.is_file():
         return -math.inf
-    from dynenv_ros.agent.checkpoint import safetensors_header
     try:
-        header, _ = safetensors_header(path.read_bytes())
-        meta = json.loads((header.get("__metadata__") or {}).get("meta", "{}"))
-    except (OSError, ValueError):
+        _, meta = load_policy(path)
+    except ValueError:
         return -math.inf
     if meta.get("best_window") != window or not isinstance(meta.get("best_moving_average"), (int, float)):
         return -math.inf

@@ -12,6 +12,7 @@ from typing import Mapping
 
 CSV_NAME = "metrics.csv"
 CSV_HEADER = ("env_steps", "update", "wall_seconds", "name", "value")
+VALUE_FORMAT = ".6g"            # a scalar as metrics.csv holds it (``as_logged``)
 # The curves drawn at the end, in this order (those a run never logged are skipped).
 CURVES = ("episode/return", "episode/primary", "episode/rule", "episode/auxiliary", "episode/observation",
           "episode/paper_metric", "train/policy_loss", "train/value_loss", "train/entropy", "train/forward_loss",
@@ -41,7 +42,7 @@ class RunLogger:
         for name, value in scalars.items():
             if value is None or (isinstance(value, float) and math.isnan(value)):
                 continue
-            self._csv.writerow((env_steps, update, f"{wall_seconds:.3f}", name, f"{float(value):.6g}"))
+            self._csv.writerow((env_steps, update, f"{wall_seconds:.3f}", name, format(float(value), VALUE_FORMAT)))
             if self._tb is not None:
                 self._tb.add_scalar(name, float(value), env_steps)
         self._file.flush()
@@ -50,6 +51,19 @@ class RunLogger:
         self._file.close()
         if self._tb is not None:
             self._tb.close()
+
+
+def as_logged(value: float) -> float:
+    """``value`` as metrics.csv holds it: what a reader of the file (``training-best``) sees."""
+    return float(format(float(value), VALUE_FORMAT))
+
+
+def series_by_step(series: tuple[list[int], list[float]]) -> tuple[list[int], list[float]]:
+    """One logged series (``read_metrics``'s) by ascending env step, one value a step: a resumed run logs again the
+    steps after its last checkpoint, and the later row of a step wins."""
+    by_step = dict(zip(*series))                  # file order: a re-logged step keeps its later value
+    steps = sorted(by_step)
+    return steps, [by_step[s] for s in steps]
 
 
 def read_metrics(path: Path) -> dict[str, tuple[list[int], list[float]]]:

@@ -33,7 +33,7 @@ from dynenv_ros.learning.best_policy import BestPolicy
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import Rollout
-from dynenv_ros.learning.run_log import RunLogger, plot_curves
+from dynenv_ros.learning.run_log import RunLogger, as_logged, plot_curves
 from dynenv_ros.learning.worlds import make_worlds, soccer_config, teacher_driven_share
 
 VERSION = "dynenv_ros.learning/1"
@@ -116,6 +116,10 @@ class Trainer:
                 "episodes": self.episodes, "wall_seconds": self.wall_before + self._elapsed(),
                 "observation_layout": self.layout_shapes,
                 "numpy_rng": self.rng.bit_generator.state, "code_revision": checkpoints.code_revision()}
+
+    def _policy_meta(self) -> dict[str, Any]:
+        """What a policy file carries of the run (the checkpoint's meta less the generator state)."""
+        return {k: v for k, v in self._meta().items() if k != "numpy_rng"}
 
     def save_checkpoint(self) -> Path:
         extra = {"torch_generator": self.generator.get_state()}
@@ -266,12 +270,10 @@ class Trainer:
                 scalars[f"episode/{key}"] = float(np.mean([r[key] for r in returns]))
         self.logger.log(self.env_steps, self.updates, self.wall_before + self._elapsed(), scalars)
         if self.best_policy is not None and "episode/return" in scalars:
-            # the value as metrics.csv holds it (6 significant digits), so the peak is where training-best finds it
-            average = self.best_policy.observe(float(f"{scalars['episode/return']:.6g}"))
+            # the value as metrics.csv holds it, so the peak is where training-best finds it
+            average = self.best_policy.observe(as_logged(scalars["episode/return"]))
             if average is not None:         # the curve's new peak: keep this policy
-                meta = {k: v for k, v in self._meta().items() if k != "numpy_rng"}
-                self.best_policy.save(self.run_dir, lambda path, m: checkpoints.save_policy(
-                    self.learner.agent, path, m), meta, average)
+                self.best_policy.save(self.run_dir, self.learner.agent, self._policy_meta(), average)
         if bar is not None:
             postfix = {"sps": f"{scalars['speed/env_steps_per_second']:.0f}"}
             if returns:
@@ -281,9 +283,8 @@ class Trainer:
     def finish(self) -> dict[str, Any]:
         """Final checkpoint, the shipped policy (safetensors + ONNX), curves and a summary."""
         self.save_checkpoint()
-        meta = {k: v for k, v in self._meta().items() if k != "numpy_rng"}
         agent = self.learner.agent
-        checkpoints.save_policy(agent, str(self.run_dir / "policy.safetensors"), meta)
+        checkpoints.save_policy(agent, str(self.run_dir / "policy.safetensors"), self._policy_meta())
         from dynenv_ros.agent.export import export_onnx
         compiled.restore()                  # the exporter traces the eager functions
         export_onnx(agent.cpu(), self.run_dir / "policy.onnx")
