@@ -33,7 +33,8 @@ from dynenv_ros.driving.config import car_names
 from dynenv_ros.soccer.config import robot_names
 
 REPO_CONFIG = Path(__file__).resolve().parent.parent / "config" / "main_job.yaml"
-INSTALLED_CONFIG = Path(sys.prefix) / "share" / "dynenv_ros" / "config" / "main_job.yaml"
+INSTALLED_SHARE = Path(sys.prefix) / "share" / "dynenv_ros"          # setup.py's data_files, in an install
+INSTALLED_CONFIG = INSTALLED_SHARE / "config" / "main_job.yaml"
 
 
 def default_config_path() -> Path:
@@ -240,7 +241,7 @@ def settings_epilog() -> str:
 
 
 SHIPPED_FOLDER = Path("policy_node") / "pretrained"
-INSTALLED_SHIPPED = Path(sys.prefix) / "share" / "dynenv_ros" / "pretrained"     # setup.py's data_files
+INSTALLED_SHIPPED = INSTALLED_SHARE / "pretrained"
 
 
 def policy_file(value: str) -> Path:

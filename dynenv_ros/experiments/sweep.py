@@ -167,11 +167,9 @@ def _check_done_runs(args: argparse.Namespace, planned: dict[str, Any]) -> None:
 
 def evaluated_otherwise(result: dict[str, Any], evaluation: dict[str, Any]) -> str:
     """How an evaluation already in the sweep's folder differs from the one this sweep makes ('' when alike)."""
-    settings = result.get("settings", {})
-    differ = [f"{key} {settings.get(key)!r}, not {evaluation[key]!r}" for key in ("episodes", "seeds")
+    settings = {"greedy": False, **result.get("settings", {})}
+    differ = [f"{key} {settings.get(key)!r}, not {evaluation[key]!r}" for key in ("episodes", "seeds", "greedy")
               if settings.get(key) != evaluation[key]]
-    if bool(settings.get("greedy", False)) != bool(evaluation.get("greedy", False)):
-        differ.append(f"greedy {bool(settings.get('greedy', False))}, not {bool(evaluation.get('greedy', False))}")
     opponent = (result.get("opponent") or {}).get("spec")
     if result.get("scenario", "robocup") != "driving" and opponent != evaluation["opponent"]:
         differ.append(f"opponent {opponent!r}, not {evaluation['opponent']!r}")
