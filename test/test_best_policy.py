@@ -58,3 +58,13 @@ def test_a_run_keeps_the_policy_where_training_best_finds_the_peak_and_a_resume_
     _, meta = checkpoints.load_policy(run / BEST_POLICY)
     assert meta["env_steps"] == statistic["at_env_steps"]
     assert math.isclose(meta["best_moving_average"], statistic["best"], rel_tol=1e-9)
+
+
+def test_a_damaged_or_foreign_kept_file_does_not_stop_a_resume(tmp_path):
+    """A kept file cut short by a full disk, or kept over another window, is not a peak to beat: the resumed run
+    tracks from scratch and replaces it at its next peak (the training checkpoint, not this file, is what resumes)."""
+    from dynenv_ros.learning.best_policy import kept_average
+    path = tmp_path / BEST_POLICY
+    path.write_bytes(b"\x10\x00\x00\x00\x00\x00\x00\x00{not json")
+    assert BestPolicy.resume(tmp_path, 3, 0).best == -math.inf and kept_average(path, 3) == -math.inf
+    assert kept_average(tmp_path / "absent.safetensors", 3) == -math.inf
