@@ -20,12 +20,5 @@ ls /tmp/r; grep -c . /tmp/r/metrics.csv
 timeout 90 python3 -m dynenv_ros.evaluation.cli /tmp/r/policy.safetensors --opponent random --episodes 1 --seeds 0 --players-per-team 2 --quiet 2>&1 | tail -8
 timeout 90 python3 -m dynenv_ros.learning.train_cli --config driving_quick --device cuda --set total_env_steps=300 --set action_mode=continuous --run-dir /tmp/d --no-progress 2>&1 | tail -6
 timeout 60 python3 -m dynenv_ros.learning.train_cli --config ppo --device cuda --set opponent=snapshot --set snapshot_every_updates=1 --set num_envs=2 --set backend=inprocess --set total_env_steps=256 --run-dir /tmp/p --no-progress 2>&1 | tail -6
-# The asynchronous runner with the learner on the GPU and rollout workers on the CPU cores (issue 25): env steps/s
-# against the number of workers, 16 worlds and one joined rollout per worker and update (goal: >= 5,000 env steps/s).
-for w in 1 2 4 8 12 15; do
-  timeout 240 python3 -m benchmarks train --config async --device cuda --baseline none --repeat 1 --updates 10 \
-      --set workers=$w --set num_envs=$((16 * w)) --set rollouts_per_update=$(( (w + 1) / 2 )) \
-      --set ppo_minibatches=2 --json 2>&1 | tail -60 > $OUT/bench_async_cuda_w$w.txt
-  grep -A3 '"env_steps_per_second"' $OUT/bench_async_cuda_w$w.txt | head -4
-done
-timeout 240 python3 -m benchmarks train --config async --device cpu --repeat 1 --updates 10 --json 2>&1 | tail -60 > $OUT/bench_async_cpu.txt
+# The asynchronous runner with the learner on the GPU against the number of CPU workers (issue 25) is
+# tools/gpu_scaling.sh: a call of its own, since each of the two takes most of a 10-minute device command.
