@@ -401,17 +401,18 @@ def test_closing_the_action_inbox_under_a_running_spin_is_a_quiet_stop(make_node
     monkeypatch.setattr(module, "shutdown_quietly", shut_then_release)
     monkeypatch.setattr(threading, "excepthook", lambda args: failures.append(args.exc_value))
     owner = make_node("inbox_owner")
-    inbox = module.ActionInbox(owner, Action, ["robot_0/action"], QoSProfile(depth=4), 4,
-                               screen=lambda robot, msg: ("", ""), deliver=lambda robot, msg: None,
-                               refused=lambda counts, reason: None)
+
+    def open_inbox(topic: str) -> module.ActionInbox:
+        return module.ActionInbox(owner, Action, [topic], QoSProfile(depth=4), 4, screen=lambda robot, msg: ("", ""),
+                                  deliver=lambda robot, msg: None, refused=lambda counts, reason: None)
+
+    inbox = open_inbox("robot_0/action")
     inbox.close()
     assert not inbox._thread.is_alive() and failures == []
 
     # open: the spin's failure is not swallowed
     context_down.clear()
-    inbox = module.ActionInbox(owner, Action, ["robot_1/action"], QoSProfile(depth=4), 4,
-                               screen=lambda robot, msg: ("", ""), deliver=lambda robot, msg: None,
-                               refused=lambda counts, reason: None)
+    inbox = open_inbox("robot_1/action")
     shutdown_quietly(inbox._context)               # the context dies under the open inbox
     context_down.set()
     inbox._thread.join(5.0)
