@@ -30,6 +30,11 @@ from dynenv_ros.ros.node_runner import shutdown_quietly
 # hundred a second), far below a flood's rate; a batch of this size costs ~10 ms of screening.
 DRAIN_LIMIT = 500
 
+# The inbox thread's longest wait before it looks whether it was closed, and how long ``close`` waits for it (a
+# batch of DRAIN_LIMIT messages takes ~10 ms; the margin is for a loaded machine).
+SPIN_POLL_S = 0.1
+JOIN_TIMEOUT_S = 10.0
+
 # screen(robot index, message) -> "" when the message may be accepted now, else the counter key of its refusal
 # ("rejected_late", ...) and the reason, as (key, reason).
 Screen = Callable[[int, Any], tuple[str, str]]
@@ -67,6 +72,7 @@ class ActionInbox:
         self._context: Context | None = None
         self._thread: threading.Thread | None = None
         self._closed = False
+        self._closing = threading.Event()
         if not own_participant:
             self._node = owner
             self.subscriptions = [owner.create_subscription(msg_type, name, self._receiver(i), qos)
@@ -84,6 +90,7 @@ class ActionInbox:
         self.subscriptions = [self._node.create_subscription(msg_type, name, self._receiver(i), qos)
                               for i, name in enumerate(resolved)]
         self._wake = owner.create_guard_condition(self._hand_over)
+        self._stop = self._node.create_guard_condition(lambda: None)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self._node)
         self._thread = threading.Thread(target=self._spin, name="action_inbox", daemon=True)
@@ -94,15 +101,18 @@ class ActionInbox:
         self._thread.start()
 
     def _spin(self) -> None:
+        # In bounded waits, so the thread notices ``close`` on its own: rclpy's ``Executor.shutdown`` from another
+        # thread destroys the guard conditions the spinning thread is waiting on (a segfault, seen on Ctrl-C during
+        # start-up), so ``close`` only asks, joins, and then tears down with the thread gone.
         try:
-            self._executor.spin()
+            while not self._closing.is_set() and self._context.ok():
+                self._executor.spin_once(timeout_sec=SPIN_POLL_S)
         except (ExternalShutdownException, ShutdownException):
             pass
         except Exception:
-            # ``close`` shuts the context down under a spin already past its loop check (a Ctrl-C during start-up,
-            # seen in CI under load): rcl then refuses the next wait set ("the given context is not valid"). That
-            # is the stop that was asked for; a failure while the inbox is open is real and still surfaces.
-            if not self._closed:
+            # A signal shuts the inbox's context down under a wait already past its check: rcl then refuses the
+            # wait set ("the given context is not valid"). That is a stop; a failure while the inbox runs is real.
+            if not self._closing.is_set() and self._context.ok():
                 raise
 
     def _receiver(self, robot: int) -> Callable[[Any], None]:
@@ -146,13 +156,24 @@ class ActionInbox:
             self._report_refused(refused, last)
 
     def close(self) -> None:
-        """Stop the inbox's thread and participant; again is a no-op."""
+        """Stop the inbox's thread, then its participant; again is a no-op."""
         if self._context is None or self._closed:
             return                          # the owner's subscriptions go with the owner
         atexit.unregister(self.close)
         self._closed = True
-        self._executor.shutdown(timeout_sec=1.0)
-        shutdown_quietly(self._context)
+        self._closing.set()
+        try:
+            self._stop.trigger()            # wake the wait now rather than at its poll
+        except Exception:                   # the context is already shut down: the poll ends the wait
+            pass
         if self._thread.ident is not None:          # started
-            self._thread.join(timeout=2.0)
+            self._thread.join(timeout=JOIN_TIMEOUT_S)
+        if self._thread.is_alive():
+            # Tearing down under a live wait is the crash this order exists to avoid; the daemon thread ends with
+            # the process instead.
+            print("action inbox: its thread did not stop; leaving its participant to the process exit",
+                  file=sys.stderr, flush=True)
+            return
+        self._executor.shutdown(timeout_sec=0)
         self._node.destroy_node()
+        shutdown_quietly(self._context)
