@@ -275,3 +275,50 @@ def test_answers_to_the_last_frames_of_an_episode_are_ignored_not_rejected():
     accepted, reason = session.submit(0, 1, 7, 0, 0, 0, 0.0)       # anything else from it is still wrong
     assert not accepted and reason.startswith("wrong_episode")
     assert session.counts["ignored_after_episode_end"] == 1 and session.counts["rejected_wrong_episode"] == 1
+
+
+def test_a_policys_first_action_sent_before_its_writer_matched_the_simulator_still_runs_the_period(make_node,
+                                                                                                   executor):
+    """CI under load (28 Nov 2026): a driving game stalled at period 1 for 180 s; the scripted driver's first action
+    reached the recorder but not the simulator, whose volatile reader its writer had not matched yet. The policies'
+    writers keep their last 20 actions (transient local), and the stepped simulator reads transient local, so a
+    late match still delivers. Here the actions for period 1 are published before the simulator exists."""
+    from rclpy.qos import DurabilityPolicy
+    from dynenv_ros.ros.qos import action_stream
+    policy = make_node("early_policy")
+    writers = {r: policy.create_publisher(Action, topics.action(r), action_stream()) for r in ROBOTS}
+    feedback = []
+    policy.create_subscription(StepFeedback, topics.feedback(ROBOTS[0]), feedback.append, sim_stream())
+    for robot, name in enumerate(ROBOTS):
+        writers[name].publish(Action(robot_id=robot, episode_id=1, motion_period=1, walk=Action.WALK_FORWARD))
+    sim = _sim(make_node, wait_for_subscribers=0)
+    executor.add_node(policy)
+    executor.add_node(sim)
+    assert all(s.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for s in sim.action_inbox.subscriptions)
+    assert spin_until(executor, lambda: any(f.motion_period == 1 for f in feedback), 10.0), \
+        [f.motion_period for f in feedback]
+    assert sim.session.counts["accepted"] == 2
+
+
+def test_a_volatile_action_publisher_makes_the_simulator_read_that_topic_volatile(make_node, executor):
+    """A user's own policy may publish volatile actions, which a transient-local reader does not match: the simulator
+    reads that robot's topic volatile (and says so), the other robot's stays transient local, and the game runs."""
+    from rclpy.qos import DurabilityPolicy
+    from dynenv_ros.ros.qos import action_stream
+    sim = _sim(make_node)
+    policy = make_node("mixed_policy")
+    volatile = policy.create_publisher(Action, topics.action(ROBOTS[0]), sim_stream())
+    latched_writer = policy.create_publisher(Action, topics.action(ROBOTS[1]), action_stream())
+    feedback = []
+    policy.create_subscription(StepFeedback, topics.feedback(ROBOTS[0]), feedback.append, sim_stream())
+    for name in ROBOTS:                                # the simulator starts once every robot's frames are read
+        policy.create_subscription(DetectionArray, topics.detections(name), lambda msg: None, sim_stream())
+    executor.add_node(sim)
+    executor.add_node(policy)
+    assert spin_until(executor, lambda: sim.started and feedback, 10.0)          # started: both writers matched
+    durability = [s.qos_profile.durability for s in sim.action_inbox.subscriptions]
+    assert durability == [DurabilityPolicy.VOLATILE, DurabilityPolicy.TRANSIENT_LOCAL]
+    assert all(s.get_publisher_count() == 1 for s in sim.action_inbox.subscriptions)
+    volatile.publish(Action(robot_id=0, episode_id=1, motion_period=1))
+    latched_writer.publish(Action(robot_id=1, episode_id=1, motion_period=1))
+    assert spin_until(executor, lambda: any(f.motion_period == 1 for f in feedback), 10.0)

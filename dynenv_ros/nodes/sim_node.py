@@ -25,7 +25,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from tf2_msgs.msg import TFMessage
@@ -61,6 +61,8 @@ from dynenv_ros.soccer.config import SoccerConfig, robot_names
 ACTION_HANDOVER_DEPTH = 10
 
 MODES_OF_RUNNING = ("stepped", "realtime")
+# Stepped mode: how often the simulator looks for volatile action publishers (a graph query per robot).
+DURABILITY_CHECK_S = 0.2
 SCENARIOS = ("robocup", "driving")
 RESET_OPTIONS = ("kickoff_team",)                    # robocup; driving takes none
 # Parameters only one scenario has: giving one to the other scenario is refused (it would change nothing).
@@ -264,6 +266,9 @@ class SimNode(Node):
             self.vision_timer = self._vision_timer() if self.mode == "realtime" else None
             self.started = False
             self._started_wall = time.monotonic()
+            # Stepped mode reads actions transient local, volatile on a topic with a volatile publisher (qos.py).
+            self.durability_timer = (self.create_timer(DURABILITY_CHECK_S, self._read_volatile_where_offered,
+                                                       clock=self.wall) if self.mode == "stepped" else None)
             if self.mode == "stepped" and (self.wait_for_subscribers > 0 or self.wait_for_recorder
                                            or self.wait_for_truth_readers > 0):
                 self.start_timer = self.create_timer(0.05, self._start_when_subscribed, clock=self.wall)
@@ -301,7 +306,25 @@ class SimNode(Node):
         self._started_wall = time.monotonic()
         self._reset(self._seed, 1)
 
+    def _read_volatile_where_offered(self) -> None:
+        """Stepped mode: read a robot's actions volatile once a publisher there offers only volatile durability (a
+        transient-local reader does not match it; its actions would never arrive), and say so once."""
+        for robot, subscription in enumerate(self.action_inbox.subscriptions):
+            if subscription.qos_profile.durability != DurabilityPolicy.TRANSIENT_LOCAL:
+                continue
+            topic = subscription.topic_name
+            volatile = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                        for info in self.get_publishers_info_by_topic(topic)
+                        if info.qos_profile.durability != DurabilityPolicy.TRANSIENT_LOCAL]
+            if volatile:
+                self.action_inbox.resubscribe(robot, action_queue(realtime=False, latched_offers=False))
+                self.get_logger().warning(
+                    f"{topic}: {', '.join(sorted(set(volatile)))} publishes volatile actions; "
+                    "reading this topic volatile from now on (an action sent before its writer matches this reader "
+                    "is lost: publish with dynenv_ros.ros.qos.action_stream(), transient local)")
+
     def _start_when_subscribed(self) -> None:
+        self._read_volatile_where_offered()
         wanted = self.wait_for_subscribers
         ready = all(p.get_subscription_count() >= wanted for p in self.detection_pubs)
         ready = ready and self.world_pub.get_subscription_count() >= self.wait_for_truth_readers

@@ -73,6 +73,7 @@ class ActionInbox:
         self._thread: threading.Thread | None = None
         self._closed = False
         self._closing = threading.Event()
+        self._msg_type = msg_type
         if not own_participant:
             self._node = owner
             self.subscriptions = [owner.create_subscription(msg_type, name, self._receiver(i), qos)
@@ -114,6 +115,16 @@ class ActionInbox:
             # wait set ("the given context is not valid"). That is a stop; a failure while the inbox runs is real.
             if not self._closing.is_set() and self._context.ok():
                 raise
+
+    def resubscribe(self, robot: int, qos: QoSProfile) -> None:
+        """Read ``robot``'s topic with ``qos`` from now on (a reader's QoS is fixed at creation). On the owner's
+        thread, for readers on the owner's node: there is no other thread to race."""
+        if self._thread is not None:
+            raise RuntimeError("resubscribe is for an inbox on its owner's node")
+        old = self.subscriptions[robot]
+        self.subscriptions[robot] = self._node.create_subscription(self._msg_type, old.topic_name,
+                                                                   self._receiver(robot), qos)
+        self._node.destroy_subscription(old)
 
     def _receiver(self, robot: int) -> Callable[[Any], None]:
         return lambda msg: self.receive(robot, msg)

@@ -44,24 +44,31 @@ def realtime_stream(depth: int) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-def action_queue(realtime: bool) -> QoSProfile:
+def action_queue(realtime: bool, latched_offers: bool = True) -> QoSProfile:
     """The simulator's subscriptions to actions, keep-last so a flood on a robot's topic cannot pile up in the
     simulator. Stepped mode reads reliably: a lost action would stall the game. Real time reads best effort: under
     a flood of a few thousand messages/s, a reliable reader's repair traffic stalled delivery on the whole topic,
     the legitimate policy's actions included, for as long as the flood lasted (measured, docs/benchmarks.md); best
-    effort keeps delivering, and a lost action in real time is one missing action, the same as a late one."""
+    effort keeps delivering, and a lost action in real time is one missing action, the same as a late one.
+
+    Stepped mode also reads transient local while every publisher on the topic offers it (``latched_offers``; the
+    policies' ``action_stream`` does): a policy's writer can match the simulator's reader after the policy has
+    answered the first observation (discovery is asymmetric; CI under load saw a driving game stall at period 1),
+    and a volatile reader never gets an action published before the match, a transient-local one gets the writer's
+    kept history. A volatile publisher does not match such a reader, so for its topic the simulator reads volatile
+    (``latched_offers=False``), as before."""
     if realtime:
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REALTIME_ACTION_QUEUE_DEPTH,
                           reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ACTION_QUEUE_DEPTH,
-                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ACTION_QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched_offers else DurabilityPolicy.VOLATILE)
 
 
 def action_stream() -> QoSProfile:
     """The policies' action publishers: reliable, transient local, keep-last ``ACTION_HISTORY_DEPTH``. Discovery is
     asymmetric: the simulator may see the recorder's reader before the policy's writer has matched it, and a short
-    stepped game can be over by then; the writer's history hands a late reader what it missed. Volatile readers
-    (the simulator) match it too and get only new actions."""
+    stepped game can be over by then; the writer's history hands a late reader what it missed: the recorder, the
+    trainer, and the stepped simulator (``action_queue``). Volatile readers match it too and get only new actions."""
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ACTION_HISTORY_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
