@@ -313,13 +313,16 @@ class SimNode(Node):
             if subscription.qos_profile.durability != DurabilityPolicy.TRANSIENT_LOCAL:
                 continue
             topic = subscription.topic_name
-            volatile = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
-                        for info in self.get_publishers_info_by_topic(topic)
+            volatile = [info for info in self.get_publishers_info_by_topic(topic)
                         if info.qos_profile.durability != DurabilityPolicy.TRANSIENT_LOCAL]
             if volatile:
                 self.action_inbox.resubscribe(robot, action_queue(realtime=False, latched_offers=False))
+                # A writer can be discovered before its participant's node names are ("_NODE_NAME_UNKNOWN_").
+                names = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in volatile
+                                if "_UNKNOWN_" not in i.node_name + i.node_namespace})
+                who = ", ".join(names) if names else "a publisher whose node is not known yet"
                 self.get_logger().warning(
-                    f"{topic}: {', '.join(sorted(set(volatile)))} publishes volatile actions; "
+                    f"{topic}: volatile actions from {who}; "
                     "reading this topic volatile from now on (an action sent before its writer matches this reader "
                     "is lost: publish with dynenv_ros.ros.qos.action_stream(), transient local)")
 
