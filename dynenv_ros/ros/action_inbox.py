@@ -71,8 +71,7 @@ class ActionInbox:
         self._last_reason = ""
         self._context: Context | None = None
         self._thread: threading.Thread | None = None
-        self._closed = False
-        self._closing = threading.Event()
+        self._closing = threading.Event()              # set by close: the thread stops at its next check
         self._msg_type = msg_type
         if not own_participant:
             self._node = owner
@@ -168,10 +167,9 @@ class ActionInbox:
 
     def close(self) -> None:
         """Stop the inbox's thread, then its participant; again is a no-op."""
-        if self._context is None or self._closed:
+        if self._context is None or self._closing.is_set():
             return                          # the owner's subscriptions go with the owner
         atexit.unregister(self.close)
-        self._closed = True
         self._closing.set()
         try:
             self._stop.trigger()            # wake the wait now rather than at its poll
