@@ -212,6 +212,10 @@ class TrainConfig:
                                            "advantage when > 0; 0 = curiosity only as auxiliary losses (paper).")
     pretrained_encoder: str | None = _f(None, "Path of a pretrained localization/reconstruction checkpoint; "
                                               "required by variant 'recon'.")
+    init_policy: str | None = _f(None, "Path of a policy file whose weights start the run (the optimiser starts "
+                                       "fresh): training on from a shipped or earlier policy, e.g. kickstarting "
+                                       "from an imitation policy; it must fit this run's agent (same variant, "
+                                       "localization, feature_size). Its sha256 goes into summary.json.")
     privileged_pose_seeding: bool = _f(False, "Re-seed the localization LSTM from the true pose every rollout, as "
                                               "the original code did (privileged information).")
 
@@ -464,6 +468,9 @@ class TrainConfig:
                                                     "encoder; to train localization + reconstruction from scratch "
                                                     "use variant 'pred' with use_localization and "
                                                     "use_reconstruction true")
+        if self.init_policy is not None and self.pretrained_encoder:
+            raise ConfigError("init_policy", "init_policy starts every network from a policy file; with "
+                                             "pretrained_encoder as well one would overwrite the other (set one)")
         if self.imitation_decay_env_steps < 0:
             raise ConfigError("imitation_decay_env_steps", f"must be >= 0, got {self.imitation_decay_env_steps}")
         if (self.imitation_coef > 0.0 or self.imitation_final_coef > 0.0) and self.teacher is None:

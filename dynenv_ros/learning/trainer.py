@@ -30,6 +30,7 @@ from dynenv_ros.learning import checkpoints, compiled
 from dynenv_ros.learning.agents import make_agent
 from dynenv_ros.learning.algorithms import UpdateSettings, update
 from dynenv_ros.learning.best_policy import BestPolicy
+from dynenv_ros.learning.compute import ComputeMeter
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout import Rollout
@@ -88,12 +89,16 @@ class Trainer:
                                           fused=self.device.type in ("cpu", "cuda"))
         self.env_steps = self.updates = self.episodes = 0
         self.wall_before = 0.0
+        self._earlier_compute: list[dict[str, Any]] = []
         if cfg.torch_compile:
             compiled.compile_hot_paths()
         if resume:
             self._resume()
         elif cfg.pretrained_encoder:
             self._load_encoder(cfg.pretrained_encoder)
+        elif cfg.init_policy:
+            self._load_init_policy(cfg.init_policy)
+        self.compute = ComputeMeter(self.env_steps, self._earlier_compute)
         self.best_policy = None
         if cfg.best_policy_window is not None:
             self.best_policy = (BestPolicy.resume(self.run_dir, cfg.best_policy_window, self.env_steps) if resume
@@ -115,7 +120,8 @@ class Trainer:
                 "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
                 "episodes": self.episodes, "wall_seconds": self.wall_before + self._elapsed(),
                 "observation_layout": self.layout_shapes,
-                "numpy_rng": self.rng.bit_generator.state, "code_revision": checkpoints.code_revision()}
+                "numpy_rng": self.rng.bit_generator.state, "code_revision": checkpoints.code_revision(),
+                "compute": self.compute.record(self.env_steps)}
 
     def _policy_meta(self) -> dict[str, Any]:
         """What a policy file carries of the run (the checkpoint's meta less the generator state)."""
@@ -131,6 +137,7 @@ class Trainer:
         self.env_steps, self.updates = int(meta["env_steps"]), int(meta["updates"])
         self.episodes, self.wall_before = int(meta.get("episodes", 0)), float(meta.get("wall_seconds", 0.0))
         self.rng.bit_generator.state = meta["numpy_rng"]
+        self._earlier_compute = list(meta.get("compute", {}).get("segments", []))
         if "torch_generator" in extra:
             self.generator.set_state(extra["torch_generator"])
 
@@ -146,6 +153,13 @@ class Trainer:
         missing = self.learner.agent.load_state_dict(state, strict=False)
         if missing.unexpected_keys:
             raise ValueError(f"pretrained encoder {path} has unexpected keys, e.g. {missing.unexpected_keys[0]}")
+
+    def _load_init_policy(self, path: str) -> None:
+        """Every network from a policy file (``init_policy``); it must fit this run's agent exactly."""
+        from dynenv_ros.agent.checkpoint import check_state_dict_fits
+        policy, _ = checkpoints.load_policy(path)
+        check_state_dict_fits(self.learner.agent, policy.state_dict(), f"init_policy {path}")
+        self.learner.agent.load_state_dict(policy.state_dict())
 
     # -- the loop ---------------------------------------------------------------------------------------------
     def _elapsed(self) -> float:
@@ -269,6 +283,7 @@ class Trainer:
             for key in returns[0]:
                 scalars[f"episode/{key}"] = float(np.mean([r[key] for r in returns]))
         self.logger.log(self.env_steps, self.updates, self.wall_before + self._elapsed(), scalars)
+        self.compute.sample_load()
         if self.best_policy is not None and "episode/return" in scalars:
             # the value as metrics.csv holds it, so the peak is where training-best finds it
             average = self.best_policy.observe(as_logged(scalars["episode/return"]))
@@ -297,8 +312,11 @@ class Trainer:
         return summary
 
     def _summary(self) -> dict[str, Any]:
-        return {"env_steps": self.env_steps, "updates": self.updates, "episodes": self.episodes,
-                "wall_seconds": self.wall_before + self._elapsed()}
+        summary = {"env_steps": self.env_steps, "updates": self.updates, "episodes": self.episodes,
+                   "wall_seconds": self.wall_before + self._elapsed(), "compute": self.compute.record(self.env_steps)}
+        if self.cfg.init_policy:
+            summary["init_policy_sha256"] = checkpoints.sha256(self.cfg.init_policy)
+        return summary
 
     def _stop_rollouts(self) -> None:
         self.env.close()
