@@ -10,6 +10,13 @@
     dynenv-eval compare random.json pred.json --metric total
     dynenv-eval merge pred_s0.json pred_s1.json pred_s2.json --out pred.json   # the runs as BEST's units
     dynenv-eval training-best runs/driving/pred_s0     # the paper's statistic: best moving average in training
+    dynenv-eval ratio pred_s0.json pred_s1.json --reference random.json --bar 2.3   # the paper's ratio, interval
+
+Seed splits (evaluation/splits.py): --split train | validation | test picks a named, disjoint seed range; choices
+are made on validation, and every --split test evaluation is appended to the test ledger
+(docs/results_data/test_ledger.jsonl). Seeds of the test range are refused without --split test. A soccer result
+carries its head-to-head: W/D/L, goals and a 95 % bootstrap interval (seeds as units) of the per-game goal
+difference; "beats" means the interval lies above 0.
 
 Driving: the policy ("random", "scripted" or a driving checkpoint) drives every car (--cars) of the same seeded
 episodes; there is no opponent (--opponent is refused): "against random / scripted" is the comparison of the
@@ -55,7 +62,14 @@ def _eval_parser() -> argparse.ArgumentParser:
     parser.add_argument("--action-mode", choices=("discrete", "continuous"),
                         help="driving: the env's action mode for random / scripted (a checkpoint brings its own)")
     parser.add_argument("--episodes", type=int, default=4, help="episodes per seed (default 4)")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds (default 0 1 2)")
+    parser.add_argument("--seeds", type=int, nargs="+", help="seeds (default 0 1 2, or the split's first "
+                        "--num-seeds); each the statistical unit")
+    parser.add_argument("--split", choices=("train", "validation", "test"),
+                        help="evaluate on this named seed range (train 0-9999, validation 10000-19999, test "
+                             "20000-29999); --split test appends a row to the test ledger")
+    parser.add_argument("--num-seeds", type=int, help="with --split and no --seeds: its first N seeds (default 25)")
+    parser.add_argument("--ledger", type=Path, help="--split test: the ledger to append to (default "
+                        "docs/results_data/test_ledger.jsonl of this checkout)")
     parser.add_argument("--players-per-team", type=int, help="robocup: robots per team (default 2)")
     parser.add_argument("--perception", choices=PERCEPTIONS, default="realistic")
     parser.add_argument("--noise-magnitude", type=float, help="perception noise 0..5 (default: the preset's)")
@@ -93,6 +107,38 @@ def _merge_parser() -> argparse.ArgumentParser:
     parser.add_argument("results", type=Path, nargs="+", help="dynenv-eval result JSONs, one per training run")
     parser.add_argument("--out", type=Path, required=True, help="write the merged result (JSON) here")
     return parser
+
+
+def _ratio_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=f"{PROG} ratio", description="A group's metric over a reference's (the random team's) "
+                     "on the same seeds, as a ratio of means with a bootstrap interval over runs and seeds.")
+    parser.add_argument("results", type=Path, nargs="+", help="dynenv-eval result JSONs, one per training run")
+    parser.add_argument("--reference", type=Path, required=True, help="the reference's result on the same seeds")
+    parser.add_argument("--metric", default="paper_metric", help="per-seed metric (default paper_metric)")
+    parser.add_argument("--bar", type=float, help="say whether the interval lies above this ratio")
+    parser.add_argument("--out", type=Path, help="write the ratio (JSON) here")
+    return parser
+
+
+def run_ratio(args: argparse.Namespace) -> int:
+    from dynenv_ros.evaluation.ratios import format_ratio, ratio_of_means
+    from dynenv_ros.evaluation.results import load_evaluation, write_json
+    try:
+        _check_folder(args.out, "--out")
+        group = [load_evaluation(p) for p in args.results]
+        result = ratio_of_means(group, load_evaluation(args.reference), args.metric,
+                                names=[str(p) for p in args.results])
+    except (ValueError, OSError) as error:
+        return _fail(str(error))
+    print(format_ratio(result, args.bar))
+    if args.out is not None:
+        try:
+            write_json({"format": "dynenv_ratio/1", "results": [str(p) for p in args.results],
+                        "reference": str(args.reference), **result}, args.out)
+        except (ValueError, OSError) as error:
+            return _fail(f"--out {args.out}: cannot write: {error}")
+        print(f"wrote {args.out}")
+    return 0
 
 
 def _training_best_parser() -> argparse.ArgumentParser:
@@ -151,16 +197,31 @@ def _check_folder(path: Path | None, flag: str) -> None:
 
 
 def _evaluate_and_report(out: Path | None, evaluate: Callable[[], Mapping[str, Any]],
-                         table: Callable[[Mapping[str, Any]], str]) -> int:
-    """Run ``evaluate`` (after checking ``--out``'s folder, so a long run cannot end unwritable), print its
-    ``table`` and write the result to ``out``; shared by the soccer and driving evaluations. Exit status."""
+                         table: Callable[[Mapping[str, Any]], str], ledger: Path | None = None) -> int:
+    """Run ``evaluate`` (after checking ``--out``'s folder and the ledger, so a long run cannot end unwritable),
+    print its ``table``, append the test ledger's row (``ledger``: a test-split evaluation) and write the result
+    to ``out``; shared by the soccer and driving evaluations. Exit status."""
+    from dynenv_ros.evaluation.head_to_head import format_head_to_head, head_to_head
+    from dynenv_ros.evaluation.ledger import append_row, ledger_row
     from dynenv_ros.evaluation.results import write_json
     try:
         _check_folder(out, "--out")
-        result = evaluate()
+        _check_folder(ledger, "--ledger")
+        result = dict(evaluate())
     except (ValueError, OSError) as error:     # a missing or corrupt checkpoint, a bad setting
         return _fail(str(error))
+    head = None
+    if "opponent" in result:                   # soccer: the head-to-head as a claim can be made from it
+        head = result["head_to_head"] = head_to_head(result)
     print(table(result))
+    if head is not None:
+        print(format_head_to_head(head))
+    if ledger is not None:
+        try:
+            append_row(ledger, ledger_row(result, out, head))
+        except (ValueError, OSError) as error:
+            return _fail(f"--ledger {ledger}: cannot append: {error}")
+        print(f"appended the test ledger {ledger}")
     if out is not None:
         try:
             write_json(result, out)
@@ -185,11 +246,54 @@ def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
     return _evaluate_and_report(args.out, lambda: evaluate_driving(
         args.policy, episodes=args.episodes, seeds=args.seeds, n_cars=cars, perception=perception,
         action_mode=args.action_mode, greedy=args.greedy, env_config=env_config, progress=progress,
-        torch_threads=args.torch_threads), format_driving_table)
+        torch_threads=args.torch_threads), format_driving_table, _ledger(args)[0])
+
+
+def _resolve_seeds(args: argparse.Namespace) -> str | None:
+    """``args.seeds`` from ``--split`` / ``--num-seeds`` / ``--seeds``; None, or the reason they are refused. Seeds
+    of the test split are evaluated only under ``--split test``, which the ledger records."""
+    from dynenv_ros.evaluation.splits import SPLITS, check_in_split, split_seeds
+    if args.num_seeds is not None and (args.split is None or args.seeds is not None):
+        return "--num-seeds takes the first seeds of --split; give it with --split and without --seeds"
+    try:
+        if args.split is not None:
+            if args.seeds is None:
+                args.seeds = split_seeds(args.split, 25 if args.num_seeds is None else args.num_seeds)
+            else:
+                check_in_split(args.split, args.seeds)
+    except ValueError as error:
+        return str(error)
+    if args.seeds is None:
+        args.seeds = [0, 1, 2]
+    test = SPLITS["test"]
+    if args.split != "test" and any(s in test for s in args.seeds):
+        return (f"seeds {test.start}-{test.stop - 1} are the test split: evaluate them with --split test, which "
+                f"appends the evaluation to the test ledger")
+    if args.ledger is not None and args.split != "test":
+        return "--ledger applies to --split test only"
+    return None
+
+
+def _ledger(args: argparse.Namespace) -> tuple[Path | None, str | None]:
+    """The ledger a test-split evaluation appends to, or the reason there is none."""
+    if args.split != "test":
+        return None, None
+    from dynenv_ros.evaluation.ledger import default_ledger
+    ledger = args.ledger or default_ledger()
+    if ledger is None:
+        return None, ("--split test: this installation has no docs/results_data/ to hold the test ledger; give "
+                      "--ledger PATH")
+    return ledger, None
 
 
 def run_eval(args: argparse.Namespace) -> int:
     from dynenv_ros.evaluation.soccer import evaluate, format_table
+    refused = _resolve_seeds(args)
+    if refused is not None:
+        return _fail(refused)
+    ledger, refused = _ledger(args)
+    if refused is not None:
+        return _fail(refused)
     if args.episodes < 1:
         return _fail(f"--episodes must be at least 1, got {args.episodes}")
     if args.torch_threads < 1:
@@ -209,7 +313,7 @@ def run_eval(args: argparse.Namespace) -> int:
         args.policy, args.opponent or "scripted", episodes=args.episodes, seeds=args.seeds,
         players_per_team=2 if args.players_per_team is None else args.players_per_team, perception=perception,
         sides=args.sides or "alternate", greedy=args.greedy, env_config=env_config, progress=progress,
-        torch_threads=args.torch_threads), format_table)
+        torch_threads=args.torch_threads), format_table, ledger)
 
 
 def run_compare(args: argparse.Namespace) -> int:
@@ -240,6 +344,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_compare(_compare_parser().parse_args(argv[1:]))
     if argv and argv[0] == "merge":
         return run_merge(_merge_parser().parse_args(argv[1:]))
+    if argv and argv[0] == "ratio":
+        return run_ratio(_ratio_parser().parse_args(argv[1:]))
     if argv and argv[0] == "training-best":
         return run_training_best(_training_best_parser().parse_args(argv[1:]))
     return run_eval(_eval_parser().parse_args(argv))

@@ -27,14 +27,12 @@ are implemented in ``dynenv_ros.agent.checkpoint`` and re-exported here.
 """
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import os
 import random
 import re
 import shutil
-import subprocess
 import tempfile
 import time
 import uuid
@@ -46,6 +44,7 @@ import numpy as np
 import torch
 from safetensors.torch import save as _st_save
 
+from dynenv_ros.core.revision import code_revision
 from dynenv_ros.agent.checkpoint import (FORMAT as POLICY_FORMAT, atomic_write, check_state_dict_fits, fsync_dir,
                                          json_dumps, load_policy, read_safetensors, refuse_non_finite,
                                          save_policy, sha256, tensors_for_saving, write_synced)
@@ -70,18 +69,6 @@ class CheckpointWarning(UserWarning):
 
 
 # -- saving --------------------------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=1)
-def code_revision() -> str | None:
-    """``git rev-parse HEAD`` of the source tree this module runs from, or None (not a git checkout, no git)."""
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).resolve().parent, timeout=5,
-                             capture_output=True, text=True, check=False)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    revision = out.stdout.strip()
-    return revision if out.returncode == 0 and re.fullmatch(r"[0-9a-f]{40,64}", revision) else None
-
-
 def _step_name(step: int) -> str:
     return f"step_{step:012d}"
 
