@@ -43,6 +43,7 @@ from typing import Any, Callable, Mapping, Union
 import numpy as np
 
 from dynenv_ros.driving.config import DrivingConfig
+from dynenv_ros.envs.league import LEAGUE_MEMBERS, League
 from dynenv_ros.envs.learning_targets import target_shapes
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.envs.soccer_observations import LOCALIZATION_OPTIONS, SoccerObservations, perception_params
@@ -92,7 +93,8 @@ def _seeds(seed: int | None, count: int) -> list[int]:
     return [int(child.generate_state(1, np.uint64)[0]) for child in children]
 
 
-SCRIPTED_TEAMS_B = (None, "chaser", "keeper_and_chasers", PERCEIVING_TEACHER)
+LEAGUE = "league"           # team B drawn per world and episode from the league's members (envs.league)
+SCRIPTED_TEAMS_B = (None, "chaser", "keeper_and_chasers", PERCEIVING_TEACHER, LEAGUE)
 
 
 @dataclass(frozen=True)
@@ -121,7 +123,8 @@ class _Settings:
     def observations(self) -> SoccerObservations:
         # the perceiving teacher reads the pose estimate: the localization runs for it, observed or not
         localization: bool | str = self.localization
-        if PERCEIVING_TEACHER in (self.teacher, self.scripted_team_b) and localization == "none":
+        if (PERCEIVING_TEACHER in (self.teacher, self.scripted_team_b) or self.scripted_team_b == LEAGUE) \
+                and localization == "none":
             localization = True     # the perceiving opponent reads it too
         return SoccerObservations(self.config, self.observation, self.perception,
                                   max_landmarks=self.max_landmarks, max_objects=self.max_objects,
@@ -225,15 +228,25 @@ class InProcessBatch:
         self._scripted_robots = range(0)
         # team B of every world played by the perceiving team: its own policies, since each remembers the ball
         self._perceiving: list[list[Any]] = []
+        self._perceiving_chasers: list[list[Any]] = []
+        # a league run: the member playing team B in each world this episode, drawn at each episode's start
+        self.league: League | None = None
+        self._team_b: list[str | None] = [settings.scripted_team_b] * num_envs
         if settings.scripted_team_b is not None:
             n = self.config.players_per_team
             self._scripted_robots = range(n, 2 * n)
-            if settings.scripted_team_b == PERCEIVING_TEACHER:
+            league = settings.scripted_team_b == LEAGUE
+            if settings.scripted_team_b == PERCEIVING_TEACHER or league:
                 self._perceiving = [perceiving_team(n, self.config.period_seconds, field=self.config.field,
                                                     motion=self.config.motion) for _ in range(num_envs)]
-            else:
-                self._scripted = team_policies(n, settings.scripted_team_b, field=self.config.field,
-                                               head_mode=self.config.head_mode, motion=self.config.motion)
+            if league:
+                self._perceiving_chasers = [perceiving_team(n, self.config.period_seconds, field=self.config.field,
+                                                            motion=self.config.motion, kind="chaser")
+                                            for _ in range(num_envs)]
+            if settings.scripted_team_b != PERCEIVING_TEACHER:
+                self._scripted = team_policies(n, "keeper_and_chasers" if league else settings.scripted_team_b,
+                                               field=self.config.field, head_mode=self.config.head_mode,
+                                               motion=self.config.motion)
         self.worlds = [settings.make_world() for _ in range(num_envs)]
         # one teacher per world: the perceiving teacher remembers the ball along its world's episode
         self._teachers = [settings.make_teacher() for _ in range(num_envs)]
@@ -265,8 +278,11 @@ class InProcessBatch:
             obs.initial_padded(out=self._obs[e], targets=self._targets[e])
         else:
             self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
-        for policy in self._perceiving[e] if self._perceiving else ():
-            policy.reset()                      # a new episode: no memory of the last one's ball
+        if self.league is not None:
+            self._team_b[e] = self.league.draw()
+        for team in (self._perceiving, self._perceiving_chasers):
+            for policy in team[e] if team else ():
+                policy.reset()                  # a new episode: no memory of the last one's ball
         self._label(e, episode_start=True)
 
     def _label(self, e: int, episode_start: bool = False) -> None:
@@ -279,6 +295,9 @@ class InProcessBatch:
         teacher.label(self.worlds[e], self.arrays["teacher"][e], self._obs[e], self.observers[e])
 
     def reset(self, seeds: list[int | None]) -> None:
+        if self.settings.scripted_team_b == LEAGUE and self.league is None:
+            known = [int(s) for s in seeds if s is not None]
+            self.league = League(LEAGUE_MEMBERS, np.random.default_rng(np.random.SeedSequence(known or None)))
         for e, (world, seed) in enumerate(zip(self.worlds, seeds)):
             world.reset(seed=seed)
             self._observe_initial(e)
@@ -293,15 +312,7 @@ class InProcessBatch:
         terms, dropped = self.arrays["reward_terms"], self.arrays["dropped"]
         terminated, truncated = self.arrays["terminated"], self.arrays["truncated"]
         for e, (world, obs, acts) in enumerate(zip(self.worlds, self.observers, actions)):
-            acts = list(acts)
-            if self._scripted:                   # team B played by the world's own scripted policies
-                snapshot = world.snapshot()
-                for i in self._scripted_robots:
-                    acts[i] = self._scripted[i].act(snapshot, i)
-            elif self._perceiving:               # ... or by the perceiving team, on what each robot saw last
-                seen, estimate = self._obs[e], obs.vision.estimate
-                for i in self._scripted_robots:
-                    acts[i] = self._perceiving[e][i].act({key: seen[key][i] for key in PERCEIVED_KEYS}, estimate[i])
+            acts = self._with_team_b(e, list(acts))
             result = world.step(acts, on_frame=obs.on_frame)
             terms[e] = result.rewards
             if self.padded:
@@ -311,6 +322,9 @@ class InProcessBatch:
                 self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
             terminated[e], truncated[e] = result.terminated, result.truncated
             if result.terminated or result.truncated:
+                if self.league is not None:
+                    score = world.snapshot()
+                    self.league.record(str(self._team_b[e]), score.score_team_a, score.score_team_b)
                 for key, final in self._final[e].items():
                     final[...] = self._obs[e][key]
                 for key, final in self._final_targets[e].items():
@@ -319,6 +333,26 @@ class InProcessBatch:
                 self._observe_initial(e)
             else:
                 self._label(e)
+
+    def _with_team_b(self, e: int, acts: list[Any]) -> list[Any]:
+        """World ``e``'s actions with team B's rows replaced by the team the world plays itself, if any."""
+        member = self._team_b[e]
+        if member is None or member == "snapshot":     # team B's rows are the caller's
+            return acts
+        if member in ("perceiving", "perceiving_chasers"):   # on what each robot saw last and its pose estimate
+            team = self._perceiving[e] if member == "perceiving" else self._perceiving_chasers[e]
+            seen, estimate = self._obs[e], self.observers[e].vision.estimate
+            for i in self._scripted_robots:
+                acts[i] = team[i].act({key: seen[key][i] for key in PERCEIVED_KEYS}, estimate[i])
+            return acts
+        snapshot = self.worlds[e].snapshot()          # a ground-truth scripted team
+        for i in self._scripted_robots:
+            acts[i] = self._scripted[i].act(snapshot, i)
+        return acts
+
+    def league_stats(self) -> dict[str, float]:
+        """The league's per-member scores and shares ({} unless team B is the league)."""
+        return {} if self.league is None else self.league.stats()
 
     def _step_driving(self, actions: Any) -> None:
         """Driving worlds: as ``step``, with driving_v0's per-car termination in ``agents_terminated`` (the world
@@ -700,6 +734,10 @@ class VectorEnv:
             raise RuntimeError("no teacher labels before reset(); call reset(seed) first")
         return self._batch.arrays["teacher"].copy()
 
+    def league_stats(self) -> dict[str, float]:
+        """A league run's per-member scores and shares, from worlds stepped in this process ({} otherwise)."""
+        return self._batch.league_stats() if isinstance(self._batch, InProcessBatch) else {}
+
     def _check_open(self) -> None:
         if self._closed:
             raise RuntimeError(f"{type(self).__name__} is closed")
@@ -798,8 +836,8 @@ class SoccerVectorEnv(VectorEnv):
                              f"got observation={observation!r}")
         if scripted_team_b not in SCRIPTED_TEAMS_B:
             raise ValueError(f"scripted_team_b must be one of {SCRIPTED_TEAMS_B}, got {scripted_team_b!r}")
-        if scripted_team_b == PERCEIVING_TEACHER and observation != "padded":
-            raise ValueError("scripted_team_b='perceiving' acts on each robot's perceived observation and pose "
+        if scripted_team_b in (PERCEIVING_TEACHER, LEAGUE) and observation != "padded":
+            raise ValueError(f"scripted_team_b={scripted_team_b!r} acts on each robot's perceived observation and pose "
                              f"estimate: it needs observation='padded', got observation={observation!r}")
         if teacher is not None and teacher not in TEACHERS:
             raise ValueError(f"teacher must be None or one of {TEACHERS}, got {teacher!r}")

@@ -96,6 +96,8 @@ class AsyncTrainer(Trainer):
                    "async/workers_alive": float(self.pool.alive),
                    "async/worker_collect_seconds": float(sum(d.info["collect_seconds"] for d in deliveries)
                                                          / len(deliveries))}
+        for key in deliveries[0].info.get("league", {}):      # a league run: each worker's own league, averaged
+            scalars[key] = float(sum(d.info["league"].get(key, 0.0) for d in deliveries) / len(deliveries))
         nodes = getattr(self.pool, "nodes_seen", None)
         if nodes is not None:                   # Ray: the cluster nodes whose actors delivered so far
             scalars["async/nodes_seen_max"] = float(len(nodes))

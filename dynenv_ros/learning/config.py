@@ -41,7 +41,7 @@ import yaml
 
 ALGORITHMS = ("a2c", "ppo")
 VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
-OPPONENTS = ("self", "snapshot", "scripted", "perceiving", "random")
+OPPONENTS = ("self", "snapshot", "scripted", "perceiving", "league", "random")
 BACKENDS = ("auto", "inprocess", "subprocess", "ray")
 RUNNERS = ("sync", "async")
 # one shared network has no slot input, so it cannot imitate a keeper in one slot: chasers only ('perceiving': the
@@ -242,8 +242,10 @@ class TrainConfig:
     # -- opponents ---------------------------------------------------------------------------------------------
     opponent: str = _f("self", "Team B: 'self' (both teams learn, shared weights), 'snapshot' (frozen past "
                                "copies), 'scripted' (keeper_and_chasers on the ground truth), 'perceiving' (keeper_and_chasers on "
-                               "its robots' own detections and pose estimates, soccer.perceiving), 'random'.")
-    snapshot_every_updates: int = _f(200, "Opponent 'snapshot': add a frozen copy every this many updates.")
+                               "its robots' own detections and pose estimates, soccer.perceiving), 'league' (per world "
+                               "and episode one of perceiving, perceiving_chasers, scripted and a frozen snapshot, "
+                               "drawn by prioritized fictitious self-play: envs.league), 'random'.")
+    snapshot_every_updates: int = _f(200, "Opponent 'snapshot' (and the league's snapshot): add a frozen copy every this many updates.")
     snapshot_pool: int = _f(5, "Opponent 'snapshot': most recent copies kept to play against.")
 
     # -- asynchronous actor-learner (runner: async; docs/training.md "Three ways to train") -------------------

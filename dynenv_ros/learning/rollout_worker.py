@@ -78,7 +78,7 @@ class RolloutWorker:
         if version == self.version:
             return
         self.version = version
-        if self.worlds is not None and self.cfg.opponent == "snapshot":
+        if self.worlds is not None and self.cfg.opponent in ("snapshot", "league"):
             due = version // self.cfg.snapshot_every_updates
             if due > self._snapshots:
                 self.worlds.opponent.refresh(self.learner.agent)
@@ -103,7 +103,8 @@ class RolloutWorker:
         finished, collector.finished = collector.finished, []
         info = {"version": self.version, "worker": self.index, "env_steps": self.num_envs * self.cfg.rollout_length,
                 "finished": finished, "collect_seconds": time.perf_counter() - started,
-                "cpu_seconds": time.process_time() - self._cpu_started, "pid": os.getpid()}
+                "cpu_seconds": time.process_time() - self._cpu_started, "pid": os.getpid(),
+                "league": self.worlds.env.league_stats() if self.cfg.opponent == "league" else {}}
         return flatten(rollout), info
 
     def close(self) -> None:

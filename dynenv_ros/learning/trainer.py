@@ -255,11 +255,11 @@ class Trainer:
         self.collector.drive_with_teacher(self._teacher_driven_worlds())
         rollout = self.collector.collect(self.cfg.rollout_length)
         finished, self.collector.finished = self.collector.finished, []
-        return Experience(rollout, self.cfg.num_envs * self.cfg.rollout_length, finished)
+        return Experience(rollout, self.cfg.num_envs * self.cfg.rollout_length, finished, self.env.league_stats())
 
     def _learned(self, batch: Experience) -> None:
         """After each update: a snapshot opponent takes its copy every ``snapshot_every_updates``."""
-        if self.opponent is not None and self.cfg.opponent == "snapshot" \
+        if self.opponent is not None and self.cfg.opponent in ("snapshot", "league") \
                 and self.updates % self.cfg.snapshot_every_updates == 0:
             self.opponent.refresh(self.learner.agent)
 

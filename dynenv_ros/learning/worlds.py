@@ -61,7 +61,7 @@ def make_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.nda
 
 
 # opponents the worlds play themselves (team B's rows of the learner's actions are ignored)
-IN_WORLD_TEAMS = {"scripted": SCRIPTED_TEAM, "perceiving": "perceiving"}
+IN_WORLD_TEAMS = {"scripted": SCRIPTED_TEAM, "perceiving": "perceiving", "league": "league"}
 
 
 @dataclass
@@ -84,9 +84,9 @@ def make_worlds(cfg: TrainConfig, learner: Learner, num_envs: int, backend: str,
     opponent: Any = None
     if cfg.opponent == "random":
         opponent = RandomOpponent(rng, 2 * soccer_config(cfg).motion.head_units + 1)
-    elif cfg.opponent == "snapshot":
+    elif cfg.opponent in ("snapshot", "league"):      # the league's snapshot member acts through the collector
         opponent = SnapshotOpponent(agent, cfg.snapshot_pool, generator, rng)
-    elif cfg.opponent in IN_WORLD_TEAMS:
+    elif cfg.opponent in IN_WORLD_TEAMS:             # (team B's rows ignored where the worlds play it)
         opponent = WorldScriptedOpponent()
     seeding: dict[str, Any] = {}
     if cfg.privileged_pose_seeding:

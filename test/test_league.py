@@ -1,0 +1,101 @@
+"""The league opponent: PFSP weights as Vinyals et al. (2019) define them ((1 − s)², here with a floor), the
+scores it keeps, the worlds playing the drawn member, and a training run against it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynenv_ros.envs.league import LEAGUE_MEMBERS, League, pfsp_weights
+from dynenv_ros.envs.vector import SoccerVectorEnv
+from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.trainer import make_trainer
+from dynenv_ros.soccer.scripted import team_policies
+
+
+def test_pfsp_weights_are_the_hard_weighting_with_a_floor():
+    # scores 0, ½, 1, ½: (1 − s)² = 1, ¼, 0, ¼ → 2/3, 1/6, 0, 1/6; with floor 0.05 over 4 members:
+    # 0.05 + 0.8·p → 0.5833, 0.1833, 0.05, 0.1833
+    w = pfsp_weights(np.array([0.0, 0.5, 1.0, 0.5]), floor=0.05)
+    assert w == pytest.approx([0.05 + 0.8 * 2 / 3, 0.05 + 0.8 / 6, 0.05, 0.05 + 0.8 / 6])
+    assert w.sum() == pytest.approx(1.0)
+    assert pfsp_weights(np.ones(3), floor=0.1) == pytest.approx([1 / 3] * 3)   # all beaten: uniform
+
+
+def test_the_score_is_a_running_mean_then_a_moving_average():
+    league = League(("perceiving", "snapshot"), np.random.default_rng(0), memory=4)
+    league.record("perceiving", 1, 0)          # 1 game: mean 1
+    assert league.scores[0] == pytest.approx(1.0)
+    league.record("perceiving", 0, 0)          # 2 games: (1 + ½)/2
+    assert league.scores[0] == pytest.approx(0.75)
+    for _ in range(2):
+        league.record("perceiving", 0, 2)      # 3 games: 0.5; 4 games: 0.375
+    assert league.scores[0] == pytest.approx(0.375)
+    league.record("perceiving", 0, 1)          # past memory 4: s += ¼ (0 − s)
+    assert league.scores[0] == pytest.approx(0.375 * 0.75)
+    assert league.scores[1] == pytest.approx(0.5) and league.games.tolist() == [5, 0]
+
+
+def test_the_opponent_the_learner_loses_to_is_drawn_most():
+    league = League(LEAGUE_MEMBERS, np.random.default_rng(1))
+    for _ in range(20):
+        league.record("perceiving", 0, 1)
+        league.record("perceiving_chasers", 1, 0)
+        league.record("keeper_and_chasers", 1, 0)
+        league.record("snapshot", 1, 0)
+    draws = [league.draw() for _ in range(4000)]
+    share = draws.count("perceiving") / len(draws)
+    expected = pfsp_weights(league.scores)[0]
+    assert expected > 0.8
+    assert share == pytest.approx(expected, abs=4 * np.sqrt(expected * (1 - expected) / len(draws)))
+    with pytest.raises(ValueError, match="league members"):
+        League(("nobody",), np.random.default_rng(0))
+
+
+def test_league_worlds_play_the_drawn_member_and_score_its_games():
+    env = SoccerVectorEnv(3, backend="inprocess", config={"players_per_team": 1, "episode_seconds": 4},
+                          scripted_team_b="league")
+    env.reset(seed=5)
+    batch = env._batch
+    drawn = set()
+    for _ in range(40):                       # 8 periods an episode: 5 episodes per world
+        drawn.update(batch._team_b)
+        env.step(np.zeros((3, 2, 4), np.int64))
+    stats = env.league_stats()
+    assert sum(stats[f"league/{m}_games"] for m in LEAGUE_MEMBERS) == 15
+    assert drawn <= set(LEAGUE_MEMBERS) and len(drawn) >= 2
+    assert sum(stats[f"league/{m}_share"] for m in LEAGUE_MEMBERS) == pytest.approx(1.0)
+    env.close()
+
+
+def test_a_ground_truth_member_moves_team_b_and_the_snapshot_member_takes_the_callers_rows():
+    env = SoccerVectorEnv(1, backend="inprocess", config={"players_per_team": 1}, scripted_team_b="league")
+    env.reset(seed=0)
+    batch = env._batch
+    standing = [0, 0, 0, 0]
+    batch._team_b[0] = "snapshot"
+    assert batch._with_team_b(0, [standing, [1, 0, 0, 0]])[1] == [1, 0, 0, 0]
+    batch._team_b[0] = "keeper_and_chasers"
+    scripted = batch._with_team_b(0, [standing, standing])[1]
+    # what the ground-truth team's robot 1 does in this state, asked of a fresh copy of that team
+    fresh = team_policies(1, "keeper_and_chasers", field=batch.config.field, head_mode=batch.config.head_mode,
+                          motion=batch.config.motion)
+    assert scripted == fresh[1].act(batch.worlds[0].snapshot(), 1)
+    assert int(scripted.walk) != 0             # at kick-off the chaser walks to the ball
+    env.close()
+
+
+SMALL = {"algorithm": "ppo", "variant": "baseline", "players_per_team": 1, "num_envs": 2, "perception": "realistic",
+         "rollout_length": 4, "ltp_horizon": 2, "feature_size": 16, "ppo_epochs": 1, "ppo_minibatches": 1,
+         "log_every_updates": 1, "checkpoint_every_minutes": 10.0, "opponent": "league",
+         "snapshot_every_updates": 2, "episode_seconds": 2.0}
+
+
+@pytest.mark.parametrize("runner", ["sync", "async"])
+def test_a_run_against_the_league_trains_and_logs_the_members(tmp_path, runner):
+    extra = {"backend": "inprocess"} if runner == "sync" else {"runner": "async", "workers": 1}
+    cfg = TrainConfig(**{**SMALL, **extra, "total_env_steps": 48})
+    summary = make_trainer(cfg, tmp_path, progress=False).run()
+    assert summary["env_steps"] >= 48
+    logged = (tmp_path / "metrics.csv").read_text()
+    for member in LEAGUE_MEMBERS:
+        assert f"league/{member}_share" in logged
