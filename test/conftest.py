@@ -31,6 +31,10 @@ def pytest_configure(config: pytest.Config) -> None:
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
     os.environ["PYTHONUNBUFFERED"] = "1"
+    # a test (or a documented command the doc test runs) that evaluates on the test split appends here, never to
+    # the repository's committed ledger
+    import tempfile
+    os.environ["DYNENV_TEST_LEDGER"] = str(Path(tempfile.gettempdir()) / f"dynenv_test_ledger_{os.getpid()}.jsonl")
 
 
 @pytest.fixture

@@ -1158,7 +1158,7 @@ def _short_train(args: list[str]) -> list[str]:
 
 
 def _short_eval(args: list[str]) -> list[str]:
-    if args[:1] in (["merge"], ["training-best"]):     # reads files only: fast as written
+    if args[:1] in (["merge"], ["training-best"], ["ratio"]):     # reads files only: fast as written
         return args
     if args[:1] == ["compare"]:   # one chain: PyMC samples it in this process (two: a process each, 15 s)
         return _replace(_replace(_replace(args, "--draws", ["100"]), "--tune", ["100"]), "--chains", ["1"])

@@ -119,3 +119,14 @@ def test_the_repository_ledger_is_readable_and_rows_are_found_by_policy(tmp_path
     ledger.write_text(ledger.read_text() + "not json\n")
     with pytest.raises(ValueError, match=":2: not JSON"):
         read_ledger(ledger)
+
+
+def test_without_ledger_the_suite_writes_to_its_scratch_ledger_not_the_repositorys(tmp_path, monkeypatch):
+    from dynenv_ros.evaluation.ledger import REPOSITORY_LEDGER, default_ledger
+    before = REPOSITORY_LEDGER.read_bytes() if REPOSITORY_LEDGER.exists() else b""
+    scratch = tmp_path / "scratch_ledger.jsonl"
+    monkeypatch.setenv("DYNENV_TEST_LEDGER", str(scratch))
+    assert default_ledger() == scratch
+    assert _eval(tmp_path, "--split", "test", "--num-seeds", "2") == 0
+    assert len(read_ledger(scratch)) == 1
+    assert (REPOSITORY_LEDGER.read_bytes() if REPOSITORY_LEDGER.exists() else b"") == before

@@ -125,3 +125,24 @@ def test_a_driving_evaluation_of_another_policy_or_of_other_episodes_is_refused(
     reference.write_text(json.dumps(result))
     with pytest.raises(tool.ReadmeError, match=r"random.json drove other episodes than policy.json: its seeds differ"):
         tool.render(tmp_path, tool.DRIVING_FOLDER)
+
+
+def test_the_readme_lists_every_test_ledger_row_of_its_policy_and_no_other(tool, folder):
+    digest = sha256(folder / tool.POLICY)
+    row = {"format": "dynenv_test_ledger/1", "date": "2026-11-29T10:00:00+00:00", "commit": "abcdef0123",
+           "evaluated": {"spec": "p", "sha256": digest}, "opponent": {"spec": "perceiving"}, "games": 100,
+           "head_to_head": {"games": 100, "wins": 30, "draws": 50, "losses": 20, "goals_for": 41, "goals_against": 28,
+                            "goal_difference_per_game": 0.13, "interval": [0.01, 0.25], "beats": True}}
+    other = dict(row, evaluated={"spec": "q", "sha256": "f" * 64}, commit="9999999")
+    lines = tool.ledger_lines(folder.parent.parent, digest)       # the repository's ledger: whatever it holds
+    ledger = [json.dumps(r) for r in (row, other, dict(row, opponent={"spec": "scripted"}))]
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory() as root:
+        path = Path(root) / tool.LEDGER
+        path.parent.mkdir(parents=True)
+        path.write_text("\n".join(ledger) + "\n")
+        text = "\n".join(tool.ledger_lines(Path(root), digest))
+    assert "| 2026-11-29 | `abcdef0` | `perceiving` | 100 | 30/50/20 | 41 : 28 | +0.130 (+0.01 to +0.25) | yes |" in text
+    assert "`scripted`" in text and "9999999" not in text
+    assert lines[0] == "## The test ledger"

@@ -313,6 +313,40 @@ def shipped_files(here: Path) -> tuple[str, str, dict[str, Any], dict[str, Any],
     return digest, onnx_digest, agent, meta, config
 
 
+LEDGER = Path("docs") / "results_data" / "test_ledger.jsonl"
+
+
+def ledger_lines(root: Path, digest: str, driving: bool = False) -> list[str]:
+    """The test ledger's rows in which this policy played (every one, in the order they were written)."""
+    from dynenv_ros.evaluation.ledger import read_ledger, rows_of
+    path = root / LEDGER
+    rows = rows_of(read_ledger(path), digest) if path.exists() else []
+    out = ["## The test ledger", "",
+           "Every evaluation of this policy on the test split (seeds 20,000–29,999), as dynenv-eval's `--split test` "
+           "appended it to `docs/results_data/test_ledger.jsonl`; the earlier tables are on seeds that choices "
+           "were made on.", ""]
+    if not rows:
+        return out + ["No test-split evaluation of this policy yet.", ""]
+    if driving:
+        out += ["| date | commit | games | reward per car and episode | share of cars home | share crashed |",
+                "|---|---|---:|---:|---:|---:|"]
+        for row in rows:
+            s = row["summary"]
+            out.append(f"| {row['date'][:10]} | `{str(row['commit'])[:7]}` | {row['games']} | {s['total']:.2f} | "
+                       f"{s['home_rate']:.2f} | {s['crash_rate']:.2f} |")
+        return out + [""]
+    out += ["| date | commit | opponent | games | W/D/L | goals for : against | goal difference a game (95 % interval) "
+            "| beats it |", "|---|---|---|---:|---:|---:|---:|---|"]
+    for row in rows:
+        h = row["head_to_head"]
+        opponent = (row.get("opponent") or {}).get("spec", "")
+        interval = "" if h["interval"] is None else f" ({h['interval'][0]:+.2f} to {h['interval'][1]:+.2f})"
+        out.append(f"| {row['date'][:10]} | `{str(row['commit'])[:7]}` | `{opponent}` | {h['games']} | "
+                   f"{h['wins']}/{h['draws']}/{h['losses']} | {h['goals_for']} : {h['goals_against']} | "
+                   f"{h['goal_difference_per_game']:+.3f}{interval} | {'yes' if h['beats'] else 'no'} |")
+    return out + [""]
+
+
 def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     """The README of ``root/folder``'s policy, from its files (``ReadmeError`` when they disagree): the soccer
     README or, for a driving agent, ``render_driving``'s."""
@@ -350,7 +384,7 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
                        f"{goals_against} against in {result['counts']['episodes']} games (below).")
     out.append("")
 
-    out += ["## How it plays (held-out seeds)", "",
+    out += ["## How it plays (seeds 100–104: train split, looked at for choices before the splits existed)", "",
             "The paper's metric (positive reward minus observation reward, per robot and episode) is the headline, "
             "the total reward beside it; mean ± sd over the evaluation seeds (the unit), goals and W/D/L summed over "
             "every game. Against `random`, the last column is the ratio of the policy's paper's metric to the "
@@ -382,6 +416,7 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     for path, result in evaluations:
         out += [format_table(result), ""]
 
+    out += ledger_lines(root, digest)
     greedy = bool(evaluations) and all(r["settings"]["greedy"] for _, r in evaluations)
     out += ["## Play it", "",
             "`make run` (team A, through the policy node and onnxruntime, against the scripted team B), or "
@@ -463,14 +498,14 @@ def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
                                f"included)")]
     out += recipe_and_listing(root, here, config, revision, digest)
     home, crashed = summary["home_rate"]["mean"], summary["crash_rate"]["mean"]
-    out.append(f"- Not a solved task: on the held-out episodes below {home * 100:.0f} % of its cars get home and "
+    out.append(f"- Not a solved task: on the evaluation episodes below {home * 100:.0f} % of its cars get home and "
                f"{crashed * 100:.0f} % crash.")
-    out.append(f"- Its figure below is a held-out evaluation, not the paper's statistic (the best 10-episode "
+    out.append(f"- Its figure below is an evaluation on unseen episodes, not the paper's statistic (the best 10-episode "
                f"moving average during training, a friendlier one): the paper's Pred reached "
                f"{PAPER_DRIVING_PRED} per car and episode that way.")
     out.append("")
 
-    out += ["## How it drives (held-out seeds)", "",
+    out += ["## How it drives (seeds of the train split, looked at for choices before the splits existed)", "",
             f"Each driver drives all {settings['n_cars']} cars of the same {len(policy['episodes'])} "
             f"episodes ({settings['episodes']} per seed, seeds {', '.join(map(str, settings['seeds']))}), "
             f"`{settings['perception']}` perception; reward per car and episode (driving's paper's metric is its "
@@ -496,6 +531,7 @@ def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
     for _, result in [(policy_path, policy), *references]:
         out += [format_driving_table(result), ""]
 
+    out += ledger_lines(root, digest, driving=True)
     out += ["## Play it", "",
             '`make run ARGS="--set scenario=driving"`: a policy node drives `car_0` with `policy.onnx` '
             "(onnxruntime), a `scripted_driver` node the other cars (`--set car_0=scripted` for scripted drivers "

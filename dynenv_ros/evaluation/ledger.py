@@ -20,7 +20,10 @@ REPOSITORY_LEDGER = Path(__file__).resolve().parents[2] / "docs" / "results_data
 
 
 def default_ledger() -> Path | None:
-    """The repository's ledger when this package runs from a checkout that has its folder, else None."""
+    """``$DYNENV_TEST_LEDGER`` if set (the test suite points it at a scratch file), else the repository's ledger
+    when this package runs from a checkout that has its folder, else None."""
+    if os.environ.get("DYNENV_TEST_LEDGER"):
+        return Path(os.environ["DYNENV_TEST_LEDGER"])
     return REPOSITORY_LEDGER if REPOSITORY_LEDGER.parent.is_dir() else None
 
 
