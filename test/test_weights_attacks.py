@@ -17,8 +17,8 @@ from pathlib import Path
 
 import torch
 from diagnostic_msgs.msg import DiagnosticArray
+from dynenv_msgs.srv import AcceptOlderWeights
 from rclpy.qos import QoSProfile
-from std_srvs.srv import Trigger
 
 from benchmarks.timing import process_rss_mib
 from dynenv_ros.agent.checkpoint import policy_bytes
@@ -26,7 +26,8 @@ from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.ros.weights_release import to_message
 from dynenv_ros.security.keys import load_private_key
 from dynenv_ros.security.weights_signing import sign
-from ros_harness import call_idempotent, spin_until
+from operator_helpers import signed_call
+from ros_harness import spin_until
 from test_policy_node_faults import Feeder, _policy_node
 from weights_helpers import SignedTrainer, key_pair, network_metadata
 
@@ -123,8 +124,8 @@ def test_a_replay_or_a_rollback_is_refused_and_taken_once_after_the_operators_ca
         # which still holds it), and only that one
         operator = make_node("operator")
         executor.add_node(operator)
-        accept = operator.create_client(Trigger, "/policy_node/accept_older_weights")
-        response = call_idempotent(executor, accept, Trigger.Request())
+        response = signed_call(operator, executor, AcceptOlderWeights, "/policy_node/accept_older_weights",
+                               AcceptOlderWeights.Request())
         assert response.success and "older than version 2 of run run will be accepted, once" in response.message
         assert spin_until(executor, lambda: policy.policy_version == 1, 20.0), policy.counts
         assert feeder.act(1)["team_a_0"].policy_version == 1

@@ -25,11 +25,10 @@ from typing import Any
 
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 from dynenv_msgs.msg import WeightsAnnouncement
-from dynenv_msgs.srv import FetchWeights
+from dynenv_msgs.srv import AcceptOlderWeights, FetchWeights
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.task import Future
-from std_srvs.srv import Trigger
 
 from dynenv_ros.ros.qos import latched
 from dynenv_ros.ros.weights_release import from_message
@@ -75,7 +74,7 @@ class WeightsFollower:
                  trusted: dict[str, Ed25519PublicKey], max_bytes: int, order: ReleaseOrder,
                  fits: Callable[[str], None], install: Callable[[bytes, Announcement], str],
                  counts: Counter, note: Callable[[str], None], run_filter: str = "",
-                 report_period_s: float = 1.0) -> None:
+                 report_period_s: float = 1.0, operator: Any = None) -> None:
         self.node, self.trusted, self.max_bytes, self.order = node, trusted, max_bytes, order
         self.fits, self.install, self.counts, self.note, self.run_filter = fits, install, counts, note, run_filter
         self.fetch: _Fetch | None = None
@@ -85,7 +84,10 @@ class WeightsFollower:
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.subscription = node.create_subscription(WeightsAnnouncement, topic, self._on_announcement, latched(1))
         self.client = node.create_client(FetchWeights, service)
-        self.accept_service = node.create_service(Trigger, accept_service, self._on_accept_older)
+        # The operator's door to an older release: only with a gate (ros.operator_gate) that checks signatures.
+        self.operator = operator
+        self.accept_service = (node.create_service(AcceptOlderWeights, accept_service, self._on_accept_older)
+                               if operator is not None else None)
         self.watch_timer = node.create_timer(WATCH_PERIOD_S, self._watch, clock=steady)
         self.report_timer = node.create_timer(report_period_s, self._report, clock=steady)
         if not trusted:
@@ -134,7 +136,13 @@ class WeightsFollower:
         self.last_refusal = f"{reason}: {text}"
         self.note(self.last_refusal)
 
-    def _on_accept_older(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def _on_accept_older(self, request: AcceptOlderWeights.Request,
+                         response: AcceptOlderWeights.Response) -> AcceptOlderWeights.Response:
+        refused = self.operator.refusal("accept_older_weights", request)
+        if refused is not None:
+            response.success, response.reason = False, refused[0]
+            response.message = f"refused ({refused[0]}): {refused[1]}"
+            return response
         self.order.allow_older_once()
         mark = self.order.mark
         acting = f"version {mark.version} of run {mark.run_id}" if mark else "no trainer release"
