@@ -305,7 +305,7 @@ class WeightsFollower:
                                        f"{fetch.download.received}/{fetch.download.size}" if fetch else ""),
                   "weights_fetch_attempt": str(fetch.attempt if fetch else again[1] if again else 0),
                   "weights_fetch_backoff_s": (f"{max(0.0, again[2] - time.monotonic()):.1f}" if again and not fetch
-                                              else "0.0")}
+                                              else "0")}
         for key in ("weights_duplicate", "weights_superseded", "weights_fetch_retries", "weights_fetch_restarts"):
             values[key] = str(self.counts.get(key, 0))
         for reason in REASONS:
