@@ -4,6 +4,7 @@ filled from a YAML mapping, one call and the response as plain data. Used by ``t
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from typing import Any
 
 
@@ -50,8 +51,11 @@ def as_plain(message: Any) -> Any:
     return message
 
 
-def call(service: str, kind: Any, request: Any, timeout_s: float) -> tuple[Any | None, str]:
-    """Call ``service`` once; (response, "") or (None, why not). Joins the domain of ``ROS_DOMAIN_ID``."""
+def call(service: str, kind: Any, request: Any, timeout_s: float,
+         prepare: Callable[[Any], Any] | None = None) -> tuple[Any | None, str]:
+    """Call ``service`` once; (response, "") or (None, why not). ``prepare`` turns the request into the one sent
+    once the service is there (``dynenv-keys call`` signs then, so waiting for discovery does not age the
+    signature). Joins the domain of ``ROS_DOMAIN_ID``."""
     import rclpy
     rclpy.init()
     node = rclpy.create_node("service_call")
@@ -59,7 +63,7 @@ def call(service: str, kind: Any, request: Any, timeout_s: float) -> tuple[Any |
         client = node.create_client(kind, service)
         if not client.wait_for_service(timeout_sec=timeout_s):
             return None, f"service {service} not available after {timeout_s:.0f} s"
-        future = client.call_async(request)
+        future = client.call_async(prepare(request) if prepare else request)
         rclpy.spin_until_future_complete(node, future, timeout_sec=timeout_s)
         if not future.done():
             return None, f"no answer from {service} within {timeout_s:.0f} s"

@@ -83,8 +83,9 @@ def split_service(service: str, node: str = "") -> tuple[str, str, str]:
     return full, target, short
 
 
-def signed_request(args: argparse.Namespace) -> tuple[str, Any, Any]:
-    """(service, service class, request signed now) from the command line."""
+def signed_request(args: argparse.Namespace, sign: bool = True) -> tuple[str, Any, Any, Any]:
+    """(service, service class, request — signed now unless ``sign`` is false —, the signing function) from the
+    command line."""
     import yaml
 
     from dynenv_ros.ros.operator_gate import sign_message
@@ -101,7 +102,9 @@ def signed_request(args: argparse.Namespace) -> tuple[str, Any, Any]:
         raise ValueError(str(error).splitlines()[0]) from None
     if "signature" not in request.get_fields_and_field_types():
         raise ValueError(f"{args.type} has no signature field: its server does not check signatures")
-    return full, kind, sign_message(request, private, target, short)
+    def signer(unsigned: Any) -> Any:
+        return sign_message(unsigned, private, target, short)
+    return full, kind, signer(request) if sign else request, signer
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -136,7 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             import yaml
 
             from dynenv_ros.ros.service_call import as_plain
-            _, _, request = signed_request(args)
+            _, _, request, _ = signed_request(args)
             print(yaml.safe_dump(as_plain(request), default_flow_style=True, width=10**6).strip())
         else:
             return _call(args)
@@ -150,9 +153,10 @@ def _call(args: argparse.Namespace) -> int:
     import yaml
 
     from dynenv_ros.ros.service_call import as_plain, call
-    full, kind, request = signed_request(args)
-    print(f"requester: making signed request to {full} (key {request.signature.key_id})")
-    response, why = call(full, kind, request, args.timeout)
+    full, kind, request, signer = signed_request(args, sign=False)
+    key = key_id(_operator_key(args.key).public_key())
+    print(f"requester: making a request to {full} signed by key {key}")
+    response, why = call(full, kind, request, args.timeout, prepare=signer)      # signed once the service is there
     if response is None:
         print(f"dynenv-keys: {why}", file=sys.stderr)
         return 1
