@@ -120,7 +120,7 @@ def test_a_replay_or_a_rollback_is_refused_and_taken_once_after_the_operators_ca
     try:
         assert spin_until(executor, lambda: policy.counts["weights_refused_rollback"] >= 3, 40.0), policy.counts
         assert policy.policy_version == 2 and feeder.act(0)["team_a_0"].policy_version == 2
-        assert "call ~/accept_older_weights" in policy.weights_refusal
+        assert "an operator's signed call of ~/accept_older_weights allows it once" in policy.weights_refusal
         # the operator allows one older release: the next replay of version 1 is taken (fetched from the trainer,
         # which still holds it), and only that one
         operator = make_node("operator")
