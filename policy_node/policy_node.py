@@ -13,6 +13,13 @@ weights are taken only when signed by a key in ``trusted_weights_keys`` and newe
 ``/trainer/weights_announcement``, fetched in chunks without blocking decisions and checked against the signed
 SHA-256 (``ros.weights_follower``; docs/ros_graph.md, "Who may change the weights").
 
+Operator services (issue 43; docs/ros_graph.md, "Who may command a node"): ``~/load_policy`` and
+``~/accept_older_weights`` change what the robot does, so they exist only when the node is given
+``trusted_operator_keys``, and obey only a request an operator signed for this node (``ros.operator_gate``: the
+request's fields, this node's name, a fresh stamp and an unused nonce); anything else is refused with the reason,
+counted in ``~/diagnostics``. A file LoadPolicy names must carry a trusted detached signature (``FILE.sig``) unless
+the node was started with ``allow_unsigned_files``; the bytes checked are the bytes loaded (read once).
+
 Driving (``scenario:=driving``): the node acts for cars ``car_0`` … ``car_<n_cars-1>`` with a driving policy
 (``DynEnvAgent(scenario='driving')``, a .safetensors or .onnx file): each car's one frame per period is packed into
 driving's padded layout (``driving_layout_spec``), and the action goes out in Action's driving fields (throttle, brake,
@@ -39,12 +46,14 @@ empty one (``partial_periods``); off (−1) by default, as a stepped game always
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import statistics
 import time
 from collections import Counter
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -71,8 +80,8 @@ from dynenv_ros.ros.qos import action_stream
 from dynenv_ros.ros.tf import base_frame
 from dynenv_ros.soccer.config import MotionConfig, SoccerConfig, robot_names
 from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.checkpoint import (MAX_POLICY_BYTES, agent_config, check_agent_config, load_policy,
-                                         policy_from_bytes, sha256)
+from dynenv_ros.agent.checkpoint import (MAX_POLICY_BYTES, agent_config, check_agent_config, check_file_size,
+                                         load_policy, policy_from_bytes, sha256)
 from dynenv_ros.agent.export import (MAX_FRAMES, TorchPolicy, behaviour_log_probs, check_driving_policy,
                                      check_policy, check_scenario, sample_actions)
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
@@ -81,8 +90,11 @@ from dynenv_ros.driving.config import MAX_CARS, DrivingConfig, car_names
 from dynenv_ros.envs.driving_observations import driving_layout_spec
 from dynenv_ros.envs.padded_layout import SOCCER
 from dynenv_ros.ros.dds_profiles import use_bounded_profiles
+from dynenv_ros.ros.operator_gate import OperatorGate
 from dynenv_ros.ros.weights_follower import WeightsFollower
 from dynenv_ros.security.keys import KeyFileError, load_trusted_keys
+from dynenv_ros.security.operator_requests import signature_path, verify_file
+from dynenv_ros.security.weights_signing import Refused
 from dynenv_ros.security.weights_order import ReleaseOrder
 from dynenv_ros.security.weights_signing import Announcement
 from policy_node.partial_periods import FrameInterval, due_ns, fill
@@ -195,6 +207,14 @@ class PolicyNode(Node):
         weights_state = declare_str(self, "weights_state_file", "", "JSON file keeping the last accepted release "
                                     "(run, version, stamp) across restarts, so a replay stays refused; empty: "
                                     "kept in memory only.", read_only=True)
+        operator_keys = declare_str_list(self, "trusted_operator_keys", [], "Ed25519 public keys (.pub files, or "
+                                         "directories of them) of the operators whose signed requests "
+                                         "~/load_policy and ~/accept_older_weights obey (dynenv-keys operator); "
+                                         "none: those services are off.", read_only=True)
+        self.allow_unsigned_files = declare_bool(self, "allow_unsigned_files", False, "Let ~/load_policy load a "
+                                                 "file without a trusted detached signature beside it (FILE.sig, "
+                                                 "dynenv-keys sign-file); the request itself must still be "
+                                                 "signed.", read_only=True)
         self.weights_run = declare_str(self, "weights_run_id", "", "Take weights from this trainer run only "
                                        "(WeightsAnnouncement.run_id); empty: any run.", read_only=True)
         self.pose_max_age, self.pose_frame = declare_pose_input(self, "Robocup, a policy that takes the pose "
@@ -249,7 +269,9 @@ class PolicyNode(Node):
                                                            self._receiver(n),
                                                            detection_qos()) for n in self.names}
         self._subscribe_poses()
-        self.load_srv = self.create_service(LoadPolicy, "~/load_policy", self._on_load)
+        self.operator = self._operator_gate(operator_keys)
+        self.load_srv = (self.create_service(LoadPolicy, "~/load_policy", self._on_load) if self.operator
+                         else None)
         self.weights = (self._follow_weights(weights_topic, weights_service, trusted_keys, max_weights,
                                              weights_state, diagnostics_s) if weights_topic else None)
         self.diagnostics_pub = Diagnostics(self, "~/diagnostics")     # and /diagnostics
@@ -265,9 +287,25 @@ class PolicyNode(Node):
                                f"{'; the policy takes the pose estimates' if self.pose_wanted else ''}")
 
     # -- weights ---------------------------------------------------------------------------------------------------
-    def _load(self, path: str, runtime: str):
+    def _operator_gate(self, key_paths: list[str]) -> OperatorGate | None:
+        """The gate of the operator services, or None (they are off) without trusted operator keys: said once."""
+        try:
+            trusted = load_trusted_keys(key_paths)
+        except KeyFileError as error:
+            raise ParameterException(str(error), ["trusted_operator_keys"]) from None
+        if not trusted:
+            self.get_logger().info("no trusted_operator_keys: ~/load_policy and ~/accept_older_weights are off "
+                                   "(give the operators' public keys to turn them on, e.g. -p "
+                                   "trusted_operator_keys:=[~/.config/dynenv_ros/keys/operator.pub])")
+            return None
+        self.get_logger().info(f"~/load_policy and ~/accept_older_weights obey requests signed by "
+                               f"{', '.join(sorted(trusted))}; files "
+                               f"{'need no signature (allow_unsigned_files)' if self.allow_unsigned_files else 'need a trusted FILE.sig'}")
+        return OperatorGate(self, trusted, self.counts)
+
+    def _load(self, path: str, runtime: str, data: bytes | None = None):
         """(policy, sha256, version) of a file that passed every check; ValueError with a one-line reason
-        otherwise."""
+        otherwise. ``data``: the file's bytes already read (and their signature checked): nothing is read again."""
         if runtime not in RUNTIMES:
             raise ValueError(f"runtime must be one of {RUNTIMES}, got {runtime!r}")
         suffix = path.lower().rsplit(".", 1)[-1] if "." in path else ""
@@ -280,13 +318,13 @@ class PolicyNode(Node):
         try:
             version = 1
             if runtime == "torch":
-                agent, meta = load_policy(path)
+                agent, meta = load_policy(path) if data is None else policy_from_bytes(data, f"policy file {path}")
                 policy, version = TorchPolicy(agent), version_of(meta)
             else:
                 from dynenv_ros.agent.export import OnnxPolicy
-                policy = OnnxPolicy(path)
+                policy = OnnxPolicy(path, data=data)
             self._validate(policy)
-            digest = sha256(path)
+            digest = sha256(path) if data is None else hashlib.sha256(data).hexdigest()
         except ValueError as error:
             raise ValueError(_one_line(error)) from None
         except Exception as error:           # anything else a hostile or broken file provokes: refused, not fatal
@@ -325,11 +363,21 @@ class PolicyNode(Node):
         return (*streams_from_padded(observation), *self._side_inputs(observation, head_max, uses_pose(policy)))
 
     def _on_load(self, request: LoadPolicy.Request, response: LoadPolicy.Response):
+        """Only an operator's signed request, and (unless ``allow_unsigned_files``) a file with a trusted
+        detached signature; the bytes verified are the bytes loaded."""
+        refused, data = self.operator.refusal("load_policy", request), None
+        if refused is None and not self.allow_unsigned_files:
+            refused, data = self._signed_file(request.checkpoint_path)
+        if refused is not None:
+            response.success, response.reason = False, refused[0]
+            response.message = f"kept the current policy: refused ({refused[0]}): {refused[1]}"
+            return response
         runtime = request.runtime or runtime_of(request.checkpoint_path)
         try:
-            policy, digest, version = self._load(request.checkpoint_path, runtime)
+            policy, digest, version = self._load(request.checkpoint_path, runtime, data)
         except ValueError as error:
-            response.success, response.message = False, f"kept the current policy: {error}"
+            response.success, response.reason = False, "load_failed"
+            response.message = f"kept the current policy: {error}"
             self.get_logger().warning(f"LoadPolicy {request.checkpoint_path!r}: {response.message}")
             return response
         self._swap(policy, digest, version)
@@ -338,6 +386,23 @@ class PolicyNode(Node):
         response.message = f"loaded ({runtime}); its trial decision on {self._trial_note} passed"
         self.get_logger().info(f"loaded {request.checkpoint_path} ({runtime}, sha256 {digest[:12]})")
         return response
+
+    def _signed_file(self, path: str) -> tuple[tuple[str, str] | None, bytes | None]:
+        """(None, the file's bytes) when they carry a trusted operator's detached signature — read once, bounded,
+        and loaded from memory, so the file cannot change between check and load; else ((reason, text), None), a
+        signature problem counted as an operator refusal."""
+        try:
+            file = Path(path)
+            check_file_size(file, "policy file")
+            with file.open("rb") as handle:
+                data = handle.read(MAX_POLICY_BYTES + 1)
+            verify_file(data, signature_path(file), self.operator.verifier.trusted)
+        except Refused as refused:
+            return self.operator.refuse("load_policy", refused.reason, f"{path}: {refused}"), None
+        except (OSError, ValueError) as error:
+            self.get_logger().warning(f"LoadPolicy {path!r}: {_one_line(error)}")
+            return ("load_failed", _one_line(error)), None
+        return None, data
 
     def _swap(self, policy, digest: str, version: int) -> None:
         """Callbacks run one at a time: the swap happens between two decisions. The recurrent states carry over
@@ -365,7 +430,7 @@ class PolicyNode(Node):
                 DynEnvAgent(feature_size=1)
         return WeightsFollower(self, topic=topic, service=service, accept_service="~/accept_older_weights",
                                trusted=trusted, max_bytes=max_bytes, order=order, fits=self._announced_network,
-                               install=self._install_weights, counts=self.counts,
+                               install=self._install_weights, counts=self.counts, operator=self.operator,
                                note=lambda text: setattr(self, "weights_refusal", text), run_filter=self.weights_run,
                                report_period_s=report_s)
 
@@ -671,6 +736,9 @@ class PolicyNode(Node):
             values[key] = str(self.counts.get(key, 0))
         if self.weights is not None:                 # refusals by reason, the fetch running (ros.weights_follower)
             values.update(self.weights.diagnostics())
+        values["operator_services"] = "on" if self.operator else "off"
+        if self.operator is not None:                # signed operator requests: accepted, refused by reason
+            values.update(self.operator.diagnostics())
         values["pose_input"] = "yes" if self.pose_wanted else "no"
         values["pose_refusal"] = self.pose_refusal
         values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"

@@ -582,9 +582,16 @@ def _semantic_eval(ns: argparse.Namespace) -> None:
                                   f"checkpoint folder (RUN/checkpoints/step_…)")
 
 
+def _semantic_keys(namespace: argparse.Namespace) -> None:
+    """`dynenv-keys call|sign-request SERVICE TYPE VALUES`: the service type, its request fields and the node's
+    service exist, as for `ros2 service call`."""
+    if namespace.command in ("call", "sign-request"):
+        check_service_call([namespace.service, namespace.type, namespace.values])
+
+
 SEMANTIC: dict[str, Callable[..., None]] = {
     "dynenv-run": _semantic_run, "dynenv-train": _semantic_train, "dynenv-bench": _semantic_bench,
-    "dynenv-eval": _semantic_eval,
+    "dynenv-eval": _semantic_eval, "dynenv-keys": _semantic_keys,
 }
 
 
@@ -1049,6 +1056,9 @@ PARSE_ONLY: list[tuple[str, str]] = [
                              "test_the_docs_venv_service_calls_reach_the_node"),
     (r"^python tools/ros2_service_call\.py ", "calls a node started by an earlier command: "
                                              "test_the_docs_venv_service_calls_reach_the_node runs it against one"),
+    (r"^dynenv-keys call ", "a signed service call of a node started by an earlier command: "
+                            "test_the_docs_venv_service_calls_reach_the_node runs each against the node deploy.md "
+                            "starts with the operator's key"),
     (r"^\w+ --ros-args --enclave ", "needs the sros2 keystore of `ros2 security` (not in the wheels; "
                                      "docs/ros_graph.md says this set-up is not tested)"),
     (r"^make test( |$)", "the test suite this test belongs to (running it here would recurse); its recipe and "
@@ -2028,13 +2038,23 @@ def test_every_ros2_command_shows_its_venv_equivalent_beside_it() -> None:
 
 
 def test_the_docs_venv_service_calls_reach_the_node(tmp_path: Path, graph_probe: GraphProbe) -> None:
-    """The venv equivalents of the docs' `ros2 service call`s answer, called as documented, against the policy node
-    deploy.md starts (as documented)."""
-    calls = [a for c in DOC_COMMANDS for a in c.argvs if _normal(a)[:2] == ["python", "tools/ros2_service_call.py"]]
-    assert {_normal(a)[2] for a in calls} == {"/policy_node/load_policy", "/policy_node/accept_older_weights"}, calls
-    node = next(a for c in DOC_COMMANDS for a in c.argvs if c.where.startswith("docs/deploy.md")
-                and _normal(a)[:1] == ["policy_node"] and "checkpoint:=agent.onnx" in a and not c.inline)
+    """The docs' signed service calls (`dynenv-keys call`, issue 43) answer success, called as documented, against
+    the policy node deploy.md starts with the operator's key (as documented), after deploy.md's documented
+    `dynenv-keys operator` and `dynenv-keys sign-file`; and the docs' plain venv calls (tools/ros2_service_call.py),
+    if any, answer too."""
+    signed = [a for c in DOC_COMMANDS for a in c.argvs if _normal(a)[:2] == ["dynenv-keys", "call"] and len(a) > 2]
+    plain = [a for c in DOC_COMMANDS for a in c.argvs if _normal(a)[:2] == ["python", "tools/ros2_service_call.py"]]
+    assert {_normal(a)[2] for a in signed} == {"/policy_node/load_policy", "/policy_node/accept_older_weights"}, signed
+    deploy = [a for c in DOC_COMMANDS for a in c.argvs if c.where.startswith("docs/deploy.md") and not c.inline]
+    node = next(a for a in deploy if _normal(a)[:1] == ["policy_node"] and "checkpoint:=agent.onnx" in a
+                and any("trusted_operator_keys" in w for w in a))
+    setup = [a for a in deploy if _normal(a)[:2] in (["dynenv-keys", "operator"], ["dynenv-keys", "sign-file"])]
+    assert [_normal(a)[1] for a in setup] == ["operator", "sign-file"], setup
     scratch = Scratch(make_scratch(tmp_path / "view"))
+    for argv in setup:
+        result = run_subprocess([str(scratch.cwd / ".venv" / "bin" / "dynenv-keys"), *_normal(argv)[1:]], scratch,
+                                {}, TIMEOUT_S)
+        assert result.code == 0, (argv, result.output)
     log = scratch.new_log()
     before = graph_probe.publishers(int(os.environ.get("ROS_DOMAIN_ID", "0")))
     with log.open("w") as handle:
@@ -2046,12 +2066,15 @@ def test_the_docs_venv_service_calls_reach_the_node(tmp_path: Path, graph_probe:
         while set(graph_probe.publishers(int(os.environ.get("ROS_DOMAIN_ID", "0")))) <= set(before):
             assert time.monotonic() < deadline and process.poll() is None, log.read_text()
             time.sleep(0.2)
-        for call in calls:
+        for call in signed:
+            args = _normal(call)
+            result = run_subprocess([str(scratch.cwd / ".venv" / "bin" / "dynenv-keys"), *args[1:], "--timeout",
+                                     "25"], scratch, {}, TIMEOUT_S)
+            assert result.code == 0 and "success: true" in result.output, (args, result.output)
+        for call in plain:
             args = _normal(call)
             result = run_subprocess([sys.executable, *args[1:], "--timeout", "60"], scratch, {}, TIMEOUT_S)
             assert result.code == 0 and "response:" in result.output, (args, result.output)
-            if args[2] == "/policy_node/load_policy":
-                assert "success: true" in result.output, result.output
     finally:
         _stop(process, signal.SIGINT, NODE_STOP_S)
         _stop(process, signal.SIGKILL, 5.0)

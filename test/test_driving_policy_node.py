@@ -22,6 +22,7 @@ from dynenv_ros.envs.driving_observations import PaddedObservation
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.ros.conversions import detection_array
 from policy_node.policy_node import PolicyNode
+from operator_helpers import operator_params, signed_call
 from ros_harness import spin_until
 
 
@@ -87,15 +88,12 @@ def test_a_driving_safetensors_policy_plays_and_the_node_refuses_a_soccer_one(ma
     save_policy(DynEnvAgent(feature_size=16), soccer)
     continuous = tmp_path / "continuous.onnx"
     export_onnx(DynEnvAgent(feature_size=16, scenario="driving", action_mode="continuous"), continuous)
-    sim, policy = _game(make_node, executor, "discrete", checkpoint=str(drive))
+    sim, policy = _game(make_node, executor, "discrete", checkpoint=str(drive), **operator_params())
     assert spin_until(executor, lambda: sim.periods_run >= 3, 30.0), dict(sim.session.counts)
-    client = policy.create_client(LoadPolicy, "/policy_node/load_policy")
-    assert client.wait_for_service(timeout_sec=5.0)
 
     def load(path, runtime):
-        future = client.call_async(LoadPolicy.Request(checkpoint_path=str(path), runtime=runtime))
-        assert spin_until(executor, future.done, 10.0)
-        return future.result()
+        return signed_call(policy, executor, LoadPolicy, "/policy_node/load_policy",
+                           LoadPolicy.Request(checkpoint_path=str(path), runtime=runtime))
 
     reply = load(soccer, "torch")
     assert not reply.success and "it is a soccer policy and this node plays driving" in reply.message, reply.message

@@ -10,6 +10,7 @@ from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.agent.checkpoint import save_checkpoint
 from dynenv_ros.agent.network import DynEnvAgent
 from policy_node.policy_node import PolicyNode
+from operator_helpers import operator_params, signed_call
 from ros_harness import spin_until
 
 
@@ -17,7 +18,7 @@ def _graph(make_node, executor, **policy_params):
     sim = make_node(SimNode, parameter_overrides=[Parameter(k, value=v) for k, v in dict(
         players_per_team=1, seed=3, falls_enabled=False, publish_markers=False).items()])
     policy = make_node(PolicyNode, parameter_overrides=[Parameter(k, value=v) for k, v in dict(
-        players_per_team=1, seed=1, **policy_params).items()])
+        players_per_team=1, seed=1, **operator_params(), **policy_params).items()])
     executor.add_node(sim)
     executor.add_node(policy)
     return sim, policy
@@ -54,13 +55,10 @@ def test_checkpoints_load_and_bad_ones_are_refused(make_node, executor, tmp_path
     bad.write_bytes(b"not a checkpoint")
     sim, policy = _graph(make_node, executor, checkpoint=str(good))
     assert policy.checkpoint_sha256 == digest
-    client = policy.create_client(LoadPolicy, "/policy_node/load_policy")
-    assert client.wait_for_service(timeout_sec=5.0)
 
     def load(path):
-        future = client.call_async(LoadPolicy.Request(checkpoint_path=str(path), runtime="torch"))
-        assert spin_until(executor, future.done, 10.0)
-        return future.result()
+        return signed_call(policy, executor, LoadPolicy, "/policy_node/load_policy",
+                           LoadPolicy.Request(checkpoint_path=str(path), runtime="torch"))
 
     reply = load(bad)
     assert not reply.success and "kept the current policy" in reply.message and "cannot be read safely" in reply.message
@@ -87,10 +85,8 @@ def test_swapping_in_a_network_of_another_size_keeps_playing(make_node, executor
     save_checkpoint(DynEnvAgent(feature_size=16), smaller)
     sim, policy = _graph(make_node, executor)
     assert spin_until(executor, lambda: sim.periods_run >= 2, 30.0)
-    client = policy.create_client(LoadPolicy, "/policy_node/load_policy")
-    assert client.wait_for_service(timeout_sec=5.0)
-    future = client.call_async(LoadPolicy.Request(checkpoint_path=str(smaller), runtime="torch"))
-    assert spin_until(executor, future.done, 10.0) and future.result().success
+    assert signed_call(policy, executor, LoadPolicy, "/policy_node/load_policy",
+                       LoadPolicy.Request(checkpoint_path=str(smaller), runtime="torch")).success
     before = sim.periods_run
     assert spin_until(executor, lambda: sim.periods_run >= before + 2, 30.0)
 
@@ -108,13 +104,10 @@ def test_the_runtime_is_inferred_from_the_policy_file(make_node, executor, tmp_p
     sim, policy = _graph(make_node, executor, checkpoint=str(onnx_file))
     assert policy.runtime_name == "onnxruntime"
     assert spin_until(executor, lambda: sim.periods_run >= 2, 30.0), sim.session.counts
-    client = policy.create_client(LoadPolicy, "/policy_node/load_policy")
-    assert client.wait_for_service(timeout_sec=5.0)
 
     def load(path, runtime=""):
-        future = client.call_async(LoadPolicy.Request(checkpoint_path=str(path), runtime=runtime))
-        assert spin_until(executor, future.done, 15.0)
-        return future.result()
+        return signed_call(policy, executor, LoadPolicy, "/policy_node/load_policy",
+                           LoadPolicy.Request(checkpoint_path=str(path), runtime=runtime))
 
     reply = load(torch_file)
     assert reply.success and policy.runtime_name == "torch", reply.message

@@ -34,6 +34,7 @@ from dynenv_ros.ros.node_runner import NodeExit
 from dynenv_ros.ros.qos import sim_stream
 from policy_node.policy_node import DETECTION_DEPTH, STAND_STILL, PolicyNode
 from policy_node.scripted_policy import ScriptedPolicyNode
+from operator_helpers import operator_params, signed_call
 from ros_harness import spin_until
 
 REPO = Path(__file__).resolve().parent.parent
@@ -171,17 +172,15 @@ class Feeder:
 
 def _policy_node(make_node, executor, **params) -> PolicyNode:
     node = make_node(PolicyNode, parameter_overrides=[Parameter(k, value=v) for k, v in {
-        "players_per_team": 1, "team": "a", "seed": 1, **params}.items()])
+        "players_per_team": 1, "team": "a", "seed": 1, **operator_params(), **params}.items()])
     executor.add_node(node)
     return node
 
 
 def _call_load(node, executor, path, runtime="torch") -> LoadPolicy.Response:
-    client = node.create_client(LoadPolicy, "/policy_node/load_policy")
-    assert client.wait_for_service(timeout_sec=5.0)
-    future = client.call_async(LoadPolicy.Request(checkpoint_path=str(path), runtime=runtime))
-    assert spin_until(executor, future.done, 20.0)
-    return future.result()
+    """LoadPolicy signed by the test operator (the node trusts it and loads unsigned files: ``_policy_node``)."""
+    return signed_call(node, executor, LoadPolicy, "/policy_node/load_policy",
+                       LoadPolicy.Request(checkpoint_path=str(path), runtime=runtime))
 
 
 def _valid(action: Action) -> bool:

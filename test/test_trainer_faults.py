@@ -10,15 +10,16 @@ import sys
 import warnings
 
 from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
+from dynenv_msgs.srv import AcceptOlderWeights
 from rclpy.parameter import Parameter
-from std_srvs.srv import Trigger
 
 from dynenv_ros.learning import checkpoints
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.nodes.trainer_node import TrainerNode
 from dynenv_ros.ros.qos import action_stream, sim_stream
 from policy_node.policy_node import PolicyNode
-from ros_harness import call_idempotent, spin_until
+from operator_helpers import signed_call
+from ros_harness import spin_until
 from weights_helpers import key_pair
 from test_trainer_node import _game, _params, _trainer
 
@@ -58,8 +59,9 @@ def test_a_killed_trainer_leaves_the_robots_playing_and_a_restarted_one_resumes(
         # version acting, so refused as a rollback until the operator allows it once; then it learns on
         if saved + 1 <= version:
             assert spin_until(executor, lambda: policy.counts["weights_refused_rollback"] > rollbacks, 60.0)
-            accept = policy.create_client(Trigger, "/policy_node/accept_older_weights")
-            assert "accepted, once" in call_idempotent(executor, accept, Trigger.Request()).message
+            assert "accepted, once" in signed_call(policy, executor, AcceptOlderWeights,
+                                                   "/policy_node/accept_older_weights",
+                                                   AcceptOlderWeights.Request()).message
         assert spin_until(executor, lambda: policy.counts["weights_loaded"] > loaded, 60.0), policy.counts
         assert policy.weights_acting[1] >= saved + 1
         assert spin_until(executor, lambda: policy.policy_version > saved + 2, 120.0), policy.policy_version

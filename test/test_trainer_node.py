@@ -12,6 +12,7 @@ from rclpy.parameter import Parameter
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.nodes.trainer_node import TrainerNode
 from policy_node.policy_node import PolicyNode
+from operator_helpers import operator_params
 from ros_harness import spin_until
 from weights_helpers import key_pair
 
@@ -25,7 +26,8 @@ def _game(make_node, executor, namespace=None, seed=3, trusted=None):
     ``trusted``, if given); it starts once the policy node and the trainer read every robot's detections, so the
     trainer sees each episode from its start."""
     options = {"namespace": namespace} if namespace else {}
-    keys = {"trusted_weights_keys": [str(trusted)]} if trusted else {}
+    # with a trainer's key, the test operator's too (its signed ~/accept_older_weights: test_trainer_faults)
+    keys = {"trusted_weights_keys": [str(trusted)], **operator_params()} if trusted else {}
     policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=seed + 1, **keys), **options)
     if trusted:     # the trainer's first weights act from the first period (they are fetched: a round trip or two)
         executor.add_node(policy)

@@ -17,16 +17,18 @@ from pathlib import Path
 
 import torch
 from diagnostic_msgs.msg import DiagnosticArray
+from dynenv_msgs.srv import AcceptOlderWeights
 from rclpy.qos import QoSProfile
-from std_srvs.srv import Trigger
 
 from benchmarks.timing import process_rss_mib
 from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.ros.weights_follower import backoff_s
 from dynenv_ros.ros.weights_release import to_message
 from dynenv_ros.security.keys import load_private_key
 from dynenv_ros.security.weights_signing import sign
-from ros_harness import call_idempotent, spin_until
+from operator_helpers import signed_call
+from ros_harness import spin_until
 from test_policy_node_faults import Feeder, _policy_node
 from weights_helpers import SignedTrainer, key_pair, network_metadata
 
@@ -118,13 +120,13 @@ def test_a_replay_or_a_rollback_is_refused_and_taken_once_after_the_operators_ca
     try:
         assert spin_until(executor, lambda: policy.counts["weights_refused_rollback"] >= 3, 40.0), policy.counts
         assert policy.policy_version == 2 and feeder.act(0)["team_a_0"].policy_version == 2
-        assert "call ~/accept_older_weights" in policy.weights_refusal
+        assert "an operator's signed call of ~/accept_older_weights allows it once" in policy.weights_refusal
         # the operator allows one older release: the next replay of version 1 is taken (fetched from the trainer,
         # which still holds it), and only that one
         operator = make_node("operator")
         executor.add_node(operator)
-        accept = operator.create_client(Trigger, "/policy_node/accept_older_weights")
-        response = call_idempotent(executor, accept, Trigger.Request())
+        response = signed_call(operator, executor, AcceptOlderWeights, "/policy_node/accept_older_weights",
+                               AcceptOlderWeights.Request())
         assert response.success and "older than version 2 of run run will be accepted, once" in response.message
         assert spin_until(executor, lambda: policy.policy_version == 1, 20.0), policy.counts
         assert feeder.act(1)["team_a_0"].policy_version == 1
@@ -166,6 +168,41 @@ def test_an_empty_sha256_or_an_oversized_size_is_refused_before_any_fetch(make_n
     assert spin_until(executor, lambda: policy.counts["weights_refused_empty_sha256"] == empty + 1, 10.0)
     assert trainer.weights.served_chunks == 0 and trainer.weights.refused_requests == 0
     assert policy.policy_version == 0
+
+
+def test_a_release_raced_by_junk_answers_is_taken_once_the_attacker_stops(make_node, executor, tmp_path):
+    """Issue 43: the attacker answers every fetch with junk before the trainer does (here the genuine server, out of
+    the executor, does not answer at all while it runs). Before, the node dropped the release after three lost
+    fetches and took it only when a newer one came; now it fetches it again with a backoff (0.5 s doubling to
+    10 s) for as long as it is the newest, and takes it once the attacker is gone."""
+    trainer, policy, feeder, first = _genuine_graph(make_node, executor, tmp_path)
+    attacker = _attacker("junk", 120)
+    try:
+        assert attacker.stdout.readline().strip() == "ready"
+        executor.remove_node(trainer.node)               # the genuine server always slower than the attacker
+        data, meta = _weights(2)
+        trainer.release(data, 2, meta)
+        assert spin_until(executor, lambda: policy.counts["weights_refused_hash_mismatch"] >= 5, 60.0), policy.counts
+        assert policy.counts["weights_fetch_restarts"] >= 4, policy.counts         # not dropped after three
+        assert policy.policy_version == 1 and feeder.act(0)["team_a_0"].policy_version == 1    # never junk
+    finally:
+        report = _finish(attacker)
+    assert report["fetch_requests"] >= 5, report
+    stopped = time.monotonic()
+    executor.add_node(trainer.node)
+    assert spin_until(executor, lambda: policy.policy_version == 2, 60.0), policy.counts
+    took = time.monotonic() - stopped
+    print(f"raced release taken {took:.1f} s after the attacker stopped; {policy.counts['weights_fetch_restarts']} "
+          f"restarts, {policy.counts['weights_refused_hash_mismatch']} junk files")
+    assert took < 60.0
+    assert policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
+    assert feeder.act(1)["team_a_0"].policy_version == 2
+    values = policy.weights.diagnostics()
+    assert int(values["weights_fetch_restarts"]) >= 4 and values["weights_fetch_backoff_s"] == "0"
+
+
+def test_the_backoff_doubles_to_ten_seconds():
+    assert [backoff_s(n) for n in range(1, 9)] == [0.5, 1.0, 2.0, 4.0, 8.0, 10.0, 10.0, 10.0]
 
 
 class _Diagnostics:

@@ -9,6 +9,7 @@ name beside the genuine trainer (whoever answers first wins a fetch). Prints one
     weights_attacker.py malformed SECONDS               # an empty sha256, and a size of 1 TiB
     weights_attacker.py replay SECONDS ANNOUNCEMENT     # a recorded genuine announcement (JSON), again and again
     weights_attacker.py flood SECONDS MEGABYTES         # raw oversized bytes on the topic; junk for every fetch
+    weights_attacker.py junk SECONDS                    # junk for every fetch, nothing published (a fetch race)
 """
 from __future__ import annotations
 
@@ -46,7 +47,7 @@ def main(mode: str, seconds: float, *args: str) -> None:
 
     def on_fetch(request, response):
         report["fetch_requests"] += 1
-        if mode == "flood":                           # junk of the length asked for, as fast as it can
+        if mode in ("flood", "junk"):                 # junk of the length asked for, as fast as it can
             response.success, response.data = True, array.array("B", bytes(request.length))
             return response
         data = served.get((request.run_id, int(request.version)))
@@ -93,7 +94,7 @@ def main(mode: str, seconds: float, *args: str) -> None:
         messages.append(to_message(Announcement(**fields)))
     elif mode == "flood":               # a run_id of that many bytes: DDS must reassemble it before the bound refuses
         messages.append(oversized_announcement(int(float(args[0]) * 1_000_000)))
-    else:
+    elif mode != "junk":
         raise SystemExit(f"unknown mode {mode!r}")
 
     print("ready", flush=True)                      # publishers and server exist

@@ -76,8 +76,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, _bounded_int, check_file_size, check_head,
-                                         non_finite_tensors)
+from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, MAX_POLICY_BYTES, _bounded_int, check_file_size,
+                                         check_head, non_finite_tensors)
 from dynenv_ros.agent import driving_actions
 from dynenv_ros.agent.inputs import FEATURES, POSE_INPUT, StreamBatch, agent_inputs
 from dynenv_ros.agent.network import DynEnvAgent, State
@@ -371,14 +371,21 @@ class OnnxPolicy:
     """onnxruntime on the CPU, ``threads`` intra-op threads (1: one robot process per core, no thread pool
     contention). Called like ``DynEnvAgent``; returns a ``PolicyStep`` of torch tensors (sharing numpy memory)."""
 
-    def __init__(self, path: str | os.PathLike[str], threads: int = 1) -> None:
+    def __init__(self, path: str | os.PathLike[str], threads: int = 1, data: bytes | None = None) -> None:
+        """``data``: the file's bytes already read (and their signature checked: the policy node's LoadPolicy),
+        so nothing is read from ``path`` again, which then only names the file in errors."""
         import onnx
         import onnxruntime as ort
 
         source = Path(path)
-        check_file_size(source, "ONNX policy")
+        if data is None:
+            check_file_size(source, "ONNX policy")
+        elif len(data) > MAX_POLICY_BYTES:
+            raise ValueError(f"ONNX policy {source} is {len(data) / 2**20:.0f} MiB, more than the "
+                             f"{MAX_POLICY_BYTES >> 20} MiB a policy may have")
         try:
-            proto = onnx.load(str(source), load_external_data=False)
+            proto = (onnx.load(str(source), load_external_data=False) if data is None else
+                     onnx.load_model_from_string(data))
         except Exception as error:    # protobuf's DecodeError, onnx's own errors
             raise ValueError(f"ONNX policy {source} cannot be loaded: {type(error).__name__}: "
                              f"{_first_line(error)}") from None
@@ -393,7 +400,7 @@ class OnnxPolicy:
         options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
         options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
         try:
-            self.session = ort.InferenceSession(str(source), sess_options=options,
+            self.session = ort.InferenceSession(str(source) if data is None else data, sess_options=options,
                                                 providers=["CPUExecutionProvider"])
         except Exception as error:    # onnxruntime raises its own Fail/InvalidProtobuf/... types
             raise ValueError(f"ONNX policy {source} cannot be loaded: {type(error).__name__}: "

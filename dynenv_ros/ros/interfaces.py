@@ -23,8 +23,8 @@ from dynenv_msgs import srv as dynenv_srv
 
 PACKAGE = "dynenv_msgs"
 MESSAGE_NAMES = ("Detection", "DetectionArray", "ObjectState", "WorldState", "Action", "StepFeedback",
-                 "WeightsAnnouncement")
-SERVICE_NAMES = ("ResetSimulation", "StepSimulation", "LoadPolicy", "FetchWeights")
+                 "WeightsAnnouncement", "OperatorSignature")
+SERVICE_NAMES = ("ResetSimulation", "StepSimulation", "LoadPolicy", "FetchWeights", "AcceptOlderWeights")
 # Sequences in samples get 0..MAX_SAMPLE_SEQUENCE elements, so empty and several-element lists are both covered.
 MAX_SAMPLE_SEQUENCE = 4
 

@@ -11,9 +11,16 @@ the log once per report period, never a line per message.
 The fetch never blocks the node: one request at a time through the asynchronous client, its answer filed by the
 executor between the node's other callbacks (decisions go on at every period), a steady-clock timer re-sending a
 chunk that got no answer (a reply can be lost while DDS matches the server's reply writer) and giving up after
-``MAX_TRIES`` failures of a chunk or ``STALL_S`` without progress. A file whose hash does not match is fetched again,
-at most ``MAX_ATTEMPTS`` times in all. While a fetch runs, a newer trusted announcement waits (the newest one only)
-and starts as soon as the fetch ends; the trainer keeps the previous release servable for that time.
+``MAX_TRIES`` failures of a chunk or ``STALL_S`` without progress. While a fetch runs, a newer trusted announcement
+waits (the newest one only) and starts as soon as the fetch ends; the trainer keeps the previous release servable
+for that time.
+
+A fetch that failed — a file whose hash does not match (a forged server answered first, issue 43), a chunk that
+failed ``MAX_TRIES`` times, a stall — is not the end of the release: it is fetched again after a backoff that
+doubles from ``BACKOFF_FIRST_S`` up to ``BACKOFF_CAP_S`` (10 s), for as long as it is the newest release announced.
+So a process that answers fetches with junk faster than the trainer can delay new weights while it answers, never
+make the node drop them: within ``BACKOFF_CAP_S`` plus one fetch of it going quiet the release is taken
+(``weights_fetch_restarts``, ``weights_fetch_backoff_s`` in diagnostics).
 """
 from __future__ import annotations
 
@@ -25,11 +32,10 @@ from typing import Any
 
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 from dynenv_msgs.msg import WeightsAnnouncement
-from dynenv_msgs.srv import FetchWeights
+from dynenv_msgs.srv import AcceptOlderWeights, FetchWeights
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.task import Future
-from std_srvs.srv import Trigger
 
 from dynenv_ros.ros.qos import latched
 from dynenv_ros.ros.weights_release import from_message
@@ -42,10 +48,17 @@ REASONS = ("malformed", "empty_sha256", "oversized", "untrusted_key", "bad_signa
            "older_run", "hash_mismatch", "fetch_failed", "load_failed")
 CHUNK_TIMEOUT_S = 2.0      # re-send a chunk request unanswered this long
 RETRY_DELAY_S = 0.5        # after a refused or malformed answer
-MAX_TRIES = 5              # failures of one chunk before the fetch is given up
-MAX_ATTEMPTS = 3           # whole-file fetches of one release (a hash mismatch starts another)
-STALL_S = 30.0             # no chunk accepted for this long (the service gone): given up
+MAX_TRIES = 5              # failures of one chunk before this fetch of the file is given up (and started again)
+STALL_S = 30.0             # no chunk accepted for this long (the service gone): this fetch given up
+BACKOFF_FIRST_S = 0.5      # wait before fetching a release again after a failed fetch; doubles each time …
+BACKOFF_CAP_S = 10.0       # … up to this: a starved release is tried at least every 10 s while it is the newest
 WATCH_PERIOD_S = 0.2
+
+
+def backoff_s(failed_attempts: int) -> float:
+    """Seconds before fetching a release again after its ``failed_attempts``-th failed fetch: 0.5, 1, 2, 4, 8, then
+    10 s for ever (``BACKOFF_CAP_S``)."""
+    return min(BACKOFF_CAP_S, BACKOFF_FIRST_S * 2.0 ** (max(1, failed_attempts) - 1))
 
 
 def newer(a: Announcement, b: Announcement) -> bool:
@@ -69,23 +82,28 @@ class _Fetch:
 class WeightsFollower:
     """Announcements in, verified policy bytes out (``install``). Counts go to the node's ``counts``: weights_loaded,
     weights_refused (all reasons) and weights_refused_<reason>, weights_duplicate, weights_other_run,
-    weights_superseded, weights_fetch_retries."""
+    weights_superseded, weights_fetch_retries (chunks), weights_fetch_restarts (whole fetches after a failure)."""
 
     def __init__(self, node: Node, *, topic: str, service: str, accept_service: str,
                  trusted: dict[str, Ed25519PublicKey], max_bytes: int, order: ReleaseOrder,
                  fits: Callable[[str], None], install: Callable[[bytes, Announcement], str],
                  counts: Counter, note: Callable[[str], None], run_filter: str = "",
-                 report_period_s: float = 1.0) -> None:
+                 report_period_s: float = 1.0, operator: Any = None) -> None:
         self.node, self.trusted, self.max_bytes, self.order = node, trusted, max_bytes, order
         self.fits, self.install, self.counts, self.note, self.run_filter = fits, install, counts, note, run_filter
         self.fetch: _Fetch | None = None
         self.pending: Announcement | None = None
+        # A release whose fetch failed, waiting out its backoff: (announcement, next attempt, due on time.monotonic)
+        self.again: tuple[Announcement, int, float] | None = None
         self.last_refusal = ""
         self._reported: Counter[str] = Counter()
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.subscription = node.create_subscription(WeightsAnnouncement, topic, self._on_announcement, latched(1))
         self.client = node.create_client(FetchWeights, service)
-        self.accept_service = node.create_service(Trigger, accept_service, self._on_accept_older)
+        # The operator's door to an older release: only with a gate (ros.operator_gate) that checks signatures.
+        self.operator = operator
+        self.accept_service = (node.create_service(AcceptOlderWeights, accept_service, self._on_accept_older)
+                               if operator is not None else None)
         self.watch_timer = node.create_timer(WATCH_PERIOD_S, self._watch, clock=steady)
         self.report_timer = node.create_timer(report_period_s, self._report, clock=steady)
         if not trusted:
@@ -106,7 +124,7 @@ class WeightsFollower:
     def consider(self, announcement: Announcement) -> None:
         """Screen one announcement; fetch it, queue it behind the fetch running, or refuse it."""
         a = announcement
-        fetching = self.fetch.announcement if self.fetch else None
+        fetching = self.fetch.announcement if self.fetch else (self.again[0] if self.again else None)
         if self.order.is_duplicate(a) or (fetching is not None and fetching == a):
             self.counts["weights_duplicate"] += 1
             return
@@ -123,6 +141,12 @@ class WeightsFollower:
             return
         if fetching is None:
             self._start(a)
+        elif self.fetch is None:                     # the waiting release is no longer the newest: drop it
+            if newer(a, fetching):
+                self.again = None
+                self._start(a)
+            else:
+                self.counts["weights_superseded"] += 1
         elif newer(a, fetching) and (self.pending is None or newer(a, self.pending)):
             self.pending = a
         else:
@@ -134,7 +158,13 @@ class WeightsFollower:
         self.last_refusal = f"{reason}: {text}"
         self.note(self.last_refusal)
 
-    def _on_accept_older(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def _on_accept_older(self, request: AcceptOlderWeights.Request,
+                         response: AcceptOlderWeights.Response) -> AcceptOlderWeights.Response:
+        refused = self.operator.refusal("accept_older_weights", request)
+        if refused is not None:
+            response.success, response.reason = False, refused[0]
+            response.message = f"refused ({refused[0]}): {refused[1]}"
+            return response
         self.order.allow_older_once()
         mark = self.order.mark
         acting = f"version {mark.version} of run {mark.run_id}" if mark else "no trainer release"
@@ -145,6 +175,7 @@ class WeightsFollower:
 
     # -- fetching -------------------------------------------------------------------------------------------------
     def _start(self, a: Announcement, attempt: int = 1) -> None:
+        self.again = None
         self.fetch = _Fetch(a, Download(a.size, a.sha256), attempt=attempt)
         self._send()
 
@@ -198,6 +229,10 @@ class WeightsFollower:
         """Steady-clock timer: re-send unanswered requests, retry when due, give up a stalled fetch."""
         fetch, now = self.fetch, time.monotonic()
         if fetch is None:
+            if self.again is not None and now >= self.again[2]:
+                a, attempt, _ = self.again
+                self.counts["weights_fetch_restarts"] += 1
+                self._start(a, attempt)
             return
         if now - fetch.progress_at > STALL_S:
             self._fail(fetch, f"no chunk for {STALL_S:.0f} s (service {self.client.srv_name} gone or silent)")
@@ -219,10 +254,7 @@ class WeightsFollower:
             data = fetch.download.finish()
         except Refused as refusal:
             self.refuse(refusal.reason, f"version {a.version} of run {a.run_id[:40]!r}: {refusal}")
-            if fetch.attempt < MAX_ATTEMPTS and self.pending is None:
-                self._start(a, fetch.attempt + 1)
-            else:
-                self._end()
+            self._end(retry=fetch)
             return
         try:
             digest = self.install(data, a)
@@ -242,15 +274,18 @@ class WeightsFollower:
     def _fail(self, fetch: _Fetch, why: str) -> None:
         a = fetch.announcement
         self.refuse("fetch_failed", f"version {a.version} of run {a.run_id[:40]!r}: {why}")
-        self._end()
+        self._end(retry=fetch)
 
-    def _end(self) -> None:
-        """The fetch is over: drop its buffer, start the release waiting if any."""
+    def _end(self, retry: _Fetch | None = None) -> None:
+        """The fetch is over: drop its buffer, start the release waiting if any; else, when it failed (``retry``),
+        fetch the same release again after the backoff — it is still the newest announced."""
         if self.fetch is not None and self.fetch.future is not None:
             self.client.remove_pending_request(self.fetch.future)
         self.fetch, waiting, self.pending = None, self.pending, None
         if waiting is not None:
             self._start(waiting)
+        elif retry is not None:
+            self.again = (retry.announcement, retry.attempt + 1, time.monotonic() + backoff_s(retry.attempt))
 
     # -- reporting ------------------------------------------------------------------------------------------------
     def _report(self) -> None:
@@ -264,11 +299,14 @@ class WeightsFollower:
                                        + f"; last: {self.last_refusal}")
 
     def diagnostics(self) -> dict[str, Any]:
-        fetch = self.fetch
+        fetch, again = self.fetch, self.again
         values = {"weights_trusted_keys": str(len(self.trusted)),
                   "weights_fetching": (f"{fetch.announcement.run_id}/{fetch.announcement.version} "
-                                       f"{fetch.download.received}/{fetch.download.size}" if fetch else "")}
-        for key in ("weights_duplicate", "weights_superseded", "weights_fetch_retries"):
+                                       f"{fetch.download.received}/{fetch.download.size}" if fetch else ""),
+                  "weights_fetch_attempt": str(fetch.attempt if fetch else again[1] if again else 0),
+                  "weights_fetch_backoff_s": (f"{max(0.0, again[2] - time.monotonic()):.1f}" if again and not fetch
+                                              else "0")}
+        for key in ("weights_duplicate", "weights_superseded", "weights_fetch_retries", "weights_fetch_restarts"):
             values[key] = str(self.counts.get(key, 0))
         for reason in REASONS:
             values[f"weights_refused_{reason}"] = str(self.counts.get(f"weights_refused_{reason}", 0))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import stat
 from collections.abc import Iterable
 from pathlib import Path
@@ -20,6 +21,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 
 PRIVATE_NAME = "trainer.key"
 PUBLIC_NAME = "trainer.pub"
+OPERATOR_NAME = "operator"          # an operator's pair: operator.key / operator.pub (signed requests, issue 43)
 PUBLIC_SUFFIX = ".pub"
 KEY_ID_CHARS = 16
 MAX_KEY_FILE_BYTES = 16 * 1024      # a PEM Ed25519 key is about 120 bytes; anything far larger is not a key
@@ -43,11 +45,14 @@ def key_id(public_key: Ed25519PublicKey) -> str:
     return hashlib.sha256(raw).hexdigest()[:KEY_ID_CHARS]
 
 
-def generate_key_pair(directory: str | os.PathLike[str]) -> tuple[Path, Path]:
-    """Write a new pair as ``directory/trainer.key`` (0600) and ``directory/trainer.pub``; refuse (KeyFileError)
-    if either exists, so a key in use is never replaced by accident. Returns (private path, public path)."""
+def generate_key_pair(directory: str | os.PathLike[str], name: str = "trainer") -> tuple[Path, Path]:
+    """Write a new pair as ``directory/<name>.key`` (0600) and ``directory/<name>.pub`` (``trainer``: signs weights;
+    ``operator``: signs requests and files); refuse (KeyFileError) if either exists, so a key in use is never
+    replaced by accident. Returns (private path, public path)."""
+    if not re.fullmatch(r"[A-Za-z0-9_-]{1,64}", name):
+        raise KeyFileError(f"key name {name!r}: use 1-64 letters, digits, '_' or '-'")
     folder = Path(directory).expanduser()
-    private_path, public_path = folder / PRIVATE_NAME, folder / PUBLIC_NAME
+    private_path, public_path = folder / f"{name}.key", folder / f"{name}{PUBLIC_SUFFIX}"
     for path in (private_path, public_path):
         if path.exists():
             raise KeyFileError(f"{path} exists: refusing to overwrite a key (move it away first)")

@@ -66,12 +66,12 @@ class ReleaseOrder:
             if a.version > mark.version:
                 return None
             return ("rollback", f"version {a.version} of run {a.run_id} is not newer than version {mark.version} "
-                                "acting (call ~/accept_older_weights to allow it once)")
+                                "acting (an operator's signed call of ~/accept_older_weights allows it once)")
         if a.stamp_ns > mark.stamp_ns:
             return None
         return ("older_run", f"run {a.run_id} was signed at {a.stamp_ns / 1e9:.3f}, not after run {mark.run_id}'s "
                              f"version {mark.version} acting ({mark.stamp_ns / 1e9:.3f}; call "
-                             "~/accept_older_weights to allow it once)")
+                             "~/accept_older_weights, signed by an operator, to allow it once)")
 
     def allow_older_once(self) -> None:
         self.older_allowed = True
