@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Any
 
 from rclpy.executors import Executor
 
@@ -33,3 +34,14 @@ def call_idempotent(executor: Executor, client, request, timeout_s: float = 20.0
             return future.result()
         client.remove_pending_request(future)
     return None
+
+
+def finish_attacker(attacker: Any) -> dict:
+    """Stop an attacker process (test/*_attacker.py) and return its report: the last JSON line it printed."""
+    import json
+    if attacker.poll() is None:
+        attacker.terminate()
+    output = attacker.communicate(timeout=30)[0]
+    lines = [line for line in output.splitlines() if line.startswith("{")]
+    assert lines, output[-3000:]
+    return json.loads(lines[-1])

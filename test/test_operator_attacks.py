@@ -25,7 +25,7 @@ from dynenv_ros.security.keys import key_id, load_private_key, load_public_key
 from dynenv_ros.security.operator_requests import sign_file
 from policy_node.policy_node import PolicyNode
 from operator_helpers import operator_pair, operator_params, signed_call
-from ros_harness import spin_until
+from ros_harness import finish_attacker, spin_until
 from test_policy_node_faults import Feeder, _policy_node
 from test_weights_attacks import _weights
 from weights_helpers import SignedTrainer, key_pair
@@ -57,14 +57,6 @@ def _attacker(*args: object) -> subprocess.Popen:
     assert process.stdout.readline().strip() == "ready"
     return process
 
-
-def _finish(attacker: subprocess.Popen) -> dict:
-    if attacker.poll() is None:
-        attacker.terminate()
-    output = attacker.communicate(timeout=30)[0]
-    lines = [line for line in output.splitlines() if line.startswith("{")]
-    assert lines, output[-3000:]
-    return json.loads(lines[-1])
 
 
 def _trusted_id() -> str:
@@ -104,7 +96,7 @@ def test_load_policy_obeys_only_the_operator_and_the_attacker_never_acts(make_no
             versions.append(feeder.act(period)["team_a_0"].policy_version)
             period += 1
     finally:
-        report = _finish(attacker)
+        report = finish_attacker(attacker)
     versions += [feeder.act(p)["team_a_0"].policy_version for p in range(period, period + 3)]
     print(f"attacker: {report}; versions acted: {versions}; counts "
           f"{ {k: v for k, v in policy.counts.items() if k.startswith('operator')} }")
@@ -202,7 +194,7 @@ def test_accept_older_weights_obeys_only_the_operator_and_no_rollback_acts(make_
             versions.append(feeder.act(period)["team_a_0"].policy_version)
             period += 1
     finally:
-        report = _finish(attacker)
+        report = finish_attacker(attacker)
         if replayer.poll() is None:
             replayer.terminate()
         replayer.communicate(timeout=30)

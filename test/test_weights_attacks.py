@@ -28,7 +28,7 @@ from dynenv_ros.ros.weights_release import to_message
 from dynenv_ros.security.keys import load_private_key
 from dynenv_ros.security.weights_signing import sign
 from operator_helpers import signed_call
-from ros_harness import spin_until
+from ros_harness import finish_attacker, spin_until
 from test_policy_node_faults import Feeder, _policy_node
 from weights_helpers import SignedTrainer, key_pair, network_metadata
 
@@ -52,15 +52,6 @@ def _attacker(mode: str, seconds: float, *args: object) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, str(ATTACKER), mode, str(seconds), *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
-
-def _finish(attacker: subprocess.Popen) -> dict:
-    """Stop the attacker and return its report (its last line)."""
-    if attacker.poll() is None:
-        attacker.terminate()
-    output = attacker.communicate(timeout=30)[0]
-    lines = [line for line in output.splitlines() if line.startswith("{")]
-    assert lines, output[-3000:]
-    return json.loads(lines[-1])
 
 
 def _files(tmp_path: Path, data: bytes, meta: str) -> tuple[Path, Path]:
@@ -96,7 +87,7 @@ def test_weights_under_an_untrusted_key_or_a_tampered_signature_change_nothing(m
                 assert feeder.act(period)["team_a_0"].policy_version == 1
                 period += 1
         finally:
-            report = _finish(attacker)
+            report = finish_attacker(attacker)
         assert report["published"] >= 3 and report["fetch_requests"] == 0, report     # refused before any fetch
         assert policy.checkpoint_sha256 == acting and policy.weights_acting == ("run", 1)
         assert reason in policy.weights_refusal, policy.weights_refusal
@@ -143,7 +134,7 @@ def test_a_replay_or_a_rollback_is_refused_and_taken_once_after_the_operators_ca
         assert spin_until(executor, lambda: policy.counts["weights_refused_older_run"] >= 2, 20.0), policy.counts
         assert policy.weights_acting == ("run_b", 1) and feeder.act(2)["team_a_0"].policy_version == 1
     finally:
-        report = _finish(attacker)
+        report = finish_attacker(attacker)
     assert report["published"] >= 6, report
 
 
@@ -155,7 +146,7 @@ def test_an_empty_sha256_or_an_oversized_size_is_refused_before_any_fetch(make_n
         assert spin_until(executor, lambda: policy.counts["weights_refused_empty_sha256"] >= 2
                           and policy.counts["weights_refused_oversized"] >= 2, 40.0), policy.counts
     finally:
-        report = _finish(attacker)
+        report = finish_attacker(attacker)
     assert report["fetch_requests"] == 0, report
     # even signed by the trusted key: a size above the node's bound, or no sha256, is never fetched
     trainer = SignedTrainer(make_node, executor, private)
@@ -186,7 +177,7 @@ def test_a_release_raced_by_junk_answers_is_taken_once_the_attacker_stops(make_n
         assert policy.counts["weights_fetch_restarts"] >= 4, policy.counts         # not dropped after three
         assert policy.policy_version == 1 and feeder.act(0)["team_a_0"].policy_version == 1    # never junk
     finally:
-        report = _finish(attacker)
+        report = finish_attacker(attacker)
     assert report["fetch_requests"] >= 5, report
     stopped = time.monotonic()
     executor.add_node(trainer.node)
@@ -257,12 +248,12 @@ def test_an_oversized_flood_costs_neither_memory_nor_a_period(make_node, executo
             peak = max(peak, process_rss_mib(node.pid))
             period, answered = period + 1, answered + 1
             spin_until(executor, lambda: False, max(0.0, MOTION_PERIOD_S - (time.monotonic() - sent)))
-        report = _finish(attacker)
+        report = finish_attacker(attacker)
         attacker = None
         assert spin_until(executor, lambda: diagnostics.values.get("actions_sent") == str(answered), 10.0)
     finally:
         if attacker is not None:
-            report = _finish(attacker)
+            report = finish_attacker(attacker)
         node.terminate()
         output = node.communicate(timeout=30)[0]
     values = diagnostics.values

@@ -23,7 +23,7 @@ from pathlib import Path
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))      # run from a checkout: the package beside it
-from dynenv_ros.ros.service_call import CallError, as_plain, call, fill, service_type  # noqa: E402
+from dynenv_ros.ros.service_call import CallError, as_plain, call, request_from_yaml  # noqa: E402
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -34,12 +34,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the service and its answer")
     args = parser.parse_args(argv)
     try:
-        kind = service_type(args.type)
-        values = yaml.safe_load(args.values) or {}
-        if not isinstance(values, dict):
-            raise CallError(f"VALUES must be a YAML mapping of request fields, got {args.values!r}")
-        request = fill(kind.Request(), values)
-    except (CallError, yaml.YAMLError) as error:
+        kind, request = request_from_yaml(args.type, args.values)
+    except CallError as error:
         print(f"ros2_service_call.py: {error}", file=sys.stderr)
         return 2
     print(f"requester: making request: {request}")

@@ -40,6 +40,20 @@ def fill(message: Any, values: dict[str, Any], where: str = "") -> Any:
     return message
 
 
+def request_from_yaml(type_name: str, values_yaml: str) -> tuple[Any, Any]:
+    """(service class, its request filled from a YAML mapping of fields), as ``ros2 service call`` reads them;
+    CallError for an unknown type, YAML that is no mapping, or a field the request lacks."""
+    import yaml
+    kind = service_type(type_name)
+    try:
+        values = yaml.safe_load(values_yaml) or {}
+    except yaml.YAMLError as error:
+        raise CallError(f"VALUES is not YAML: {error}") from None
+    if not isinstance(values, dict):
+        raise CallError(f"VALUES must be a YAML mapping of request fields, got {values_yaml!r}")
+    return kind, fill(kind.Request(), values)
+
+
 def as_plain(message: Any) -> Any:
     """A message as plain data (nested messages as mappings, sequences as lists) for printing."""
     if hasattr(message, "get_fields_and_field_types"):

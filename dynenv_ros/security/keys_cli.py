@@ -86,19 +86,13 @@ def split_service(service: str, node: str = "") -> tuple[str, str, str]:
 def signed_request(args: argparse.Namespace, sign: bool = True) -> tuple[str, Any, Any, Any]:
     """(service, service class, request — signed now unless ``sign`` is false —, the signing function) from the
     command line."""
-    import yaml
-
     from dynenv_ros.ros.operator_gate import sign_message
-    from dynenv_ros.ros.service_call import CallError, fill, service_type
+    from dynenv_ros.ros.service_call import CallError, request_from_yaml
     full, target, short = split_service(args.service, args.node)
     private = _operator_key(args.key)
     try:
-        kind = service_type(args.type)
-        values = yaml.safe_load(args.values) or {}
-        if not isinstance(values, dict):
-            raise CallError(f"VALUES must be a YAML mapping of request fields, got {args.values!r}")
-        request = fill(kind.Request(), values)
-    except (CallError, yaml.YAMLError) as error:
+        kind, request = request_from_yaml(args.type, args.values)
+    except CallError as error:
         raise ValueError(str(error).splitlines()[0]) from None
     if "signature" not in request.get_fields_and_field_types():
         raise ValueError(f"{args.type} has no signature field: its server does not check signatures")
