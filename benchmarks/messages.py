@@ -18,7 +18,7 @@ import json
 
 from benchmarks.timing import format_stat, measure, print_table, summarise
 
-DETECTIONS_PER_FRAME = 12  # the original's mean at noise 1, 2v2 (facts sheet 4.2) rounded up
+DETECTIONS_PER_FRAME = 12  # the original's mean at noise 1, 2v2 (docs/original.md §4.2) rounded up
 
 
 def vision_frame():

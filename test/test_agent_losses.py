@@ -352,7 +352,7 @@ def test_helpers():
 
 
 def test_the_long_term_prediction_loss_is_actually_optimised():
-    """DynEnv computed LTP but never optimised it (facts §12.12): here an optimiser on it learns the dynamics."""
+    """DynEnv computed LTP but never optimised it (docs/original.md §12.12): an optimiser on it learns the dynamics."""
     from dynenv_ros.agent.losses import LongTermPredictor, RCMAttention, ltp_loss
     g = torch.Generator().manual_seed(0)
     T, N, D, A = 6, 8, 8, 4

@@ -1,4 +1,4 @@
-"""The driving config: defaults are the fact sheet's numbers × 0.1 m/px, and bad values are refused by name."""
+"""The driving config: defaults are docs/original.md's numbers × 0.1 m/px, and bad values are refused by name."""
 import math
 
 import pytest
@@ -8,7 +8,7 @@ from dynenv_ros.driving.config import DrivingConfig, MapConfig
 
 def test_defaults_are_the_original_numbers_in_metres():
     c = DrivingConfig()
-    # World 1700 x 1000 px, lane width 35 px, roads at x = 875 px and y = 500 px (facts §3).
+    # World 1700 x 1000 px, lane width 35 px, roads at x = 875 px and y = 500 px (docs/original.md §3).
     assert (c.map.width, c.map.height, c.map.lane_width) == (170.0, 100.0, 3.5)
     assert (c.map.vertical_road_x, c.map.horizontal_road_y) == (87.5, 50.0)
     assert (c.map.vertical_lanes, c.map.horizontal_lanes) == (2, 1)
@@ -23,7 +23,7 @@ def test_defaults_are_the_original_numbers_in_metres():
     p, o = c.pedestrians, c.obstacles
     assert (p.count_min, p.count_max, p.mass, p.radius) == (10, 20, 90.0, pytest.approx(0.5))
     assert (o.count_min, o.count_max, o.size) == (10, 20, pytest.approx(2.0))
-    # 10 ms ticks, one action and one frame per 100 ms, 60 s = 600 periods (facts §1).
+    # 10 ms ticks, one action and one frame per 100 ms, 60 s = 600 periods (docs/original.md §1).
     assert c.rates.tick_seconds == pytest.approx(0.01)
     assert (c.rates.motion_period_ticks, c.rates.frames_per_period, c.rates.vision_tick_offsets()) == (10, 1, (10,))
     assert (c.episode_periods, c.episode_ticks) == (600, 6000)

@@ -1,4 +1,4 @@
-"""The driving map's geometry against the fact sheet (§3) in metres, and lane classification of placed poses."""
+"""The driving map's geometry against docs/original.md §3 in metres, and lane classification of placed poses."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Driving rules and rewards by term, with the original's magnitudes (facts §3 collisions, §6.2).
+"""Driving rules and rewards by term, with the original's magnitudes (docs/original.md §3 collisions, §6.2).
 
 Unit conversions used below (0.1 m per px): a crash costs |v|/5 with v in px/s = 2·|v| with v in m/s; opposing-lane
 driving costs |v|/10000 per 10 ms tick (v in px/s) = 0.1 per metre; progress pays Δpx/50 = 0.2 per metre; reaching

@@ -176,8 +176,8 @@ def test_a2c_update_changes_parameters_and_reports_losses(rollout_setup):
 
 
 def test_ltp_is_optimised_through_the_training_update():
-    """DynEnv logged LTP but never optimised it (facts §12.12); here ``update`` — the trainer's own step — lowers it
-    and moves the LTP predictors' weights."""
+    """DynEnv logged LTP but never optimised it (docs/original.md §12.12); here ``update`` — the trainer's own step —
+    lowers it and moves the LTP predictors' weights."""
     env, learner, collector = _setup(targets=False, worlds=1, seed=8)
     rollout = collector.collect(4)
     env.close()

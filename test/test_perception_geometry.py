@@ -1,8 +1,8 @@
 """Perception geometry: occlusion by each preset's rule, sighting bits and row order from the reports, what made-up
 reports look like, confidence, and that no absolute pose leaks (rigid motions, mirror images, field lines included).
 
-Expected values are written out here from the documented rules and numbers (docs/perception.md; facts
-shared/reference/dynenv_facts.md §2.7, §5.1, §12.3; the preset YAML where only it states a number); the documented
+Expected values are written out here from the documented rules and numbers (docs/perception.md; the
+original's in docs/original.md §2.7, §5.1, §12.3; the preset YAML where only it states a number); the documented
 numbers themselves are the literal tables of test_perception_model.py.
 """
 import math
@@ -26,8 +26,8 @@ NEARBY_DISTANCE = 0.35     # docs "Crowding ... nearby_distance (0.35 m)", "NEAR
 # Occlusion (docs "Geometry", "Occlusion, two models"; docs table "occlusion | band, 0.35 m | cone, 0.15 m"):
 # realistic 'cone', 0.15 m — hidden when farther and within asin(occluder_radius / d_robot) of the robot's bearing;
 # DynEnv 'band', 0.35 m — a robot in the field of view hides what is farther, ahead along its sight line and within
-# 0.35 m of that line (facts §2.7: "Occlude if b lies within R of the line of sight to a and a is closer", R = 35 px,
-# "Robots that fall inside the FOV occlude").
+# 0.35 m of that line (docs/original.md §2.7: "occluded if b lies within R of the line of sight to a and a is the
+# closer one", R = 35 px, "A robot inside the field of view occludes").
 CONE_RADIUS, BAND_RADIUS = 0.15, 0.35
 
 
@@ -90,8 +90,8 @@ def cone_hides(ox, oy, bx, by):
 
 
 def band_hides(ox, oy, bx, by):
-    """DynEnv: the robot is in the field of view (its visibility radius 0.175 m, facts §2.7 "robot 17.5"), the object
-    is farther, ahead along the robot's sight line and within 0.35 m of that line."""
+    """DynEnv: the robot is in the field of view (its visibility radius 0.175 m, docs/original.md §2.7 "robot 17.5"),
+    the object is farther, ahead along the robot's sight line and within 0.35 m of that line."""
     d_o, d_b = np.hypot(ox, oy), np.hypot(bx, by)
     in_view = np.abs(np.arctan2(oy, ox)) <= HALF_FOV + np.arcsin(np.minimum(1, 0.175 / d_o))
     along = (ox * bx + oy * by) / d_o
@@ -190,7 +190,7 @@ def test_nothing_is_hidden_by_a_robot_farther_away_than_the_object(preset):
 
 @pytest.mark.parametrize("preset,mode", [("realistic", "realistic"), ("dynenv", "realistic"), ("dynenv", "random")])
 def test_hidden_objects_are_never_reported_and_robots_hide_robots(preset, mode):
-    """docs: "Hidden objects are never reported, in every mode"; facts §2.7: robots occlude robots and balls."""
+    """docs: "Hidden objects are never reported, in every mode"; docs/original.md §2.7: robots hide robots, balls."""
     params = load_preset(preset, noise_magnitude=3.0, mode=mode)
     things = [OBSERVER, Thing(ROBOT, 2.0, 0.0, 0.0, -1), Thing(BALL, 4.0, 0.05), Thing(ROBOT, 3.5, -0.1, 1.0, -1),
               Thing(ROBOT, 3.0, 1.4, 2.0, 1)]
@@ -205,7 +205,7 @@ def test_hidden_objects_are_never_reported_and_robots_hide_robots(preset, mode):
 @pytest.mark.parametrize("cls", [BALL, ROBOT, POST])
 def test_the_field_of_view_reaches_out_by_the_objects_radius(preset, cls):
     """docs "Geometry": an object of visibility radius r at distance d is in view if its bearing is within half the
-    view + asin(r/d), PARTIAL if not at least asin(r/d) inside both edges (facts §2.7); a bearing grid at 2 m."""
+    view + asin(r/d), PARTIAL if not at least asin(r/d) inside both edges (docs/original.md §2.7); bearings at 2 m."""
     d, r = 2.0, RADIUS[preset][cls]
     bearings = HALF_FOV + (np.arange(-40, 40) + 0.5) * 0.004                 # ±0.16 rad around the left edge
     xs = np.column_stack((np.zeros(len(bearings)), d * np.cos(bearings)))
@@ -403,7 +403,7 @@ def test_detections_do_not_depend_on_where_the_observer_stands_or_faces(preset, 
     """docs: "no absolute heading or position (a test rotates, shifts and mirrors the whole scene, lines included,
     and gets the same or the mirrored detections)". The whole scene — observer, ball, robots, posts, marks,
     crossings, circle and field lines — moved rigidly gives the same reports (with noise: for the same seed);
-    facts §12.3: DynEnv leaked a compass."""
+    docs/original.md §12.3: DynEnv leaked a compass."""
     params = load_preset(preset, **overrides)
     a = run(params, *rigid(CLUSTER, LINES, 0.7, (-1.0, 0.5)), head_yaw=HEAD_YAWS, seed=3)
     b = run(params, *rigid(CLUSTER, LINES, -2.4, (3.5, -2.0)), head_yaw=HEAD_YAWS, seed=3)
@@ -475,9 +475,9 @@ def field_lines(turn):
 @pytest.mark.parametrize("preset,overrides", [("none", {}), ("realistic", {"noise_magnitude": 1.0}),
                                               ("dynenv", {"noise_magnitude": 1.0})])
 def test_line_endpoint_order_does_not_follow_the_field(preset, overrides):
-    """Regression (facts §12.3, a line's stored direction is a compass): from headings 0, 90°, 180° and 270° with
-    the field turned along, the reports are the same and each line's nearer endpoint comes first — the vertical line
-    from (3, −1) to (3, 3) (clipped by the view's left edge), the horizontal from (1, 1) (clipped) to (5, 1)."""
+    """Regression (docs/original.md §12.3, a line's stored direction is a compass): from headings 0, 90°, 180° and 270°
+    with the field turned along, the reports are the same and each line's nearer endpoint comes first — the vertical
+    line from (3, −1) to (3, 3) (clipped by the view's left edge), the horizontal from (1, 1) (clipped) to (5, 1)."""
     params = load_preset(preset, **overrides)
     reports = []
     for turn in (0.0, math.pi / 2, math.pi, -math.pi / 2):

@@ -2,7 +2,7 @@
 
 The expected values are the documented formulas written out here with the presets' documented numbers as literals
 (docs/perception.md, "Error model" and "Parameters and presets"; the original's numbers in
-shared/reference/dynenv_facts.md §2.7 and §5.1; a number only the YAML states cites config/perception/<preset>.yaml).
+docs/original.md §2.7 and §5.1; a number only the YAML states cites config/perception/<preset>.yaml).
 Nothing expected is read from the parameters or computed by the model's own code, so a preset that drifts from its
 documented numbers fails. Tolerances are ``SIGMAS`` standard errors of the sample at hand (binomial for rates,
 normal or chi-square for means and spreads, Kolmogorov for shapes): a correct model fails about once in a million
@@ -24,15 +24,15 @@ ROBOT, BALL, POST, CROSS = ObjectClass.ROBOT, ObjectClass.BALL, ObjectClass.GOAL
 CROSSING, LINE, CIRCLE = ObjectClass.LINE_CROSSING, ObjectClass.FIELD_LINE, ObjectClass.CENTER_CIRCLE
 SIZE = {ROBOT: 0.2, BALL: 0.1, POST: 0.1, CROSS: 0.1, CROSSING: 0.1}
 SIGMAS = 5.0
-HALF_FOV = math.pi / 4          # docs "Parameters and presets": field_of_view 90° in both presets; facts §2.7
+HALF_FOV = math.pi / 4          # docs "Parameters and presets": field_of_view 90°, both presets; docs/original.md §2.7
 
 # ---- the documented numbers, written out (each cross-checked against the preset YAML and docs/perception.md) ----
 # Per class: (near_range, max_range, miss_scale). Realistic: docs/perception.md "Parameters and presets" rows
 # "ball ... 3.0 m / 6.0 m", "robot 4.0 / 7.0", "goalpost 5.0 / 9.0", "penalty cross, line crossing 3.0 / 4.5–5.0",
 # "field line, circle 4.0 / 6.0" and "miss_scale ball / cross / crossing / circle 1.5 / 1.5 / 2 / 1.5"
 # (= config/perception/realistic.yaml classes). DynEnv: 4.16 m / 8.32 m, no cut-off, miss_scale 1 (docs table;
-# facts §2.7 "416 px (ball, penalty crosses, field crosses) and 832 px (robots, goalposts, lines, centre circle)",
-# "There is no hard range cutoff"; 1 px = 1 cm).
+# docs/original.md §2.7: 416 px for ball, penalty crosses and field crosses, 832 px for robots, goalposts, lines and
+# the centre circle, "There is no hard range limit"; 1 px = 1 cm).
 CLASSES = {
     "realistic": {BALL: (3.0, 6.0, 1.5), ROBOT: (4.0, 7.0, 1.0), POST: (5.0, 9.0, 1.0), CROSS: (3.0, 4.5, 1.5),
                   CROSSING: (3.0, 5.0, 2.0), LINE: (4.0, 6.0, 1.0), CIRCLE: (4.0, 6.0, 1.5)},
@@ -40,18 +40,19 @@ CLASSES = {
                CROSS: (4.16, math.inf, 1.0), CROSSING: (4.16, math.inf, 1.0), LINE: (8.32, math.inf, 1.0),
                CIRCLE: (8.32, math.inf, 1.0)},
 }
-# Visibility radii: realistic from config/perception/realistic.yaml (docs do not list them); DynEnv facts §2.7
-# "radii used for visibility are ball 10, robot 17.5, goalpost 5, crosses 5" px (= config/perception/dynenv.yaml).
+# Visibility radii: realistic from config/perception/realistic.yaml (docs do not list them); DynEnv from
+# docs/original.md §2.7 "radii used for visibility: ball 10, robot 17.5, goalpost 5, crosses 5" px
+# (= config/perception/dynenv.yaml).
 RADIUS = {"realistic": {BALL: 0.05, ROBOT: 0.15, POST: 0.05, CROSS: 0.05, CROSSING: 0.05},
           "dynenv": {BALL: 0.10, ROBOT: 0.175, POST: 0.05, CROSS: 0.05, CROSSING: 0.05}}
-# Uniform false positives: docs "false positives | 10 trials × 0.01, 8.32 m | 10 × 0.01, 6 m"; facts §5.1
-# "10 trials per observation, each firing with probability ρ", "6 options: ball, robot, post, penalty cross, field
-# cross, or none", "distance U·832 px".
+# Uniform false positives: docs "false positives | 10 trials × 0.01, 8.32 m | 10 × 0.01, 6 m"; docs/original.md §5.1
+# "10 trials per observation, each firing with probability ρ", "6 options uniformly: ball, robot, post, penalty
+# cross, field cross, or none", "distance U·832 px".
 FP_TRIALS, FP_PROBABILITY, FP_REAL_SHARE = 10, 0.01, 5 / 6
 FP_MAX_DISTANCE = {"realistic": 6.0, "dynenv": 8.32}
 # Confusions, P = probability·ρ·m(d): docs "each confusions rule: P = probability·ρ·m(d) (optionally only DISTANT)";
-# ball ↔ penalty cross 0.5 in both presets (docs table; facts §5.1 "ρ·multiplier/2"); robot → goalpost 1.0 and
-# goalpost → robot 0.5, DISTANT only, realistic only (the docs name the rules, config/perception/realistic.yaml
+# ball ↔ penalty cross 0.5 in both presets (docs table; docs/original.md §5.1 "ρ·multiplier/2"); robot → goalpost 1.0
+# and goalpost → robot 0.5, DISTANT only, realistic only (the docs name the rules, config/perception/realistic.yaml
 # their probabilities).
 CONFUSION = {"realistic": {BALL: (CROSS, 0.5, False), CROSS: (BALL, 0.5, False), ROBOT: (POST, 1.0, True),
                            POST: (ROBOT, 0.5, True)},
@@ -60,12 +61,13 @@ CONFUSION = {"realistic": {BALL: (CROSS, 0.5, False), CROSS: (BALL, 0.5, False),
 
 def multiplier(distance, near, sighting=None):
     """docs "Error model": m(d) = (0.25 + 3.75·(d/near_range)²) × 4 if PARTIAL, else 3 if DISTANT, else 2 if NEARBY
-    (facts §5.1: "range = 0.25 + 3.75·|p|²/maxVisDist", "Distant/Partial override Nearby")."""
+    (docs/original.md §5.1: "range = 0.25 + 3.75·|p|²/maxVisDist", "Distant/Partial override Nearby")."""
     return (0.25 + 3.75 * (distance / near) ** 2) * {None: 1, "nearby": 2, "distant": 3, "partial": 4}[sighting]
 
 
 def p_miss(magnitude, miss_scale, mult):
-    """docs "Error model": P(miss) = ρ·miss_scale·m(d), ρ = 0.01·magnitude (facts §5.1 "FN with probability ρ·mult")."""
+    """docs "Error model": P(miss) = ρ·miss_scale·m(d), ρ = 0.01·magnitude (docs/original.md §5.1 "FN with
+    probability ρ·multiplier")."""
     return min(1.0, 0.01 * magnitude * miss_scale * mult)
 
 
@@ -212,7 +214,7 @@ def test_miss_and_confusion_rates_follow_the_documented_formula(preset, magnitud
 
 @pytest.mark.parametrize("preset,magnitude", [("realistic", 4.0), ("dynenv", 2.0)])
 def test_random_mode_misses_at_a_fixed_rate_whatever_the_distance(preset, magnitude):
-    """docs "Error model", random: multiplier 1, P(miss) = ρ·miss_scale, no confusions (facts §5.1 RANDOM)."""
+    """docs "Error model", random: multiplier 1, P(miss) = ρ·miss_scale, no confusions (docs/original.md §5.1)."""
     params = load_preset(preset, mode="random", noise_magnitude=magnitude)
     scale = CLASSES[preset][BALL][2]
     for distance in (1.0, 5.0):
@@ -224,7 +226,7 @@ def test_random_mode_misses_at_a_fixed_rate_whatever_the_distance(preset, magnit
 @pytest.mark.parametrize("situation", ["nearby", "distant and nearby", "partial", "partial and distant"])
 def test_nearby_partial_and_distant_multiply_the_miss_rate(situation):
     """docs "Error model": ×4 if PARTIAL, else ×3 if DISTANT, else ×2 if NEARBY (another ball or robot within
-    0.35 m); facts §5.1 "Distant/Partial override Nearby". Realistic ball: near 3.0 m, miss_scale 1.5."""
+    0.35 m); docs/original.md §5.1 "Distant/Partial override Nearby". Realistic ball: near 3.0 m, miss_scale 1.5."""
     magnitude, views = 3.0, 20000
     d, bearing, neighbour, factor = {"nearby": (1.5, 0.0, True, "nearby"),
                                      "distant and nearby": (3.5, 0.0, True, "distant"),
@@ -243,8 +245,8 @@ def test_nearby_partial_and_distant_multiply_the_miss_rate(situation):
 
 @pytest.mark.parametrize("preset,magnitude", [("realistic", 3.0), ("dynenv", 3.0)])
 def test_field_lines_are_missed_by_the_mean_multiplier_of_their_ends(preset, magnitude):
-    """facts §5.1 (addNoiseLine): per endpoint mult_i = 0.25 + 3.75·(d_i/near)², P(miss) = ρ·mean(mult_i), the
-    sighting type ignored (no ×4 for a clipped line). Field line near: realistic 4.0 m, DynEnv 8.32 m."""
+    """docs/original.md §5.1 (addNoiseLine): per endpoint mult_i = 0.25 + 3.75·(d_i/near)², P(miss) = ρ·mean(mult_i),
+    the sighting type ignored (no ×4 for a clipped line). Field line near: realistic 4.0 m, DynEnv 8.32 m."""
     near = CLASSES[preset][LINE][0]
     params = load_preset(preset, noise_magnitude=magnitude)
     views = 20000
@@ -286,7 +288,7 @@ def test_robots_and_goalposts_are_confused_only_at_a_distance():
         missed = p_miss(3.0, 1.0, mult)
         assert_rate(int((outcome == target).sum()), views, (1 - missed) * p_confuse(3.0, probability, mult),
                     f"{source.name} as {target.name}")
-    # DynEnv confuses only balls and penalty crosses (facts §5.1 "Robots, posts and field crosses are never
+    # DynEnv confuses only balls and penalty crosses (docs/original.md §5.1 "Robots, posts and field crosses are never
     # misclassified")
     dynenv = load_preset("dynenv", noise_magnitude=3.0)
     for source, target in ((ROBOT, POST), (POST, ROBOT)):
@@ -331,7 +333,7 @@ def test_false_positives_per_frame_and_where_they_appear(preset, magnitude, view
 @pytest.mark.parametrize("preset", ["realistic", "dynenv"])
 def test_balls_appear_at_the_feet_of_nearby_robots_and_sometimes_replace_them(preset):
     """docs rule (4): per robot seen (not DISTANT/PARTIAL) closer than 2.5 m, a ball at its feet with P = 0.1·m,
-    and then the robot itself unreported with P = 0.08·m (both presets; facts §5.1 "10ρ", "8ρ", "250 px").
+    and then the robot itself unreported with P = 0.08·m (both presets; docs/original.md §5.1 "10ρ", "8ρ", "250 px").
     Uniform false positives are switched off so that every false ball is one at the feet."""
     magnitude, views = 2.0, 40000
     params = load_preset(preset, noise_magnitude=magnitude)
@@ -381,7 +383,8 @@ def test_random_mode_position_error_is_the_same_at_every_distance():
                                                      (2.0, 2.0, "random"), (6.0, 2.0, "random")])
 def test_dynenv_position_error_is_uniform_and_sub_centimetre(distance, magnitude, mode):
     """DynEnv: each axis ± 0.5·m·0.0025 m·mult (realistic, mult with near 4.16 m and ×3 DISTANT) or ·4 (random)
-    (docs "Error model"; facts §5.1 "position += n·m·multiplier/4" px, RANDOM "at most ±0.5m px per axis")."""
+    (docs "Error model"; docs/original.md §5.1 "position += n·m·multiplier/4" px, RANDOM "at most ±0.5m px per
+    axis")."""
     views = 20000
     rows = perceive(load_preset("dynenv", noise_magnitude=magnitude, mode=mode),
                     [(BALL, distance, 0.0, np.nan, 0, False)], views).detections
@@ -392,14 +395,14 @@ def test_dynenv_position_error_is_uniform_and_sub_centimetre(distance, magnitude
         assert np.abs(err).max() >= bound * 0.99                          # P(all inside 0.99·bound) = 0.99^n
         assert_uniform(err, -bound, bound, "error per axis")            # within float32 rounding (1e-6 m)
     if distance <= 4.16 and magnitude == 1.0:
-        assert bound < 0.01                          # facts §5.1: "usually below 1 px = 1 cm"
+        assert bound < 0.01                          # docs/original.md §5.1: "usually below 1 px = 1 cm"
 
 
 @pytest.mark.parametrize("preset,magnitude", [("realistic", 1.0), ("dynenv", 2.0)])
 def test_line_endpoints_get_the_position_error_of_their_own_distance(preset, magnitude):
     """docs: "lines' endpoints get the position error of their own distance". Realistic: the polar error of each
-    endpoint's distance; DynEnv: endpoint i ± 0.0025·m·mult_i per axis (facts §5.1 "Endpoint i += n·m·mult_i/2" px,
-    mult_i with 832 px). Endpoints are reported nearer first."""
+    endpoint's distance; DynEnv: endpoint i ± 0.0025·m·mult_i per axis (docs/original.md §5.1 "endpoint i +=
+    n·m·mult_i/2" px, mult_i with 832 px). Endpoints are reported nearer first."""
     views = 20000
     near, far = (2.0, -0.5), (3.5, 0.5)
     result = perceive(load_preset(preset, noise_magnitude=magnitude), [], views, lines=[(*far, *near)])
@@ -474,7 +477,8 @@ def test_same_seed_same_detections_other_seed_other_detections():
 
 
 def test_the_observed_robots_own_state_is_reported_not_the_observers():
-    """facts §12.2: DynEnv reported the observer's fallen flag; docs: robots carry the team relation (own/opponent)."""
+    """docs/original.md §12.2: DynEnv reported the observer's fallen flag; docs: robots carry the team relation
+    (own/opponent)."""
     params = load_preset("none")
     obj, frames, views = scene([(ROBOT, 2.0, 0.0, 0.0, 1, False)])
     frames.fallen[0, 0] = True                      # the observer is fallen, the observed robot is not

@@ -32,7 +32,7 @@ def test_ball_progress_is_shared_along_the_touch_chain_and_with_the_team():
 
 
 def test_goal_reward_magnitudes_along_the_chain_and_for_bystanders():
-    """docs/soccer.md primary term (fact sheet §6.1, same weights): ±25 per goal; every robot 0.1 × its team's
+    """docs/soccer.md primary term (docs/original.md §6.1, same weights): ±25 per goal; every robot 0.1 × its team's
     value; the i-th robot of the touch chain (newest first, either team) 25 × 0.5^i times its team's sign; robots
     of the losing side outside the chain that are their team's closest to the ball or within 1.5 m of it, half
     the loss."""

@@ -288,7 +288,7 @@ def test_goal_scores_pays_and_restarts_with_a_kickoff_for_the_other_team():
     assert [(g.team, g.detail) for g in goals] == [(1, "score 1:0")]
     snap = world.snapshot()
     assert (snap.score_team_a, snap.score_team_b) == (1, 0)
-    # docs/soccer.md, primary term (fact sheet §6.1, the same weights): the goal is worth ±25; every robot gets
+    # docs/soccer.md, primary term (docs/original.md §6.1, the same weights): the goal is worth ±25; every robot gets
     # 0.1 of its team's value, the touch chain [1, 0] gets 25·0.5^i, and of the losing side the robot closest to
     # the ball outside the chain (robot 3 at (1.6, -2.5); robot 2 at (1.0, -2.5); nobody within 1.5 m) gets half
     # the loss.

@@ -36,7 +36,7 @@ def test_each_robot_sees_the_ball_in_front_of_it_in_every_frame_of_the_period():
         assert np.all(np.hypot(goals["x"], goals["y"]) > 5.4)
 
 
-# docs/soccer.md, observation term (fact sheet §6.1, the same weights and caps), per robot and motion period:
+# docs/soccer.md, observation term (docs/original.md §6.1, the same weights and caps), per robot and motion period:
 # 0.0025·(R + L) + 0.01·B, R = Σ over the other robots of min(2, frames it was seen), L = landmarks seen per frame
 # (posts, penalty marks, line crossings, field lines: SoccerVision.landmarks_seen) averaged over the frames, capped
 # at 3, B = min(3, frames the real ball was seen).

@@ -170,7 +170,7 @@ def collate(observations: Sequence[Sequence[np.ndarray]], max_landmarks: int | N
 def encode_previous_action(walk: torch.Tensor, turn: torch.Tensor, kick: torch.Tensor, head: torch.Tensor,
                            head_max: float) -> torch.Tensor:
     """(B, 12): one-hot walk (5), turn (3), kick (3) and the head turn scaled to [-1, 1] — every dimension kept
-    (DynEnv folded both side steps into one value and dropped the kick, facts §12.16)."""
+    (DynEnv folded both side steps into one value and dropped the kick, docs/original.md §12.16)."""
     return torch.cat([torch.nn.functional.one_hot(walk.long(), 5).float(),
                       torch.nn.functional.one_hot(turn.long(), 3).float(),
                       torch.nn.functional.one_hot(kick.long(), 3).float(),

@@ -19,8 +19,8 @@ Two scenarios (``DynEnvAgent(scenario=…)``), one architecture:
 - ``soccer`` (the default; exactly the network above: same parameters, same seeded initialisation, same outputs):
   landmarks and objects streams over F = 5 frames, the pose head, walk/turn/kick/head actor heads, the
   reconstruction head.
-- ``driving`` (the paper's Driving agent, facts §9): the static stream takes the car's SELF row and the lanes, the
-  dynamic one cars, pedestrians, obstacles and class-less false positives, each with its own class table
+- ``driving`` (the paper's Driving agent, docs/original.md §9): the static stream takes the car's SELF row and the
+  lanes, the dynamic one cars, pedestrians, obstacles and class-less false positives, each with its own class table
   (``inputs.agent_inputs``); one frame per period, so there is **no temporal attention** — the RTA is the
   intratemporal self-attention and the pooling only (the paper's nTime = 1: its temporal loop never runs), and the
   network has no temporal-attention weights; a period of more than one frame is refused. Actor heads: two

@@ -11,7 +11,7 @@ keep the original's coordinates times 0.1. Traffic drives on the right.
 
 Rewards keep the original's magnitudes (so the paper's reward figures compare: random ≈ 0.7, Pred 26.47): a
 per-pixel weight becomes a per-metre weight ten times larger, a weight on a speed in px/s becomes one ten times
-larger on m/s. Defaults follow shared/reference/dynenv_facts.md §1, §3, §6.2; docs/driving.md lists every
+larger on m/s. Defaults follow docs/original.md §1, §3, §6.2; docs/driving.md lists every
 departure from the original and why.
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ def car_names(n_cars: int) -> list[str]:
 
 @dataclass(frozen=True)
 class MapConfig:
-    """Two crossing roads, their walkways and four buildings (DynEnv §3, × 0.1 m/px)."""
+    """Two crossing roads, their walkways and four buildings (docs/original.md §3, × 0.1 m/px)."""
     width: float = 170.0                   # m (1700 px)
     height: float = 100.0                  # m (1000 px)
     lane_width: float = 3.5                # m (35 px)
@@ -101,7 +101,7 @@ class CarConfig:
 
 @dataclass(frozen=True)
 class PedestrianConfig:
-    """Walkers on the walkways; now and then one crosses its road (DynEnv §3, × 0.1 m/px)."""
+    """Walkers on the walkways; now and then one crosses its road (docs/original.md §3, × 0.1 m/px)."""
     count_min: int = 10
     count_max: int = 20
     mass: float = 90.0                     # kg, the original's; unused while pedestrians are kinematic sensors
@@ -122,7 +122,7 @@ class PedestrianConfig:
 
 @dataclass(frozen=True)
 class ObstacleConfig:
-    """Static boxes on the walkways (DynEnv §3: 10–20 of 20 x 20 px)."""
+    """Static boxes on the walkways (docs/original.md §3: 10–20 of 20 x 20 px)."""
     count_min: int = 10
     count_max: int = 20
     size: float = 2.0                      # m, square
@@ -130,7 +130,7 @@ class ObstacleConfig:
 
 @dataclass(frozen=True)
 class RewardConfig:
-    """Weights in SI units that give the original's reward magnitudes (DynEnv §6.2, §3 collisions).
+    """Weights in SI units that give the original's reward magnitudes (docs/original.md §6.2, §3 collisions).
 
     Penalties are stored as positive magnitudes and subtracted.
     """

@@ -1,4 +1,4 @@
-"""Pedestrians: walk along their walkway, now and then cross their road (DynEnv §3 numbers, × 0.1 m/px).
+"""Pedestrians: walk along their walkway, now and then cross their road (docs/original.md §3 numbers, × 0.1 m/px).
 
 Each pedestrian keeps to one walkway stretch (``DrivingMap.walkway_segments``: between a map edge and the other
 road) and only steps onto the carriageway to cross to the opposite stretch. A movement is a constant velocity

@@ -19,7 +19,7 @@ from dynenv_ros.driving.config import MapConfig
 
 
 class LanePosition(IntEnum):
-    """Where a car is, best first: a car takes the best class over all roads (DynEnv §3)."""
+    """Where a car is, best first: a car takes the best class over all roads (docs/original.md §3)."""
     AT_GOAL = 0
     RIGHT_LANE = 1
     OPPOSING_LANE = 2
@@ -202,7 +202,7 @@ class DrivingMap:
     # -- classification ---------------------------------------------------------------------------------------
     def classify(self, x: float, y: float, yaw: float, goal: int | None = None) -> LanePosition:
         """The best lane position over both roads; AT_GOAL when past the destination ``goal``'s road end and within
-        the goal radius of it (DynEnv §3: AtGoal < InRightLane < InOpposingLane < OverRoad < OffRoad).
+        the goal radius of it (docs/original.md §3: AtGoal < InRightLane < InOpposingLane < OverRoad < OffRoad).
 
         The same rule as ``classify_on_road`` per road, inlined (it runs for every car at every vision instant).
         """

@@ -381,7 +381,7 @@ class DrivingWorld:
 
     def _resolve_cars(self, a: Car, b: Car, va: tuple[float, float], vb: tuple[float, float]) -> None:
         """Both crash. Each still driving pays −k·|v|; again if out of its right lane; again, when both were in their
-        right lanes, if it drove into the other (DynEnv §3)."""
+        right lanes, if it drove into the other (docs/original.md §3)."""
         k = self.config.rewards.crash_per_speed
         lanes = {car.index: self.map.classify(car.x, car.y, car.body.angle) for car in (a, b)}
         for car, other, v in ((a, b, va), (b, a, vb)):

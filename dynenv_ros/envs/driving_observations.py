@@ -7,7 +7,7 @@ per-agent info, and ``space``. A mode is a factory in ``OBSERVATION_BUILDERS`` (
 ``register_observation``), called as ``factory(config, perception=…, **options)``; the env never names a mode
 itself, so a perception-based mode (``partial``, ``padded``) plugs in here without touching the env class.
 
-``full`` (this module): the original's FULL observation (DynEnv §4.6) as noise-free ground truth in the
+``full`` (this module): the original's FULL observation (docs/original.md §4.6) as noise-free ground truth in the
 **observer's frame** (REP 103: x forward along the car's heading, y to its left; metres, seconds, radians, m/s), one
 flat float32 ``Box``. Sections, in this order (``FullLayout.split`` cuts a vector into them):
 

@@ -5,8 +5,8 @@ end; for the observation after a reset, the reset state, which every frame of th
 the observing robot's **team frame**: origin at the field centre, x towards the opponent goal, y to its left, in
 metres. Team A's frame is the field frame; team B's is the field frame turned by π — positions negated and every
 orientation turned by π (cos and sin negated), so both teams see the same picture of the same situation (DynEnv
-reflected positions but not orientations, facts §12.1). Angles relative to the robot itself (the head yaw) are the
-same in every frame: h is the head yaw relative to the body, θ + h the gaze.
+reflected positions but not orientations, docs/original.md §12.1). Angles relative to the robot itself (the head yaw)
+are the same in every frame: h is the head yaw relative to the body, θ + h the gaze.
 
 Per robot (arrays with leading robot axis A; the vectorised batch adds an env axis in front), float32:
 

@@ -2,7 +2,7 @@
 
 Until perception lands (issue 4) an agent observes the ground truth in its *team frame*: team A's frame is the
 field frame, team B's is its point reflection (positions and headings turned by π), so both teams see the
-same picture of the same situation (DynEnv turned positions but not headings, facts §12.1).
+same picture of the same situation (DynEnv turned positions but not headings, docs/original.md §12.1).
 """
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ Reported: the difference of means Δμ = μ₂ − μ₁ (mean, median, 95 % HDI
 Δμ / sqrt((σ₁² + σ₂²)/2) (mean, median, 95 % HDI), and the probability of improvement P(μ₂ > μ₁) — the fraction
 of posterior draws with Δμ > 0 (group 2 is the proposal, group 1 the baseline; for metrics where lower is better,
 such as falls, an "improvement" is P < 0.5). The original analysis pooled 8 envs per seed as independent
-samples (facts §11); here each seed counts once.
+samples (docs/original.md §11); here each seed counts once.
 """
 from __future__ import annotations
 

@@ -67,8 +67,8 @@ def positive_reward(step_terms: Iterable[Mapping[str, float]]) -> float:
     """DynEnv's ``episode_p_r`` for one robot: the positive-only reward, Σ over env steps of ``positive_part``.
 
     DynEnv summed, per env step, the positive parts of the team reward and of the observation reward plus the
-    positive personal rewards (facts §6.1). This world books the team share and the touch-chain share of a ball
-    event into one term, so the positive part is taken per reward term (primary, rule, auxiliary, observation)
+    positive personal rewards (docs/original.md §6.1). This world books the team share and the touch-chain share of a
+    ball event into one term, so the positive part is taken per reward term (primary, rule, auxiliary, observation)
     and per env step (one motion period) — the same granularity as DynEnv's step, with team and personal parts
     of one step netted within a term.
     """
@@ -76,8 +76,8 @@ def positive_reward(step_terms: Iterable[Mapping[str, float]]) -> float:
 
 
 def paper_metric(step_terms: Iterable[Mapping[str, float]]) -> float:
-    """The RoboCup metric of the paper (facts §11): positive reward minus observation reward, for one robot and
-    episode — ``positive_reward(step_terms)`` minus Σ over steps of the ``observation`` term. The observation
+    """The RoboCup metric of the paper (docs/original.md §11): positive reward minus observation reward, for one robot
+    and episode — ``positive_reward(step_terms)`` minus Σ over steps of the ``observation`` term. The observation
     reward is never negative, so this is Σ over steps and over the non-observation terms of max(0, term)."""
     steps = list(step_terms)
     return positive_reward(steps) - float(sum(float(t.get(OBSERVATION, 0.0)) for t in steps))

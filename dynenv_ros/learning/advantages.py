@@ -2,8 +2,8 @@
 
 A2C's n-step returns are the special case λ = 1 (the sum of discounted rewards up to the rollout's end, bootstrapped
 with the critic there), so both algorithms share this one function. DynEnv ignored episode ends (its done mask was
-hard-coded to zeros, facts §9.4/§12.15), so its returns ran across resets; here an episode end cuts the sum, and a
-truncated (time-limit) end is bootstrapped from the critic's value of the episode's *final* observation, since the
+hard-coded to zeros, docs/original.md §9.4/§12.15), so its returns ran across resets; here an episode end cuts the sum,
+and a truncated (time-limit) end is bootstrapped from the critic's value of the episode's *final* observation, since the
 game did not really end there for the agent's purposes — it ran out of clock.
 """
 from __future__ import annotations

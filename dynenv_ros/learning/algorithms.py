@@ -242,7 +242,7 @@ def _initial_state(learner: Learner, rollout: Mapping[str, Any], rows: Tensor) -
 
 @torch.no_grad()
 def _intrinsic(learner: Learner, rollout: Mapping[str, Any], s: UpdateSettings) -> tuple[Tensor, Tensor, Tensor]:
-    """Curiosity as a reward (off in the paper, facts §6.3): the forward model's error on each transition
+    """Curiosity as a reward (off in the paper, docs/original.md §6.3): the forward model's error on each transition
     (attention-weighted under RCM), scaled by ``intrinsic_reward_coef``, with its own critic and advantage —
     added to the extrinsic advantage. An episode's last transition has no successor and earns nothing."""
     T, B = rollout["actions"].shape[:2]

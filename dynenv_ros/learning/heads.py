@@ -36,7 +36,7 @@ def action_features(actions: Tensor, heads: tuple[int, ...], continuous: bool) -
 
 class CuriosityHeads(nn.Module):
     """Forward model f(φ_t, a_t), inverse model g(φ_t, φ_{t+1}), the RCM attention W(φ_{t+1}), and the LTP chain
-    with its own attention over the previous error (paper eqs. 1–6; facts §9.5 for the sizes: hidden 140)."""
+    with its own attention over the previous error (paper eqs. 1–6; docs/original.md §9.5 for the sizes: hidden 140)."""
 
     def __init__(self, feature_size: int, horizon: int, head_sizes: tuple[int, ...] = ROBOCUP_HEADS) -> None:
         super().__init__()

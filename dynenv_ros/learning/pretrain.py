@@ -1,5 +1,5 @@
-"""dynenv-pretrain: the reconstruction/localization pretraining of the DynEnv agent's encoder (facts §9.7), done
-with the RL agent's own action space, without privileged pose seeding by default, and with real metrics.
+"""dynenv-pretrain: the reconstruction/localization pretraining of the DynEnv agent's encoder (docs/original.md §9.7),
+done with the RL agent's own action space, without privileged pose seeding by default, and with real metrics.
 
     dynenv-pretrain generate --out DIR --train 1024 --test 256 --seed 0
     dynenv-pretrain train --data DIR --out DIR --epochs 30 --seed 0 [--privileged-seeding]

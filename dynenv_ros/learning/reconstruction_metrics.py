@@ -6,7 +6,7 @@ Three families, all over flat batches of "robot-steps" (one robot at one observa
 ``localization_fractions``
     The fraction of robot-steps whose estimated position lies within each distance threshold of the true one.
     This is what the DynEnv paper's Table 3 reports as localization "AP" (its code: the "corr" statistic,
-    facts §9.6).
+    docs/original.md §9.6).
 
 ``detection_ap`` — a real average precision, as for object detectors (PASCAL VOC 2010+ / COCO style)
     Every predicted slot of every robot-step is one detection with a confidence. Detections are ranked by
@@ -22,12 +22,12 @@ Three families, all over flat batches of "robot-steps" (one robot at one observa
     (``ignore_unknown=True``): detections near a true object that is not known yet are left out instead of being
     false positives (COCO's "ignore" rule) — the AP consistent with the reconstruction loss's own ignore rule.
 
-``original_ap`` — DynEnv's "AP" (``ReconLosses.update_stats/compute_APs``, facts §9.6), kept to compare with the
-    paper: at confidence > 0.5, precision = confident slots within the threshold of ANY true object of the class
+``original_ap`` — DynEnv's "AP" (``ReconLosses.update_stats/compute_APs``, docs/original.md §9.6), kept to compare with
+    the paper: at confidence > 0.5, precision = confident slots within the threshold of ANY true object of the class
     (known or not) / confident slots; recall = known objects whose ASSIGNED slot (the anchor assignment of the
     reconstruction loss) is within the threshold of that object and confident / known objects; "AP" = (P + R)/2.
     Counts are summed over the whole set before the ratios. The original's thresholds are 2× the paper's labels
-    (52, 104, 208 cm for "25 cm, 50 cm, 1 m", facts §12.19): ``ORIGINAL_RECON_THRESHOLDS``.
+    (52, 104, 208 cm for "25 cm, 50 cm, 1 m", docs/original.md §12.19): ``ORIGINAL_RECON_THRESHOLDS``.
 
 Shapes used throughout: predicted positions ``pred_xy`` (N, S, 2) (S slots), confidences ``confidence`` (N, S) as
 probabilities in [0, 1] (any monotone score works for the ranking of ``detection_ap``; thresholds need

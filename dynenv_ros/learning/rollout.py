@@ -6,7 +6,7 @@ by world, ``(E, A_learning) -> B``):
 - ``obs[key]`` (T+1, B, ...): the padded observation layout (``envs.padded_layout``), observation t being what
   the policy acted on at step t; observation T is the one after the last step (the next rollout's first).
 - ``actions`` (T, B, 4) int64, ``log_probs`` and ``values`` (T, B) of the behaviour policy at acting time (PPO's
-  ratio is taken against these, never against resampled actions — DynEnv's PPO bug, facts §12.13).
+  ratio is taken against these, never against resampled actions — DynEnv's PPO bug, docs/original.md §12.13).
 - ``rewards`` (T, B) and ``reward_terms`` (T, B, 4); ``episode_end``, ``truncated`` (T, B); ``final_values``
   (T, B): the critic at the finished episode's final observation (truncation bootstrap).
 - ``starts`` (T+1, B): observation t is an episode's first (the recurrent state is zeroed before it).
@@ -262,7 +262,7 @@ class RolloutCollector:
         self.generator = generator
         self.with_targets = bool(getattr(env, "with_targets", False))
         self.reward_transform = reward_transform
-        # DynEnv's privileged re-initialisation (facts §9.6, §12.18), off unless a seeder is given: at every
+        # DynEnv's privileged re-initialisation (docs/original.md §9.6, §12.18), off unless a seeder is given: at every
         # rollout's start the whole recurrent state is replaced by pose_seeder(true pose + N(0, seed_noise²)).
         self.pose_seeder, self.seed_noise, self.rng = pose_seeder, seed_noise, rng
         if pose_seeder is not None and not self.with_targets:
@@ -481,7 +481,7 @@ class RolloutCollector:
         self.episode_positive += np.maximum(terms, 0.0).sum(-1)
         for r in np.flatnonzero(ended & ~self.teacher_driven):     # the learner's own episodes only
             t = self.episode_terms[r]
-            # the paper's metric (facts §6.1, §11): the positive parts of every term, per period, minus the
+            # the paper's metric (docs/original.md §6.1, §11): the positive parts of every term, per period, minus the
             # observation reward
             self.finished.append({"return": float(self.episode_returns[r]), "primary": float(t[0]),
                                   "rule": float(t[1]), "auxiliary": float(t[2]), "observation": float(t[3]),

@@ -18,7 +18,7 @@ from dynenv_ros.learning.rollout import RolloutCollector
 from dynenv_ros.soccer.config import SoccerConfig
 
 # DynEnv's privileged seeding noise: N(0, 0.05²) in its normalised units (1 unit = 5.2 m) on x, y; 0.05 on the
-# unit-vector components of the pose (facts §9.6).
+# unit-vector components of the pose (docs/original.md §9.6).
 SEED_NOISE = np.array([0.26, 0.26, 0.05, 0.05, 0.05, 0.05], np.float32)
 
 

@@ -1,5 +1,5 @@
 """An emulated self-localization: the pose estimate (x, y, yaw) with a covariance that a real SPL robot's
-self-locator publishes (B-Human's ``RobotPose``; shared/reference/spl_localization.md), stepped once per vision
+self-locator publishes (B-Human's ``RobotPose``; docs/spl_localization.md), stepped once per vision
 frame. ROS-free; docs/perception.md, "Self-localization".
 
 No particle filter runs here. The estimate is the true pose plus an error ``e`` that is drawn so that it always

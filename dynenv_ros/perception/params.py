@@ -90,7 +90,7 @@ class FalsePositiveParams:
 @dataclass(frozen=True)
 class OcclusionParams:
     """What a robot hides. ``cone`` (realistic): whatever lies behind it within its angular half-width
-    asin(occluder_radius / its distance), the shadow of a body of that radius. ``band`` (DynEnv, facts §2.7):
+    asin(occluder_radius / its distance), the shadow of a body of that radius. ``band`` (DynEnv, docs/original.md §2.7):
     whatever lies behind it within ``occluder_radius`` of the line of sight through it, and only robots in the field
     of view occlude."""
     enabled: bool = True

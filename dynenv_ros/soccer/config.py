@@ -1,6 +1,6 @@
 """Every number of the soccer world in one validated place: motions, kicks, falls, penalties, ball, rewards.
 
-Defaults reproduce the motions and rules measured in the original DynEnv (shared/reference/dynenv_facts.md §2, §6),
+Defaults reproduce the motions and rules measured in the original DynEnv (docs/original.md §2, §6),
 converted to SI units; docs/differences.md lists where we depart from it on purpose.
 """
 from __future__ import annotations

@@ -11,7 +11,7 @@ import numpy as np
 
 from dynenv_ros.soccer.field import FieldGeometry
 
-# Kickoff roles (DynEnv §2.2, converted to metres in the team's own frame). Each entry: x0, x spread (uniform
+# Kickoff roles (docs/original.md §2.2, converted to metres in the team's own frame). Each entry: x0, x spread (uniform
 # in [0, spread), negative = away from the ball), x jitter (uniform ±), y0, y jitter (uniform ±).
 # Which slot takes which role: see role_order.
 KICKING_ROLES = ((-0.275, -0.5, 0.0, 0.0, 0.125),   # striker just behind the ball
@@ -64,7 +64,7 @@ def kickoff_poses(rng: np.random.Generator, players_per_team: int, kicking_team:
 
 def sideline_spots(geometry: FieldGeometry, team: int, ball_y: float, spacing: float, count: int
                    ) -> list[tuple[float, float, float]]:
-    """A team's spots on the sideline away from the ball, own half, facing into the field (DynEnv §2.1)."""
+    """A team's spots on the sideline away from the ball, own half, facing into the field (docs/original.md §2.1)."""
     side = 1.0 if ball_y < 0 else -1.0
     y = side * geometry.half_width
     yaw = -side * math.pi / 2

@@ -1,7 +1,7 @@
 """Soccer reward terms: how goals and ball progress are shared, approach shaping, and the observation term.
 
 DynEnv computes these per tick; here the ball's path is split at every touch, out and goal, which gives the
-same sums without Python work on every tick, and never counts a ball teleport as progress (facts §12.9).
+same sums without Python work on every tick, and never counts a ball teleport as progress (docs/original.md §12.9).
 """
 from __future__ import annotations
 

@@ -332,7 +332,7 @@ class SoccerWorld:
                     self._penalize(robot, "illegal defender")
 
     def _approach_rewards(self) -> None:
-        """The robot of each team closest to the ball is paid for closing in on it (DynEnv §6.1)."""
+        """The robot of each team closest to the ball is paid for closing in on it (docs/original.md §6.1)."""
         weight = self.config.rewards.approach_per_m
         # Every body's position once (a pymunk read costs µs), kept for this instant's on_frame callback: the
         # last rule of the instant has acted, and nothing moves before the callback returns (then cleared).
@@ -497,7 +497,7 @@ class SoccerWorld:
             self._penalize(robot, f"fell {rules.fall_count} times without getting up")
 
     def _knock_around(self, robot: Robot) -> None:
-        """A falling robot shoves the ball and robots close to it (DynEnv §2.5)."""
+        """A falling robot shoves the ball and robots close to it (docs/original.md §2.5)."""
         falls = self.config.falls
         bodies = [(other.body, other) for other in self.robots if other is not robot and other.in_space]
         bodies.append((self.ball, None))
@@ -550,7 +550,7 @@ class SoccerWorld:
         return free_spot(spots, occupied, p.sideline_spacing)
 
     def _kickoff(self, kicking_team: int) -> None:
-        """Ball to the centre, robots to kickoff positions, the kicking team owns the ball (DynEnv §2.2)."""
+        """Ball to the centre, robots to kickoff positions, the kicking team owns the ball (docs/original.md §2.2)."""
         c = self.config
         poses = kickoff_poses(self.rng, c.players_per_team, kicking_team)
         space = self.physics.space
