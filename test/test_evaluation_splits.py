@@ -130,3 +130,12 @@ def test_without_ledger_the_suite_writes_to_its_scratch_ledger_not_the_repositor
     assert _eval(tmp_path, "--split", "test", "--num-seeds", "2") == 0
     assert len(read_ledger(scratch)) == 1
     assert (REPOSITORY_LEDGER.read_bytes() if REPOSITORY_LEDGER.exists() else b"") == before
+
+
+def test_a_driving_test_split_evaluation_is_in_the_ledger_too(tmp_path):
+    ledger = tmp_path / "ledger.jsonl"
+    assert main(["--scenario", "driving", "random", "--episodes", "1", "--episode-seconds", "2", "--quiet",
+                 "--split", "test", "--num-seeds", "2", "--ledger", str(ledger)]) == 0
+    (row,) = read_ledger(ledger)
+    assert row["scenario"] == "driving" and row["seeds"] == [20_000, 20_001] and row["opponent"] is None
+    assert "home_rate" in row["summary"] and "head_to_head" not in row
