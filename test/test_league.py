@@ -7,7 +7,7 @@ import pytest
 
 from dynenv_ros.envs.league import LEAGUE_MEMBERS, League, pfsp_weights
 from dynenv_ros.envs.vector import SoccerVectorEnv
-from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.trainer import make_trainer
 from dynenv_ros.soccer.scripted import team_policies
 
@@ -99,3 +99,40 @@ def test_a_run_against_the_league_trains_and_logs_the_members(tmp_path, runner):
     logged = (tmp_path / "metrics.csv").read_text()
     for member in LEAGUE_MEMBERS:
         assert f"league/{member}_share" in logged
+
+
+def test_team_sizes_give_each_worker_its_size_with_one_layout(tmp_path):
+    from dynenv_ros.envs.padded_layout import EXTRA_OBJECT_SLOTS
+    from dynenv_ros.learning.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
+    cfg = TrainConfig(**{**SMALL, "runner": "async", "opponent": "perceiving", "players_per_team": 1,
+                         "team_sizes": [1, 3], "workers": 2, "num_envs": 2})
+    shapes = []
+    for index, (first, count) in enumerate(shard_sizes(cfg.num_envs, 2)):
+        worker = RolloutWorker(cfg, index, first, count)
+        worker.adopt(0)
+        shapes.append(worker.layout_shapes)
+        arrays, _ = worker.collect(0)
+        robots = worker.worlds.env.config.players_per_team
+        assert robots == (1, 3)[index]
+        worker.close()
+    # every worker pads its objects to the largest size's: the ball and the 2 x 3 - 1 other robots, plus extra slots
+    assert shapes[0] == shapes[1] and shapes[0]["objects"][1] == 2 * 3 + EXTRA_OBJECT_SLOTS
+    assert resolve_workers(TrainConfig(**{**SMALL, "runner": "async", "team_sizes": [1, 2], "workers": None}),
+                           cores=2) == 2
+
+
+def test_team_sizes_need_the_async_runner_a_worker_each_and_players_per_team_among_them():
+    with pytest.raises(ConfigError, match="team_sizes"):
+        TrainConfig(**{**SMALL, "team_sizes": [1, 2], "backend": "inprocess"})
+    with pytest.raises(ConfigError, match="team_sizes"):
+        TrainConfig(**{**SMALL, "runner": "async", "team_sizes": [2, 3]})
+    with pytest.raises(ConfigError, match="workers"):
+        TrainConfig(**{**SMALL, "runner": "async", "team_sizes": [1, 2], "workers": 1})
+    with pytest.raises(ConfigError, match="distinct"):
+        TrainConfig(**{**SMALL, "runner": "async", "team_sizes": [1, 1]})
+
+
+def test_a_run_over_two_team_sizes_trains(tmp_path):
+    cfg = TrainConfig(**{**SMALL, "runner": "async", "team_sizes": [1, 2], "workers": 2, "total_env_steps": 48})
+    summary = make_trainer(cfg, tmp_path, progress=False).run()
+    assert summary["env_steps"] >= 48 and summary["worker_deaths"] == 0

@@ -155,6 +155,10 @@ class TrainConfig:
     action_mode: str = _f("discrete", "Driving: 'discrete' (two categorical heads [3, 3], paper) or 'continuous' "
                                       "(a clipped 3-d Gaussian over [throttle, brake, steering / limit]).")
     players_per_team: int = _f(2, f"Robots per team, 1..{MAX_PLAYERS_PER_TEAM} (paper: 2, i.e. 2v2).")
+    team_sizes: tuple | None = _f(None, "runner async, soccer: robots per team, e.g. [2, 5]: rollout worker i plays "
+                                        "size i mod len (so at least one worker per size), the objects padded to the "
+                                        "largest size, so one network learns every size; must hold "
+                                        "players_per_team; null = players_per_team only.")
     num_envs: int = _f(8, "Parallel worlds, 1..1024 (paper: 8).")
     perception: str = _f("realistic", f"Perception preset: one of {PERCEPTIONS}.")
     localization: str = _f("none", "Self-localization as an input: 'none' (paper) or 'estimate' (the worlds run the "
@@ -310,6 +314,8 @@ class TrainConfig:
         every car."""
         if self.driving:
             return self.num_envs * self.n_cars
+        if self.team_sizes:               # the smallest rollout: one size's worlds
+            return self.num_envs * min(self.team_sizes) * (2 if self.opponent == "self" else 1)
         return self.num_envs * self.players_per_team * (2 if self.opponent == "self" else 1)
 
     @property
@@ -492,6 +498,15 @@ class TrainConfig:
         if not all(math.isfinite(w) for w in self.reward_weights):
             raise ConfigError("reward_weights", f"must be finite, got {list(self.reward_weights)}")
         self._validate_runner()
+        if self.team_sizes is not None:
+            if self.driving or self.runner != "async":
+                raise ConfigError("team_sizes", "applies to soccer on the asynchronous runner (runner: async) only")
+            if self.players_per_team not in self.team_sizes:
+                raise ConfigError("team_sizes", f"must hold players_per_team ({self.players_per_team}), got "
+                                                f"{list(self.team_sizes)}")
+            if self.workers is not None and self.workers < len(self.team_sizes):
+                raise ConfigError("workers", f"{self.workers} workers cannot play {len(self.team_sizes)} team sizes "
+                                             f"(each worker plays one)")
         if self.intrinsic_reward_coef > 0.0 and not losses.forward:
             raise ConfigError("intrinsic_reward_coef", f"> 0 needs a forward model, which variant "
                                                        f"{self.variant!r} does not train")
@@ -505,6 +520,8 @@ _BASE_TYPES = {"int": int, "float": float, "bool": bool, "str": str}
 def _parse_annotation(annotation: str) -> tuple[type, bool]:
     if str(annotation) == "tuple":                  # a list of 4 numbers (reward_weights)
         return tuple, False
+    if str(annotation) == "tuple | None":           # a list of distinct team sizes (team_sizes)
+        return list, True
     parts = [p.strip() for p in str(annotation).split("|")]
     optional = "None" in parts
     (base,) = [p for p in parts if p != "None"]
@@ -522,6 +539,13 @@ def _check_type(key: str, value: Any, expected: tuple[type, bool]) -> Any:
             return None
         raise ConfigError(key, f"expected {kind.__name__}, got null")
     described = f"{type(value).__name__} {value!r}"
+    if kind is list:
+        if not isinstance(value, (list, tuple)) or not value or len(set(value)) != len(value) or \
+                any(isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_PLAYERS_PER_TEAM
+                    for v in value):
+            raise ConfigError(key, f"expected a list of distinct robots-per-team sizes in "
+                                   f"1..{MAX_PLAYERS_PER_TEAM}, got {described}")
+        return tuple(int(v) for v in value)
     if kind is tuple:
         if not isinstance(value, (list, tuple)) or len(value) != 4 or \
                 any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):

@@ -9,6 +9,7 @@ every world's episodes independent and every worker's draws its own.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from typing import Any
@@ -28,12 +29,21 @@ def usable_cores() -> int:
 
 
 def resolve_workers(cfg: TrainConfig, cores: int | None = None) -> int:
-    """``cfg.workers``, or one per core this process may use, less one for a CPU learner; at most ``num_envs``."""
+    """``cfg.workers``, or one per core this process may use, less one for a CPU learner; at most ``num_envs``;
+    at least one per team size (``team_sizes``: each worker plays one size)."""
     if cfg.workers is not None:
         return cfg.workers
     cores = usable_cores() if cores is None else cores
     wanted = cores if cfg.device != "cpu" else cores - 1
-    return max(1, min(cfg.num_envs, wanted))
+    return max(1, len(cfg.team_sizes or ()), min(cfg.num_envs, wanted))
+
+
+def worker_config(cfg: TrainConfig, index: int) -> TrainConfig:
+    """The config worker ``index`` plays: with ``team_sizes``, its size is the (index mod sizes)-th, so the sizes
+    alternate over the workers and every rollout of one worker has one shape (its slots' shape)."""
+    if not cfg.team_sizes:
+        return cfg
+    return dataclasses.replace(cfg, players_per_team=cfg.team_sizes[index % len(cfg.team_sizes)])
 
 
 def shard_sizes(num_envs: int, workers: int) -> list[tuple[int, int]]:
@@ -48,6 +58,7 @@ class RolloutWorker:
 
     def __init__(self, cfg: TrainConfig, index: int, first_world: int, num_envs: int, incarnation: int = 0,
                  first_update: int = 0) -> None:
+        cfg = worker_config(cfg, index)
         self.cfg, self.index, self.first_world, self.num_envs = cfg, index, first_world, num_envs
         torch.set_num_threads(1)                # one core per worker: intra-op threads would fight the others
         seeds = np.random.SeedSequence([cfg.seed, index, incarnation, first_update]).spawn(4)

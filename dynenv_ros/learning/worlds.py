@@ -43,6 +43,15 @@ def needs_targets(cfg: TrainConfig) -> bool:
     return losses.localization or losses.reconstruction or cfg.privileged_pose_seeding
 
 
+def padded_objects(cfg: TrainConfig) -> int | None:
+    """The object slots every world pads to when a run mixes team sizes (``team_sizes``): the largest size's, so
+    every rollout has one layout; None otherwise (each world's own)."""
+    if not cfg.team_sizes:
+        return None
+    from dynenv_ros.envs.padded_layout import PaddedLayout
+    return PaddedLayout.for_players(max(cfg.team_sizes), 1).max_objects
+
+
 def make_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.ndarray]:
     """The vector env of ``cfg``'s scenario (padded observations) and the robots (cars) of each world that learn."""
     if cfg.driving:
@@ -55,7 +64,7 @@ def make_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.nda
     env = SoccerVectorEnv(num_envs, backend=backend, config=soccer_config(cfg), observation="padded",
                           perception=cfg.perception, targets=needs_targets(cfg),
                           scripted_team_b=IN_WORLD_TEAMS.get(cfg.opponent), teacher=cfg.teacher,
-                          localization=cfg.localization)
+                          localization=cfg.localization, max_objects=padded_objects(cfg))
     n = cfg.players_per_team
     return env, (np.arange(2 * n) if cfg.opponent == "self" else np.arange(n))
 
