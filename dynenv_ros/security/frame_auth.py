@@ -42,7 +42,7 @@ TAG_SUFFIX = "_mac"                        # the companion topic: <frame topic>_
 DETECTIONS_DOMAIN = b"dynenv_msgs/DetectionArray/v1\n"
 WORLD_STATE_DOMAIN = b"dynenv_msgs/WorldState/v1\n"
 WAIT_S = 2.0                               # how long a frame waits for its tag (and a tag for its frame)
-CAPACITY = 256                             # frames (and tags) waiting per gate; the oldest is refused first
+CAPACITY = 1024                            # frames (and tags) waiting per gate; the oldest is refused first
 REPLAY_MEMORY = 4096                       # tags of frames used, to refuse a replay
 # Refusal reasons, as counted (frames_refused_<reason> in the nodes' diagnostics).
 REASONS = ("frame_mac_missing", "frame_replayed", "tag_malformed", "tag_unmatched")
