@@ -56,7 +56,8 @@ def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
         **TRAINER_SETTINGS, "players_per_team": players, "run_dir": str(run_dir / "trainer"), "seed": config.seed,
         "batch_sequences": config.games * 2 * players, "max_minutes": config.train_minutes,
         "max_updates": config.train_updates,
-        "signing_key": str(signing_key), "secrets_dir": secrets, "authenticated_frames": True}, ends_run=True)
+        "signing_key": str(signing_key), "secrets_dir": secrets, "authenticated_frames": True,
+        "runtime_controls": False}, ends_run=True)
     nodes: list[NodeLaunch] = []
     topics = ["/trainer/diagnostics"]
     for game in range(1, config.games + 1):
@@ -65,7 +66,7 @@ def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
             "players_per_team": players, "seed": config.seed + game, "perception_preset": config.perception,
             "mode": "stepped", "episode_seconds": config.episode_seconds, "auto_reset": True,
             "publish_markers": False, "wait_for_subscribers": 2, "secrets_dir": secrets,
-            "authenticated_frames": True}, namespace=namespace))
+            "authenticated_frames": True, "runtime_controls": False}, namespace=namespace))
         nodes.append(NodeLaunch(f"policy_game_{game}", "policy_node.policy_node", {
             "players_per_team": players, "seed": config.seed + 100 + game,
             "trusted_weights_keys": [str(public_key)], "secrets_dir": secrets,

@@ -45,6 +45,7 @@ from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
 from dynenv_ros.ros.authentication import secrets_for
+from dynenv_ros.ros.runtime_controls import declare_runtime_controls
 from dynenv_ros.ros.frame_tags import frames_secret, tag_message, tag_topic
 from dynenv_ros.security.frame_auth import detection_rows_bytes, world_state_bytes
 from dynenv_ros.security.action_auth import ReplayGuard, action_digest, check_action, tag_feedback
@@ -257,9 +258,16 @@ class SimNode(Node):
                                                           QoSProfile(depth=5))
             self.detection_marker_pub = self.create_publisher(MarkerArray, local(topics.DETECTION_MARKERS),
                                                               QoSProfile(depth=5))
-            self.reset_srv = self.create_service(ResetSimulation, local(topics.RESET_SERVICE), self._on_reset)
-            self.step_srv = self.create_service(StepSimulation, local(topics.STEP_SERVICE), self._on_step)
-            self.add_on_set_parameters_callback(self._on_set_parameters)
+            # /sim/reset, /sim/step and the settable parameters change the game: off with runtime_controls false
+            # (the deployment profile, the train graph; ros/runtime_controls.py).
+            services = [self.resolve_service_name(local(n)) for n in (topics.RESET_SERVICE, topics.STEP_SERVICE)]
+            self.runtime_controls = declare_runtime_controls(self, " and ".join(services) + " are not offered")
+            self.reset_srv = self.step_srv = None
+            if self.runtime_controls:
+                self.reset_srv = self.create_service(ResetSimulation, local(topics.RESET_SERVICE), self._on_reset)
+                self.step_srv = self.create_service(StepSimulation, local(topics.STEP_SERVICE), self._on_step)
+            if self.runtime_controls:       # else every change is refused (declare_runtime_controls)
+                self.add_on_set_parameters_callback(self._on_set_parameters)
             self.wall = Clock(clock_type=ClockType.STEADY_TIME)
             self.frames_published = 0
             self.periods_run = 0
@@ -766,6 +774,7 @@ class SimNode(Node):
                     "mac_missing", "mac_invalid", "replayed")
         values["action_authentication"] = "off" if self.secrets is None else "on"
         values["frame_authentication"] = "off" if self.frames_secret is None else "on"
+        values["runtime_controls"] = "on" if self.runtime_controls else "off"
         for key in ("accepted", "missing", "ignored_after_episode_end", "publish_failed") + tuple(
                 f"rejected_{r}" for r in rejected):
             values[key] = str(counts.get(key, 0))

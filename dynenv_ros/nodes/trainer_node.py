@@ -57,6 +57,7 @@ from dynenv_ros.learning.experience_scenarios import DrivingExperience, Experien
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.diagnostics import Diagnostics
+from dynenv_ros.ros.runtime_controls import declare_runtime_controls
 from dynenv_ros.ros.frame_tags import FrameReceiver, frames_secret
 from dynenv_ros.ros.drain import take
 from dynenv_ros.ros.authentication import declare_secrets_dir, load_secrets
@@ -229,7 +230,11 @@ class TrainerNode(Node):
         self.background = BackgroundLearner(self.learner, on_update=self._on_update)
         self._publish_weights()
         self.background.start()
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        # The settable parameters change what is learnt: fixed with runtime_controls false (ros/runtime_controls.py).
+        self.runtime_controls = declare_runtime_controls(
+            self, "learning_rate, entropy_coef, max_policy_lag and publish_every_updates are fixed")
+        if self.runtime_controls:
+            self.add_on_set_parameters_callback(self._on_set_parameters)
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.discovery_timer = self.create_timer(0.5, self._discover, clock=wall)
         self.diagnostics_timer = self.create_timer(diagnostics_s, self._publish_diagnostics, clock=wall)
@@ -425,6 +430,7 @@ class TrainerNode(Node):
                     "feedback_mac_missing", "feedback_mac_invalid"):
             values[key] = str(counts.get(key, 0))
         values["action_authentication"] = "off" if self.secrets is None else "on"
+        values["runtime_controls"] = "on" if self.runtime_controls else "off"
         values["frame_authentication"] = "off"
         if self.frame_gate is not None:
             values.update(self.frame_gate.diagnostics())
