@@ -236,6 +236,9 @@ class PolicyNode(Node):
         self.names = [name for name in everyone if (not team or name[5] == team) and (not cars or name in cars)]
         self.ids = {name: everyone.index(name) for name in self.names}
         self.tag_action = action_tagger(self, self.names)    # secrets_dir: team secrets, Action.mac (issue 27)
+        # Authenticated frames (issue 43, the train graph): a frame counts once its tag under frames.secret came.
+        secret = frames_secret(self, self.get_parameter("secrets_dir").value, "Act only on frames whose tag "
+                               "verifies")
         self.memory = {name: RobotMemory(self.idle) for name in self.names}
         self.teams = {name: 1 if name.startswith("team_a") else -1 for name in self.names}   # robocup's team signs
         self.pose_histories = {name: PoseHistory() for name in self.names}
@@ -270,9 +273,6 @@ class PolicyNode(Node):
         self.detection_subs = {n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)),
                                                            self._receiver(n),
                                                            detection_qos()) for n in self.names}
-        # Authenticated frames (issue 43, the train graph): a frame counts once its tag under frames.secret came.
-        secret = frames_secret(self, self.get_parameter("secrets_dir").value, "Act only on frames whose tag "
-                               "verifies")
         self.frame_gate = FrameReceiver(self, secret) if secret is not None else None
         if self.frame_gate is not None:
             for sub in self.detection_subs.values():

@@ -57,7 +57,11 @@ def render() -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    parser = argparse.ArgumentParser(prog="python -m dynenv_ros.graph.inventory",
+                                     description="Print the inventory table of docs/ros_graph.md (Markdown).")
+    parser.parse_args(argv)
     print(render(), end="")
     return 0
 

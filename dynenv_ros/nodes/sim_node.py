@@ -45,7 +45,7 @@ from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
 from dynenv_ros.ros.authentication import secrets_for
-from dynenv_ros.ros.runtime_controls import declare_runtime_controls
+from dynenv_ros.ros.runtime_controls import declare_runtime_controls, lock_when_off
 from dynenv_ros.ros.frame_tags import frames_secret, tag_message, tag_topic
 from dynenv_ros.security.frame_auth import detection_rows_bytes, world_state_bytes
 from dynenv_ros.security.action_auth import ReplayGuard, action_digest, check_action, tag_feedback
@@ -199,6 +199,8 @@ class SimNode(Node):
         # team's MAC and a nonce not used before, and the feedback carries the simulator's MAC. Either way the
         # feedback names the action each robot's period ran (StepFeedback.action_digest).
         self.secrets = secrets_for(self, names, simulator=True)
+        # /sim/reset, /sim/step and the settable parameters change the game (issue 43, ros/runtime_controls.py).
+        self.runtime_controls = declare_runtime_controls(self, "/sim/reset, /sim/step")
         # Authenticated frames (issue 43, security/frame_auth.py): each frame's tag on <topic>_mac.
         self.frames_secret = frames_secret(self, self.get_parameter("secrets_dir").value, "Tag each DetectionArray "
                                            "and WorldState on <topic>_mac")
@@ -261,12 +263,12 @@ class SimNode(Node):
             # /sim/reset, /sim/step and the settable parameters change the game: off with runtime_controls false
             # (the deployment profile, the train graph; ros/runtime_controls.py).
             services = [self.resolve_service_name(local(n)) for n in (topics.RESET_SERVICE, topics.STEP_SERVICE)]
-            self.runtime_controls = declare_runtime_controls(self, " and ".join(services) + " are not offered")
+            lock_when_off(self, self.runtime_controls, " and ".join(services) + " are not offered")
             self.reset_srv = self.step_srv = None
             if self.runtime_controls:
                 self.reset_srv = self.create_service(ResetSimulation, local(topics.RESET_SERVICE), self._on_reset)
                 self.step_srv = self.create_service(StepSimulation, local(topics.STEP_SERVICE), self._on_step)
-            if self.runtime_controls:       # else every change is refused (declare_runtime_controls)
+            if self.runtime_controls:       # else every change is refused (lock_when_off)
                 self.add_on_set_parameters_callback(self._on_set_parameters)
             self.wall = Clock(clock_type=ClockType.STEADY_TIME)
             self.frames_published = 0

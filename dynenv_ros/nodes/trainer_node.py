@@ -57,7 +57,7 @@ from dynenv_ros.learning.experience_scenarios import DrivingExperience, Experien
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.diagnostics import Diagnostics
-from dynenv_ros.ros.runtime_controls import declare_runtime_controls
+from dynenv_ros.ros.runtime_controls import declare_runtime_controls, lock_when_off
 from dynenv_ros.ros.frame_tags import FrameReceiver, frames_secret
 from dynenv_ros.ros.drain import take
 from dynenv_ros.ros.authentication import declare_secrets_dir, load_secrets
@@ -170,6 +170,8 @@ class TrainerNode(Node):
                                           "their team's MAC and feedback with the simulator's are learnt")
         # Authenticated frames (issue 43): only frames and world states whose tag under frames.secret came are learnt.
         frames = frames_secret(self, secrets_dir, "Learn only from frames and world states whose tag verifies")
+        self.runtime_controls = declare_runtime_controls(self, "learning_rate, entropy_coef, max_policy_lag, "
+                                                         "publish_every_updates")
         signing_key = declare_str(self, "signing_key", "", "Ed25519 private key (PEM, mode 0600) that signs every "
                                   "weights release; empty: trainer.key in $DYNENV_KEYS_DIR or "
                                   "~/.config/dynenv_ros/keys (make one with `dynenv-keys generate`).", **fixed)
@@ -231,8 +233,8 @@ class TrainerNode(Node):
         self._publish_weights()
         self.background.start()
         # The settable parameters change what is learnt: fixed with runtime_controls false (ros/runtime_controls.py).
-        self.runtime_controls = declare_runtime_controls(
-            self, "learning_rate, entropy_coef, max_policy_lag and publish_every_updates are fixed")
+        lock_when_off(self, self.runtime_controls, "learning_rate, entropy_coef, max_policy_lag and "
+                      "publish_every_updates are fixed")
         if self.runtime_controls:
             self.add_on_set_parameters_callback(self._on_set_parameters)
         wall = Clock(clock_type=ClockType.STEADY_TIME)

@@ -18,14 +18,18 @@ REFUSED = ("runtime_controls is off: this node's parameters are fixed at start (
 
 
 def declare_runtime_controls(node: Node, what: str) -> bool:
-    """Declare ``runtime_controls``; when false, log at start what is off (``what``: e.g. '/sim/reset and
-    /sim/step are not offered') and refuse every later parameter change. The node then adds no on-set callback
-    of its own: rclpy runs the newest first, so one that applies a change would act before this refusal."""
-    on = declare_bool(node, PARAMETER, True, f"Offer the run-time controls ({what}; settable parameters); false "
-                      "(deployment profile, train graph): off, since any process on the domain could call them.",
-                      read_only=True)
-    if not on:
-        node.get_logger().info(f"runtime_controls off: {what}; parameter changes are refused")
-        node.add_on_set_parameters_callback(lambda parameters: SetParametersResult(successful=False,
-                                                                                   reason=REFUSED))
-    return on
+    """Declare ``runtime_controls`` (with the other parameters, so ``--help`` lists it); ``what``: what it
+    switches off, for ``--help``."""
+    return declare_bool(node, PARAMETER, True, f"Offer the run-time controls ({what}, settable parameters); "
+                        "false (deployment profile, train graph): off, since any process on the domain could call "
+                        "them.", read_only=True)
+
+
+def lock_when_off(node: Node, on: bool, what: str) -> None:
+    """When ``runtime_controls`` is off, say so at start (``what``: e.g. '/sim/reset and /sim/step are not
+    offered') and refuse every later parameter change. The node then adds no on-set callback of its own: rclpy runs
+    the newest first, so one that applies a change would act before this refusal."""
+    if on:
+        return
+    node.get_logger().info(f"runtime_controls off: {what}; parameter changes are refused")
+    node.add_on_set_parameters_callback(lambda parameters: SetParametersResult(successful=False, reason=REFUSED))
