@@ -72,6 +72,7 @@ from dynenv_ros.envs.pose_features import POSE_KEY
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.authentication import action_tagger
 from dynenv_ros.ros.diagnostics import Diagnostics
+from dynenv_ros.ros.frame_tags import FrameReceiver, frames_secret
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.pose_estimates import (HISTORY_DEPTH, LOST_ROW, PoseHistory, declare_pose_input, pose_batch,
@@ -92,6 +93,7 @@ from dynenv_ros.envs.padded_layout import SOCCER
 from dynenv_ros.ros.dds_profiles import use_bounded_profiles
 from dynenv_ros.ros.operator_gate import OperatorGate
 from dynenv_ros.ros.weights_follower import WeightsFollower
+from dynenv_ros.security.frame_auth import detection_array_bytes
 from dynenv_ros.security.keys import KeyFileError, load_trusted_keys
 from dynenv_ros.security.operator_requests import signature_path, verify_file
 from dynenv_ros.security.weights_signing import Refused
@@ -234,6 +236,9 @@ class PolicyNode(Node):
         self.names = [name for name in everyone if (not team or name[5] == team) and (not cars or name in cars)]
         self.ids = {name: everyone.index(name) for name in self.names}
         self.tag_action = action_tagger(self, self.names)    # secrets_dir: team secrets, Action.mac (issue 27)
+        # Authenticated frames (issue 43, the train graph): a frame counts once its tag under frames.secret came.
+        secret = frames_secret(self, self.get_parameter("secrets_dir").value, "Act only on frames whose tag "
+                               "verifies")
         self.memory = {name: RobotMemory(self.idle) for name in self.names}
         self.teams = {name: 1 if name.startswith("team_a") else -1 for name in self.names}   # robocup's team signs
         self.pose_histories = {name: PoseHistory() for name in self.names}
@@ -268,6 +273,10 @@ class PolicyNode(Node):
         self.detection_subs = {n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)),
                                                            self._receiver(n),
                                                            detection_qos()) for n in self.names}
+        self.frame_gate = FrameReceiver(self, secret) if secret is not None else None
+        if self.frame_gate is not None:
+            for sub in self.detection_subs.values():
+                self.frame_gate.subscribe(sub.topic_name, detection_qos(), self._release)
         self._subscribe_poses()
         self.operator = self._operator_gate(operator_keys)
         self.load_srv = (self.create_service(LoadPolicy, "~/load_policy", self._on_load) if self.operator
@@ -508,11 +517,33 @@ class PolicyNode(Node):
     # -- frames ----------------------------------------------------------------------------------------------------
     def _receiver(self, name: str):
         def receive(msg: DetectionArray) -> None:
-            self._store(name, msg)
+            self._admit(name, msg)
             self._drain()
             while self._decide_if_ready():     # frames taken during a decision may complete the next period
                 pass
         return receive
+
+    def _release(self, items: list[tuple[str, DetectionArray]]) -> None:
+        """With authenticated frames: frames whose tag came after them are stored, and acted on, from here. Each
+        names its robot (a tag binds its frame's topic, whichever companion topic it came on)."""
+        for name, msg in items:
+            self._store(name, msg)
+        self._drain()
+        while self._decide_if_ready():
+            pass
+
+    def _admit(self, name: str, msg: DetectionArray) -> None:
+        """Store a frame, or with authenticated frames hand it to the gate: stored once its tag came."""
+        if self.frame_gate is None:
+            self._store(name, msg)
+            return
+        topic = self.detection_subs[name].topic_name
+        try:
+            data: bytes | None = detection_array_bytes(msg, topic)
+        except ValueError:
+            data = None
+        for verified_name, verified in self.frame_gate.frame((name, msg), data, topic):
+            self._store(verified_name, verified)
 
     def _drain(self) -> None:
         """Take every detection message already waiting (at most the queue's depth per robot), so the decision
@@ -520,7 +551,7 @@ class PolicyNode(Node):
         subscription handle's take, what rclpy's executor itself calls (there is no public take in rclpy)."""
         for name, sub in self.detection_subs.items():
             for msg in _waiting(sub, DETECTION_DEPTH):
-                self._store(name, msg)
+                self._admit(name, msg)
 
     def _store(self, name: str, msg: DetectionArray) -> None:
         """File one frame (``periods.file_frame``); a new episode resets the robot. With a decision deadline, an
@@ -739,6 +770,9 @@ class PolicyNode(Node):
         values["operator_services"] = "on" if self.operator else "off"
         if self.operator is not None:                # signed operator requests: accepted, refused by reason
             values.update(self.operator.diagnostics())
+        values["frame_authentication"] = "off"
+        if self.frame_gate is not None:              # frames verified, waiting for their tag, refused by reason
+            values.update(self.frame_gate.diagnostics())
         values["pose_input"] = "yes" if self.pose_wanted else "no"
         values["pose_refusal"] = self.pose_refusal
         values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"

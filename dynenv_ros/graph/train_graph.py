@@ -30,7 +30,8 @@ from typing import Any
 from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch
 from dynenv_ros.learning.checkpoints import START_POLICY
 from dynenv_ros.soccer.config import robot_names
-from dynenv_ros.security.action_auth import write_game_secrets
+from dynenv_ros.security.action_auth import secret_path, write_game_secrets, write_team_secret
+from dynenv_ros.security.frame_auth import FRAMES
 from dynenv_ros.security.keys import generate_key_pair
 
 # The trainer's settings for the demonstration (the node's defaults are the paper's).
@@ -48,11 +49,15 @@ def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
     # ... and secrets of this run (run_dir/secrets): the teams' and the simulator's, so only the policy nodes' actions
     # are run and learnt, and only the simulators' feedback (authenticated actions, docs/ros_graph.md "Who may act").
     secrets = str(write_game_secrets(run_dir / "secrets", robot_names(players)))
+    # ... and frames.secret: the simulators tag their frames, the policy nodes act on and the trainer learns from
+    # tagged frames only (docs/ros_graph.md, "Which frames count").
+    write_team_secret(secret_path(secrets, FRAMES))
     trainer = NodeLaunch("trainer", "dynenv_ros.nodes.trainer_node", {
         **TRAINER_SETTINGS, "players_per_team": players, "run_dir": str(run_dir / "trainer"), "seed": config.seed,
         "batch_sequences": config.games * 2 * players, "max_minutes": config.train_minutes,
         "max_updates": config.train_updates,
-        "signing_key": str(signing_key), "secrets_dir": secrets}, ends_run=True)
+        "signing_key": str(signing_key), "secrets_dir": secrets, "authenticated_frames": True,
+        "runtime_controls": False}, ends_run=True)
     nodes: list[NodeLaunch] = []
     topics = ["/trainer/diagnostics"]
     for game in range(1, config.games + 1):
@@ -60,10 +65,12 @@ def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
         nodes.append(NodeLaunch(f"sim_game_{game}", "dynenv_ros.nodes.sim_node", {
             "players_per_team": players, "seed": config.seed + game, "perception_preset": config.perception,
             "mode": "stepped", "episode_seconds": config.episode_seconds, "auto_reset": True,
-            "publish_markers": False, "wait_for_subscribers": 2, "secrets_dir": secrets}, namespace=namespace))
+            "publish_markers": False, "wait_for_subscribers": 2, "secrets_dir": secrets,
+            "authenticated_frames": True, "runtime_controls": False}, namespace=namespace))
         nodes.append(NodeLaunch(f"policy_game_{game}", "policy_node.policy_node", {
             "players_per_team": players, "seed": config.seed + 100 + game,
-            "trusted_weights_keys": [str(public_key)], "secrets_dir": secrets}, namespace=namespace))
+            "trusted_weights_keys": [str(public_key)], "secrets_dir": secrets,
+            "authenticated_frames": True}, namespace=namespace))
         for team in "ab":
             for slot in range(players):
                 topics += [f"{namespace}/team_{team}_{slot}/action", f"{namespace}/team_{team}_{slot}/feedback"]

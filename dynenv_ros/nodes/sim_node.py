@@ -27,6 +27,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
+from std_msgs.msg import UInt8MultiArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
@@ -44,6 +45,9 @@ from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.topics import local
 from dynenv_ros.ros.action_inbox import ActionInbox
 from dynenv_ros.ros.authentication import secrets_for
+from dynenv_ros.ros.runtime_controls import declare_runtime_controls, lock_when_off
+from dynenv_ros.ros.frame_tags import frames_secret, tag_message, tag_topic
+from dynenv_ros.security.frame_auth import detection_rows_bytes, world_state_bytes
 from dynenv_ros.security.action_auth import ReplayGuard, action_digest, check_action, tag_feedback
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.pose_estimates import EmulatedOdometry, pose_message, stamp_ns
@@ -195,6 +199,11 @@ class SimNode(Node):
         # team's MAC and a nonce not used before, and the feedback carries the simulator's MAC. Either way the
         # feedback names the action each robot's period ran (StepFeedback.action_digest).
         self.secrets = secrets_for(self, names, simulator=True)
+        # /sim/reset, /sim/step and the settable parameters change the game (issue 43, ros/runtime_controls.py).
+        self.runtime_controls = declare_runtime_controls(self, "/sim/reset, /sim/step")
+        # Authenticated frames (issue 43, security/frame_auth.py): each frame's tag on <topic>_mac.
+        self.frames_secret = frames_secret(self, self.get_parameter("secrets_dir").value, "Tag each DetectionArray "
+                                           "and WorldState on <topic>_mac")
         self.replay_guard = ReplayGuard()
         self._accepted_digests: dict[int, bytes] = {}          # robot -> digest, for the period being collected
         self._executed_digests: dict[tuple[int, int], dict[int, bytes]] = {}   # (episode, period) run -> digests
@@ -210,6 +219,10 @@ class SimNode(Node):
         self.world_pub = self.create_publisher(cv.WorldState, local(topics.WORLD_STATE), frame_qos)
         self.detection_pubs = [self.create_publisher(cv.DetectionArray, local(topics.detections(n)),
                                                      frame_qos) for n in names]
+        self.frame_tag_pubs: list[Any] = []            # world_state's, then each robot's detections'
+        if self.frames_secret is not None:
+            self.frame_tag_pubs = [self.create_publisher(UInt8MultiArray, tag_topic(p.topic_name), frame_qos)
+                                   for p in [self.world_pub] + self.detection_pubs]
         self.feedback_pubs = [self.create_publisher(cv.StepFeedback, local(topics.feedback(n)), feedback_qos)
                               for n in names]
         # Self-localization (ros/pose_estimates.py): each robot's estimate per frame, with the detections' QoS.
@@ -247,9 +260,16 @@ class SimNode(Node):
                                                           QoSProfile(depth=5))
             self.detection_marker_pub = self.create_publisher(MarkerArray, local(topics.DETECTION_MARKERS),
                                                               QoSProfile(depth=5))
-            self.reset_srv = self.create_service(ResetSimulation, local(topics.RESET_SERVICE), self._on_reset)
-            self.step_srv = self.create_service(StepSimulation, local(topics.STEP_SERVICE), self._on_step)
-            self.add_on_set_parameters_callback(self._on_set_parameters)
+            # /sim/reset, /sim/step and the settable parameters change the game: off with runtime_controls false
+            # (the deployment profile, the train graph; ros/runtime_controls.py).
+            services = [self.resolve_service_name(local(n)) for n in (topics.RESET_SERVICE, topics.STEP_SERVICE)]
+            lock_when_off(self, self.runtime_controls, " and ".join(services) + " are not offered")
+            self.reset_srv = self.step_srv = None
+            if self.runtime_controls:
+                self.reset_srv = self.create_service(ResetSimulation, local(topics.RESET_SERVICE), self._on_reset)
+                self.step_srv = self.create_service(StepSimulation, local(topics.STEP_SERVICE), self._on_step)
+            if self.runtime_controls:       # else every change is refused (lock_when_off)
+                self.add_on_set_parameters_callback(self._on_set_parameters)
             self.wall = Clock(clock_type=ClockType.STEADY_TIME)
             self.frames_published = 0
             self.periods_run = 0
@@ -564,7 +584,11 @@ class SimNode(Node):
         frame = output.frames[k]
         stamp = cv.sim_time(self._tick_offset + frame.tick, self._tick_s)
         self._publish(self.clock_pub, ClockMsg(clock=stamp))
-        self._publish(self.world_pub, cv.world_state(frame.snapshot, stamp))
+        world = cv.world_state(frame.snapshot, stamp)
+        self._publish(self.world_pub, world)
+        if self.frame_tag_pubs:
+            self._publish(self.frame_tag_pubs[0], tag_message(self.frames_secret,
+                                                              world_state_bytes(world, self.world_pub.topic_name)))
         truth = [(o.x, o.y, o.yaw, o.head_yaw) for o in frame.snapshot.objects[:len(self.names)]]
         estimates = odometry = None
         if poses is not None:
@@ -586,13 +610,16 @@ class SimNode(Node):
                 self._publish(publisher, pose_message(estimates[i], variances[i], stamp))
         frames_per_period = len(output.frames)
         for i, robot in enumerate(frame.robots):   # serialised from the numpy records directly (ros/cdr.py)
-            self._publish(self.detection_pubs[i], detection_array_cdr(
-                robot.detections, stamp_sec=stamp.sec, stamp_nanosec=stamp.nanosec,
-                frame_id=cv.camera_frame(self.names[i]), robot_id=i, episode_id=output.episode_id,
-                motion_period=output.motion_period, frame_index=k, frames_per_period=frames_per_period,
-                head_yaw=robot.head_yaw, fallen=robot.fallen, penalized=robot.penalized, kicking=robot.kicking,
-                ball_owner=robot.ball_owner, ball_owner_seconds=robot.ball_owner_seconds,
-                game_seconds_remaining=robot.game_seconds_remaining))
+            fields = dict(stamp_sec=stamp.sec, stamp_nanosec=stamp.nanosec, frame_id=cv.camera_frame(self.names[i]),
+                          robot_id=i, episode_id=output.episode_id, motion_period=output.motion_period,
+                          frame_index=k, frames_per_period=frames_per_period, head_yaw=robot.head_yaw,
+                          fallen=robot.fallen, penalized=robot.penalized, kicking=robot.kicking,
+                          ball_owner=robot.ball_owner, ball_owner_seconds=robot.ball_owner_seconds,
+                          game_seconds_remaining=robot.game_seconds_remaining)
+            self._publish(self.detection_pubs[i], detection_array_cdr(robot.detections, **fields))
+            if self.frame_tag_pubs:
+                data = detection_rows_bytes(robot.detections, self.detection_pubs[i].topic_name, **fields)
+                self._publish(self.frame_tag_pubs[i + 1], tag_message(self.frames_secret, data))
         self.frames_published += 1
         if self.publish_markers and k == len(output.frames) - 1:
             self._publish_markers(frame, stamp)
@@ -624,7 +651,8 @@ class SimNode(Node):
 
         from dynenv_ros.ros.node_runner import NodeExit
         final = self.diagnostics()     # before waiting: acknowledgements take a heartbeat period (≈ 3 s)
-        publishers = [self.clock_pub, self.world_pub] + self.detection_pubs + self.feedback_pubs + self.pose_pubs
+        publishers = ([self.clock_pub, self.world_pub] + self.detection_pubs + self.frame_tag_pubs + self.feedback_pubs
+                      + self.pose_pubs)
         for publisher in publishers:
             publisher.wait_for_all_acked(Duration(seconds=5.0))
         self.write_report(final)
@@ -747,6 +775,8 @@ class SimNode(Node):
         rejected = ("malformed", "out_of_range", "unknown_robot", "wrong_episode", "late", "early", "duplicate",
                     "mac_missing", "mac_invalid", "replayed")
         values["action_authentication"] = "off" if self.secrets is None else "on"
+        values["frame_authentication"] = "off" if self.frames_secret is None else "on"
+        values["runtime_controls"] = "on" if self.runtime_controls else "off"
         for key in ("accepted", "missing", "ignored_after_episode_end", "publish_failed") + tuple(
                 f"rejected_{r}" for r in rejected):
             values[key] = str(counts.get(key, 0))

@@ -57,11 +57,14 @@ from dynenv_ros.learning.experience_scenarios import DrivingExperience, Experien
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.diagnostics import Diagnostics
+from dynenv_ros.ros.runtime_controls import declare_runtime_controls, lock_when_off
+from dynenv_ros.ros.frame_tags import FrameReceiver, frames_secret
 from dynenv_ros.ros.drain import take
 from dynenv_ros.ros.authentication import declare_secrets_dir, load_secrets
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, refuse_other_scenario
 from dynenv_ros.ros.weights_release import WeightsRelease
+from dynenv_ros.security.frame_auth import detection_array_bytes, world_state_bytes
 from dynenv_ros.security.keys import PRIVATE_NAME, KeyFileError, default_keys_dir, load_private_key
 from dynenv_ros.soccer.config import SoccerConfig
 
@@ -165,6 +168,10 @@ class TrainerNode(Node):
                                       **fixed)
         secrets_dir = declare_secrets_dir(self, "the learnt teams' secrets and simulator.secret: only actions with "
                                           "their team's MAC and feedback with the simulator's are learnt")
+        # Authenticated frames (issue 43): only frames and world states whose tag under frames.secret came are learnt.
+        frames = frames_secret(self, secrets_dir, "Learn only from frames and world states whose tag verifies")
+        self.runtime_controls = declare_runtime_controls(self, "learning_rate, entropy_coef, max_policy_lag, "
+                                                         "publish_every_updates")
         signing_key = declare_str(self, "signing_key", "", "Ed25519 private key (PEM, mode 0600) that signs every "
                                   "weights release; empty: trainer.key in $DYNENV_KEYS_DIR or "
                                   "~/.config/dynenv_ros/keys (make one with `dynenv-keys generate`).", **fixed)
@@ -217,6 +224,7 @@ class TrainerNode(Node):
         self.robots: set[tuple[str, str]] = set()
         self.games: set[str] = set()
         self.experience_subs: list = []
+        self.frame_gate = FrameReceiver(self, frames) if frames is not None else None
         self._steps_window: deque[tuple[float, int, int]] = deque(maxlen=2)   # (wall, steps, updates)
         self.episodes: list[dict[str, float]] = []      # finished episodes: the version that ended it, return
         self.weights_published = 0
@@ -224,7 +232,11 @@ class TrainerNode(Node):
         self.background = BackgroundLearner(self.learner, on_update=self._on_update)
         self._publish_weights()
         self.background.start()
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        # The settable parameters change what is learnt: fixed with runtime_controls false (ros/runtime_controls.py).
+        lock_when_off(self, self.runtime_controls, "learning_rate, entropy_coef, max_policy_lag and "
+                      "publish_every_updates are fixed")
+        if self.runtime_controls:
+            self.add_on_set_parameters_callback(self._on_set_parameters)
         wall = Clock(clock_type=ClockType.STEADY_TIME)
         self.discovery_timer = self.create_timer(0.5, self._discover, clock=wall)
         self.diagnostics_timer = self.create_timer(diagnostics_s, self._publish_diagnostics, clock=wall)
@@ -269,18 +281,26 @@ class TrainerNode(Node):
                 continue
             add = self.assembler
             for msg_type, topic, method, kind, depth, latched in (
-                    (DetectionArray, name, add.add_frame, "frames", FRAME_DEPTH, False),
+                    (DetectionArray, name, self._gated(add.add_frame, name, detection_array_bytes), "frames",
+                     FRAME_DEPTH, False),
                     (Action, f"{source}/{robot}/action", add.add_action, "actions", MESSAGE_DEPTH, True),
                     (StepFeedback, f"{source}/{robot}/feedback", add.add_feedback, "feedback", MESSAGE_DEPTH, False)):
                 handler = self._handler(method, source, robot, kind, depth)
                 handler.subscription = self.create_subscription(msg_type, topic, handler,
                                                                 experience_qos(depth, latched))
                 self.experience_subs.append(handler.subscription)
+            if self.frame_gate is not None:
+                self.experience_subs.append(self.frame_gate.subscribe(self.resolve_topic_name(name),
+                                                                      experience_qos(FRAME_DEPTH), self._release))
             if source not in self.games:
                 self.games.add(source)
                 if add.with_targets:
+                    world = f"{source}/world_state"
                     self.experience_subs.append(self.create_subscription(
-                        WorldState, f"{source}/world_state", self._world_handler(source), experience_qos(FRAME_DEPTH)))
+                        WorldState, world, self._world_handler(source), experience_qos(FRAME_DEPTH)))
+                    if self.frame_gate is not None:
+                        self.experience_subs.append(self.frame_gate.subscribe(
+                            self.resolve_topic_name(world), experience_qos(FRAME_DEPTH), self._release))
             self.get_logger().info(f"learning from {source or '/'} {robot}")
 
     def _handler(self, add, source: str, robot: str, kind: str, depth: int):
@@ -306,10 +326,45 @@ class TrainerNode(Node):
         return receive
 
     def _world_handler(self, source: str):
+        add = self._gated(lambda _source, _robot, msg: self.assembler.add_world_state(source, msg),
+                          f"{source}/world_state", world_state_bytes)
+
         def receive(msg) -> None:
             self.received["world_states"] += 1
-            self.assembler.add_world_state(source, msg)
+            add(source, None, msg)
         return receive
+
+    def _gated(self, add, topic: str, encode):
+        """``add`` as it is, or with authenticated frames behind the gate: a frame is added once its tag came
+        (now, or later by ``_release``)."""
+        if self.frame_gate is None:
+            return add
+        topic = self.resolve_topic_name(topic)
+
+        def admit(source: str, robot: str | None, msg) -> None:
+            try:
+                data = encode(msg, topic)
+            except ValueError:
+                data = None
+            for item in self.frame_gate.frame((add, source, robot, msg), data, topic):
+                self._add_verified([item])
+        return admit
+
+    def _release(self, items: list) -> None:
+        """Frames whose tag came after them: added, and whatever they complete handed to the learner."""
+        self._add_verified(items)
+        ready = self.assembler.take()
+        if ready:
+            self.background.put(ready)
+
+    def _add_verified(self, items: list) -> None:
+        for add, source, robot, msg in items:
+            try:
+                add(source, robot, msg)
+            except Exception as error:     # as the handlers: a message nothing foresaw is dropped and counted
+                self.received["errors"] += 1
+                self.get_logger().error(f"frame of {source}/{robot} dropped: {type(error).__name__}: {error}",
+                                        throttle_duration_sec=5.0)
 
     # -- weights --------------------------------------------------------------------------------------------------
     def _on_update(self, learner: SequenceLearner, stats: dict[str, float]) -> None:
@@ -377,6 +432,10 @@ class TrainerNode(Node):
                     "feedback_mac_missing", "feedback_mac_invalid"):
             values[key] = str(counts.get(key, 0))
         values["action_authentication"] = "off" if self.secrets is None else "on"
+        values["runtime_controls"] = "on" if self.runtime_controls else "off"
+        values["frame_authentication"] = "off"
+        if self.frame_gate is not None:
+            values.update(self.frame_gate.diagnostics())
         for key, value in list(self.learner.counts.items()) + list(self.background.counts.items()):
             values[key] = str(value)
         for key, value in self.received.items():

@@ -1,0 +1,142 @@
+"""Issue 43 item 4 on the ROS graph, as the attacker: a second process without frames.secret publishes forged
+frames (untagged, with a random tag, with a tag under another team's secret) and replays genuine ones into a train
+graph running with authenticated frames (simulator, policy node, trainer). Not one forged frame reaches the policy
+node's decisions or the trainer's experience; every refusal is counted by reason. Without authenticated frames the
+same attacker's frames do reach the policy node (the control)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from dynenv_msgs.msg import WorldState
+from rclpy.exceptions import ParameterException
+from rclpy.parameter import Parameter
+from std_msgs.msg import UInt8MultiArray
+
+from dynenv_ros.nodes.sim_node import SimNode
+from dynenv_ros.nodes.trainer_node import TrainerNode
+from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.security.action_auth import load_secret, secret_path, write_game_secrets, write_team_secret
+from dynenv_ros.security.frame_auth import FRAMES, FrameGate, world_state_bytes
+from dynenv_ros.soccer.config import robot_names
+from policy_node.policy_node import PolicyNode
+from policy_node.scripted_policy import ScriptedPolicyNode
+from ros_harness import spin_until
+
+ATTACKER = Path(__file__).with_name("frame_attacker.py")
+MARK = 0.987654                                  # frame_attacker.py's forged confidence
+
+
+def _params(**values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _secrets(tmp_path: Path) -> Path:
+    folder = write_game_secrets(tmp_path / "secrets", robot_names(1))
+    write_team_secret(secret_path(folder, FRAMES))
+    return folder
+
+
+def _attacker(secrets: Path, seconds: float) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, str(ATTACKER), "team_a_0", str(seconds), str(secrets)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _forged(frames) -> int:
+    return sum(any(d.confidence == pytest.approx(MARK) for d in f.detections) for f in frames)
+
+
+def _record(target, name: str) -> list:
+    """Every message passed to ``target.<name>`` from now on (what the node acts on or learns from)."""
+    seen: list = []
+    original = getattr(target, name)
+
+    def recording(*args):
+        seen.append(args[-1])
+        return original(*args)
+    setattr(target, name, recording)
+    return seen
+
+
+def test_no_forged_frame_reaches_the_policys_decisions_or_the_trainers_experience(make_node, executor, tmp_path):
+    from weights_helpers import key_pair
+    secrets = _secrets(tmp_path)
+    private, public = key_pair(tmp_path / "keys")
+    common = dict(secrets_dir=str(secrets), authenticated_frames=True)
+    trainer = make_node(TrainerNode, parameter_overrides=_params(
+        players_per_team=1, sequence_length=4, batch_sequences=2, ppo_epochs=1, ppo_minibatches=1,
+        variant="baseline", feature_size=16, run_dir=str(tmp_path / "run"), signing_key=str(private), **common))
+    learnt = _record(trainer.assembler, "add_frame")
+    sim = make_node(SimNode, parameter_overrides=_params(
+        players_per_team=1, seed=5, falls_enabled=False, publish_markers=False, wait_for_subscribers=2, **common))
+    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, seed=6,
+                                                               trusted_weights_keys=[str(public)], **common))
+    acted_on = _record(policy, "_store")
+    # a bystander checks the simulator's world states against their tags
+    world_gate = FrameGate(load_secret(secret_path(secrets, FRAMES)))
+    world_states: list = []
+    watcher = make_node("watcher")
+    watcher.create_subscription(WorldState, "/world_state", lambda m: (world_states.append(m), world_gate.frame(
+        m, world_state_bytes(m, "/world_state"), 0)), sim_stream())
+    watcher.create_subscription(UInt8MultiArray, "/world_state_mac", lambda m: world_gate.tag(m.data, 0),
+                                sim_stream())
+    for node in (trainer, sim, policy, watcher):
+        executor.add_node(node)
+    attacker = _attacker(secrets, 150)
+    gate, learner_gate = policy.frame_gate.gate, trainer.frame_gate.gate
+    try:
+        assert spin_until(executor, lambda: trainer.learner.updates >= 3 and gate.counts["frame_replayed"] >= 5
+                          and gate.counts["frame_mac_missing"] >= 30 and learner_gate.counts["frame_mac_missing"]
+                          >= 30 and sim.periods_run >= 20, 200.0), \
+            (policy.diagnostics(), trainer.diagnostics())
+    finally:
+        attacker.kill()
+        output = attacker.communicate(timeout=10)[0]
+    # the attacker was there and sent its frames: every refusal counted by reason, in both nodes' diagnostics
+    diagnostics, learner = policy.diagnostics(), trainer.diagnostics()
+    assert diagnostics["frame_authentication"] == "on" and learner["frame_authentication"] == "on"
+    assert int(diagnostics["frames_refused_frame_mac_missing"]) >= 30, diagnostics
+    assert int(learner["frames_refused_frame_mac_missing"]) >= 30, learner
+    assert int(diagnostics["frames_refused_frame_replayed"]) >= 5, diagnostics
+    assert int(diagnostics["frames_verified"]) >= 100 and int(learner["frames_verified"]) >= 100
+    # 0 forged frames reached the policy's decisions or the trainer's experience; the game and learning went on
+    assert acted_on and learnt and _forged(acted_on) == 0 and _forged(learnt) == 0, output
+    assert sim.session.counts["missing"] == 0 and int(policy.diagnostics()["decisions"]) >= 20
+    assert not trainer.background.error and trainer.learner.updates >= 3
+    # every world state the simulator published carries a tag that verifies
+    assert len(world_states) >= 100 and world_gate.counts["frames_verified"] >= len(world_states) - 10
+    assert world_gate.counts["frame_mac_missing"] == 0
+    trainer.destroy_node()
+
+
+def test_without_authenticated_frames_the_attackers_frames_reach_the_policy(make_node, executor, tmp_path):
+    """The control: the same attacker against a policy node that reads frames as they come (a real robot's
+    default) gets its forged frames acted on."""
+    secrets = _secrets(tmp_path)
+    sim = make_node(SimNode, parameter_overrides=_params(players_per_team=1, seed=5, falls_enabled=False,
+                                                         publish_markers=False, wait_for_subscribers=1))
+    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, team="a", seed=6,
+                                                               weights_topic=""))
+    keeper = make_node(ScriptedPolicyNode, parameter_overrides=_params(robot="team_b_0", policy="keeper"))
+    acted_on = _record(policy, "_store")
+    for node in (sim, policy, keeper):
+        executor.add_node(node)
+    attacker = _attacker(secrets, 60)
+    try:
+        assert spin_until(executor, lambda: _forged(acted_on) >= 5, 60.0), policy.diagnostics()
+    finally:
+        attacker.kill()
+        attacker.communicate(timeout=10)
+    assert policy.diagnostics()["frame_authentication"] == "off" and policy.frame_gate is None
+
+
+def test_authenticated_frames_need_frames_secret(make_node, tmp_path):
+    folder = write_game_secrets(tmp_path / "secrets", robot_names(1))
+    with pytest.raises(ParameterException, match="frames.secret does not exist"):
+        make_node(SimNode, parameter_overrides=_params(players_per_team=1, secrets_dir=str(folder),
+                                                       authenticated_frames=True))
+    with pytest.raises(ParameterException, match="authenticated_frames needs secrets_dir"):
+        make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, weights_topic="",
+                                                          authenticated_frames=True))
