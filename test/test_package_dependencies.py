@@ -22,7 +22,8 @@ OWN = {"dynenv_ros", "policy_node", "benchmarks"}
 # ROS packages imported as Python modules: the package.xml key is the package's own name.
 ROS_PACKAGES = {"rclpy", "rcl_interfaces", "rosidl_parser", "ament_index_python", "builtin_interfaces", "std_msgs",
                 "geometry_msgs", "rosgraph_msgs", "sensor_msgs", "visualization_msgs", "diagnostic_msgs",
-                "tf2_msgs", "vision_msgs", "dynenv_msgs", "launch", "launch_ros"}
+                "tf2_msgs", "vision_msgs", "soccer_vision_3d_msgs", "game_controller_spl_interfaces", "dynenv_msgs",
+                "launch", "launch_ros"}
 # Python modules: (rosdep key from rosdistro's rosdep/python.yaml or None where it has none, pip distribution).
 PYTHON_MODULES: dict[str, tuple[str | None, str]] = {
     "numpy": ("python3-numpy", "numpy"),

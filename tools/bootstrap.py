@@ -23,7 +23,9 @@ LOCK = ROOT / "requirements.lock"
 MSG_SRC = ROOT / "msg_defs"
 # Interface packages to build into the venv, dependencies first: upstream packages without a PyPI wheel (same
 # definitions, same type hashes; msg_defs/upstream/README.md), then dynenv_msgs.
-INTERFACE_PACKAGES = (MSG_SRC / "upstream" / "tf2_msgs", MSG_SRC / "upstream" / "vision_msgs", MSG_SRC)
+UPSTREAM_PACKAGES = ("tf2_msgs", "vision_msgs", "soccer_vision_attribute_msgs", "soccer_vision_3d_msgs",
+                     "game_controller_spl_interfaces")
+INTERFACE_PACKAGES = (*(MSG_SRC / "upstream" / name for name in UPSTREAM_PACKAGES), MSG_SRC)
 BUILD = ROOT / "build"
 REQUIRED_PYTHON = (3, 11)
 # Paths of the machine that built the ROS wheels, hard-coded in their exported CMake targets (a known defect).
@@ -166,7 +168,8 @@ def fix_cmake_exports() -> int:
 
 
 def build_interfaces(state: dict[str, str]) -> None:
-    key = fingerprint(MSG_SRC, extra=state.get("dependencies", ""))
+    # The package list counts too: a package added to the list (its sources already there) is built.
+    key = fingerprint(MSG_SRC, extra=state.get("dependencies", "") + str(UPSTREAM_PACKAGES))
     if state.get("interfaces") == key:
         return
     changed = fix_cmake_exports()

@@ -37,11 +37,14 @@ def interface_definitions(source: Path) -> dict[str, str]:
     return definitions
 
 
-UPSTREAM_PACKAGES = ("vision_msgs",)   # rebuilt from msg_defs/upstream and missing from rosbags' Jazzy store
+# Rebuilt from msg_defs/upstream and missing from rosbags' Jazzy store (tf2_msgs is in it).
+UPSTREAM_PACKAGES = ("vision_msgs", "soccer_vision_attribute_msgs", "soccer_vision_3d_msgs",
+                     "game_controller_spl_interfaces")
 
 
 def upstream_definitions() -> dict[str, str]:
-    """``vision_msgs`` definitions (the subset msg_defs/upstream rebuilds), from the source tree or the venv."""
+    """The definitions of ``UPSTREAM_PACKAGES`` (what msg_defs/upstream rebuilds), from the source tree or the
+    venv."""
     definitions: dict[str, str] = {}
     for package in UPSTREAM_PACKAGES:
         candidates = [Path(__file__).resolve().parents[2] / "msg_defs" / "upstream" / package,
@@ -54,7 +57,7 @@ def upstream_definitions() -> dict[str, str]:
 
 @lru_cache(maxsize=4)
 def dynenv_typestore(source: Path | None = None) -> Typestore:
-    """The ROS 2 Jazzy typestore plus every dynenv_msgs type and the rebuilt upstream ones (vision_msgs)."""
+    """The ROS 2 Jazzy typestore plus every dynenv_msgs type and the rebuilt upstream ones (``UPSTREAM_PACKAGES``)."""
     if source is None:
         sources = interface_source_dirs()
         if not sources:

@@ -27,8 +27,10 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
-from std_msgs.msg import UInt8MultiArray
+from game_controller_spl_interfaces.msg import RCGCD15
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from soccer_vision_3d_msgs.msg import BallArray, GoalpostArray, MarkingArray, RobotArray
+from std_msgs.msg import Header, UInt8MultiArray
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
@@ -36,6 +38,8 @@ from dynenv_ros.driving.config import DrivingConfig, car_names
 from dynenv_ros.envs.driving_session import DrivingSession
 from dynenv_ros.envs.session import MISSING_ACTION_RULES, PeriodOutput, refusal_key
 from dynenv_ros.envs.soccer_session import SoccerSession, kickoff_team
+from dynenv_ros.gamecontroller.game_state import game_control_data, penalty_code
+from dynenv_ros.perception.soccer_vision_3d import soccer_vision_3d
 from dynenv_ros.perception.driving_params import load_driving_preset
 from dynenv_ros.perception.params import MODES, PRESETS, load_preset
 from dynenv_ros.ros import conversions as cv
@@ -51,12 +55,13 @@ from dynenv_ros.security.frame_auth import detection_rows_bytes, world_state_byt
 from dynenv_ros.security.action_auth import ReplayGuard, action_digest, check_action, tag_feedback
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.pose_estimates import EmulatedOdometry, pose_message, stamp_ns
+from dynenv_ros.ros.ros_sports_conversion import rcgcd15, soccer_vision_messages
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list,
                                        refuse_other_scenario)
 from dynenv_ros.ros.qos import (REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, action_queue, latched,
                                 realtime_stream, sim_stream)
 from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, static_transforms, tf_message, tf_qos, tf_static_qos
-from dynenv_ros.sim.frames import robot_frames
+from dynenv_ros.sim.frames import base_frame, robot_frames
 from dynenv_ros.sim.seeding import checked_seed
 from dynenv_ros.soccer.config import SoccerConfig, robot_names
 
@@ -70,7 +75,8 @@ DURABILITY_CHECK_S = 0.2
 SCENARIOS = ("robocup", "driving")
 RESET_OPTIONS = ("kickoff_team",)                    # robocup; driving takes none
 # Parameters only one scenario has: giving one to the other scenario is refused (it would change nothing).
-SCENARIO_PARAMETERS = {"robocup": ("players_per_team", "falls_enabled", "localization"),
+SCENARIO_PARAMETERS = {"robocup": ("players_per_team", "falls_enabled", "localization", "ros_sports",
+                                   "gc_team_number_a", "gc_team_number_b"),
                        "driving": ("n_cars", "action_mode", "teams")}
 # Defaults that differ: rates (physics Hz, ticks per vision frame, ticks per motion period), episode seconds, the
 # agent whose detections the markers show.
@@ -133,6 +139,14 @@ class SimNode(Node):
                                     "self-localization, publish <robot>/pose_estimate and TF map -> <robot>/odom -> "
                                     "<robot>/base_link at the estimate (the truth on <robot>/ground_truth/base_link); "
                                     "off: base_link is the truth.", **fixed)
+        ros_sports = declare_bool(self, "ros_sports", False, "Robocup only: also publish, per robot, its "
+                                  "detections as soccer_vision_3d_msgs (<robot>/soccer_vision_3d/balls, robots, "
+                                  "goalposts, markings; frame <robot>/base_link) and the game as "
+                                  "game_controller_spl's RCGCD15 on <robot>/gc/data once per motion period "
+                                  "(docs/interfaces.md).", **fixed)
+        gc_team_numbers = [declare_int(self, f"gc_team_number_{team}", default, 1, 254, "Robocup with ros_sports: "
+                                       f"the SPL team number of team {team.upper()} in gc/data.", **fixed)
+                           for team, default in (("a", 1), ("b", 2))]
         controlled = declare_str_list(self, "controlled_robots", [], "Robots whose actions a period waits for "
                                       "(names like team_a_0); empty: all.", **fixed)
         self.auto_reset = declare_bool(self, "auto_reset", True, "Start a new episode when one ends.")
@@ -228,6 +242,20 @@ class SimNode(Node):
         # Self-localization (ros/pose_estimates.py): each robot's estimate per frame, with the detections' QoS.
         self.pose_pubs = [self.create_publisher(PoseWithCovarianceStamped, local(topics.pose_estimate(n)),
                                                 frame_qos) for n in names] if self.localization else []
+        # ros-sports (issue 41, docs/interfaces.md): the same frames in the messages a team's stack reads.
+        self.ros_sports = ros_sports and not driving
+        if self.ros_sports and (len(gc_team_numbers) != 2 or gc_team_numbers[0] == gc_team_numbers[1]):
+            raise ParameterException(f"the teams need distinct numbers, got {gc_team_numbers}",
+                                     ["gc_team_number_a", "gc_team_number_b"])
+        self.gc_team_numbers = (gc_team_numbers[0], gc_team_numbers[1]) if self.ros_sports else (1, 2)
+        self.gc_packet_number = 0
+        self.penalty_codes: dict[int, int] = {}      # robot id -> SPL penalty of its latest penalty
+        self.ros_sports_pubs = [tuple(self.create_publisher(t, local(name), frame_qos) for t, name in (
+            (BallArray, topics.soccer_vision_3d(n, "balls")), (RobotArray, topics.soccer_vision_3d(n, "robots")),
+            (GoalpostArray, topics.soccer_vision_3d(n, "goalposts")),
+            (MarkingArray, topics.soccer_vision_3d(n, "markings")))) for n in names] if self.ros_sports else []
+        self.gc_pubs = [self.create_publisher(RCGCD15, local(topics.gc_data(n)), frame_qos)
+                        for n in names] if self.ros_sports else []
         self.odometry = EmulatedOdometry(config.rates.vision_period_ticks * config.rates.tick_seconds)
         # In real time, actions arrive on a participant and thread of their own (ros/action_inbox.py): a flood on
         # one robot's topic cannot drop this node's service requests. Both modes queue a bounded number (qos.py).
@@ -381,6 +409,7 @@ class SimNode(Node):
             self.session.reset(seed=seed)
         else:
             self.session.reset(seed=seed, kickoff_team=kickoff)
+            self.penalty_codes.clear()
         self.odometry.restart()                 # a new episode, a new odometry (odom: the kickoff pose)
         self.episodes_started += 1
         if self.live_view is not None:
@@ -515,6 +544,10 @@ class SimNode(Node):
         while len(self._executed_digests) > 8:      # bounded (real time: the feedback follows within a period)
             del self._executed_digests[next(iter(self._executed_digests))]
         self.periods_run += 1
+        if self.ros_sports:
+            for event in output.events:
+                if event.kind == "penalty" and event.robot is not None:
+                    self.penalty_codes[event.robot] = penalty_code(event.detail)
         now = time.monotonic()
         self._first_period_wall = self._first_period_wall or now
         self._last_period_wall = now
@@ -620,9 +653,30 @@ class SimNode(Node):
             if self.frame_tag_pubs:
                 data = detection_rows_bytes(robot.detections, self.detection_pubs[i].topic_name, **fields)
                 self._publish(self.frame_tag_pubs[i + 1], tag_message(self.frames_secret, data))
+        if self.ros_sports:
+            self._publish_ros_sports(output, k, frame, stamp)
         self.frames_published += 1
         if self.publish_markers and k == len(output.frames) - 1:
             self._publish_markers(frame, stamp)
+
+    def _publish_ros_sports(self, output: PeriodOutput, k: int, frame, stamp) -> None:
+        """Frame k's detections as soccer_vision_3d_msgs per robot (base_link frame); at a period's first frame the
+        game as RCGCD15 on each robot's gc/data, as game_controller_spl relays the GameController's 2 Hz packets
+        (one motion period is 0.5 s by default)."""
+        for i, robot in enumerate(frame.robots):
+            header = Header(stamp=stamp, frame_id=base_frame(self.names[i]))
+            records = soccer_vision_3d(robot.detections, robot.head_yaw)
+            for publisher, message in zip(self.ros_sports_pubs[i], soccer_vision_messages(records, header)):
+                self._publish(publisher, message)
+        if k != 0:
+            return
+        data = game_control_data(frame.snapshot, players_per_team=self.config.players_per_team,
+                                 team_numbers=self.gc_team_numbers, packet_number=self.gc_packet_number,
+                                 penalties=self.penalty_codes)
+        self.gc_packet_number = (self.gc_packet_number + 1) % 256
+        message = rcgcd15(data)
+        for publisher in self.gc_pubs:
+            self._publish(publisher, message)
 
     def _publish_feedback(self, output: PeriodOutput) -> None:
         stamp = cv.sim_time(self._tick_offset + output.frames[-1].tick, self._tick_s)

@@ -71,6 +71,18 @@ def game_state(robot: str) -> str:
     return f"{robot}/game_state"
 
 
+def soccer_vision_3d(robot: str, kind: str) -> str:
+    """ros-sports soccer_vision_3d_msgs of one robot: ``kind`` balls, robots, goalposts or markings (issue 41)."""
+    if kind not in ("balls", "robots", "goalposts", "markings"):
+        raise ValueError(f"no soccer_vision_3d topic '{kind}'")
+    return f"/{robot}/soccer_vision_3d/{kind}"
+
+
+def gc_data(robot: str) -> str:
+    """game_controller_spl_interfaces/RCGCD15 as game_controller_spl publishes it, in the robot's namespace."""
+    return f"/{robot}/gc/data"
+
+
 def pose_estimate(robot: str) -> str:
     """geometry_msgs/PoseWithCovarianceStamped: one robot's self-localization estimate, frame "map", vision rate
     (the simulator's with ``localization`` on; a real robot's localization feeds the policy node on the same name)."""
