@@ -74,6 +74,7 @@ from dynenv_ros.ros.authentication import action_tagger
 from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.frame_tags import FrameReceiver, frames_secret
 from dynenv_ros.ros.node_runner import NodeExit, run_node
+from dynenv_ros.ros.runtime_controls import declare_runtime_controls, lock_when_off
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.pose_estimates import (HISTORY_DEPTH, LOST_ROW, PoseHistory, declare_pose_input, pose_batch,
                                            pose_problem, stamp_ns)
@@ -217,6 +218,9 @@ class PolicyNode(Node):
                                                  "file without a trusted detached signature beside it (FILE.sig, "
                                                  "dynenv-keys sign-file); the request itself must still be "
                                                  "signed.", read_only=True)
+        # use_sim_time (rclpy's own) and greedy are settable: fixed with runtime_controls false (ros/runtime_controls.py)
+        self.runtime_controls = declare_runtime_controls(self, "greedy, use_sim_time")
+        lock_when_off(self, self.runtime_controls, "greedy and use_sim_time stay as started")
         self.weights_run = declare_str(self, "weights_run_id", "", "Take weights from this trainer run only "
                                        "(WeightsAnnouncement.run_id); empty: any run.", read_only=True)
         self.pose_max_age, self.pose_frame = declare_pose_input(self, "Robocup, a policy that takes the pose "
@@ -768,6 +772,7 @@ class PolicyNode(Node):
         if self.weights is not None:                 # refusals by reason, the fetch running (ros.weights_follower)
             values.update(self.weights.diagnostics())
         values["operator_services"] = "on" if self.operator else "off"
+        values["runtime_controls"] = "on" if self.runtime_controls else "off"
         if self.operator is not None:                # signed operator requests: accepted, refused by reason
             values.update(self.operator.diagnostics())
         values["frame_authentication"] = "off"

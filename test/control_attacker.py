@@ -1,7 +1,7 @@
 """The attacker of test_runtime_controls.py, a process of its own on the test's ROS domain with no key and no
 secret: for ``seconds`` it looks for the simulator's /sim/reset and /sim/step and calls them (a reset with seed 99,
-one step), and asks /sim_node and /trainer_node to change settable parameters (missing_action hold, auto_reset
-false, learning_rate 1.0, use_sim_time true). Prints one JSON line of what each call answered ("absent": the
+one step), and asks /sim_node, /trainer_node and /policy_node to change settable parameters (missing_action hold,
+auto_reset false, learning_rate 1.0, greedy false, use_sim_time true). Prints one JSON line of what each call answered ("absent": the
 service never appeared)."""
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from rclpy.parameter import Parameter
 
 CHANGES = {"/sim_node": [Parameter("missing_action", value="hold"), Parameter("auto_reset", value=False),
                          Parameter("use_sim_time", value=True)],
-           "/trainer_node": [Parameter("learning_rate", value=1.0), Parameter("use_sim_time", value=True)]}
+           "/trainer_node": [Parameter("learning_rate", value=1.0), Parameter("use_sim_time", value=True)],
+           "/policy_node": [Parameter("greedy", value=False), Parameter("use_sim_time", value=True)]}
 
 
 def call(node, client, request, wait_s: float):

@@ -96,9 +96,24 @@ def test_with_the_local_default_the_same_calls_change_the_game(make_node, execut
         (episode, sim.session.episode_id, seen)
 
 
+def test_a_robots_policy_node_with_runtime_controls_off_keeps_greedy_and_its_clock(make_node, executor):
+    """The deployment profile's policy node: a remote greedy or use_sim_time change (which would move its decision
+    deadline onto an attacker's /clock) is refused with the reason."""
+    from policy_node.policy_node import PolicyNode
+    node = make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, team="a", greedy=True,
+                                                             runtime_controls=False))
+    executor.add_node(node)
+    seen = _attack(executor, 8.0)
+    assert seen["/policy_node"] == [{"name": n, "successful": False, "reason": REFUSED}
+                                    for n in ("greedy", "use_sim_time")], seen
+    assert node.get_parameter("greedy").value and not node.get_parameter("use_sim_time").value
+    assert node.diagnostics()["runtime_controls"] == "off"
+
+
 def test_the_deployment_profile_turns_the_runtime_controls_off():
-    profile = yaml.safe_load((ROOT / "config" / "sim_2v2_deploy.yaml").read_text())
-    assert profile["/**"]["ros__parameters"]["runtime_controls"] is False
+    for name in ("sim_2v2_deploy.yaml", "deploy_policy_node.yaml"):
+        profile = yaml.safe_load((ROOT / "config" / name).read_text())
+        assert profile["/**"]["ros__parameters"]["runtime_controls"] is False, name
     from dynenv_ros.graph.train_graph import train_graph
     from types import SimpleNamespace
     import tempfile

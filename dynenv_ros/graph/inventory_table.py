@@ -52,7 +52,8 @@ CLASSES: dict[str, dict[str, dict[str, tuple[str, str]]]] = {
         "parameters": {**_params(GAME, "scenario players_per_team n_cars action_mode teams mode perception_preset "
                                        "noise_mode noise_magnitude physics_hz vision_period_ticks "
                                        "motion_period_ticks episode_seconds falls_enabled seed localization "
-                                       "controlled_robots secrets_dir authenticated_frames runtime_controls"),
+                                       "controlled_robots secrets_dir authenticated_frames runtime_controls "
+                                       "ros_sports gc_team_number_a gc_team_number_b"),
                        **_params(GAME, "real_time_factor missing_action auto_reset", RUNTIME),
                        **_params(READ, "publish_markers marker_robot", RUNTIME),
                        **_params(READ, "diagnostics_period wait_for_subscribers wait_for_ground_truth_subscribers "
@@ -60,7 +61,7 @@ CLASSES: dict[str, dict[str, dict[str, tuple[str, str]]]] = {
                                        "foxglove_host"), **_RUNTIME_FLAGS}},
     "policy_node": {
         "services": {"~/load_policy": (ACTS, OPERATOR), "~/accept_older_weights": (ACTS, OPERATOR),
-                     **_standard(ACTS, NONE + "; only `use_sim_time` acts (the clock of the decision deadline)")},
+                     **_standard(ACTS, RUNTIME + "; `use_sim_time` moves the decision deadline's clock")},
         "publishes": {**_COMMON_TOPICS, "/<robot>/action": (ACTS, ACTION_MAC), "/diagnostics": (READ, NONE),
                       "~/diagnostics": (READ, NONE)},
         "subscribes": {"/<robot>/detections": (ACTS, FRAME_TAG),
@@ -70,7 +71,7 @@ CLASSES: dict[str, dict[str, dict[str, tuple[str, str]]]] = {
                                        "greedy seed decision_deadline pose_frame pose_max_age weights_topic "
                                        "weights_service weights_run_id trusted_weights_keys max_weights_bytes "
                                        "weights_state_file trusted_operator_keys allow_unsigned_files secrets_dir "
-                                       "authenticated_frames"),
+                                       "authenticated_frames runtime_controls"),
                        **_params(READ, "diagnostics_period"), **_RUNTIME_FLAGS}},
     "trainer_node": {
         "services": {"/trainer/fetch_weights": (READ, FETCH), **_standard(ACTS, RUNTIME)},
