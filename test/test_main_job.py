@@ -29,9 +29,9 @@ def test_main_job_verifies_every_interface_across_processes(tmp_path, capsys):
     output = _run_main(tmp_path, capsys, "graph=selfcheck", "samples_per_type=3")
     report = json.loads((tmp_path / "selfcheck.json").read_text())
     assert report["ok"] and not report["hash_problems"]
-    assert len(report["interfaces"]) == 11          # 7 messages (docs/interfaces.md) and 4 services
+    assert len(report["interfaces"]) == 13          # 8 messages (docs/interfaces.md) and 5 services
     assert all(entry["received"] == 3 for entry in report["interfaces"].values())
-    assert "interfaces verified: 11/11" in output and "dynenv-run: OK" in output
+    assert "interfaces verified: 13/13" in output and "dynenv-run: OK" in output
 
 
 def test_main_job_plays_records_and_replays_a_soccer_game(tmp_path, capsys):
@@ -157,7 +157,7 @@ def test_graph_reports_a_listener_that_does_not_get_what_it_expects(tmp_path):
     report = json.loads((tmp_path / "report.json").read_text())
     # Different seeds: every message differs field by field (service answers depend on the request only).
     messages = {name: entry for name, entry in report["interfaces"].items() if "/msg/" in name}
-    assert len(messages) == 7
+    assert len(messages) == 8
     assert all(entry["problems"] and not entry["ok"] for entry in messages.values())
 
 
@@ -280,8 +280,8 @@ def test_the_train_graph_runs_games_policies_and_the_trainer_and_summarises(tmp_
     assert "robot-periods learnt" in output and "reward learnt (auxiliary term) per episode" in output, output
     assert "held-out episodes (80 against the random team, same seeds)" in output, output
     # authenticated actions on: run-local secrets (owner-only), every node given them, nothing refused
-    assert sorted(p.name for p in (tmp_path / "secrets").iterdir()) == ["simulator.secret", "team_a.secret",
-                                                                        "team_b.secret"]
+    assert sorted(p.name for p in (tmp_path / "secrets").iterdir()) == ["frames.secret", "simulator.secret",
+                                                                        "team_a.secret", "team_b.secret"]
     assert all(p.stat().st_mode & 0o077 == 0 for p in (tmp_path / "secrets").iterdir())
     assert summary["diagnostics"]["action_authentication"] == "on" and "authenticated actions: on" in output
     assert summary["diagnostics"]["action_mac_invalid"] == summary["diagnostics"]["feedback_mac_invalid"] == "0"
