@@ -328,7 +328,7 @@ def _non_finite_initializers(proto: Any) -> list[str]:
 def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
     """The first way the session's declared inputs/outputs disagree with the metadata ('' if none). Dimensions the
     file leaves symbolic are not checked here (the robot axis always is); the node's trial decision runs them."""
-    F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size
+    F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size  # noqa: E741 - the paper's dimension letters
     input_names, output_names = io_names(policy.scenario, policy.action_mode, policy.uses_pose)
     static = "lane" if policy.scenario == "driving" else "landmark"
     widths = agent_inputs(policy.scenario)

@@ -93,7 +93,7 @@ class DrivingPerceiver:
 
     def __init__(self, scene: DrivingScene, params: DrivingPerceptionParams) -> None:
         self.scene, self.params = scene, params
-        n, P, O = scene.n_cars, scene.n_pedestrians, len(scene.obstacle_xy)
+        n, P, O = scene.n_cars, scene.n_pedestrians, len(scene.obstacle_xy)  # noqa: E741 - counts named as in the docs
         self.n, self.P, self.O = n, P, O
         N = self.N = n + P + O
         self.cls = np.concatenate((np.full(n, _CAR), np.full(P, _PED), np.full(O, _OBST))).astype(np.uint8)
