@@ -441,7 +441,7 @@ def dress_rows(rows: np.ndarray, v: np.ndarray, g: np.ndarray, ur: np.ndarray, o
         if own and pick >= np.searchsorted(present_cars, vc):
             pick += 1
         none = choices <= 0
-        other = present_cars[min(pick, max(P - 1, 0))] if P else 0
+        other = present_cars[min(pick, max(P - 1, 0))] if P else 0  # type: ignore[call-overload]  # np.int64 pick
         src = np.int64(ur[1, c] * len(half_length)) if none else other
         r.size_x = 2 * half_length[src] * f
         r.size_y = 2 * half_width[src] * f

@@ -193,7 +193,8 @@ class Localization:
     @property
     def estimate(self) -> np.ndarray:
         """(n, 3) x, y, yaw estimated at the last frame, field frame."""
-        return self.estimates[-1]
+        estimate: np.ndarray = self.estimates[-1]
+        return estimate
 
     @property
     def covariance(self) -> np.ndarray:
@@ -208,10 +209,11 @@ class Localization:
     @property
     def flipped(self) -> np.ndarray:
         """(n,) whether each estimate tracks the mirror pose (−x, −y, yaw + π) at the last frame."""
-        return self.flips[-1]
+        flipped: np.ndarray = self.flips[-1]
+        return flipped
 
     def error(self, pose: np.ndarray) -> np.ndarray:
         """(n, 3) the estimate minus ``pose`` (the true pose at the last frame), yaw wrapped to [−π, π)."""
-        e = self.estimate - np.asarray(pose, float)
+        e: np.ndarray = self.estimate - np.asarray(pose, float)
         e[:, 2] = _wrapped(e[:, 2])
         return e

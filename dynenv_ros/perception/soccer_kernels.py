@@ -14,6 +14,7 @@ physics-and-rules path. The first call of each kernel compiles it (or loads it f
 from __future__ import annotations
 
 import math
+from typing import Any, TypeVar
 
 import numba
 import numpy as np
@@ -22,16 +23,17 @@ from dynenv_ros.perception.detections import DETECTION_DTYPE as _DETECTION
 from dynenv_ros.perception.row_kernels import sort_by_view
 
 _EPS = 1e-9
+_R = TypeVar("_R", float, np.floating[Any])     # a Python or a numpy float (for mypy; numba types each call)
 
 
 @numba.njit(cache=True, inline="always")
-def _maximum(a: float, b: float) -> float:
+def _maximum(a: _R, b: _R) -> _R:
     """``np.maximum`` to the bit: NaN if either is, and the second operand of equal ones (−0.0, 0.0 → 0.0)."""
     return a if (a > b or a != a) else b
 
 
 @numba.njit(cache=True, inline="always")
-def _minimum(a: float, b: float) -> float:
+def _minimum(a: _R, b: _R) -> _R:
     """``np.minimum`` to the bit (see ``_maximum``)."""
     return a if (a < b or a != a) else b
 
