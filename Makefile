@@ -6,7 +6,7 @@ HOST_PY := $(shell command -v python3.11 || command -v python3)
 ARGS ?=
 PYTEST_ARGS ?=
 
-.PHONY: run test bootstrap lock bench clean
+.PHONY: run test lint bootstrap lock bench clean
 
 bootstrap:
 	@test -n "$(HOST_PY)" || { echo "error: Python 3.11 is required (python3.11 not found on PATH)"; exit 2; }
@@ -15,7 +15,11 @@ bootstrap:
 run: bootstrap
 	@$(VENV_PY) -m dynenv_ros.main_job $(ARGS)
 
-test: bootstrap
+# ruff, mypy and import-linter (tools/lint.py); `make test` runs it first.
+lint: bootstrap
+	@$(VENV_PY) tools/lint.py
+
+test: lint
 	@$(VENV_PY) -m pytest -n 2 $(PYTEST_ARGS) test
 
 bench: bootstrap
@@ -25,4 +29,4 @@ lock:
 	@$(HOST_PY) tools/lock.py
 
 clean:
-	rm -rf .venv build runs .pytest_cache
+	rm -rf .venv build runs .pytest_cache .mypy_cache .ruff_cache .import_linter_cache

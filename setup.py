@@ -48,7 +48,7 @@ TOOLS = [
     "dynenv-train = dynenv_ros.learning.train_cli:main",
     "dynenv-sweep = dynenv_ros.experiments.sweep:main",
     "dynenv-pretrain = dynenv_ros.learning.pretrain:main",
-    "dynenv-keys = dynenv_ros.security.keys_cli:main",
+    "dynenv-keys = dynenv_ros.ros.keys_cli:main",
 ]
 
 setup(

@@ -23,7 +23,6 @@ import resource
 import statistics
 import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
 from benchmarks.timing import Clock, combine, format_stat, print_table, stat, table_rows

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 
 import rclpy
 from dynenv_msgs.srv import ResetSimulation, StepSimulation

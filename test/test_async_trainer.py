@@ -19,13 +19,13 @@ import pytest
 import torch
 
 from dynenv_ros.learning.agents import make_agent
-from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
+from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.heads import Learner
 from dynenv_ros.learning.rollout_transfer import AttachedSlots, RolloutSlots, flatten, join, spec_of, unflatten
 from dynenv_ros.learning.rollout_worker import RolloutWorker, shard_sizes
 from dynenv_ros.learning.shared_weights import AttachedWeights, SharedWeights, pack, unpack
 from dynenv_ros.learning.train_cli import main
-from dynenv_ros.learning.trainer import make_trainer
+from dynenv_ros.learning.runners import make_trainer
 from dynenv_ros.learning.worker_pool import ProcessPool, WorkerPoolError
 
 ROOT = Path(__file__).resolve().parent.parent

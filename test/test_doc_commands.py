@@ -1063,6 +1063,7 @@ PARSE_ONLY: list[tuple[str, str]] = [
                                      "docs/ros_graph.md says this set-up is not tested)"),
     (r"^make test( |$)", "the test suite this test belongs to (running it here would recurse); its recipe and "
                          "PYTEST_ARGS selection are checked"),
+    (r"^make lint( |$)", "runs before the suite in `make test`, which this test belongs to; its recipe is checked"),
     (r"^(python -m )?pytest ", "tests of this suite (the suite runs them); the selection is collected"),
     (r"(--device[ =]|device=)cuda", "needs a CUDA GPU"),
     (r"ray_address=HEAD|--address HEAD", "joins the user's Ray cluster (HEAD:6379); test/test_ray_cluster.py starts "
@@ -1097,7 +1098,7 @@ IN_PROCESS: dict[tuple[str, ...], str] = {
     ("dynenv-pretrain",): "dynenv_ros.learning.pretrain:main",
     ("dynenv-play",): "dynenv_ros.envs.play:main",
     ("dynenv-bag",): "dynenv_ros.bags.inspect:main",
-    ("dynenv-keys",): "dynenv_ros.security.keys_cli:main",
+    ("dynenv-keys",): "dynenv_ros.ros.keys_cli:main",
     **{("dynenv-bench", suite): "benchmarks.__main__:main"
        for suite in ("sim", "vector", "policy", "train", "learner", "cores", "msgs")},
     ("python", "-m", "benchmarks", "sim"): "benchmarks.__main__:main",

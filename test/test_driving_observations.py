@@ -41,7 +41,7 @@ def test_partial_observations_lie_in_the_space_and_repeat_with_the_seed():
     b, _ = _rollout(5, n_cars=4, teams=2, observation="partial", perception="realistic", **SHORT)
     space = env.observation_space("car_0")
     rows = 0
-    for (oa, ia), (ob, ib) in zip(a, b):
+    for (oa, ia), (ob, _ib) in zip(a, b):
         for agent, o in oa.items():
             assert space.contains(o), agent
             (det,) = o["detections"]

@@ -346,7 +346,7 @@ def test_vision_over_the_world_is_seeded_and_none_sees_every_visible_object():
         world = DrivingWorld(DrivingConfig(n_cars=3), seed=4)
         vision = DrivingVision(world, "realistic")
         rows = []
-        for t in range(30):
+        for _t in range(30):
             world.step(np.ones((3, 2), int) * [2, 1])
             rows.append(vision.perceive().detections.copy())
         outs.append(np.concatenate(rows))

@@ -50,7 +50,7 @@ def car_state(world, i):
 def test_reaching_the_destination_pays_the_seconds_left_and_the_car_leaves():
     world = make_world()
     world.place_car(0, 166.0, 48.25, EAST, speed=5.0)          # 4 m before the east end, its destination
-    rewards, events = np.zeros(4), []
+    events = []
     for _ in range(20):
         result = step(world, {0: COAST})
         events += result.events

@@ -58,7 +58,7 @@ def test_driving_teacher_refusals():
     with DrivingVectorEnv(1, backend="inprocess", perception="none") as env:
         env.reset(seed=0)
         with pytest.raises(RuntimeError, match="without a teacher"):
-            env.teacher_actions
+            _ = env.teacher_actions
     with pytest.raises(ConfigError) as error:
         load_config(None, ["scenario=driving", "teacher=chaser"])
     assert error.value.key == "teacher"

@@ -8,7 +8,7 @@ import pytest
 from dynenv_ros.envs.league import LEAGUE_MEMBERS, League, pfsp_weights
 from dynenv_ros.envs.vector import SoccerVectorEnv
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.trainer import make_trainer
+from dynenv_ros.learning.runners import make_trainer
 from dynenv_ros.soccer.scripted import team_policies
 
 

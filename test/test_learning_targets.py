@@ -270,7 +270,7 @@ def test_batch_targets_are_the_worlds_state_when_the_observation_is_made_reset_i
 def test_shapes_dtypes_and_refusals():
     with SoccerVectorEnv(2, backend="inprocess", config={"players_per_team": 2}, targets=True) as env:
         with pytest.raises(RuntimeError, match="reset"):
-            env.targets
+            _ = env.targets
         env.reset(seed=3)
         result = env.step(np.zeros((2, 4, 4), int))
         expected = {"pose": (2, 4, 6), "ball": (2, 4, 3), "robots": (2, 4, 3, 6), "ball_seen": (2, 4),
@@ -292,6 +292,6 @@ def test_shapes_dtypes_and_refusals():
         assert not env.with_targets and env.target_shapes is None
         assert env.step(np.zeros((1, 4, 4), int)).targets is None
         with pytest.raises(RuntimeError, match="targets=True"):
-            env.targets
+            _ = env.targets
     with pytest.raises(ValueError, match="padded"):
         SoccerVectorEnv(1, backend="inprocess", observation="full", targets=True)

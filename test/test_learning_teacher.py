@@ -64,7 +64,7 @@ def test_teacher_refusals():
     with SoccerVectorEnv(1, backend="inprocess") as env:
         env.reset(seed=0)
         with pytest.raises(RuntimeError, match="without a teacher"):
-            env.teacher_actions
+            _ = env.teacher_actions
         assert env.step(np.zeros((1, 4, 4), np.int64) + [0, 0, 0, 3]).teacher_actions is None
     with pytest.raises(ConfigError, match="imitation_coef.*teacher"):
         TrainConfig(imitation_coef=1.0)

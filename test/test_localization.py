@@ -123,7 +123,7 @@ def test_odometry_drift_grows_the_error_as_documented_without_landmarks():
 
 
 def test_the_reported_covariance_is_calibrated_in_a_mixed_history():
-    n, frames, rng = 20000, 60, np.random.default_rng(3)
+    n, rng = 20000, np.random.default_rng(3)
     loc = Localization(_params(), n, DT, np.random.default_rng(4))
     pose = np.column_stack([rng.uniform(-4, 4, n), rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)])
     loc.reset(pose)
@@ -251,7 +251,7 @@ def test_the_worlds_falls_goals_penalties_and_reentries_reach_the_localization()
     assert not vision.flipped.any()
     # the first penalty lasts 20 s (40 periods): then the return
     returned = None
-    for period in range(45):
+    for _period in range(45):
         world.step([IDLE] * 4, on_frame=vision.frame)
         vision.perceive()
         if seen[-1][:, 3].any():
@@ -314,7 +314,7 @@ def test_a_seed_gives_the_same_estimates_and_another_seed_others():
 def test_estimates_need_the_switch():
     world = make_world()
     with pytest.raises(RuntimeError, match="localization=True"):
-        SoccerVision(world, load_preset("realistic")).estimate
+        _ = SoccerVision(world, load_preset("realistic")).estimate
 
 
 @pytest.mark.parametrize("observation", ["partial", "padded"])

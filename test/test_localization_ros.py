@@ -84,7 +84,7 @@ def test_odometry_integrates_the_walk_and_skips_a_robot_carried_elsewhere():
     start = (1.0, 2.0, 0.5)
     odometry.reset([start])
     poses = [start]
-    for k in range(1, 30):                         # walk a curve: 2 cm and 0.03 rad per frame
+    for _k in range(1, 30):                         # walk a curve: 2 cm and 0.03 rad per frame
         poses.append(compose(poses[-1], (0.02, 0.0, 0.03)))
         odometry.step([poses[-1]])
     assert odometry.pose[0] == pytest.approx(compose(inverse(start), poses[-1]), abs=1e-12)

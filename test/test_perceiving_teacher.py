@@ -136,7 +136,7 @@ SMALL = {"algorithm": "ppo", "variant": "pred", "players_per_team": 1, "num_envs
 def test_a_tiny_run_with_the_perceiving_teacher_trains_and_checkpoints(tmp_path, runner, extra):
     from dynenv_ros.learning.checkpoints import read_checkpoint_meta
     from dynenv_ros.learning.run_log import CSV_NAME, read_metrics
-    from dynenv_ros.learning.trainer import make_trainer
+    from dynenv_ros.learning.runners import make_trainer
     cfg = TrainConfig(**SMALL, runner=runner, **extra, total_env_steps=16)
     run = tmp_path / "run"
     summary = make_trainer(cfg, run, progress=False).run()

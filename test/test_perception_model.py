@@ -443,7 +443,7 @@ def test_noise_magnitude_zero_reports_exactly_what_is_visible():
     assert len(result.detections) == 500 * 3 and result.seen[:, 1:].all()
     rows = result.of_view(0)
     by_id = {int(r["true_id"]): r for r in rows}
-    for i, (cls, x, y, yaw, team, fallen) in enumerate(objects, start=1):
+    for i, (cls, x, y, _yaw, _team, _fallen) in enumerate(objects, start=1):
         assert by_id[i]["class_id"] == cls and by_id[i]["x"] == pytest.approx(x) and by_id[i]["y"] == pytest.approx(y)
     robot = by_id[2]
     assert robot["yaw"] == pytest.approx(1.0) and robot["team"] == -1 and robot["fallen"]

@@ -291,7 +291,7 @@ def test_a_tiny_run_with_the_estimate_trains_checkpoints_resumes_and_evaluates(t
     from dynenv_ros.evaluation.soccer import evaluate
     from dynenv_ros.learning.checkpoints import read_checkpoint_meta
     from dynenv_ros.learning.train_cli import main
-    from dynenv_ros.learning.trainer import make_trainer
+    from dynenv_ros.learning.runners import make_trainer
     extra = {"runner": "async", "workers": 1} if runner == "async" else {}
     cfg = TrainConfig(**SMALL, **extra, total_env_steps=16)
     run = tmp_path / "run"

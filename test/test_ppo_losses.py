@@ -67,7 +67,10 @@ def _loss(monkeypatch, settings, out, rollout, adv=None, ret=None):
     ``adv``/``ret`` per robot (None: decoupled PPO's fused pass computes them)."""
     monkeypatch.setattr(algorithms, "run_sequence", lambda agent, obs, state, starts: out)
     logged = {}
-    as_step = (lambda x: None if x is None else torch.tensor([x], dtype=torch.float64))
+
+    def as_step(x):
+        return None if x is None else torch.tensor([x], dtype=torch.float64)
+
     loss, _ = _minibatch_loss(LEARNER, rollout, torch.arange(rollout["actions"].shape[1]), as_step(adv),
                               as_step(ret), settings, lambda name, value: logged.__setitem__(name, float(value)))
     return loss, logged

@@ -77,7 +77,7 @@ def test_observations_and_state_lie_in_their_spaces_and_use_team_frames():
         assert env.observation_space(agent).contains(o)
     assert env.state_space.contains(env.state())
     # Kickoff positions: every robot is in its own half, which its team frame shows as x < 0, facing +x.
-    for agent, o in obs.items():
+    for o in obs.values():
         assert o[0] < 0 and o[2] == pytest.approx(1.0)
 
 

@@ -13,7 +13,7 @@ import torch
 from dynenv_ros.agent.checkpoint import save_policy, sha256
 from dynenv_ros.learning.compute import ComputeMeter, cpu_seconds_of_tree, machine
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.trainer import make_trainer
+from dynenv_ros.learning.runners import make_trainer
 
 SMALL = {"algorithm": "ppo", "variant": "baseline", "players_per_team": 1, "num_envs": 2, "perception": "none",
          "rollout_length": 4, "ltp_horizon": 2, "feature_size": 16, "ppo_epochs": 1, "ppo_minibatches": 1,

@@ -9,7 +9,6 @@ from dynenv_ros.envs.robocup_v0 import parallel_env
 from dynenv_ros.perception.detections import empty
 from dynenv_ros.perception.model import Perception
 from dynenv_ros.perception.params import load_preset
-from dynenv_ros.soccer.actions import SoccerAction
 from dynenv_ros.soccer.vision import SoccerVision
 from soccer_helpers import IDLE, make_world
 

@@ -5,7 +5,6 @@ map → base_link → camera applied to it must give the object's map position (
 """
 import math
 
-import numpy as np
 import pytest
 
 from builtin_interfaces.msg import Time

@@ -13,7 +13,8 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ec import SECP256R1, generate_private_key
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
-from dynenv_ros.security import keys, keys_cli
+from dynenv_ros.ros import keys_cli
+from dynenv_ros.security import keys
 from dynenv_ros.security.weights_download import ChunkRefused, Download
 from dynenv_ros.security.weights_order import ReleaseOrder
 from dynenv_ros.security.weights_signing import Announcement, Refused, canonical_bytes, check_fields, sign, verify

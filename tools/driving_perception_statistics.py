@@ -94,7 +94,7 @@ def maxima(periods=1000):
     from dynenv_ros.driving.scripted import ScriptedDriver
     from dynenv_ros.envs.driving_observations import default_maxima
     lanes_ids, object_ids = (23, 24), (0, 20, 21, 22)
-    print(f"| cars | play | preset | lanes (SELF + LANE) | objects | of which false positives | default maxima |")
+    print("| cars | play | preset | lanes (SELF + LANE) | objects | of which false positives | default maxima |")
     print("|---|---|---|---|---|---|---|")
     for n_cars in (2, 4, 10):
         for policy in ("random", "scripted"):

@@ -275,8 +275,8 @@ def training_recipe(root: Path, here: Path, config: Mapping[str, Any], revision:
     stages = training_stages(here, config)
     if stages is None:
         preset, arguments = training_preset(root, config)
-        budget = (f"The run stops after `max_minutes` of wall time, so the env steps it reaches (and its weights) "
-                  f"depend on the machine: the command reproduces the recipe, not the file."
+        budget = ("The run stops after `max_minutes` of wall time, so the env steps it reaches (and its weights) "
+                  "depend on the machine: the command reproduces the recipe, not the file."
                   if config.get("max_minutes") is not None else
                   "A budget in env steps: the command reproduces the recipe; the weights depend on the machine's "
                   "timing" + (" (the asynchronous workers' policy lag)." if config.get("runner") == "async" else "."))
@@ -377,7 +377,7 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
         if applies(config) and not includes_fix(root, fix, revision):
             out.append(f"- It was trained **before the fix of `{fix}`**, at `{revision[:7]}`: {what}. It is a "
                        f"first-pass model of its variant.")
-    for path, result in evaluations:
+    for _path, result in evaluations:
         goals_for, goals_against = _totals(result)
         if result["opponent"]["spec"] != "random" and goals_for <= goals_against:
             out.append(f"- It is **not a match for the `{result['opponent']['spec']}` team**: {goals_for} goals for, "
@@ -392,7 +392,7 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
             "| opponent | games (episodes × seeds) | W/D/L | goals for : against | paper's metric | total reward | "
             "opponent's paper's metric | × random's paper's metric |",
             "|---|---|---|---|---:|---:|---:|---:|"]
-    for path, result in evaluations:
+    for _path, result in evaluations:
         s, counts, settings = result["summary"], result["counts"], result["settings"]
         goals_for, goals_against = _totals(result)
         ratio = (f"{s['paper_metric']['mean'] / s['opponent_paper_metric']['mean']:.2f}x"
@@ -413,7 +413,7 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     out += [".venv/bin/python tools/pretrained_readme.py", "```", "",
             "`git log -- policy_node/pretrained/eval` gives the commit each file was made at.", "",
             "### Per seed", ""]
-    for path, result in evaluations:
+    for _path, result in evaluations:
         out += [format_table(result), ""]
 
     out += ledger_lines(root, digest)
@@ -512,7 +512,7 @@ def render_driving(root: Path = ROOT, folder: Path = DRIVING_FOLDER) -> str:
             f"total: it has no observation reward), mean ± sd over the seeds (the unit).", "",
             "| driver | actions | reward per car and episode | share of cars home | share of cars crashed |",
             "|---|---|---:|---:|---:|"]
-    for path, result in [(policy_path, policy), *references]:
+    for _path, result in [(policy_path, policy), *references]:
         s = result["summary"]
         spec = result["evaluated"]["spec"]
         name = ("this policy" if result is policy else f"`{spec}`" + (" (reads the ground truth)"

@@ -31,7 +31,7 @@ import os
 import struct
 import tempfile
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, cast
 
 import torch
 from safetensors.torch import load as _st_load
@@ -252,7 +252,7 @@ def agent_config(model: DynEnvAgent) -> dict[str, Any]:
     discrete = model.head_mode == "discrete"
     config = {"feature_size": int(model.feature_size), "head_mode": str(model.head_mode),
               "head_units": (model.head_head.out_features - 1) // 2 if discrete else 3,
-              "head_max": float(model.head_max)}
+              "head_max": float(cast(float, model.head_max))}
     if getattr(model, "uses_pose", False):      # only then: a file without the pose stays byte-identical
         config["uses_pose"] = True
     return config

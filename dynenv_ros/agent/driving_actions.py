@@ -20,7 +20,7 @@ steers at the limit. Its entropy is the underlying Gaussian's (the clipped varia
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -44,7 +44,7 @@ BOUND_TOLERANCE = 1e-5
 def check_action_mode(action_mode: Any) -> str:
     if action_mode not in ACTION_MODES:
         raise ValueError(f"action_mode must be 'discrete' or 'continuous', got {action_mode!r}")
-    return action_mode
+    return cast(str, action_mode)
 
 
 class ClippedNormal:
@@ -65,7 +65,8 @@ class ClippedNormal:
 
     def sample(self, sample_shape: torch.Size = torch.Size()) -> torch.Tensor:
         with torch.no_grad():
-            return self.normal.sample(sample_shape).clamp(self.low, self.high)
+            sample: torch.Tensor = self.normal.sample(sample_shape).clamp(self.low, self.high)
+            return sample
 
     def log_prob(self, value: torch.Tensor) -> torch.Tensor:
         value = torch.as_tensor(value, dtype=self.loc.dtype, device=self.loc.device)
@@ -75,7 +76,8 @@ class ClippedNormal:
         return torch.where(value <= self.low, below, torch.where(value >= self.high, above, inside))
 
     def entropy(self) -> torch.Tensor:
-        return self.normal.entropy()
+        entropy: torch.Tensor = self.normal.entropy()
+        return entropy
 
 
 def distributions(action_mode: str, acceleration: torch.Tensor | None, steering: torch.Tensor | None,
@@ -84,7 +86,8 @@ def distributions(action_mode: str, acceleration: torch.Tensor | None, steering:
     three ``ClippedNormal`` (throttle, brake, steering / limit) of ``command`` (..., 6) = [mean × 3, log_std × 3]."""
     if action_mode == "discrete":
         return [Categorical(logits=acceleration), Categorical(logits=steering)]
-    return [ClippedNormal(command[..., d], command[..., CONTINUOUS_SIZE + d].exp(), CONTINUOUS_LOW[d],
+    head = cast(torch.Tensor, command)
+    return [ClippedNormal(head[..., d], head[..., CONTINUOUS_SIZE + d].exp(), CONTINUOUS_LOW[d],
                           CONTINUOUS_HIGH[d]) for d in range(CONTINUOUS_SIZE)]
 
 
@@ -120,9 +123,9 @@ def sample_actions(step: Any, action_mode: str, generator: torch.Generator, gree
         value = mean if greedy else mean + std * noise
         actions = torch.maximum(torch.minimum(value, torch.tensor(CONTINUOUS_HIGH, dtype=torch.float64)),
                                 torch.tensor(CONTINUOUS_LOW, dtype=torch.float64))
-    actions = actions.numpy()
-    finite = finite.numpy() & np.isfinite(actions).all(-1)
-    return actions, finite
+    chosen = actions.numpy()
+    usable = finite.numpy() & np.isfinite(chosen).all(-1)
+    return chosen, usable
 
 
 def commands(actions: np.ndarray, action_mode: str, max_yaw_rate: float) -> np.ndarray:
@@ -137,22 +140,24 @@ def commands(actions: np.ndarray, action_mode: str, max_yaw_rate: float) -> np.n
             c = discrete_action(int(acceleration), int(steering), max_yaw_rate)
             out.append((c.throttle, c.brake, c.steering))
         return np.array(out, np.float64).reshape(-1, 3)
-    return actions * np.array([1.0, 1.0, max_yaw_rate])
+    scaled: np.ndarray = actions * np.array([1.0, 1.0, max_yaw_rate])
+    return scaled
 
 
 def log_probs(step: Any, actions: np.ndarray, action_mode: str) -> np.ndarray:
     """(B,) log-probability of the network's actions (``sample_actions``) under either runtime's outputs: the sum
     over the heads, as the learner scores them (``distributions``); NaN where an output was not finite."""
-    actions = torch.as_tensor(np.asarray(actions, np.float64))
+    taken = torch.as_tensor(np.asarray(actions, np.float64))
     if action_mode == "discrete":
         outputs = (torch.as_tensor(step.acceleration, dtype=torch.float64),
                    torch.as_tensor(step.steering, dtype=torch.float64))
         dists = distributions("discrete", *outputs, None)
-        actions = actions.long().clamp(0, 2)
+        taken = taken.long().clamp(0, 2)
     else:
         dists = distributions("continuous", None, None, torch.as_tensor(step.command, dtype=torch.float64))
-    total = sum(dist.log_prob(actions[:, d]) for d, dist in enumerate(dists))
-    return total.numpy()
+    total = sum(dist.log_prob(taken[:, d]) for d, dist in enumerate(dists))
+    result: np.ndarray = total.numpy()
+    return result
 
 
 def command_problem(command: np.ndarray, action_mode: str, max_yaw_rate: float) -> str:

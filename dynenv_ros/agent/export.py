@@ -70,7 +70,7 @@ import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -79,9 +79,9 @@ from torch import nn
 from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, MAX_POLICY_BYTES, _bounded_int, check_file_size,
                                          check_head, non_finite_tensors)
 from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.inputs import FEATURES, POSE_INPUT, StreamBatch, agent_inputs
+from dynenv_ros.agent.inputs import POSE_INPUT, StreamBatch, agent_inputs
 from dynenv_ros.agent.network import DynEnvAgent, State
-from dynenv_ros.envs.padded_layout import MAX_FRAMES, MAX_SLOTS, SOCCER
+from dynenv_ros.envs.padded_layout import FEATURES, MAX_FRAMES, MAX_SLOTS, SOCCER
 
 INPUT_NAMES = ("landmark_features", "landmark_kind", "landmark_mask", "object_features", "object_kind",
                "object_mask", "previous_action", "proprioception", "h_loc", "c_loc", "h_obj", "c_obj")
@@ -132,7 +132,7 @@ def _driving_step(outputs: list[torch.Tensor], action_mode: str) -> PolicyStep:
     heads = ({"acceleration": outputs[0], "steering": outputs[1]} if action_mode == "discrete"
              else {"command": outputs[0]})
     rest = outputs[len(heads):]
-    return PolicyStep(None, None, None, None, rest[0], None, tuple(rest[1:5]), **heads)
+    return PolicyStep(None, None, None, None, rest[0], None, cast(State, tuple(rest[1:5])), **heads)
 
 
 class _ExportWrapper(nn.Module):
@@ -210,7 +210,7 @@ def _config(model: DynEnvAgent, frames: int, max_landmarks: int, max_objects: in
                             "continuous_high": list(driving_actions.CONTINUOUS_HIGH)}}
     head_units = (model.head_head.out_features - 1) // 2 if model.head_mode == "discrete" else None
     return {"format": FORMAT, "feature_size": model.feature_size, "head_mode": model.head_mode,
-            "head_units": head_units, "head_max": float(model.head_max), "frames": frames,
+            "head_units": head_units, "head_max": float(cast(float, model.head_max)), "frames": frames,
             "max_landmarks": max_landmarks, "max_objects": max_objects, "scenario": "soccer",
             "uses_pose": bool(getattr(model, "uses_pose", False)), "layout": _layout_metadata("soccer"),
             "actions": {"heads": {"walk": WALK_CHOICES, "turn": TURN_CHOICES, "kick": KICK_CHOICES,
@@ -257,7 +257,8 @@ def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int
                                 module=r"torch\.onnx")
         warnings.filterwarnings("ignore", message="Constant folding - Only steps=1", category=UserWarning)
         warnings.filterwarnings("ignore", category=torch.jit.TracerWarning, module=r"torch\.nn\.functional")
-        torch.onnx.export(wrapper, example, buffer, dynamo=False, opset_version=opset,
+        torch.onnx.export(wrapper, example, buffer, dynamo=False, opset_version=opset,  # type: ignore[arg-type]
+                          # (the stubs omit the file-like object torch.onnx.export writes to)
                           input_names=list(input_names), output_names=list(output_names),
                           dynamic_axes={name: {0: "robots"} for name in input_names + output_names},
                           do_constant_folding=True)
@@ -328,7 +329,7 @@ def _non_finite_initializers(proto: Any) -> list[str]:
 def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
     """The first way the session's declared inputs/outputs disagree with the metadata ('' if none). Dimensions the
     file leaves symbolic are not checked here (the robot axis always is); the node's trial decision runs them."""
-    F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size
+    F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size  # noqa: E741 - the paper's dimension letters
     input_names, output_names = io_names(policy.scenario, policy.action_mode, policy.uses_pose)
     static = "lane" if policy.scenario == "driving" else "landmark"
     widths = agent_inputs(policy.scenario)
@@ -338,12 +339,13 @@ def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
               "previous_action": ("float", (widths.action_encoding,)),
               "proprioception": ("float", (widths.self_state,)), POSE_INPUT_NAME: ("float", (POSE_INPUT,)),
               **{name: ("float", (D,)) for name in STATE_NAMES}}
+    outputs: dict[str, tuple[int, ...]]
     if policy.scenario == "driving":
         outputs = {"acceleration_logits": (driving_actions.ACCELERATION_CHOICES,),
                    "steering_logits": (driving_actions.STEERING_CHOICES,),
                    "command": (2 * driving_actions.CONTINUOUS_SIZE,)}
     else:
-        head = 2 * policy.head_units + 1 if policy.head_mode == "discrete" else 2
+        head = 2 * cast(int, policy.head_units) + 1 if policy.head_mode == "discrete" else 2
         outputs = {"walk_logits": (WALK_CHOICES,), "turn_logits": (TURN_CHOICES,), "kick_logits": (KICK_CHOICES,),
                    "head": (head,), "pose": (6,)}
     outputs.update({"value": (), **{name + "_out": (D,) for name in STATE_NAMES}})
@@ -420,14 +422,18 @@ class OnnxPolicy:
         self.feature_size: int = config["feature_size"]
         self.scenario: str = config.get("scenario", "soccer")
         self.uses_pose: bool = config.get("uses_pose", False)
+        self.action_mode: str | None        # driving's; soccer's head below (None in the other scenario)
+        self.head_mode: str | None
+        self.head_units: int | None
+        self.head_max: float | None
         if self.scenario == "driving":
-            self.action_mode: str | None = config["action_mode"]
+            self.action_mode = config["action_mode"]
             self.head_mode, self.head_units, self.head_max = None, None, None
         else:
             self.action_mode = None
-            self.head_mode: str = config["head_mode"]
-            self.head_units: int | None = config["head_units"] if self.head_mode == "discrete" else None
-            self.head_max: float = float(config["head_max"])
+            self.head_mode = config["head_mode"]
+            self.head_units = config["head_units"] if self.head_mode == "discrete" else None
+            self.head_max = float(config["head_max"])
         self.frames: int = config["frames"]
         self.max_landmarks: int = config["max_landmarks"]
         self.max_objects: int = config["max_objects"]
@@ -482,7 +488,7 @@ class OnnxPolicy:
             feeds[name] = _numpy(tensor, np.float32)
         out = [torch.from_numpy(array) for array in self.session.run(None, feeds)]
         if self.scenario == "driving":
-            return _driving_step(out, self.action_mode)
+            return _driving_step(out, cast(str, self.action_mode))
         return PolicyStep(out[0], out[1], out[2], out[3], out[4], out[5], (out[6], out[7], out[8], out[9]))
 
 

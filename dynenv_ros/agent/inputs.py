@@ -32,10 +32,14 @@ scenario's network takes (``AgentInputs``):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 import torch
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    TensorLike = torch.Tensor | ArrayLike
 
 from dynenv_ros.envs.padded_layout import (FEATURES, GAME_COLUMNS, LANDMARK_CLASSES, OBJECT_CLASSES,
                                            PROPRIOCEPTION_COLUMNS, SOCCER, LayoutSpec, PaddedLayout, pack_frames)
@@ -79,11 +83,11 @@ class StreamBatch:
     mask: torch.Tensor
 
 
-def _as_tensor(value) -> torch.Tensor:
+def _as_tensor(value: TensorLike) -> torch.Tensor:
     return value if isinstance(value, torch.Tensor) else torch.from_numpy(np.asarray(value, np.float32))
 
 
-def stream(features, valid, kind_table: torch.Tensor | None = None) -> StreamBatch:
+def stream(features: TensorLike, valid: TensorLike, kind_table: torch.Tensor | None = None) -> StreamBatch:
     """One stream from padded rows (B, F, N, FEATURES) and a validity mask (B, F, N), 1 = a detection;
     ``kind_table``: the scenario's class → embedding index table (``AgentInputs.kind_table``; soccer's by default)."""
     features, valid = _as_tensor(features), _as_tensor(valid)
@@ -93,7 +97,7 @@ def stream(features, valid, kind_table: torch.Tensor | None = None) -> StreamBat
     return StreamBatch(features, kind.masked_fill(padded, 0), padded)
 
 
-def streams_from_padded(observation: Mapping[str, object], spec: LayoutSpec = SOCCER
+def streams_from_padded(observation: Mapping[str, Any], spec: LayoutSpec = SOCCER
                         ) -> tuple[StreamBatch, StreamBatch]:
     """(static stream, dynamic stream) of a batch of padded observations (keys of the layout ``spec``, robots
     leading): soccer's (landmarks, objects), driving's (lanes with the SELF row, objects)."""
@@ -103,7 +107,7 @@ def streams_from_padded(observation: Mapping[str, object], spec: LayoutSpec = SO
             stream(observation[dynamic.key], observation[dynamic.mask], table))
 
 
-def side_inputs(observation: Mapping[str, object], head_max: float | None = None, spec: LayoutSpec = SOCCER,
+def side_inputs(observation: Mapping[str, Any], head_max: float | None = None, spec: LayoutSpec = SOCCER,
                 pose: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
     """(previous action encoding (B, action_encoding), self state (B, self_state)) of padded observations: the
     period's last proprioception row and the game's values, scaled. ``head_max`` (soccer only): the head turn's
@@ -124,7 +128,7 @@ def side_inputs(observation: Mapping[str, object], head_max: float | None = None
     return previous, state
 
 
-def pose_input(observation: Mapping[str, object]) -> torch.Tensor:
+def pose_input(observation: Mapping[str, Any]) -> torch.Tensor:
     """The batch's ``pose_estimate`` (B, 7) float32, checked; ValueError naming the key when it is missing."""
     if POSE_KEY not in observation:
         raise ValueError(f"this agent takes the self-localization estimate (uses_pose): the batch needs "
@@ -150,10 +154,10 @@ def encode_pose(pose: torch.Tensor) -> torch.Tensor:
                       torch.log1p(pose[..., 4:].clamp(min=0.0) / POSE_STD_UNIT)], dim=-1)
 
 
-def self_state(proprioception, game) -> torch.Tensor:
+def self_state(proprioception: TensorLike, game: TensorLike) -> torch.Tensor:
     """(B, SELF_STATE): the last frame's proprioception (B, 4) and the GameController's values (B, 3), scaled."""
-    game = _as_tensor(game)
-    return torch.cat([_as_tensor(proprioception), game * GAME_SCALE.to(game.device)], dim=-1)
+    values = _as_tensor(game)
+    return torch.cat([_as_tensor(proprioception), values * GAME_SCALE.to(values.device)], dim=-1)
 
 
 def collate(observations: Sequence[Sequence[np.ndarray]], max_landmarks: int | None = None,
@@ -189,18 +193,18 @@ DRIVING_ACTION_ENCODING = 3
 DRIVING_SELF_STATE = len(DRIVING_EGO_SCALE) + 1
 
 
-def encode_driving_action(action, spec: LayoutSpec) -> torch.Tensor:
+def encode_driving_action(action: TensorLike, spec: LayoutSpec) -> torch.Tensor:
     """(B, 3) of (B, 3) [throttle, brake, steering rad/s]: throttle and brake as they are, the steering over the
     layout's steering bound (``spec.action_high[2]``, ``cars.max_yaw_rate``)."""
-    action = _as_tensor(action).float()
-    scale = torch.tensor([1.0, 1.0, 1.0 / spec.action_high[2]], device=action.device)
-    return action * scale
+    command = _as_tensor(action).float()
+    scale = torch.tensor([1.0, 1.0, 1.0 / spec.action_high[2]], device=command.device)
+    return command * scale
 
 
-def driving_self_state(ego, game) -> torch.Tensor:
+def driving_self_state(ego: TensorLike, game: TensorLike) -> torch.Tensor:
     """(B, 9): the last frame's ego values (B, 8) and the seconds remaining (B, 1), scaled."""
-    ego = _as_tensor(ego)
-    return torch.cat([ego * DRIVING_EGO_SCALE.to(ego.device), _as_tensor(game) * DRIVING_GAME_SCALE], dim=-1)
+    values = _as_tensor(ego)
+    return torch.cat([values * DRIVING_EGO_SCALE.to(values.device), _as_tensor(game) * DRIVING_GAME_SCALE], dim=-1)
 
 
 @dataclass(frozen=True)
@@ -209,7 +213,7 @@ class AgentInputs:
     ``num_classes`` embedding blocks per stream, padding's included), the width of its previous-action encoding and
     of its self state, and its stream keys (static, dynamic)."""
     scenario: str
-    class_index: dict
+    class_index: dict[int, int]
     kind_table: torch.Tensor
     num_classes: int
     action_encoding: int
@@ -220,7 +224,8 @@ class AgentInputs:
 def _driving_spec() -> LayoutSpec:
     from dynenv_ros.driving.config import DrivingConfig
     from dynenv_ros.envs.driving_observations import driving_layout_spec
-    return driving_layout_spec(DrivingConfig())
+    spec: LayoutSpec = driving_layout_spec(DrivingConfig())
+    return spec
 
 
 _AGENT_INPUTS: dict[str, AgentInputs] = {}

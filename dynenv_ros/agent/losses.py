@@ -39,7 +39,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -99,7 +99,8 @@ class ForwardModel(nn.Module):
                                  nn.Linear(hidden, feature_size))
 
     def forward(self, phi: Tensor, action: Tensor) -> Tensor:
-        return self.net(torch.cat([phi, action.to(phi.dtype)], dim=-1))
+        predicted: Tensor = self.net(torch.cat([phi, action.to(phi.dtype)], dim=-1))
+        return predicted
 
 
 class InverseModel(nn.Module):
@@ -288,15 +289,17 @@ def localization_loss(pose_pred: Tensor, pose_true: Tensor, mask: Tensor | None 
 # ---------------------------------------------------------------------------------------------------------------
 # Reconstruction with field-fixed anchors
 
-def _numpy(x: Tensor | np.ndarray | Sequence) -> np.ndarray:
+def _numpy(x: Tensor | np.ndarray | Sequence[Any]) -> np.ndarray:
     if isinstance(x, Tensor):
-        return x.detach().cpu().numpy()
-    return np.asarray(x)
+        array: np.ndarray = x.detach().cpu().numpy()
+        return array
+    converted: np.ndarray = np.asarray(x)
+    return converted
 
 
 def _assignment_costs(anchors: np.ndarray, targets: np.ndarray, seen: np.ndarray) -> np.ndarray:
     """(M, S) squared distances from each target to each anchor; 0 for unseen targets (they may take any slot)."""
-    cost = ((targets[:, None, :2] - anchors[None, :, :2]) ** 2).sum(-1)
+    cost: np.ndarray = ((targets[:, None, :2] - anchors[None, :, :2]) ** 2).sum(-1)
     cost[~seen.astype(bool)] = 0.0
     return cost
 
@@ -339,7 +342,8 @@ def assign_slots_batch(anchors: np.ndarray, targets: np.ndarray, seen: np.ndarra
     cost = np.where(seen.astype(bool)[:, :, None], cost, 0.0)
     maps = np.array(list(itertools.permutations(range(slots), count)), np.int64)          # (P, M)
     totals = cost[:, np.arange(count)[None, :], maps].sum(-1)                              # (B, P)
-    return maps[np.argmin(totals, axis=1)]
+    best: np.ndarray = maps[np.argmin(totals, axis=1)]
+    return best
 
 
 def assignment_cost(anchors: Tensor | np.ndarray, targets: Tensor | np.ndarray, seen: Tensor | np.ndarray,

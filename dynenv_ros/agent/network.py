@@ -40,6 +40,7 @@ earlier checkpoint) is the network above, parameter for parameter.
 from __future__ import annotations
 
 import math
+from typing import Any, cast
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,11 +49,15 @@ from torch import nn
 from torch.distributions import Categorical, Normal
 
 from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.inputs import (ACTION_ENCODING, FEATURES, NUM_CLASSES, POSE_INPUT, PROPRIOCEPTION, SCENARIOS,
-                                     StreamBatch, agent_inputs, encode_pose)
+from dynenv_ros.agent.inputs import (ACTION_ENCODING, NUM_CLASSES, POSE_INPUT, PROPRIOCEPTION, SCENARIOS, StreamBatch,
+                                     agent_inputs, encode_pose)
+from dynenv_ros.envs.padded_layout import FEATURES
 
 POSE_SIZE = 6            # [x, y, cos(θ+h), sin(θ+h), cos h, sin h] in the team frame
 State = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]
+# EmbedBlock's layers as its forward unpacks them (for mypy: an nn.Sequential iterates as plain Modules)
+_EmbedLayers = tuple[nn.Linear, nn.Module, nn.LayerNorm, nn.Linear, nn.Module, nn.LayerNorm]
+_Folded = tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]     # SingleHeadAttention.folded()
 
 
 class EmbedBlock(nn.Module):
@@ -66,7 +71,7 @@ class EmbedBlock(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         # ``self.net(x)`` written out with its layers' parameters: the same ops without six module calls (their
         # Python overhead is most of the cost at the few hundred rows a class has in one batch)
-        first, _, first_norm, second, _, second_norm = self.net
+        first, _, first_norm, second, _, second_norm = cast(_EmbedLayers, self.net)
         functional = nn.functional
         x = functional.layer_norm(functional.leaky_relu(functional.linear(x, first.weight), 0.1),
                                   first_norm.normalized_shape, first_norm.weight, first_norm.bias, first_norm.eps)
@@ -136,15 +141,15 @@ def trim(batch: StreamBatch) -> StreamBatch:
     if _tracing():
         position = torch.arange(1, slots + 1, dtype=torch.int64, device=mask.device)
         used = torch.clamp((position * (~mask).to(torch.int64)).amax(), min=1)
-        keep = torch.arange(used, device=mask.device)
+        keep = torch.arange(used, device=mask.device)  # type: ignore[call-overload]  # (a 0-d tensor: traced)
         last = mask.dim() - 1
         return StreamBatch(batch.features.index_select(last, keep), batch.kind.index_select(last, keep),
                            mask.index_select(last, keep))
     filled = torch.nonzero((~mask).reshape(-1, slots).any(0))
-    used = int(filled[-1]) + 1 if filled.numel() else 1
-    if used == slots:
+    kept = int(filled[-1]) + 1 if filled.numel() else 1
+    if kept == slots:
         return batch
-    return StreamBatch(batch.features[..., :used, :], batch.kind[..., :used], mask[..., :used])
+    return StreamBatch(batch.features[..., :kept, :], batch.kind[..., :kept], mask[..., :kept])
 
 
 def _bias_slot(x: torch.Tensor) -> torch.Tensor:
@@ -261,6 +266,9 @@ class RecurrentTemporalAttention(nn.Module):
     Nothing here depends on earlier motion periods, so a whole rollout (T·B periods) goes through in one batch.
     """
 
+    temporal_attention: SingleHeadAttention | None     # None without the temporal part (declared for mypy)
+    norm: nn.LayerNorm | None
+
     def __init__(self, size: int, temporal: bool = True) -> None:
         super().__init__()
         self.object_attention = SingleHeadAttention(size)
@@ -276,13 +284,13 @@ class RecurrentTemporalAttention(nn.Module):
         slots (0 on slots no frame of the period filled)."""
         return self.frames_first(x.transpose(0, 1), mask.transpose(0, 1))
 
-    def folded(self) -> tuple[tuple[torch.Tensor, ...], tuple[torch.Tensor, ...]]:
+    def folded(self) -> tuple[_Folded, _Folded | None]:
         """Both attentions' folded weights (``SingleHeadAttention.folded``), to form once per forward pass."""
         temporal = self.temporal_attention
         return self.object_attention.folded(), (temporal.folded() if temporal is not None else None)
 
     def frames_first(self, x: torch.Tensor, mask: torch.Tensor,
-                     folded: tuple[tuple[torch.Tensor, ...], tuple[torch.Tensor, ...]] | None = None
+                     folded: tuple[_Folded, _Folded | None] | None = None
                      ) -> tuple[torch.Tensor, torch.Tensor]:
         """``forward`` with the frame axis first: x (F, B, N, D), mask (F, B, N) (each frame's rows contiguous);
         ``folded``: ``self.folded()`` where the caller already has it."""
@@ -306,15 +314,16 @@ class RecurrentTemporalAttention(nn.Module):
         frames = attended.unbind(0)
         summary = frames[0]
         if len(frames) > 1:               # (one frame: nothing to attend over, the summary is the frame itself)
-            w_query, b_query, w_out, b_out = folded_temporal
+            w_query, b_query, w_out, b_out = cast(_Folded, folded_temporal)     # (more frames: temporal)
             temporal_masks = key_masks[1].unbind(0)
+        norm = cast(nn.LayerNorm, self.norm)
         for t in range(1, len(frames)):   # (not range(1, F): under the ONNX tracer F is a traced size)
             frame = frames[t].reshape(B * N, D)
             read = SingleHeadAttention.attend(linear(frame, w_query, b_query).view(B, N, D + 1),
                                               _with_bias_slot(summary, slot), temporal_masks[t - 1])
             summary = nn.functional.layer_norm(
-                torch.addmm(frame + b_out, read.reshape(B * N, D + 1), w_out.t()), self.norm.normalized_shape,
-                self.norm.weight, self.norm.bias, self.norm.eps).reshape(B, N, D)
+                torch.addmm(frame + b_out, read.reshape(B * N, D + 1), w_out.t()), norm.normalized_shape,
+                norm.weight, norm.bias, norm.eps).reshape(B, N, D)
         confidence = torch.sigmoid(linear(summary, self.confidence.weight, self.confidence.bias)).squeeze(-1)
         confidence = confidence.masked_fill(padded_so_far[-1], 0.0)
         pooled = torch.bmm(confidence.unsqueeze(1), summary).squeeze(1) / (1.0 + confidence.sum(1, keepdim=True))
@@ -388,25 +397,27 @@ class Stream(nn.Module):
         # one gather of every bucket's rows: bucket by bucket, frames first (each frame's rows contiguous for the
         # RTA), each cut to its bucket's slots
         frame_offsets = (torch.arange(F, device=used.device) * N).view(F, 1, 1)
-        index, start = [], 0
+        pieces, start = [], 0
         for count, slots in plan:
             periods = (order[start:start + count] * (F * N)).view(1, count, 1)
-            index.append((periods + frame_offsets + torch.arange(slots, device=used.device).view(1, 1, slots)).reshape(-1))
+            pieces.append((periods + frame_offsets + torch.arange(slots, device=used.device).view(1, 1, slots)).reshape(-1))
             start += count
-        index = torch.cat(index)
+        index = torch.cat(pieces)
         sizes = [F * count * slots for count, slots in plan]
         mask = batch.mask.reshape(-1).index_select(0, index)
         rows = self.embed(batch.features.reshape(-1, FEATURES).index_select(0, index),
                           batch.kind.reshape(-1).index_select(0, index), mask)
-        pooled, confidence, folded = [], [], self.rta.folded()
+        pooled_parts: list[torch.Tensor] = []
+        confidence_parts: list[torch.Tensor] = []
+        folded = self.rta.folded()
         for (count, slots), embedded, padded in zip(plan, rows.split(sizes), mask.split(sizes)):
             result = self.rta.frames_first(embedded.view(F, count, slots, -1), padded.view(F, count, slots), folded)
-            pooled.append(result[0])
-            confidence.append(nn.functional.pad(result[1], (0, N - slots)))
+            pooled_parts.append(result[0])
+            confidence_parts.append(nn.functional.pad(result[1], (0, N - slots)))
         if len(plan) == 1:
-            pooled, confidence = pooled[0], confidence[0]
+            pooled, confidence = pooled_parts[0], confidence_parts[0]
         else:
-            pooled, confidence = torch.cat(pooled), torch.cat(confidence)
+            pooled, confidence = torch.cat(pooled_parts), torch.cat(confidence_parts)
         inverse = torch.empty_like(order)
         inverse[order] = torch.arange(B, device=order.device)
         return pooled.index_select(0, inverse), confidence.index_select(0, inverse)
@@ -489,6 +500,15 @@ class DynEnvAgent(nn.Module):
     """The agent of one scenario (module docstring). Soccer: ``head_mode``/``head_units``/``head_max`` set the head
     turn's action head. Driving (``scenario='driving'``): ``action_mode`` 'discrete' or 'continuous' sets the actor
     heads; the head settings do not apply."""
+
+    # Set by each scenario's build, None where they do not apply (declared here for mypy; no class attributes).
+    action_mode: str | None
+    head_mode: str | None
+    head_max: float | None
+    pose_head: nn.Linear | None
+    reconstruction: ReconstructionHead | None
+    command_centre: torch.Tensor              # driving, continuous: buffers
+    command_half_range: torch.Tensor
 
     def __init__(self, feature_size: int = 64, head_mode: str = "discrete", head_units: int = 3,
                  head_max: float = math.radians(37.5), scenario: str = "soccer",
@@ -603,7 +623,7 @@ class DynEnvAgent(nn.Module):
         loc_in = self.localization.transform(torch.cat([loc_pooled, previous_action, proprioception], dim=-1))
         loc_h, loc_state = self.localization.recur(loc_in, state[:2], resets)
         loc = self.localization.norm(loc_h)
-        pose = self.pose_head(loc)
+        pose = cast(nn.Linear, self.pose_head)(loc)                     # (soccer's heads: set in this scenario)
         obj_in = self.objects.transform(torch.cat([obj_pooled, pose.detach(), proprioception], dim=-1))
         obj_h, obj_state = self.objects.recur(obj_in, state[2:], resets)
         obj = self.objects.norm(obj_h)
@@ -611,9 +631,9 @@ class DynEnvAgent(nn.Module):
         if self.head_mode == "discrete":
             head = self.head_head(phi)
         else:
-            mean = self.head_max * torch.tanh(self.head_head(phi))
+            mean = cast(float, self.head_max) * torch.tanh(self.head_head(phi))
             head = torch.cat([mean, self.head_log_std.expand_as(mean)], dim=-1)
-        ball, ball_conf, robots, robot_conf = self.reconstruction(obj)
+        ball, ball_conf, robots, robot_conf = cast(ReconstructionHead, self.reconstruction)(obj)
         return AgentStep(self.walk_head(phi), self.turn_head(phi), self.kick_head(phi), head,
                          self.critic(phi).squeeze(-1), pose, phi, obj, loc_state + obj_state,
                          landmark_confidence, object_confidence, ball, ball_conf, robots, robot_conf)
@@ -639,16 +659,19 @@ class DynEnvAgent(nn.Module):
         return AgentStep(None, None, None, None, self.critic(phi).squeeze(-1), None, phi, obj, loc_state + obj_state,
                          static_confidence, object_confidence, **heads)
 
-    def distributions(self, step: AgentStep) -> list:
+    def distributions(self, step: AgentStep) -> list[Any]:
         """One distribution per action dimension: soccer's categorical walk, turn, kick and the head categorical or
         Gaussian; driving's (``driving_actions.distributions``) two categorical heads or three clipped Gaussians."""
         if self.scenario == "driving":
-            return driving_actions.distributions(self.action_mode, step.acceleration, step.steering, step.command)
-        heads = [Categorical(logits=step.walk), Categorical(logits=step.turn), Categorical(logits=step.kick)]
+            return driving_actions.distributions(cast(str, self.action_mode), step.acceleration, step.steering,
+                                                 step.command)
+        heads: list[Categorical | Normal] = [Categorical(logits=step.walk), Categorical(logits=step.turn),
+                                             Categorical(logits=step.kick)]
         if self.head_mode == "discrete":
             heads.append(Categorical(logits=step.head))
         else:
-            heads.append(Normal(step.head[..., 0], step.head[..., 1].exp()))
+            head = cast(torch.Tensor, step.head)
+            heads.append(Normal(head[..., 0], head[..., 1].exp()))
         return heads
 
     def act(self, step: AgentStep, generator: torch.Generator | None = None, greedy: bool = False
@@ -671,7 +694,8 @@ class DynEnvAgent(nn.Module):
             else:
                 noise = torch.randn(dist.mean.shape, generator=generator, device=dist.mean.device)
                 sample = dist.mean if greedy else dist.mean + dist.stddev * noise
-                columns.append(sample.clamp(-self.head_max, self.head_max))
+                limit = cast(float, self.head_max)
+                columns.append(sample.clamp(-limit, limit))
         return torch.stack(columns, dim=-1).detach()
 
 

@@ -1,1 +1,1 @@
-"""ROS-free core: usable in-process without rclpy (enforced by test/test_layout.py)."""
+"""ROS-free core: usable in-process without rclpy (enforced by .importlinter and test/test_layout.py)."""

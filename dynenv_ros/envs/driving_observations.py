@@ -182,8 +182,8 @@ class DrivingGroundTruth:
                               (STATE_OBSTACLE_COLUMNS, lay.obstacles), (("time_remaining",), 1)]
         self.state_space = spaces.Box(*_bounds(config, self._state_blocks), dtype=np.float32)
         lines = DrivingMap(config.map).lane_lines
-        self._lines = np.array([(l.x1, l.y1, l.x2, l.y2) for l in lines], float).reshape(-1, 4)
-        self._line_kind = np.array([float(l.kind) for l in lines])
+        self._lines = np.array([(line.x1, line.y1, line.x2, line.y2) for line in lines], float).reshape(-1, 4)
+        self._line_kind = np.array([float(line.kind) for line in lines])
         self._obstacle_size = (config.obstacles.size, config.obstacles.size)     # length, width (square)
         n = config.n_cars
         self._others_table = np.array([[j for j in range(n) if j != i] for i in range(n)], np.intp).reshape(n, n - 1)

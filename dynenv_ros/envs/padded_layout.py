@@ -39,15 +39,14 @@ from gymnasium import spaces
 from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.envs.pose_features import POSE_COLUMNS, POSE_HIGH, POSE_KEY, POSE_LOW
 from dynenv_ros.perception.detections import FEATURE_COLUMNS
+from dynenv_ros.soccer.observation_columns import GAME_COLUMNS as GAME_COLUMNS
+from dynenv_ros.soccer.observation_columns import PROPRIOCEPTION_COLUMNS as PROPRIOCEPTION_COLUMNS
 
 FEATURES = len(FEATURE_COLUMNS)
 FEATURE_BOUND = 50.0
 LANDMARK_CLASSES = (ObjectClass.GOALPOST, ObjectClass.PENALTY_CROSS, ObjectClass.LINE_CROSSING,
                     ObjectClass.FIELD_LINE, ObjectClass.CENTER_CIRCLE)
 OBJECT_CLASSES = (ObjectClass.BALL, ObjectClass.ROBOT)
-PROPRIOCEPTION_COLUMNS = ("head_yaw", "fallen", "penalized", "kicking")
-# ball_owner: +1 own team owns the ball (kick-off or set play), -1 the opponents do, 0 free ball; seconds in SI.
-GAME_COLUMNS = ("ball_owner", "ball_owner_seconds", "game_seconds_remaining")
 # head_yaw_delta in rad per period, whatever the head mode (a discrete index is converted).
 ACTION_COLUMNS = ("walk", "turn", "kick", "head_yaw_delta")
 KEYS = ("landmarks", "landmark_mask", "objects", "object_mask", "proprioception", "game", "previous_action")

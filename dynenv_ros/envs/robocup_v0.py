@@ -41,7 +41,7 @@ from dynenv_ros.envs.parallel_agents import AgentSpaces, check_step_actions
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.sim.seeding import checked_seed
 from dynenv_ros.soccer.config import SoccerConfig
-from dynenv_ros.soccer.world import TEAM_A, TEAM_B, SoccerWorld
+from dynenv_ros.soccer.world import SoccerWorld
 
 RESET_OPTIONS = ("kickoff_team",)
 _TERM_NAMES = tuple(term.name.lower() for term in sorted(RewardTerm))   # rows of a period's rewards

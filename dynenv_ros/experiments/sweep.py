@@ -114,7 +114,7 @@ def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str
     checkpoint, or a temporary one), evaluate the policy, return the small files."""
     from dynenv_ros.learning.checkpoints import list_checkpoints
     from dynenv_ros.learning.config import TrainConfig
-    from dynenv_ros.learning.trainer import make_trainer
+    from dynenv_ros.learning.runners import make_trainer
     cfg = TrainConfig.from_dict(cfg_dict)
     started = time.time()
     with tempfile.TemporaryDirectory(prefix=f"dynenv-sweep-{name}-") as temporary:

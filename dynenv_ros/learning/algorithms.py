@@ -175,7 +175,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
 
     timing = {"forward_backward": 0.0, "optimizer": 0.0}
     stop = False
-    for epoch in range(epochs):
+    for epoch in range(epochs):  # noqa: B007 - read after the loop (epochs_run)
         # row indices on the CPU (the CPU generator draws them); they index tensors on any device
         order = torch.randperm(B, generator=generator, device="cpu") if minibatches > 1 else torch.arange(B, device="cpu")
         for chunk in order.chunk(minibatches):

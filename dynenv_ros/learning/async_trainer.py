@@ -22,7 +22,6 @@ which is exactly what ``update`` takes.
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 from typing import Any
 

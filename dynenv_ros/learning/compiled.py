@@ -14,7 +14,6 @@ from __future__ import annotations
 import warnings
 from typing import Any, Callable
 
-import torch
 
 _PATCHED: dict[tuple[type, str], Callable[..., Any]] = {}
 
@@ -31,7 +30,7 @@ def compile_hot_paths() -> bool:
     try:
         import torch._dynamo  # noqa: F401 - fails on builds without the compiler stack
     except Exception as error:                   # pragma: no cover - depends on the torch build
-        warnings.warn(f"torch_compile: torch cannot compile here ({error}); running eager", RuntimeWarning)
+        warnings.warn(f"torch_compile: torch cannot compile here ({error}); running eager", RuntimeWarning, stacklevel=1)
         return False
     for owner, name in _targets():
         original = getattr(owner, name)
@@ -43,7 +42,7 @@ def compile_hot_paths() -> bool:
             except Exception as error:           # a backend failure (no compiler, an unsupported op): eager for good
                 warnings.warn(f"torch_compile: {_owner.__name__}.{_name} fell back to eager: "
                               f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''}",
-                              RuntimeWarning)
+                              RuntimeWarning, stacklevel=1)
                 setattr(_owner, _name, _original)
                 _PATCHED.pop((_owner, _name), None)
                 return _original(*args, **kwargs)

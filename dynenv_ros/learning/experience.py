@@ -620,7 +620,7 @@ class ExperienceAssembler:
         slots = [stream.slots[k] for k in keys]
         T = self.steps
         previous, starts = [], np.zeros(T + 1, bool)
-        for t, (key, slot) in enumerate(zip(keys, slots)):
+        for t, key in enumerate(keys):
             if key[1] == 0 or (t == 0 and stream.chain_starts_episode):
                 starts[t] = True
             answer = self._shown(stream, (key[0], key[1] - 1)) if key[1] > 0 else None

@@ -321,10 +321,3 @@ class Trainer:
     def _stop_rollouts(self) -> None:
         self.env.close()
 
-
-def make_trainer(cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True) -> Trainer:
-    """The trainer of ``cfg.runner``: ``Trainer`` (sync) or ``async_trainer.AsyncTrainer``."""
-    if cfg.runner == "async":
-        from dynenv_ros.learning.async_trainer import AsyncTrainer
-        return AsyncTrainer(cfg, run_dir, resume=resume, progress=progress)
-    return Trainer(cfg, run_dir, resume=resume, progress=progress)

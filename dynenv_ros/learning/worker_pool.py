@@ -22,7 +22,6 @@ from __future__ import annotations
 import ctypes
 import math
 import multiprocessing as mp
-import os
 import signal
 import time
 import traceback
@@ -30,7 +29,6 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any, Callable
 
-import numpy as np
 import torch
 
 from dynenv_ros.learning.config import TrainConfig

@@ -103,7 +103,7 @@ class VisionAdapter(Node):
         self.states: dict[str, RobotState] = {}
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         self.publishers_by_robot = {}
-        for i, name in enumerate(self.names):
+        for name in self.names:
             robot_id = names.index(name)
             if self.reverse:
                 publisher = self.create_publisher(DetectionArray, topics.local(topics.detections(name)), qos)

@@ -14,6 +14,7 @@ asserts them. Both tests compute their expectations independently (``test/leak_r
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,7 +35,8 @@ DRIVING_NON_GEOMETRIC_FEATURES = ("cos_yaw", "sin_yaw", "size_x", "size_y", "tea
 
 def false_reports(rows: np.ndarray) -> np.ndarray:
     """(k,) bool: no object behind the report, or an object of another class."""
-    return (rows["true_id"] == -1) | (rows["true_class"] != rows["class_id"])
+    false: np.ndarray = (rows["true_id"] == -1) | (rows["true_class"] != rows["class_id"])
+    return false
 
 
 def nearest_of(rows: np.ndarray, views: np.ndarray, classes: tuple[int, ...]) -> np.ndarray:
@@ -146,7 +148,8 @@ def driving_leak_check(rows: np.ndarray, views: np.ndarray,
     return _held_out_check(rows, views, near, _driving_design, tuple(extra), bootstrap, seed)
 
 
-def _held_out_check(rows: np.ndarray, views: np.ndarray, near: np.ndarray, design, extra: tuple[str, ...],
+def _held_out_check(rows: np.ndarray, views: np.ndarray, near: np.ndarray,
+                    design: Callable[[np.ndarray, np.ndarray, tuple[str, ...]], np.ndarray], extra: tuple[str, ...],
                     bootstrap: int, seed: int) -> LeakCheck:
     """Fit the geometry-only and the geometry-plus-``extra`` regressions (``design(rows, near, columns)``) on the
     even views, score the odd ones; the AUCs and the bootstrap SE of their difference over the held-out reports."""

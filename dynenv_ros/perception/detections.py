@@ -6,6 +6,9 @@ The camera frame is REP 103 body convention: x along the gaze, y left; metres an
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+from typing import Any, cast
+
 import numpy as np
 
 DETECTION_DTYPE = np.dtype([
@@ -38,7 +41,7 @@ def empty(count: int = 0) -> np.ndarray:
     return out
 
 
-def rows_from_messages(detections, true_id: int = -2) -> np.ndarray:
+def rows_from_messages(detections: Sequence[Any], true_id: int = -2) -> np.ndarray:
     """Detection messages (rclpy or rosbags: attributes only) → rows. A message carries only what the robot
     reported, so ``true_id`` is a placeholder (-2 by default: neither a false positive nor a known object)."""
     rows = empty(len(detections))
@@ -77,13 +80,15 @@ def _runs(runs: dict[str, tuple[str, int]]) -> np.dtype:
     """A dtype overlaying the record with runs of consecutive same-typed fields, each as one sub-array, so a run
     of feature columns is copied with one numpy call. Refuses a run that is not consecutive fields of one type."""
     names, formats, offsets = [], [], []
+    record_names = cast(tuple[str, ...], DETECTION_DTYPE.names)
+    record_fields = cast(Mapping[str, tuple[np.dtype[Any], int]], DETECTION_DTYPE.fields)
     for name, (first, count) in runs.items():
-        at = DETECTION_DTYPE.names.index(first)
-        fields = [DETECTION_DTYPE.fields[f] for f in DETECTION_DTYPE.names[at:at + count]]
+        at = record_names.index(first)
+        fields = [record_fields[f] for f in record_names[at:at + count]]
         size = fields[0][0].itemsize
         if len({f[0].itemsize for f in fields}) != 1 or any(f[1] != fields[0][1] + i * size
                                                             for i, f in enumerate(fields)):
-            raise AssertionError(f"{name}: fields {DETECTION_DTYPE.names[at:at + count]} are not one run")
+            raise AssertionError(f"{name}: fields {record_names[at:at + count]} are not one run")
         names.append(name)
         formats.append((fields[0][0] if fields[0][0].kind == "f" else np.dtype("u1"), (count,)))
         offsets.append(fields[0][1])

@@ -27,7 +27,8 @@ _EPS = 1e-9
 
 
 @numba.njit(cache=True)
-def _segment_hits_box(ox, oy, px, py, cx, cy, ux, uy, a, b):
+def _segment_hits_box(ox: float, oy: float, px: float, py: float, cx: float, cy: float, ux: float, uy: float, a: float,
+                      b: float) -> bool:
     """Segment O→P crosses the box (centre c, unit axis u, half sizes a along u and b across): separating axes."""
     qx, qy = ox - cx, oy - cy
     rx, ry = px - cx, py - cy
@@ -42,7 +43,9 @@ def _segment_hits_box(ox, oy, px, py, cx, cy, ux, uy, a, b):
 
 
 @numba.njit(cache=True)
-def _three_lines(b0, b1, b2, x0, y0, p0x, p0y, p1x, p1y, p2x, p2y, cx, cy, ux, uy, a, b):
+def _three_lines(b0: bool, b1: bool, b2: bool, x0: float, y0: float, p0x: float, p0y: float, p1x: float, p1y: float,
+                 p2x: float, p2y: float, cx: float, cy: float, ux: float, uy: float, a: float,
+                 b: float) -> tuple[bool, bool, bool]:
     """The three sight lines from (x0, y0) already blocked, or-ed with whether this box blocks them."""
     b0 = b0 or _segment_hits_box(x0, y0, p0x, p0y, cx, cy, ux, uy, a, b)
     b1 = b1 or _segment_hits_box(x0, y0, p1x, p1y, cx, cy, ux, uy, a, b)
@@ -51,8 +54,11 @@ def _three_lines(b0, b1, b2, x0, y0, p0x, p0y, p1x, p1y, p2x, p2y, cx, cy, ux, u
 
 
 @numba.njit(cache=True)
-def _sight_lines_blocked(vv, jj, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, d, ox, oy, cars_present,
-                         occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B):
+def _sight_lines_blocked(vv: int, jj: int, tx: float, ty: float, ux: float, uy: float, thx: float, thy: float,
+                         trr: float, tcls: int, ddx: float, ddy: float, d: float, ox: np.ndarray, oy: np.ndarray,
+                         cars_present: np.ndarray, occ_x: np.ndarray, occ_y: np.ndarray, occ_ux: np.ndarray,
+                         occ_uy: np.ndarray, occ_a: np.ndarray, occ_b: np.ndarray, occ_r: np.ndarray,
+                         occ_kind: np.ndarray, occ_obj: np.ndarray, hides: np.ndarray, B: int) -> int:
     """How many of one target's three sight lines (centre, both outline edges) an occluder blocks (0..3)."""
     inv = 1.0 / max(d, _EPS)
     ex, ey = ddx * inv, ddy * inv
@@ -92,9 +98,15 @@ def _sight_lines_blocked(vv, jj, tx, ty, ux, uy, thx, thy, trr, tcls, ddx, ddy, 
 
 
 @numba.njit(cache=True)
-def visible_pairs(X, Y, UX, UY, present, cars_present, hx, hy, rr, cls, max_range, near, ox, oy, c, s,
-                  occ_x, occ_y, occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B, any_hides,
-                  realistic, n_cars, n_peds, nearby2, factor, range_offset, range_slope, range_reference, visible):
+def visible_pairs(X: np.ndarray, Y: np.ndarray, UX: np.ndarray, UY: np.ndarray, present: np.ndarray,
+                  cars_present: np.ndarray, hx: np.ndarray, hy: np.ndarray, rr: np.ndarray, cls: np.ndarray,
+                  max_range: np.ndarray, near: np.ndarray, ox: np.ndarray, oy: np.ndarray, c: np.ndarray, s: np.ndarray,
+                  occ_x: np.ndarray, occ_y: np.ndarray, occ_ux: np.ndarray, occ_uy: np.ndarray, occ_a: np.ndarray,
+                  occ_b: np.ndarray, occ_r: np.ndarray, occ_kind: np.ndarray, occ_obj: np.ndarray, hides: np.ndarray,
+                  B: int, any_hides: bool, realistic: bool, n_cars: int, n_peds: int, nearby2: float,
+                  factor: np.ndarray, range_offset: float, range_slope: float, range_reference: float,
+                  visible: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every (view v, object j) pair in range, present, not the observer and not hidden (fewer than three sight
     lines blocked), view after view, object after object: its index v·N + j, v, j, the offset in the observer's
     frame (x forward, y left), the distance, the sighting bits (PARTIAL if a sight line is blocked, DISTANT beyond the
@@ -150,7 +162,8 @@ def visible_pairs(X, Y, UX, UY, present, cars_present, hx, hy, rr, cls, max_rang
 
 
 @numba.njit(cache=True)
-def clip_lanes(lanes, len2, ox, oy, c, s, R, min_length):
+def clip_lanes(lanes: np.ndarray, len2: np.ndarray, ox: np.ndarray, oy: np.ndarray, c: np.ndarray, s: np.ndarray,
+               R: float, min_length: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each (view, lane) whose segment meets the circle of radius R about the observer for at least ``min_length``:
     view, lane, the clipped segment's ends in the observer's frame, PARTIAL if clipped, the point nearest the car,
     the clipped segment's squared length (≥ ε) and the nearest point's distance."""
@@ -192,7 +205,7 @@ def clip_lanes(lanes, len2, ox, oy, c, s, R, min_length):
 
 
 @numba.njit(cache=True)
-def _order_ends(a, b, e, f, g2):
+def _order_ends(a: float, b: float, e: float, f: float, g2: float) -> tuple[float, float, float, float, float, float]:
     """One segment's ends in order (nearer end first; equally far: rear end first, then the right end) and the point
     nearest the car."""
     gap = math.hypot(e, f) - math.hypot(a, b)
@@ -205,8 +218,10 @@ def _order_ends(a, b, e, f, g2):
 
 
 @numba.njit(cache=True)
-def lane_rows(lv, k, bits, g, noisy, keep, shift, ct, st, same, centre, size_y, n_views, lane_class, same_subtype,
-              opposing_subtype, edge_subtype):
+def lane_rows(lv: np.ndarray, k: np.ndarray, bits: np.ndarray, g: np.ndarray, noisy: bool, keep: np.ndarray,
+              shift: np.ndarray, ct: np.ndarray, st: np.ndarray, same: np.ndarray, centre: np.ndarray,
+              size_y: np.ndarray, n_views: int, lane_class: int, same_subtype: int, opposing_subtype: int,
+              edge_subtype: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The lane reports of ``clip_lanes``' segments ``g`` (kept ones only when ``noisy``: shifted sideways by
     ``shift`` along the segment's normal and turned by the angle of cos ``ct``, sin ``st`` about the point nearest
     the car), ends ordered by ``_order_ends``; all fields but the yaw, whose direction (gx, gy) it returns; and the
@@ -253,8 +268,10 @@ def lane_rows(lv, k, bits, g, noisy, keep, shift, ct, st, same, centre, size_y, 
 
 
 @numba.njit(cache=True)
-def pair_rows(kept, reported, true_class, xk, yk, size_factor, yaw_noise, v, j, bits, hx, hy, rr, yaw, oyaw, team,
-              n_cars, car):
+def pair_rows(kept: np.ndarray, reported: np.ndarray, true_class: np.ndarray, xk: np.ndarray, yk: np.ndarray,
+              size_factor: np.ndarray, yaw_noise: np.ndarray, v: np.ndarray, j: np.ndarray, bits: np.ndarray,
+              hx: np.ndarray, hy: np.ndarray, rr: np.ndarray, yaw: np.ndarray, oyaw: np.ndarray, team: np.ndarray,
+              n_cars: int, car: int) -> np.ndarray:
     """The reports of the kept (view, object) pairs: class as reported, position, size (× the size error), relative
     heading with its error and team relation (cars), sighting bits, the true object and class."""
     rows = np.zeros(len(kept), _DETECTION)
@@ -279,10 +296,13 @@ def pair_rows(kept, reported, true_class, xk, yk, size_factor, yaw_noise, v, j, 
 
 
 @numba.njit(cache=True)
-def lane_reports(lv, k, bits, g, noisy, realistic, uniform, u, n2, m, miss_rate, range_offset, range_slope,
-                 range_reference, lateral_uniform, angle_uniform, lateral_base, lateral_per_m2, angle_std,
-                 lane_heading, oyaw, centre, size_y, n_views, lane_class, same_subtype, opposing_subtype,
-                 edge_subtype):
+def lane_reports(lv: np.ndarray, k: np.ndarray, bits: np.ndarray, g: np.ndarray, noisy: bool, realistic: bool,
+                 uniform: bool, u: np.ndarray, n2: np.ndarray, m: float, miss_rate: float, range_offset: float,
+                 range_slope: float, range_reference: float, lateral_uniform: float, angle_uniform: float,
+                 lateral_base: float, lateral_per_m2: float, angle_std: float, lane_heading: np.ndarray,
+                 oyaw: np.ndarray, centre: np.ndarray, size_y: np.ndarray, n_views: int, lane_class: int,
+                 same_subtype: int, opposing_subtype: int,
+                 edge_subtype: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lane reports of ``clip_lanes``' segments in one call: when ``noisy`` each one missed (``u[0]``) at the
     lane class's rate (``miss_rate`` = ρ x its scale, x the range factor when ``realistic``), shifted and turned
     (from ``u[1:3]`` when ``uniform``, else the normal draws ``n2``), then ``lane_rows``, the yaw of each report's
@@ -322,10 +342,15 @@ UNIFORM_POSITION, GAUSSIAN_POSITION, POLAR_POSITION = 0, 1, 2     # ``pair_repor
 
 
 @numba.njit(cache=True)
-def pair_reports(at, v, j, xk, yk, dk, bits, mult, ck, noisy, realistic, confusions, position_model, uniform_yaw,
-                 u, pos, g, yu, m, rho, class_scale, confusion_rate, confusion_target, uniform_scale, random_std,
-                 radial_base, radial_per_m2, bearing_std, size_std, yaw_std, near_car_range, near_car_probability,
-                 distant, partial, seen, hx, hy, rr, yaw, oyaw, team, n_cars, car):
+def pair_reports(at: np.ndarray, v: np.ndarray, j: np.ndarray, xk: np.ndarray, yk: np.ndarray, dk: np.ndarray,
+                 bits: np.ndarray, mult: np.ndarray, ck: np.ndarray, noisy: bool, realistic: bool, confusions: bool,
+                 position_model: int, uniform_yaw: bool, u: np.ndarray, pos: np.ndarray, g: np.ndarray, yu: np.ndarray,
+                 m: float, rho: float, class_scale: np.ndarray, confusion_rate: np.ndarray,
+                 confusion_target: np.ndarray, uniform_scale: float, random_std: float, radial_base: float,
+                 radial_per_m2: float, bearing_std: float, size_std: float, yaw_std: float, near_car_range: float,
+                 near_car_probability: float, distant: int, partial: int, seen: np.ndarray, hx: np.ndarray,
+                 hy: np.ndarray, rr: np.ndarray, yaw: np.ndarray, oyaw: np.ndarray, team: np.ndarray, n_cars: int,
+                 car: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The reports of ``visible_pairs``' pairs in one call. When ``noisy``: each pair missed (``u[0]``) at its
     class's rate, confused (``u[1]``, ``realistic`` with ``confusions``) into its class's target, moved by the
     position error (``pos``: uniform draws for ``UNIFORM_POSITION``, normal ones otherwise), its size and heading
@@ -384,8 +409,10 @@ def pair_reports(at, v, j, xk, yk, dk, bits, mult, ck, noisy, realistic, confusi
 
 
 @numba.njit(cache=True)
-def dress_rows(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team, single_team, uniform_yaw, m,
-               size_std, yaw_std, pedestrian_radius, obstacle_half, car, pedestrian):
+def dress_rows(rows: np.ndarray, v: np.ndarray, g: np.ndarray, ur: np.ndarray, oyaw: np.ndarray, yaw: np.ndarray,
+               present: np.ndarray, half_length: np.ndarray, half_width: np.ndarray, team: np.ndarray,
+               single_team: bool, uniform_yaw: bool, m: float, size_std: float, yaw_std: float,
+               pedestrian_radius: float, obstacle_half: float, car: int, pedestrian: int) -> None:
     """Give reports that no object of their class stands behind (false positives, confusions) what a real report of
     that class has (``DrivingPerceiver._dressing`` says how), from the caller's draws: ``g`` (2, K) normal (size and
     heading error), ``ur`` (rows, cars) uniform — per car report: the other car it copies, the car type when there
@@ -414,7 +441,7 @@ def dress_rows(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team
         if own and pick >= np.searchsorted(present_cars, vc):
             pick += 1
         none = choices <= 0
-        other = present_cars[min(pick, max(P - 1, 0))] if P else 0
+        other = present_cars[min(pick, max(P - 1, 0))] if P else 0  # type: ignore[call-overload]  # np.int64 pick
         src = np.int64(ur[1, c] * len(half_length)) if none else other
         r.size_x = 2 * half_length[src] * f
         r.size_y = 2 * half_width[src] * f
@@ -429,9 +456,14 @@ def dress_rows(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team
 
 
 @numba.njit(cache=True)
-def place_made_up(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team, single_team, uniform_yaw, m,
-                  size_std, yaw_std, pedestrian_radius, obstacle_half, car, pedestrian, ox, oy, c, s, occ_x, occ_y,
-                  occ_ux, occ_uy, occ_a, occ_b, occ_r, occ_kind, occ_obj, hides, B, any_hides, class_max, partial):
+def place_made_up(rows: np.ndarray, v: np.ndarray, g: np.ndarray, ur: np.ndarray, oyaw: np.ndarray, yaw: np.ndarray,
+                  present: np.ndarray, half_length: np.ndarray, half_width: np.ndarray, team: np.ndarray,
+                  single_team: bool, uniform_yaw: bool, m: float, size_std: float, yaw_std: float,
+                  pedestrian_radius: float, obstacle_half: float, car: int, pedestrian: int, ox: np.ndarray,
+                  oy: np.ndarray, c: np.ndarray, s: np.ndarray, occ_x: np.ndarray, occ_y: np.ndarray,
+                  occ_ux: np.ndarray, occ_uy: np.ndarray, occ_a: np.ndarray, occ_b: np.ndarray, occ_r: np.ndarray,
+                  occ_kind: np.ndarray, occ_obj: np.ndarray, hides: np.ndarray, B: int, any_hides: bool,
+                  class_max: np.ndarray, partial: int) -> tuple[np.ndarray, np.ndarray]:
     """Made-up reports dressed (``dress_rows``, same draws), then only those a real object of their class could be
     seen at (within its range, fewer than three sight lines blocked), PARTIAL when any is: the rows and their views."""
     dress_rows(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, team, single_team, uniform_yaw, m,
@@ -468,7 +500,8 @@ def place_made_up(rows, v, g, ur, oyaw, yaw, present, half_length, half_width, t
 
 
 @numba.njit(cache=True)
-def uniform_false_positives(counts, u, classes, max_range, unknown):
+def uniform_false_positives(counts: np.ndarray, u: np.ndarray, classes: np.ndarray, max_range: np.ndarray,
+                            unknown: int) -> tuple[np.ndarray, np.ndarray]:
     """The uniform false positives of each view (``counts[v]`` chances that came up): class ``classes[u[0]]`` (an
     ``unknown`` one is dropped), distance ``u[1]`` x the class's ``max_range``, bearing from ``u[2]`` all round; the
     rows (class and position only) and their views."""
@@ -505,8 +538,10 @@ def uniform_false_positives(counts, u, classes, max_range, unknown):
 
 # -- records (DETECTION_DTYPE rows written field by field; ``rows`` come zeroed) -------------------------------------
 @numba.njit(cache=True)
-def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy, m, speed_std, yaw_rate_std,
-              goal_std, half_length, half_width, crashed, finished, self_class):
+def self_rows(rows: np.ndarray, ego: np.ndarray, goal_x: np.ndarray, goal_y: np.ndarray, ox: np.ndarray, oy: np.ndarray,
+              c: np.ndarray, s: np.ndarray, speed: np.ndarray, yaw_rate: np.ndarray, g: np.ndarray, noisy: bool,
+              m: float, speed_std: float, yaw_rate_std: float, goal_std: float, half_length: np.ndarray,
+              half_width: np.ndarray, crashed: np.ndarray, finished: np.ndarray, self_class: int) -> None:
     """One SELF row per car (goal in its own frame, speed and yaw rate, with the self-state noise ``g`` (4, V) when
     ``noisy``) and its ego values (float32 EGO_COLUMNS)."""
     for v in range(len(ox)):
@@ -534,7 +569,8 @@ def self_rows(rows, ego, goal_x, goal_y, ox, oy, c, s, speed, yaw_rate, g, noisy
 
 
 @numba.njit(cache=True)
-def sighting_bits(rows, distance, offsets, class_near, nearby2, car, pedestrian, obstacle, distant, partial, nearby):
+def sighting_bits(rows: np.ndarray, distance: np.ndarray, offsets: np.ndarray, class_near: np.ndarray, nearby2: float,
+                  car: int, pedestrian: int, obstacle: int, distant: int, partial: int, nearby: int) -> None:
     """DISTANT and NEARBY of the sorted reports from the reports themselves, by one rule for real and made-up ones:
     DISTANT beyond the class's near range, NEARBY a pedestrian within the nearby distance of a reported car or
     obstacle of the same view (PARTIAL kept)."""
@@ -561,8 +597,10 @@ def sighting_bits(rows, distance, offsets, class_near, nearby2, car, pedestrian,
 
 
 @numba.njit(cache=True)
-def finish_rows(rows, view, distance, n_views, self_class, class_near, nearby2, car, pedestrian, obstacle, distant,
-                partial, nearby, z, separation, prior_logit, calibrated):
+def finish_rows(rows: np.ndarray, view: np.ndarray, distance: np.ndarray, n_views: int, self_class: int,
+                class_near: np.ndarray, nearby2: float, car: int, pedestrian: int, obstacle: int, distant: int,
+                partial: int, nearby: int, z: np.ndarray, separation: float, prior_logit: np.ndarray,
+                calibrated: bool) -> tuple[np.ndarray, np.ndarray]:
     """The frame's last pass in one call: rows sorted view after view (``sort_by_view``), their DISTANT and NEARBY
     bits (``sighting_bits``) and their confidence: the calibrated detector score of docs/perception.md from the
     standard normal draws ``z`` (one per sorted row, drawn by the caller), 1 for SELF rows or when not

@@ -29,6 +29,10 @@ EGO_COLUMNS = ("speed", "yaw_rate", "goal_x", "goal_y", "length", "width", "cras
 EDGE_WIDTH = 0.15            # m: a road edge line's painted width (its report's size_y)
 _EPS = 1e-9
 _RAW = np.dtype((np.void, DETECTION_DTYPE.itemsize))
+_Part = tuple[np.ndarray, np.ndarray]      # report rows and each row's view
+# What ``kernels.dress_rows`` takes after the rows and their views (``DrivingPerceiver._dressing``).
+_Dressing = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                  bool, bool, float, float, float, float, float]
 
 
 @dataclass
@@ -84,7 +88,7 @@ class DrivingPerception:
         return len(self.offsets) - 1
 
 
-def _wrap(angle):
+def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
@@ -93,7 +97,7 @@ class DrivingPerceiver:
 
     def __init__(self, scene: DrivingScene, params: DrivingPerceptionParams) -> None:
         self.scene, self.params = scene, params
-        n, P, O = scene.n_cars, scene.n_pedestrians, len(scene.obstacle_xy)
+        n, P, O = scene.n_cars, scene.n_pedestrians, len(scene.obstacle_xy)  # noqa: E741 - counts named as in the docs
         self.n, self.P, self.O = n, P, O
         N = self.N = n + P + O
         self.cls = np.concatenate((np.full(n, _CAR), np.full(P, _PED), np.full(O, _OBST))).astype(np.uint8)
@@ -235,7 +239,7 @@ class DrivingPerceiver:
         return self._assemble(parts, visible.reshape(n, N), seen.reshape(n, N), lanes_seen, ego, rng)
 
     # -- made-up reports ---------------------------------------------------------------------------------------------
-    def _dressing(self, rows, oyaw, st: DrivingState, rng) -> tuple:
+    def _dressing(self, rows: np.ndarray, oyaw: np.ndarray, st: DrivingState, rng: np.random.Generator) -> _Dressing:
         """The draws and scene arrays ``kernels.dress_rows`` needs to dress ``rows``: reports that no object of
         their class stands behind (false positives, confusions) get what a real report of that class has — a car
         the outline, heading (relative, with the heading error) and team of a randomly chosen other car in the
@@ -250,14 +254,15 @@ class DrivingPerceiver:
                 p.noise_magnitude, p.position.size_std, p.position.yaw_std, self.scene.pedestrian_radius,
                 self.scene.obstacle_half)
 
-    def _uniform_false_positives(self, rng):
+    def _uniform_false_positives(self, rng: np.random.Generator) -> _Part:
         """``trials`` chances per view, uniform in distance up to ``max_distance`` (and the class's range) and in
         bearing all round; ``none`` draws nothing."""
         counts = rng.binomial(self.params.false_positives.trials, self._fp_probability, size=self.n)
         u = rng.random((3, int(counts.sum())))
         return kernels.uniform_false_positives(counts, u, self._fp_classes, self._fp_range, _UNKNOWN)
 
-    def _near_car_pedestrians(self, v, cx, cy, yaw, hx, hy, rng):
+    def _near_car_pedestrians(self, v: np.ndarray, cx: np.ndarray, cy: np.ndarray, yaw: np.ndarray, hx: np.ndarray,
+                              hy: np.ndarray, rng: np.random.Generator) -> _Part:
         """Rule 4 of the paper for driving: a pedestrian reported next to a nearby car (the original: 10ρ per car
         seen within 25 m), just outside the car's outline in a random direction."""
         K = len(v)
@@ -270,7 +275,8 @@ class DrivingPerceiver:
         rows["x"], rows["y"] = cx + reach * np.cos(phi), cy + reach * np.sin(phi)
         return rows, v
 
-    def _place_made_up(self, parts, ox, oy, oyaw, c, s, st, rng):
+    def _place_made_up(self, parts: list[_Part], ox: np.ndarray, oy: np.ndarray, oyaw: np.ndarray, c: np.ndarray,
+                       s: np.ndarray, st: DrivingState, rng: np.random.Generator) -> _Part | None:
         """Dress the false positives, then keep only those a real object of their class could be seen at (within
         its range, not hidden) with the PARTIAL bit the same occlusion test gives a real one."""
         rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
@@ -283,7 +289,8 @@ class DrivingPerceiver:
                                      *self._occluders, self.hides, self.B, self._any_hides, self.class_max, _PARTIAL)
 
     # -- lanes -------------------------------------------------------------------------------------------------------
-    def _lanes(self, ox, oy, oyaw, c, s, rng):
+    def _lanes(self, ox: np.ndarray, oy: np.ndarray, oyaw: np.ndarray, c: np.ndarray, s: np.ndarray,
+               rng: np.random.Generator) -> tuple[_Part, np.ndarray]:
         """Lane centres and road edges within the lane class's range, as segments in the observer's frame."""
         p = self.params
         L, V = len(self.lanes), self.n
@@ -309,7 +316,8 @@ class DrivingPerceiver:
         return (rows, views), lanes_seen
 
     # -- the observer itself -------------------------------------------------------------------------------------------
-    def _self_rows(self, st: DrivingState, ox, oy, c, s, rng):
+    def _self_rows(self, st: DrivingState, ox: np.ndarray, oy: np.ndarray, c: np.ndarray, s: np.ndarray,
+                   rng: np.random.Generator) -> tuple[_Part, np.ndarray]:
         """One SELF row per car: what it knows of itself — its destination in its own frame (navigation), speed and
         yaw rate (odometry) as ``line_start`` (x: speed m/s, y: yaw rate rad/s), its outline, crashed (``fallen``)
         and finished (``penalized``). Never a map-frame pose."""
@@ -325,7 +333,8 @@ class DrivingPerceiver:
         return (rows, np.arange(V)), ego
 
     # -- assembly ----------------------------------------------------------------------------------------------------
-    def _assemble(self, parts, visible, seen, lanes_seen, ego, rng) -> DrivingPerception:
+    def _assemble(self, parts: list[_Part], visible: np.ndarray, seen: np.ndarray, lanes_seen: np.ndarray,
+                  ego: np.ndarray, rng: np.random.Generator) -> DrivingPerception:
         rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
         view = np.concatenate([v for _, v in parts]).astype(np.int64)
         distance = np.hypot(rows["x"], rows["y"]).astype(np.float32)

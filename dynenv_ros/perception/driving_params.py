@@ -195,7 +195,7 @@ class DrivingPerceptionParams:
         return self.miss.base * self.noise_magnitude
 
 
-def _class_list(values: Any, where: str, allowed: Mapping[str, ObjectClass] = CLASS_NAMES) -> tuple:
+def _class_list(values: Any, where: str, allowed: Mapping[str, ObjectClass] = CLASS_NAMES) -> tuple[ObjectClass, ...]:
     if not isinstance(values, (list, tuple)):
         raise ValueError(f"{where} must be a list of class names, got {values!r}")
     return tuple(parse_class(c, where, allowed) for c in values)

@@ -42,14 +42,15 @@ _TAU = 2.0 * math.pi
 
 
 @numba.njit(cache=True, inline="always")
-def _wrap(a):
+def _wrap(a: float) -> float:
     """An angle in [−π, π)."""
     return (a + math.pi) % _TAU - math.pi
 
 
 @numba.njit(cache=True)
-def _step_frames(pose, landmarks, events, penalized, prev, err, var, flipped, cue_age, z, u, q, out_est, out_var,
-                 out_flip):
+def _step_frames(pose: np.ndarray, landmarks: np.ndarray, events: np.ndarray, penalized: np.ndarray, prev: np.ndarray,
+                 err: np.ndarray, var: np.ndarray, flipped: np.ndarray, cue_age: np.ndarray, z: np.ndarray,
+                 u: np.ndarray, q: np.ndarray, out_est: np.ndarray, out_var: np.ndarray, out_flip: np.ndarray) -> None:
     """The rules of the module docstring for F frames of n robots. pose (F, n, 3) true; landmarks (F, n) int;
     events (F, n) flags; penalized (F, n) bool; prev (n, 3) the previous frame's true pose, err and var (n, 3),
     flipped (n,), cue_age (n,) updated in place; z (F, n, 4, 3) standard normals (odometry, fall, reset, sighting),
@@ -192,7 +193,8 @@ class Localization:
     @property
     def estimate(self) -> np.ndarray:
         """(n, 3) x, y, yaw estimated at the last frame, field frame."""
-        return self.estimates[-1]
+        estimate: np.ndarray = self.estimates[-1]
+        return estimate
 
     @property
     def covariance(self) -> np.ndarray:
@@ -207,10 +209,11 @@ class Localization:
     @property
     def flipped(self) -> np.ndarray:
         """(n,) whether each estimate tracks the mirror pose (−x, −y, yaw + π) at the last frame."""
-        return self.flips[-1]
+        flipped: np.ndarray = self.flips[-1]
+        return flipped
 
     def error(self, pose: np.ndarray) -> np.ndarray:
         """(n, 3) the estimate minus ``pose`` (the true pose at the last frame), yaw wrapped to [−π, π)."""
-        e = self.estimate - np.asarray(pose, float)
+        e: np.ndarray = self.estimate - np.asarray(pose, float)
         e[:, 2] = _wrapped(e[:, 2])
         return e

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from types import ModuleType
+from typing import Any, cast
 
 import numpy as np
 
@@ -32,6 +34,7 @@ _DISTANT, _PARTIAL, _NEARBY = int(Sighting.DISTANT), int(Sighting.PARTIAL), int(
 CIRCLE_SAMPLES = 36
 MIN_LINE_LENGTH = 0.1        # m of a line that must be in view to detect it
 _EPS = 1e-9
+_Part = tuple[np.ndarray, np.ndarray]      # detection rows and each row's view
 
 
 @dataclass
@@ -50,7 +53,7 @@ class Perception:
         return len(self.offsets) - 1
 
 
-def _kernels():
+def _kernels() -> ModuleType:
     """The compiled kernels (``soccer_kernels``), imported and compiled (or loaded from numba's cache) on the first
     ``Perceiver``: importing numba costs ≈ 1 s and ≈ 80 MB, which the physics-and-rules path never pays."""
     global _KERNELS
@@ -61,7 +64,7 @@ def _kernels():
     return _KERNELS
 
 
-_KERNELS = None
+_KERNELS: ModuleType | None = None
 
 
 def missed_objects(visible: np.ndarray, detections: np.ndarray, object_ids: np.ndarray) -> np.ndarray:
@@ -277,9 +280,10 @@ class Perceiver:
         within the occluder radius of the sight line through it (``band``, DynEnv's rule, where only robots in the
         field of view occlude). Occluder quantities are (occluders, views), gathered per candidate's view."""
         occlusion = self.params.occlusion
-        return self._kernels.hidden(at, j, lay.pair_view, cx, cy, d, bearing, in_view, lay.occluder_pair,
+        hidden: np.ndarray = self._kernels.hidden(at, j, lay.pair_view, cx, cy, d, bearing, in_view, lay.occluder_pair,
                                     lay.occluder_not_observer, lay.occluder_object.ravel(),
                                     occlusion.model == "band", occlusion.occluder_radius)
+        return hidden
 
     def _nearby(self, frames: SceneFrames, lay: "_Layout", at: np.ndarray) -> np.ndarray:
         """For the pairs ``at``: another moving object (not the observer) within ``nearby_distance`` of the object.
@@ -296,7 +300,8 @@ class Perceiver:
                 out=close[:, :-1])
         close.ravel()[lay.close_self] = False                             # an object is not its own neighbour
         count = close.sum(axis=1)                                         # (F, N)
-        return count.ravel()[lay.pair_source[at]] > close.ravel()[lay.observer_closeness[at]]
+        nearby: np.ndarray = count.ravel()[lay.pair_source[at]] > close.ravel()[lay.observer_closeness[at]]
+        return nearby
 
     def _confuse(self, cls: np.ndarray, distant: np.ndarray, keep: np.ndarray, mult: np.ndarray,
                  u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -316,7 +321,8 @@ class Perceiver:
             confused |= hit
         return reported, confused
 
-    def _position_noise(self, x, y, d, mult, rng):
+    def _position_noise(self, x: np.ndarray, y: np.ndarray, d: np.ndarray, mult: np.ndarray,
+                        rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Noisy positions, and the (2, n) standard normals of the size and yaw errors, which come next in the
         draw order (polar model: drawn in the same call)."""
         p, m = self.params.position, self.params.noise_magnitude
@@ -328,7 +334,8 @@ class Perceiver:
         noisy = self._polar_point_noise(np.array((x, y)), g[:2], d)
         return noisy[0], noisy[1], g[2:]
 
-    def _point_rows(self, v, j, src, cls, x, y, context: "_ViewContext", size_factor, yaw_noise):
+    def _point_rows(self, v: np.ndarray, j: np.ndarray, src: np.ndarray, cls: np.ndarray, x: np.ndarray,
+                    y: np.ndarray, context: "_ViewContext", size_factor: np.ndarray, yaw_noise: np.ndarray) -> _Part:
         """Rows of the detected point objects with their own attributes (confused ones are re-dressed later);
         ``src`` is each pair's index in the frames' flattened arrays."""
         obj, frames = self.objects, context.frames
@@ -348,7 +355,7 @@ class Perceiver:
         rows["true_class"] = obj.class_id[j]
         return rows, v
 
-    def _made_up_rows(self, part, context: "_ViewContext", rng: np.random.Generator):
+    def _made_up_rows(self, part: _Part, context: "_ViewContext", rng: np.random.Generator) -> _Part:
         """Give reports that no object of their class stands behind (false positives, confusions) the attributes
         a real detection of that class has: its class's size with the same size error, and for robots the heading,
         team and state of a randomly chosen other robot of the game (so neither the marginal team mix nor the
@@ -394,7 +401,7 @@ class Perceiver:
                 rows["subtype"][at] = subtypes[(rng.random(len(at)) * len(subtypes)).astype(np.intp)]
         return rows, v
 
-    def _feet_balls(self, v: np.ndarray, rx: np.ndarray, ry: np.ndarray, rng: np.random.Generator):
+    def _feet_balls(self, v: np.ndarray, rx: np.ndarray, ry: np.ndarray, rng: np.random.Generator) -> _Part:
         """Rule 4: a ball seen at the feet of a nearby robot (DynEnv: 10ρ per robot within 2.5 m)."""
         rows = np.zeros(len(v), DETECTION_DTYPE)
         rows["yaw"] = np.nan
@@ -408,7 +415,7 @@ class Perceiver:
         rows["y"] = ry - ry / dist * toward + rx / dist * side
         return rows, v
 
-    def _false_positives(self, lay: "_Layout", rng: np.random.Generator):
+    def _false_positives(self, lay: "_Layout", rng: np.random.Generator) -> _Part:
         """Rule 4, uniform part: ``trials`` chances per frame, anywhere a detection of the drawn class could be —
         uniform in distance up to ``max_distance`` (and the class's range), uniform in bearing across the view
         widened by the class's reach asin(radius / max(distance, 2·radius)), as partially seen real objects are."""
@@ -431,7 +438,8 @@ class Perceiver:
         rows["true_id"] = -1
         return rows, v
 
-    def _assemble(self, parts, lay: "_Layout", seen, lines_seen, visible, rng: np.random.Generator) -> Perception:
+    def _assemble(self, parts: list[_Part], lay: "_Layout", seen: np.ndarray, lines_seen: np.ndarray,
+                  visible: np.ndarray, rng: np.random.Generator) -> Perception:
         """All rows of all views, each view's rows nearest first, with the sighting bits and confidences every
         report gets by the same rule whether it is real, confused or false."""
         rows, view = _concatenate(parts)
@@ -472,7 +480,8 @@ class Perceiver:
         rows["confidence"] = 1.0 / (1.0 + np.exp(minus_logit))
 
     # -- lines and the centre circle ------------------------------------------------------------------------------
-    def _line_rows(self, lay: "_Layout", ox, oy, c, s, rng):
+    def _line_rows(self, lay: "_Layout", ox: np.ndarray, oy: np.ndarray, c: np.ndarray, s: np.ndarray,
+                   rng: np.random.Generator) -> tuple[_Part, np.ndarray]:
         """Field lines clipped to the view wedge and range; DynEnv's endpoint noise and miss rule.
 
         Every (view, line endpoint) is one entry of flat arrays (``_Layout.line_view``: all first endpoints, then
@@ -523,19 +532,22 @@ class Perceiver:
         b = np.arctan2(xy[1], xy[0]) + g[1] * m * p.bearing_std
         return np.array((r * np.cos(b), r * np.sin(b)))
 
-    def _circle_rim_in_view(self, lay: "_Layout", fx, fy, c, s) -> np.ndarray:
+    def _circle_rim_in_view(self, lay: "_Layout", fx: np.ndarray, fy: np.ndarray, c: np.ndarray,
+                            s: np.ndarray) -> np.ndarray:
         """(V,) how many rim samples of the circle lie in the view wedge and range. (view, sample) entries are
         flat (``_Layout.rim_view``), per-view values gathered."""
         kern = self._kernels
         px, py, in_range = kern.rim_points(fx, fy, lay.rim_circle, lay.rim_observer, lay.rim_x, lay.rim_y,
                                            lay.rim_view, c, s, self.params.classes[ObjectClass.CENTER_CIRCLE].max_range)
-        return kern.rim_count(np.arctan2(py, px), in_range, self.params.field_of_view / 2, CIRCLE_SAMPLES)
+        count: np.ndarray = kern.rim_count(np.arctan2(py, px), in_range, self.params.field_of_view / 2, CIRCLE_SAMPLES)
+        return count
 
 
 _RAW = np.dtype((np.void, DETECTION_DTYPE.itemsize))
 # Rows as runs of fields (x, y | the line's ends), each written with one numpy call.
+_FIELDS = cast(dict[str, tuple[Any, int]], DETECTION_DTYPE.fields)     # (dtype, offset) by name
 _ROW_RUNS = np.dtype({"names": ["position", "line"], "formats": [("<f4", (2,)), ("<f4", (4,))],
-                      "offsets": [DETECTION_DTYPE.fields["x"][1], DETECTION_DTYPE.fields["line_start_x"][1]],
+                      "offsets": [_FIELDS["x"][1], _FIELDS["line_start_x"][1]],
                       "itemsize": DETECTION_DTYPE.itemsize})
 
 
@@ -545,7 +557,7 @@ def _take(part: tuple[np.ndarray, np.ndarray], index: np.ndarray) -> tuple[np.nd
     return rows.view(_RAW)[index].view(DETECTION_DTYPE), views[index]
 
 
-def _concatenate(parts):
+def _concatenate(parts: list[_Part]) -> _Part:
     """(rows, views) parts → one (rows, views). As raw records: numpy's structured concatenate re-promotes every
     field (slow for small parts)."""
     rows = np.concatenate([r.view(_RAW) for r, _ in parts]).view(DETECTION_DTYPE)
@@ -621,12 +633,15 @@ class _Layout:
         F, D = int(frame.max(initial=-1)) + 1, len(dynamic)
         f_, k_, j_ = np.meshgrid(np.arange(F), np.arange(D), np.arange(N), indexing="ij")
         close_self = (f_ * (D + 1) + k_) * N + dynamic[k_]
-        rim = {"rim_view": None, "rim_circle": None, "rim_observer": None, "rim_x": None, "rim_y": None}
+        rim_view: np.ndarray | None = None
+        rim_circle: np.ndarray | None = None
+        rim_observer: np.ndarray | None = None
+        rim_x: np.ndarray | None = None
+        rim_y: np.ndarray | None = None
         if circle is not None:
             rim_view = np.repeat(views, CIRCLE_SAMPLES)
-            rim = {"rim_view": rim_view, "rim_circle": frame[rim_view] * N + circle,
-                   "rim_observer": observer_source[rim_view], "rim_x": np.tile(perceiver.rim_offsets[:, 0], V),
-                   "rim_y": np.tile(perceiver.rim_offsets[:, 1], V)}
+            rim_circle, rim_observer = frame[rim_view] * N + circle, observer_source[rim_view]
+            rim_x, rim_y = np.tile(perceiver.rim_offsets[:, 0], V), np.tile(perceiver.rim_offsets[:, 1], V)
         return cls(frame=frame, observer=observer, views=views, view_starts=np.arange(V + 1), pair_view=v,
                    pair_object=j, pair_source=frame[v] * N + j, observer_source=observer_source,
                    observer_of_pair=observer_source[v], own_pair=views * N + observer,
@@ -636,7 +651,8 @@ class _Layout:
                    occluder_object=k[:, None], occluder_not_observer=k[:, None] != observer[None, :],
                    observer_closeness=(frame[v] * (len(dynamic) + 1) + row[observer[v]]) * N + j,
                    close_first=(f_ * N + dynamic[k_]).ravel(), close_second=(f_ * N + j_).ravel(),
-                   close_self=close_self[:, np.arange(D), dynamic].ravel(), **rim,
+                   close_self=close_self[:, np.arange(D), dynamic].ravel(), rim_view=rim_view,
+                   rim_circle=rim_circle, rim_observer=rim_observer, rim_x=rim_x, rim_y=rim_y,
                    line_view=np.tile(np.repeat(views, len(lines)), 2),
                    line_x=np.concatenate((np.tile(lines[:, 0], V), np.tile(lines[:, 2], V))),
                    line_y=np.concatenate((np.tile(lines[:, 1], V), np.tile(lines[:, 3], V))))

@@ -305,7 +305,7 @@ def parse_class_sections(values: Any, cls: type, allowed: Mapping[str, ObjectCla
             for name, v in values.items()}
 
 
-def parse_confusions(values: Any, cls: type, allowed: Mapping[str, ObjectClass]) -> tuple:
+def parse_confusions(values: Any, cls: type, allowed: Mapping[str, ObjectClass]) -> tuple[Any, ...]:
     """The ``confusions`` setting: a list of ``cls`` rules whose ``source`` and ``target`` name classes."""
     rules = []
     for i, rule in enumerate(values or ()):

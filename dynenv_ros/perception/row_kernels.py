@@ -11,7 +11,8 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def sort_by_view(rows, view, distance_bits, n_views, first_class):
+def sort_by_view(rows: np.ndarray, view: np.ndarray, distance_bits: np.ndarray, n_views: int,
+                 first_class: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows view after view, each view's rows of ``first_class`` first (driving's SELF row; -1: none), then
     nearest first, stably; the order taken and each view's first row (``offsets``, n_views + 1). The bits of a
     non-negative float32 distance order as the distance does, so one integer key sorts by both."""
@@ -36,7 +37,7 @@ def sort_by_view(rows, view, distance_bits, n_views, first_class):
 
 
 @numba.njit(cache=True)
-def clipped_features(rows, bound):
+def clipped_features(rows: np.ndarray, bound: float) -> np.ndarray:
     """``detections.as_features(rows)`` clipped to ±``bound``, in one pass (a dozen numpy calls there): the columns
     of ``detections.FEATURE_COLUMNS``, yaw as cos/sin (0, 0 where undefined; taken in float64 and rounded, so within
     one float32 ulp of numpy's float32 cos/sin), the low three sighting bits as 0/1."""

@@ -14,6 +14,7 @@ physics-and-rules path. The first call of each kernel compiles it (or loads it f
 from __future__ import annotations
 
 import math
+from typing import Any, TypeVar
 
 import numba
 import numpy as np
@@ -22,22 +23,24 @@ from dynenv_ros.perception.detections import DETECTION_DTYPE as _DETECTION
 from dynenv_ros.perception.row_kernels import sort_by_view
 
 _EPS = 1e-9
+_R = TypeVar("_R", float, np.floating[Any])     # a Python or a numpy float (for mypy; numba types each call)
 
 
 @numba.njit(cache=True, inline="always")
-def _maximum(a, b):
+def _maximum(a: _R, b: _R) -> _R:
     """``np.maximum`` to the bit: NaN if either is, and the second operand of equal ones (−0.0, 0.0 → 0.0)."""
     return a if (a > b or a != a) else b
 
 
 @numba.njit(cache=True, inline="always")
-def _minimum(a, b):
+def _minimum(a: _R, b: _R) -> _R:
     """``np.minimum`` to the bit (see ``_maximum``)."""
     return a if (a < b or a != a) else b
 
 
 @numba.njit(cache=True)
-def line_clip(line_x, line_y, lv, ox, oy, c, s, half_sin, half_cos, line_max, finite_range):
+def line_clip(line_x: np.ndarray, line_y: np.ndarray, lv: np.ndarray, ox: np.ndarray, oy: np.ndarray, c: np.ndarray,
+              s: np.ndarray, half_sin: float, half_cos: float, line_max: float, finite_range: bool) -> np.ndarray:
     """Every (view, line) of ``_Layout``'s endpoint tables (first endpoints, then second ones) in the camera frame
     and clipped to the view wedge (and range): rows ax, ay, ex, ey (first end and direction) and lo, hi (the
     clipped part's bounds along it)."""
@@ -84,7 +87,8 @@ def line_clip(line_x, line_y, lv, ox, oy, c, s, half_sin, half_cos, line_max, fi
 
 
 @numba.njit(cache=True)
-def line_visible(clip, length, lv, L, min_length, partial):
+def line_visible(clip: np.ndarray, length: np.ndarray, lv: np.ndarray, L: int, min_length: float,
+                 partial: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The (view, line) pairs with at least ``min_length`` in view (``length``: numpy's hypot of the direction):
     their view, line, clipped ends as (coordinate, start/end, pair) and PARTIAL if clipped."""
     VL = clip.shape[1]
@@ -113,7 +117,8 @@ def line_visible(clip, length, lv, L, min_length, partial):
 
 
 @numba.njit(cache=True)
-def line_miss(dist, bits, near, realistic, range_offset, range_slope, rho_scale):
+def line_miss(dist: np.ndarray, bits: np.ndarray, near: float, realistic: bool, range_offset: float, range_slope: float,
+              rho_scale: float) -> tuple[np.ndarray, np.ndarray]:
     """DISTANT added to ``bits`` (the farther end beyond ``near``); the miss multipliers (2, K) of both ends and the
     miss probability of each line."""
     K = len(bits)
@@ -131,7 +136,8 @@ def line_miss(dist, bits, near, realistic, range_offset, range_slope, rho_scale)
 
 
 @numba.njit(cache=True)
-def line_rows(ends, reach, kept, v, k, bits, n_views, line_class):
+def line_rows(ends: np.ndarray, reach: np.ndarray, kept: np.ndarray, v: np.ndarray, k: np.ndarray, bits: np.ndarray,
+              n_views: int, line_class: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The reports of lines ``kept`` (indices into ``ends`` (coordinate, start/end, K) and ``reach``, the ends'
     distances): nearer end first (ties within 1e-6: the right end first), the point nearest the camera, length;
     all fields but the yaw, whose direction (ex, ey) it returns; each report's view and the count per view."""
@@ -165,8 +171,9 @@ def line_rows(ends, reach, kept, v, k, bits, n_views, line_class):
 
 
 @numba.njit(cache=True)
-def hidden(at, j, pair_view, cx, cy, d, bearing, in_view, occluder_pair, not_observer, occluder_object, band,
-           radius):
+def hidden(at: np.ndarray, j: np.ndarray, pair_view: np.ndarray, cx: np.ndarray, cy: np.ndarray, d: np.ndarray,
+           bearing: np.ndarray, in_view: np.ndarray, occluder_pair: np.ndarray, not_observer: np.ndarray,
+           occluder_object: np.ndarray, band: bool, radius: float) -> np.ndarray:
     """For the candidate pairs ``at`` (objects ``j``): hidden behind a robot in front of the observer (``band``:
     DynEnv's rule, one in the view too) — farther than it and in its shadow cone, or (``band``) within ``radius``
     of the sight line through it. Nothing hides itself."""
@@ -206,7 +213,9 @@ def hidden(at, j, pair_view, cx, cy, d, bearing, in_view, occluder_pair, not_obs
 
 
 @numba.njit(cache=True)
-def rim_points(fx, fy, rim_circle, rim_observer, rim_x, rim_y, rim_view, c, s, limit):
+def rim_points(fx: np.ndarray, fy: np.ndarray, rim_circle: np.ndarray, rim_observer: np.ndarray, rim_x: np.ndarray,
+               rim_y: np.ndarray, rim_view: np.ndarray, c: np.ndarray, s: np.ndarray,
+               limit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The circle's rim samples of every view in the camera frame (px, py) and whether each is within range."""
     n = len(rim_view)
     px, py = np.empty(n), np.empty(n)
@@ -222,7 +231,7 @@ def rim_points(fx, fy, rim_circle, rim_observer, rim_x, rim_y, rim_view, c, s, l
 
 
 @numba.njit(cache=True)
-def rim_count(angle, in_range, half, samples):
+def rim_count(angle: np.ndarray, in_range: np.ndarray, half: float, samples: int) -> np.ndarray:
     """Per view: how many rim samples are in range with |angle| within ``half``."""
     V = len(angle) // samples
     out = np.zeros(V, np.int64)
@@ -263,7 +272,8 @@ __all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_by_view"
 
 
 @numba.njit(cache=True)
-def sighting_inputs(rows, distance, point_class, reach_radius):
+def sighting_inputs(rows: np.ndarray, distance: np.ndarray, point_class: np.ndarray,
+                    reach_radius: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The point reports (classes that get their sighting bits from themselves) of the sorted ``rows``: their
     indices, the arcsin argument of their reach (radius / distance, clamped to [0, 1]) and their x, y."""
     n = 0
@@ -286,8 +296,9 @@ def sighting_inputs(rows, distance, point_class, reach_radius):
 
 
 @numba.njit(cache=True)
-def sighting_bits(rows, view, distance, idx, reach, bearing, x, y, half, class_near, dynamic_class, nearby2,
-                  partial, nearby):
+def sighting_bits(rows: np.ndarray, view: np.ndarray, distance: np.ndarray, idx: np.ndarray, reach: np.ndarray,
+                  bearing: np.ndarray, x: np.ndarray, y: np.ndarray, half: float, class_near: np.ndarray,
+                  dynamic_class: np.ndarray, nearby2: float, partial: int, nearby: int) -> None:
     """PARTIAL (|bearing| beyond the half view less the reach), DISTANT (beyond the class's near range) and NEARBY
     (within the nearby distance of another ball or robot report of the same view) of the point reports ``idx``."""
     n = len(idx)
@@ -314,7 +325,7 @@ def sighting_bits(rows, view, distance, idx, reach, bearing, x, y, half, class_n
 
 
 @numba.njit(cache=True)
-def confidence_exponents(rows, z, separation, prior_logit):
+def confidence_exponents(rows: np.ndarray, z: np.ndarray, separation: float, prior_logit: np.ndarray) -> np.ndarray:
     """−logit of each report's calibrated confidence from its standard normal ``z``: evidence z + d' when it is
     correct (a real object of its class), z when not."""
     out = np.empty(len(rows))

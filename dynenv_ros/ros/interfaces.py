@@ -72,7 +72,7 @@ def interface_share_dir() -> Path:
         candidate = Path(sys.prefix) / "share" / PACKAGE
         if candidate.is_dir():
             return candidate
-        raise FileNotFoundError(f"{PACKAGE} is not installed: run `make test` or `make run` to build msg_defs")
+        raise FileNotFoundError(f"{PACKAGE} is not installed: run `make test` or `make run` to build msg_defs") from None
 
 
 def generated_type_hash(name: str) -> str:

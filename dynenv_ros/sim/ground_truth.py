@@ -15,7 +15,7 @@ from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
 class BodyState:
     """One body: pose and velocity in the field frame (m, rad, m/s, rad/s), as ObjectState.msg."""
     id: int
-    class_id: ObjectClass
+    class_id: ObjectClass | int   # an int: a class this code base does not know yet (a replayed recording)
     team: int = 0                 # +1 team A, -1 team B, 0 none (TEAM_* of the messages use the same numbers)
     x: float = 0.0
     y: float = 0.0

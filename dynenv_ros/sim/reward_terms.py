@@ -1,6 +1,7 @@
 """Rewards as separate named terms per agent, so learners and logs can weigh and inspect each one."""
 from __future__ import annotations
 
+from collections.abc import Iterable
 from enum import IntEnum
 
 import numpy as np
@@ -23,7 +24,7 @@ class RewardLedger:
     def add(self, term: RewardTerm, agent: int, value: float) -> None:
         self.values[term, agent] += value
 
-    def add_many(self, term: RewardTerm, agents, value: float) -> None:
+    def add_many(self, term: RewardTerm, agents: Iterable[int], value: float) -> None:
         self.values[term, list(agents)] += value
 
     def clear(self) -> None:
@@ -31,7 +32,8 @@ class RewardLedger:
 
     def total(self) -> np.ndarray:
         """Per-agent sum of all terms."""
-        return self.values.sum(axis=0)
+        total: np.ndarray = self.values.sum(axis=0)
+        return total
 
     def as_dicts(self) -> list[dict[str, float]]:
         """One {term name: value} dict per agent, for infos and logs."""

@@ -29,12 +29,12 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
-from dynenv_ros.envs.padded_layout import GAME_COLUMNS, PROPRIOCEPTION_COLUMNS
 from dynenv_ros.perception.detections import FEATURE_COLUMNS
 from dynenv_ros.sim.ground_truth import BodyState, WorldSnapshot
 from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk
 from dynenv_ros.soccer.config import MotionConfig
 from dynenv_ros.soccer.field import FieldGeometry
+from dynenv_ros.soccer.observation_columns import GAME_COLUMNS, PROPRIOCEPTION_COLUMNS
 from dynenv_ros.soccer.scripted import ChaserPolicy, GoalkeeperPolicy, ScriptedPolicy
 
 MEMORY_SECONDS = 3.0          # how long a ball no frame shows is still believed where it was last seen

@@ -13,6 +13,9 @@ docs/ros_graph.md, "Keys on a robot" and "Who may command a node").
 30 s, once, for the node that owns SERVICE (``/policy_node/load_policy`` -> ``/policy_node``; ``--node`` to say
 otherwise). Errors are one line on stderr and exit status 2; ``call``: 1 when the service does not appear or answer,
 3 when it answers with success false (the reply says why). No key file is ever overwritten.
+
+It lives in ``ros`` because ``sign-request`` and ``call`` build and send ROS messages; the keys and signatures it
+uses stay in the ROS-free ``security`` (the contracts in .importlinter).
 """
 from __future__ import annotations
 
