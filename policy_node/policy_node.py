@@ -220,7 +220,6 @@ class PolicyNode(Node):
                                                  "signed.", read_only=True)
         # use_sim_time (rclpy's own) and greedy are settable: fixed with runtime_controls false (ros/runtime_controls.py)
         self.runtime_controls = declare_runtime_controls(self, "greedy, use_sim_time")
-        lock_when_off(self, self.runtime_controls, "greedy and use_sim_time stay as started")
         self.weights_run = declare_str(self, "weights_run_id", "", "Take weights from this trainer run only "
                                        "(WeightsAnnouncement.run_id); empty: any run.", read_only=True)
         self.pose_max_age, self.pose_frame = declare_pose_input(self, "Robocup, a policy that takes the pose "
@@ -298,6 +297,8 @@ class PolicyNode(Node):
                                if self.deadline_ns is not None else None)
         self.get_logger().info(f"controlling {', '.join(self.names)} with {self.runtime_name}"
                                f"{'; the policy takes the pose estimates' if self.pose_wanted else ''}")
+        # last: the lock refuses every parameter set from now on, declarations included
+        lock_when_off(self, self.runtime_controls, "greedy and use_sim_time stay as started")
 
     # -- weights ---------------------------------------------------------------------------------------------------
     def _operator_gate(self, key_paths: list[str]) -> OperatorGate | None:

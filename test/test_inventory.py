@@ -57,9 +57,9 @@ def test_every_service_topic_and_parameter_of_a_node_has_a_class(name, make_node
 
 
 def test_a_new_service_without_a_class_fails_the_inventory(make_node, tmp_path):
-    from std_srvs.srv import Trigger
+    from dynenv_msgs.srv import StepSimulation      # any service type: the project's own, no extra dependency
     node = _start("policy_node", make_node, tmp_path)
-    node.create_service(Trigger, "~/open_door", lambda request, response: response)
+    node.create_service(StepSimulation, "~/open_door", lambda request, response: response)
     node.declare_parameter("new_knob", 1)
     assert differences("policy_node", observe(node)) == [
         "policy_node services ~/open_door: no class (add it to dynenv_ros/graph/inventory_table.py)",

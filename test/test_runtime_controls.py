@@ -62,7 +62,7 @@ def test_with_runtime_controls_off_no_call_changes_the_game_or_the_learning(make
         variant="baseline", feature_size=16, run_dir=str(tmp_path / "run"), signing_key=str(private),
         runtime_controls=False))
     executor.add_node(trainer)
-    sim = _game(make_node, executor, runtime_controls=False)
+    sim = _game(make_node, executor, runtime_controls=False, episode_seconds=3600.0)   # no episode ends by itself
     assert spin_until(executor, lambda: sim.periods_run >= 3, 60.0)
     episode, rate = sim.session.episode_id, trainer.learner.optimizer.param_groups[0]["lr"]
     seen = _attack(executor, 8.0)
