@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from collections import Counter
 from pathlib import Path
 
 import rclpy
+from ros_harness import spin_then_report
 from diagnostic_msgs.msg import DiagnosticArray
 from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
 
@@ -91,12 +91,7 @@ def main(robot: str, seconds: float, secrets_dir: str) -> None:
     node.create_subscription(DetectionArray, f"/{robot}/detections", on_frame, sim_stream())
     node.create_subscription(Action, action_topic, on_action, action_stream())
     node.create_subscription(DiagnosticArray, topics.TRAINER_DIAGNOSTICS, on_diagnostics, 10)
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        rclpy.spin_once(node, timeout_sec=0.05)
-    print("sent " + " ".join(f"{k}={n}" for k, n in sorted(sent.items())), flush=True)
-    node.destroy_node()
-    rclpy.shutdown()
+    spin_then_report(node, seconds, sent)
 
 
 if __name__ == "__main__":

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from collections import Counter
 from pathlib import Path
 
 import rclpy
+from ros_harness import spin_then_report
 from dynenv_msgs.msg import Detection, DetectionArray
 from std_msgs.msg import UInt8MultiArray
 
@@ -72,12 +72,7 @@ def main(robot: str, seconds: float, secrets_dir: str) -> None:
 
     node.create_subscription(DetectionArray, topic, on_frame, sim_stream())
     node.create_subscription(UInt8MultiArray, topic + "_mac", on_tag, sim_stream())
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        rclpy.spin_once(node, timeout_sec=0.05)
-    print("sent " + " ".join(f"{k}={n}" for k, n in sorted(sent.items())), flush=True)
-    node.destroy_node()
-    rclpy.shutdown()
+    spin_then_report(node, seconds, sent)
 
 
 if __name__ == "__main__":

@@ -45,3 +45,15 @@ def finish_attacker(attacker: Any) -> dict:
     lines = [line for line in output.splitlines() if line.startswith("{")]
     assert lines, output[-3000:]
     return json.loads(lines[-1])
+
+
+def spin_then_report(node: Any, seconds: float, sent: dict[str, int]) -> None:
+    """An attacker process's last act: spin ``node`` for ``seconds``, print what it sent (the test reads the line),
+    and shut ROS down."""
+    import rclpy
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    print("sent " + " ".join(f"{k}={n}" for k, n in sorted(sent.items())), flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
