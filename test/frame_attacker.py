@@ -1,7 +1,8 @@
 """The attacker of test_frame_auth_graph.py, a process of its own on the test's ROS domain, without frames.secret.
 For every genuine frame of ``robot`` it sees, it publishes forged frames on ``/<robot>/detections`` for the next
-motion period (all its frame indices, so they arrive before the simulator's): one ball 0.3 m ahead with confidence
-``MARK`` (what no genuine frame holds), untagged, with a random tag, and with a tag under ``team_b.secret`` (a robot
+motion period (all its frame indices, so they arrive before the simulator's): one ball 0.3 m ahead at height
+``MARK`` (the simulator's detections are planar, z = 0, so no genuine frame holds it; a mark in ``confidence`` would
+not do: a calibrated confidence can come within any tolerance of it), untagged, with a random tag, and with a tag under ``team_b.secret`` (a robot
 of the other team: a secret it may hold) on ``/<robot>/detections_mac``; and it replays the genuine frame it just saw
 with its genuine tag. Runs ``seconds``, then prints what it sent."""
 from __future__ import annotations
@@ -29,8 +30,8 @@ def forged_frame(genuine: DetectionArray, period: int, index: int) -> DetectionA
                          game_seconds_remaining=genuine.game_seconds_remaining)
     msg.header.frame_id = genuine.header.frame_id
     msg.header.stamp.sec = genuine.header.stamp.sec + 1
-    ball = Detection(class_id=Detection.CLASS_BALL, yaw=float("nan"), size_x=0.1, size_y=0.1, confidence=MARK)
-    ball.position.x = 0.3
+    ball = Detection(class_id=Detection.CLASS_BALL, yaw=float("nan"), size_x=0.1, size_y=0.1, confidence=0.9)
+    ball.position.x, ball.position.z = 0.3, MARK
     msg.detections = [ball]
     return msg
 
@@ -52,7 +53,7 @@ def main(robot: str, seconds: float, secrets_dir: str) -> None:
 
     def on_frame(msg: DetectionArray) -> None:
         key = (msg.episode_id, msg.motion_period)
-        if any(abs(d.confidence - MARK) < 1e-6 for d in msg.detections) or msg.frame_index != 0 or key in attacked:
+        if any(d.position.z == MARK for d in msg.detections) or msg.frame_index != 0 or key in attacked:
             return
         attacked.add(key)                                           # once a period (its own replay comes back)
         for index in range(msg.frames_per_period):

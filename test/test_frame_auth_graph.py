@@ -26,7 +26,7 @@ from policy_node.scripted_policy import ScriptedPolicyNode
 from ros_harness import spin_until
 
 ATTACKER = Path(__file__).with_name("frame_attacker.py")
-MARK = 0.987654                                  # frame_attacker.py's forged confidence
+MARK = 0.987654                                  # frame_attacker.py's forged height (genuine: z = 0)
 
 
 def _params(**values):
@@ -45,7 +45,7 @@ def _attacker(secrets: Path, seconds: float) -> subprocess.Popen:
 
 
 def _forged(frames) -> int:
-    return sum(any(d.confidence == pytest.approx(MARK) for d in f.detections) for f in frames)
+    return sum(any(d.position.z == MARK for d in f.detections) for f in frames)
 
 
 def _record(target, name: str) -> list:
