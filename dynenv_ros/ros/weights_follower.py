@@ -15,8 +15,9 @@ Two routes fill one buffer of the announced size (``security.weights_download``)
 
 - **The blob topic** (issue 43, "fetches that cannot be starved"). The trainer publishes each release's manifest
   and chunks on ``<trainer>/weights_blob`` (reliable, transient local). The node (re)subscribes when a release
-  starts, so the trainer's writer hands it the release it holds, and places each sample by its SHA-256: the
-  manifest by the signed digest, a chunk by the manifest. Anything else — another process's junk, an older
+  starts, with a reader deep enough for all of its samples, so the trainer's writer hands it the release it holds
+  whole even while the executor is busy; it places each sample by its SHA-256: the manifest by the signed digest, a
+  chunk by the manifest. Anything else — another process's junk, an older
   release's chunk — is refused and counted (``weights_blob_refused_<reason>``) and cannot displace a genuine
   sample: every sample is checked, nothing is overwritten. A ROS service client takes the first answer from any
   server of the name; a topic reader takes every sample, so a faster attacker cannot starve this route. Without
@@ -249,16 +250,20 @@ class WeightsFollower:
             self._start(waiting)
 
     # -- the blob topic -------------------------------------------------------------------------------------------
-    def _subscribe_blob(self) -> Any:
+    def _subscribe_blob(self, depth: int = BLOB_READER_DEPTH) -> Any:
         return self.node.create_subscription(FetchWeights.Response, self.blob_topic_name, self._on_blob,
-                                             latched(BLOB_READER_DEPTH))
+                                             latched(depth))
 
     def _resubscribe(self) -> None:
-        """A new reader of the blob topic, so the trainer's transient-local writer hands out what it holds again."""
+        """A new reader of the blob topic, so the trainer's transient-local writer hands out what it holds again.
+        Deep enough for the whole release wanted (manifest and chunks): the writer hands them out in one burst, and
+        a reader that kept fewer would lose the same ones on every resubscription while the executor is busy."""
+        release = self.wanted
+        samples = release.download.chunks + (release.download.chunks > 1) if release is not None else 0
         self.node.destroy_subscription(self.blob_subscription)
-        self.blob_subscription = self._subscribe_blob()
-        if self.wanted is not None:
-            self.wanted.blob_subscribed_at = time.monotonic()
+        self.blob_subscription = self._subscribe_blob(max(BLOB_READER_DEPTH, samples))
+        if release is not None:
+            release.blob_subscribed_at = time.monotonic()
 
     def _on_blob(self, msg: FetchWeights.Response) -> None:
         release = self.wanted

@@ -36,8 +36,9 @@ from dynenv_ros.security.weights_signing import MAX_METADATA, Announcement, sign
 from dynenv_ros.security.weights_source import Source, fetch_service_name, with_source
 
 HELD = 2          # the current release and the one before, on the fetch service
-# A policy node's blob reader keeps this many samples for its executor (each at most a chunk, 1 MiB): a short burst
-# of junk between two takes cannot push a genuine chunk out; a longer one costs a resubscription (ros.weights_follower).
+# A policy node's blob reader keeps at least this many samples for its executor (each at most a chunk, 1 MiB), and
+# while a release is wanted as many as it has (manifest and chunks): a short burst of junk between two takes cannot
+# push a genuine sample out; a longer one costs a resubscription (ros.weights_follower).
 BLOB_READER_DEPTH = 4
 
 
