@@ -17,9 +17,9 @@ Two routes fill one buffer of the announced size (``security.weights_download``)
   and chunks on ``<trainer>/weights_blob`` (reliable, transient local). The node (re)subscribes when a release
   starts, with a reader deep enough for all of its samples, so the trainer's writer hands it the release it holds
   whole even while the executor is busy; it places each sample by its SHA-256: the manifest by the signed digest, a
-  chunk by the manifest. Anything else — another process's junk, an older
-  release's chunk — is refused and counted (``weights_blob_refused_<reason>``) and cannot displace a genuine
-  sample: every sample is checked, nothing is overwritten. A ROS service client takes the first answer from any
+  chunk by the manifest. Anything else — another process's junk, another release's chunk — is refused and counted
+  (``weights_blob_refused_<reason>``) and cannot displace a genuine sample: every sample is checked, nothing is
+  overwritten. A ROS service client takes the first answer from any
   server of the name; a topic reader takes every sample, so a faster attacker cannot starve this route. Without
   progress for ``BLOB_REDELIVER_S`` the node subscribes again (``weights_blob_resubscribes``): the trainer's
   writer hands the release out again, and chunks already verified are kept.
