@@ -10,8 +10,10 @@ or an ONNX file, at start or through the LoadPolicy service; either way the poli
 actions the simulator accepts) and a failing one is refused with the reason — at start a one-line error and exit
 status 2, at run time a refusal that keeps the current policy. Swaps happen between two decisions. A trainer's
 weights are taken only when signed by a key in ``trusted_weights_keys`` and newer than those acting: announced on
-``/trainer/weights_announcement``, fetched in chunks without blocking decisions and checked against the signed
-SHA-256 (``ros.weights_follower``; docs/ros_graph.md, "Who may change the weights").
+``/trainer/weights_announcement``, their bytes taken from ``/trainer/weights_blob`` (every sample checked, so another
+writer cannot displace them) or fetched in chunks from the service the announcement names, without blocking
+decisions, and checked against the signed digests (``ros.weights_follower``; docs/ros_graph.md, "Who may change the
+weights").
 
 Operator services (issue 43; docs/ros_graph.md, "Who may command a node"): ``~/load_policy`` and
 ``~/accept_older_weights`` change what the robot does, so they exist only when the node is given
@@ -197,10 +199,10 @@ class PolicyNode(Node):
         diagnostics_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.",
                                       read_only=True)
         weights_topic = declare_str(self, "weights_topic", topics.WEIGHTS_ANNOUNCEMENT, "A trainer's signed "
-                                    "WeightsAnnouncements; the weights are fetched, checked and swapped in between "
-                                    "two decisions (torch runtime); empty: never.", read_only=True)
-        weights_service = declare_str(self, "weights_service", topics.FETCH_WEIGHTS, "The trainer's FetchWeights "
-                                      "service the announced weights are fetched from.", read_only=True)
+                                    "WeightsAnnouncements; the weights are taken from the blob topic beside it "
+                                    "(weights_blob) or the fetch service the announcement names, checked and "
+                                    "swapped in between two decisions (torch runtime); empty: never.",
+                                    read_only=True)
         trusted_keys = declare_str_list(self, "trusted_weights_keys", [], "Ed25519 public keys (.pub files, or "
                                         "directories of them) whose signed weights are taken; none: a trainer's "
                                         "weights are refused.", read_only=True)
@@ -284,8 +286,8 @@ class PolicyNode(Node):
         self.operator = self._operator_gate(operator_keys)
         self.load_srv = (self.create_service(LoadPolicy, "~/load_policy", self._on_load) if self.operator
                          else None)
-        self.weights = (self._follow_weights(weights_topic, weights_service, trusted_keys, max_weights,
-                                             weights_state, diagnostics_s) if weights_topic else None)
+        self.weights = (self._follow_weights(weights_topic, trusted_keys, max_weights, weights_state,
+                                             diagnostics_s) if weights_topic else None)
         self.diagnostics_pub = Diagnostics(self, "~/diagnostics")     # and /diagnostics
         self._diagnostics_sent = 0
         self._reported: Counter[str] = Counter()
@@ -427,7 +429,7 @@ class PolicyNode(Node):
         self.policy, self.checkpoint_sha256, self.policy_version = policy, digest, version
         self._subscribe_poses()
 
-    def _follow_weights(self, topic: str, service: str, key_paths: list[str], max_bytes: int, state_file: str,
+    def _follow_weights(self, topic: str, key_paths: list[str], max_bytes: int, state_file: str,
                         report_s: float) -> WeightsFollower:
         """Signed weights from a trainer (``ros.weights_follower``): only releases a trusted key signed, newer than
         the one acting, fitting this node, fetched without blocking decisions."""
@@ -442,7 +444,8 @@ class PolicyNode(Node):
         if trusted:       # the first shape check on torch's meta device imports ~70 MB of torch (2-3 s): now, not
             with torch.device("meta"):          # as a stall of the decisions when the first weights arrive
                 DynEnvAgent(feature_size=1)
-        return WeightsFollower(self, topic=topic, service=service, accept_service="~/accept_older_weights",
+        return WeightsFollower(self, topic=topic, blob_topic=topics.weights_blob(topic),
+                               accept_service="~/accept_older_weights",
                                trusted=trusted, max_bytes=max_bytes, order=order, fits=self._announced_network,
                                install=self._install_weights, counts=self.counts, operator=self.operator,
                                note=lambda text: setattr(self, "weights_refusal", text), run_filter=self.weights_run,

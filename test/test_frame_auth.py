@@ -111,6 +111,21 @@ def test_the_gate_refuses_forged_untagged_replayed_frames_and_bad_tags():
     assert gate.waiting == 3 and gate.counts["frame_mac_missing"] == 3
 
 
+def test_a_tag_that_comes_after_the_wait_still_verifies_its_frame_and_the_others_expire():
+    """A node too busy to read a tag within the wait (the train graph's stall under load): the tag is matched before
+    anything expires, so its frame is used; an untagged frame that waited as long is still refused."""
+    gate = FrameGate(SECRET, wait_s=2.0)
+    assert gate.frame("late", b"late", now_ns=0) == [] and gate.frame("forged", b"forged", now_ns=0) == []
+    assert gate.tag(tag_frame(SECRET, b"late"), now_ns=3_000_000_000) == ["late"]     # 3 s: still verifies
+    assert gate.counts["frame_mac_missing"] == 1 and gate.waiting == 0               # the untagged one expired
+    assert gate.tag(tag_frame(SECRET, b"first"), now_ns=4_000_000_000) == []         # a tag before its frame …
+    assert gate.frame("first", b"first", now_ns=7_000_000_000) == ["first"]          # … 3 s later, still used
+    # a batch of queued tags expires nothing until its end
+    gate.frame("x", b"x", now_ns=8_000_000_000)
+    assert gate.tag(b"\x02" * 16, now_ns=11_000_000_000, expire=False) == [] and gate.waiting == 1
+    assert gate.tag(tag_frame(SECRET, b"x"), now_ns=11_000_000_000, expire=False) == ["x"]
+
+
 def test_a_gate_needs_a_secret():
     with pytest.raises(ValueError, match="secret of >= 16 bytes"):
         FrameGate(b"")

@@ -7,19 +7,21 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
-from dynenv_msgs.msg import WorldState
+from dynenv_msgs.msg import Action, DetectionArray, WorldState
 from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 from std_msgs.msg import UInt8MultiArray
 
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.nodes.trainer_node import TrainerNode
-from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.ros.frame_tags import FrameReceiver, tag_message
+from dynenv_ros.ros.qos import action_stream, sim_stream
 from dynenv_ros.security.action_auth import load_secret, secret_path, write_game_secrets, write_team_secret
-from dynenv_ros.security.frame_auth import FRAMES, FrameGate, world_state_bytes
+from dynenv_ros.security.frame_auth import FRAMES, FrameGate, detection_array_bytes, world_state_bytes
 from dynenv_ros.soccer.config import robot_names
 from policy_node.policy_node import PolicyNode
 from policy_node.scripted_policy import ScriptedPolicyNode
@@ -105,10 +107,62 @@ def test_no_forged_frame_reaches_the_policys_decisions_or_the_trainers_experienc
     assert acted_on and learnt and _forged(acted_on) == 0 and _forged(learnt) == 0, output
     assert sim.session.counts["missing"] == 0 and int(policy.diagnostics()["decisions"]) >= 20
     assert not trainer.background.error and trainer.learner.updates >= 3
-    # every world state the simulator published carries a tag that verifies
-    assert len(world_states) >= 100 and world_gate.counts["frames_verified"] >= len(world_states) - 10
+    # every world state the simulator published carries a tag that verifies (the bystander takes one message per
+    # wake-up of the executor the nodes share, so it may still be catching up)
+    assert spin_until(executor, lambda: len(world_states) >= 100, 60.0), len(world_states)
+    assert world_gate.counts["frames_verified"] >= len(world_states) - 10
     assert world_gate.counts["frame_mac_missing"] == 0
     trainer.destroy_node()
+
+
+def test_a_stepped_game_starts_only_once_its_tag_readers_have_matched(make_node, executor, tmp_path):
+    """The train graph's stall under load (game 2 stuck at period 1, 4 frames verified): the simulator waited for
+    the readers of its frames, not of their tags, and a tag published before its reader matched (discovery is
+    asymmetric, and slow on a loaded machine) was lost, its frame refused, the period never complete, the stepped
+    game stuck. Here a receiver reads the frames at once and the tags only later: the game must not start before
+    the tag readers have matched, and then every frame of the first period verifies."""
+    secrets = _secrets(tmp_path)
+    sim = make_node(SimNode, parameter_overrides=_params(players_per_team=1, seed=5, falls_enabled=False,
+                                                         publish_markers=False, wait_for_subscribers=1,
+                                                         secrets_dir=str(secrets), authenticated_frames=True))
+    receiver = make_node("late_tag_reader")
+    gate = FrameGate(load_secret(secret_path(secrets, FRAMES)))
+    frames: list = []
+    for robot in robot_names(1):
+        topic = f"/{robot}/detections"
+        receiver.create_subscription(DetectionArray, topic, lambda m, t=topic: (frames.append(m), gate.frame(
+            m, detection_array_bytes(m, t), 0)), sim_stream())
+        receiver.create_publisher(Action, f"/{robot}/action", action_stream())     # someone acts for the robot
+    for node in (sim, receiver):
+        executor.add_node(node)
+    assert not spin_until(executor, lambda: frames, 5.0), "the game started before its tags had a reader"
+    for robot in robot_names(1):
+        receiver.create_subscription(UInt8MultiArray, f"/{robot}/detections_mac", lambda m: gate.tag(m.data, 0),
+                                     sim_stream())
+    assert spin_until(executor, lambda: gate.counts["frames_verified"] >= 10, 30.0), (len(frames), gate.counts)
+    assert {(f.motion_period, f.frame_index) for f in frames[:10]} == {(0, i) for i in range(5)}
+    assert gate.counts["frame_mac_missing"] == 0 and gate.waiting == 0
+
+
+def test_a_busy_receiver_takes_the_tags_already_queued_before_a_frame_can_expire(make_node, executor, tmp_path):
+    """The other half of the stall under load: a receiver whose executor is busy longer than the gate's wait (2 s)
+    while a frame's tag sits in its queue. Before, the next frame's arrival expired the first one (its tag
+    unread), the period stayed incomplete and the stepped game stalled; now every queued tag is taken first."""
+    secret = load_secret(secret_path(_secrets(tmp_path), FRAMES))
+    node, sender = make_node("busy_receiver"), make_node("tagger")
+    receiver = FrameReceiver(node, secret)
+    released: list = []
+    receiver.subscribe("/team_a_0/detections", sim_stream(), released.extend)
+    tags = sender.create_publisher(UInt8MultiArray, "/team_a_0/detections_mac", sim_stream())
+    for each in (node, sender):
+        executor.add_node(each)
+    assert spin_until(executor, lambda: tags.get_subscription_count() >= 1
+                      and receiver.subscriptions[0].get_publisher_count() >= 1, 20.0)
+    assert receiver.frame("first", b"first frame", "first") == []         # waits for its tag
+    tags.publish(tag_message(secret, b"first frame"))
+    time.sleep(3.0)                                    # busy: the executor runs nothing, the tag waits in the queue
+    assert receiver.frame("second", b"second frame", "second") == ["first"]
+    assert receiver.gate.counts["frame_mac_missing"] == 0 and receiver.gate.waiting == 1 and released == []
 
 
 def test_without_authenticated_frames_the_attackers_frames_reach_the_policy(make_node, executor, tmp_path):

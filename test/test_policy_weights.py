@@ -1,11 +1,14 @@
 """What the policy node tells a trainer (Action's learning fields) and how it takes a trainer's signed weights
-(an announcement on /trainer/weights_announcement, the bytes fetched from /trainer/fetch_weights: swapped in between
-decisions, refused with a reason and the old weights kept playing, delivered at once to a node that starts late).
-The attacks from another process are in test_weights_attacks.py."""
+(an announcement on /trainer/weights_announcement, the bytes from /trainer/weights_blob or fetched from the service
+the announcement names: swapped in between decisions, refused with a reason and the old weights kept playing,
+delivered at once to a node that starts late). The attacks from another process are in test_weights_attacks.py."""
 from __future__ import annotations
 
+import dataclasses
 import hashlib
+import json
 import math
+import time
 
 import pytest
 import torch
@@ -13,6 +16,9 @@ from rclpy.parameter import Parameter
 
 from dynenv_ros.agent.checkpoint import policy_bytes, save_policy
 from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.ros.weights_release import to_message
+from dynenv_ros.security.keys import load_private_key
+from dynenv_ros.security.weights_signing import sign
 from ros_harness import spin_until
 from weights_helpers import SignedTrainer, key_pair, network_metadata
 from policy_node.policy_node import PolicyNode
@@ -80,7 +86,9 @@ def test_signed_weights_are_fetched_and_swapped_in_and_bad_ones_refused(make_nod
     source.release(good, version=7, metadata_json=meta)
     assert spin_until(executor, lambda: policy.policy_version == 7, 20.0), policy.counts
     assert policy.checkpoint_sha256 == hashlib.sha256(good).hexdigest()
-    assert source.weights.served_chunks == 1                          # 0.87 MB: one chunk
+    # 0.87 MB: one chunk, from the blob topic or the fetch service, whichever came first
+    assert policy.counts["weights_blob_chunks"] + policy.counts["weights_fetch_chunks"] >= 1, policy.counts
+    assert source.weights.served_chunks <= 1 and source.weights.blob_samples == 1
     action = feeder.act(1)["team_a_0"]
     assert action.policy_version == 7 and action.value == pytest.approx(VALUE, abs=1e-5)
 
@@ -101,11 +109,81 @@ def test_signed_weights_are_fetched_and_swapped_in_and_bad_ones_refused(make_nod
         assert feeder.act(2 + number)["team_a_0"].policy_version == 7       # still playing the old weights
     diagnostics = policy.diagnostics()
     assert diagnostics["weights_refused"] == str(len(bad)) and diagnostics["weights_refused_load_failed"] == "4"
-    # bytes that are not the ones signed: fetched (three times), never loaded
+    # bytes that are not the ones signed, from a server without a blob topic: fetched (three times), never loaded
+    source.weights.blob = False
     source.release(good, version=20, metadata_json=meta)
     source.weights.held[("run", 20)] = policy_bytes(DynEnvAgent(), {"updates": 19})
     assert spin_until(executor, lambda: policy.counts["weights_refused_hash_mismatch"] == 3, 30.0), policy.counts
     assert policy.policy_version == 7 and policy.checkpoint_sha256 == hashlib.sha256(good).hexdigest()
+
+
+def test_the_blob_topic_delivers_without_the_fetch_service_and_the_service_without_the_blob(make_node, executor,
+                                                                                           tmp_path):
+    """Issue 43: the two routes of a release, each alone. With the trainer's node out of the executor its fetch
+    service never answers, and the release comes by the blob topic (its writer is served by DDS, not the executor);
+    a trainer that publishes no blob (its signed source names none) is fetched from its service."""
+    private, public = key_pair(tmp_path / "keys")
+    blob_only = SignedTrainer(make_node, executor, private)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    executor.remove_node(blob_only.node)
+    agent = _fixed_policy()
+    blob_only.release(policy_bytes(agent, {"updates": 1}), version=2, metadata_json=network_metadata(agent))
+    assert spin_until(executor, lambda: policy.policy_version == 2, 20.0), policy.counts
+    values = policy.weights.diagnostics()
+    assert values["weights_route"] == "blob" and values["weights_loaded_via_blob"] == "1", values
+    assert values["weights_source"] == "/fake_trainer" and blob_only.weights.served_chunks == 0
+    fetch_only = SignedTrainer(make_node, executor, private, name="fetch_trainer", blob=False)
+    data = policy_bytes(agent, {"updates": 2})
+    fetch_only.release(data, version=3, metadata_json=network_metadata(agent))
+    assert spin_until(executor, lambda: policy.policy_version == 3, 20.0), policy.counts
+    values = policy.weights.diagnostics()
+    assert values["weights_route"] == "fetch" and values["weights_loaded_via_fetch"] == "1", values
+    assert values["weights_source"] == "/fetch_trainer" and fetch_only.weights.served_chunks == 1
+    assert policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
+    assert values["weights_blob_chunks"] == "1" and values["weights_fetch_chunks"] == "1"
+
+
+def test_a_file_of_several_chunks_reaches_a_busy_node_whole_by_the_blob_topic(make_node, executor, tmp_path):
+    """A 4.4 MB policy file: the manifest and 5 chunks on the blob topic, handed out in one burst when the node
+    subscribes. The node's executor is busy for 3 s meanwhile (nothing spins); its reader, as deep as the release
+    has samples, keeps them all, so the file arrives whole by the blob alone (the trainer's service never answers)."""
+    private, public = key_pair(tmp_path / "keys")
+    trainer = SignedTrainer(make_node, executor, private)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    executor.remove_node(trainer.node)
+    agent = DynEnvAgent(feature_size=160)
+    data = policy_bytes(agent, {"updates": 4})
+    assert 4 * 2**20 < len(data) < 5 * 2**20                            # 5 chunks of at most 1 MiB
+    trainer.release(data, version=5, metadata_json=network_metadata(agent))
+    assert spin_until(executor, lambda: policy.weights.wanted is not None, 20.0), policy.counts
+    time.sleep(3.0)                                                     # a busy node: nothing taken meanwhile
+    assert spin_until(executor, lambda: policy.policy_version == 5, 30.0), policy.weights.diagnostics()
+    values = policy.weights.diagnostics()
+    assert values["weights_route"] == "blob" and values["weights_blob_chunks"] == "6", values    # manifest + 5
+    assert values["weights_blob_refused_unverifiable"] == "0" and trainer.weights.served_chunks == 0, values
+    assert policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
+
+
+def test_an_announcement_without_a_signed_source_is_refused_before_any_fetch(make_node, executor, tmp_path):
+    """A trainer from before issue 43 signs no source: refused as ``no_source`` (docs/decisions.md), even under the
+    trusted key; a source whose fetch service does not carry the signing key's id, ``bad_source``."""
+    private, public = key_pair(tmp_path / "keys")
+    trainer = SignedTrainer(make_node, executor, private)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    agent = _fixed_policy()
+    data, meta = policy_bytes(agent), network_metadata(agent)
+    current = trainer.release(data, version=1, metadata_json=meta)
+    assert spin_until(executor, lambda: policy.policy_version == 1, 20.0), policy.counts
+    key = load_private_key(private)
+    sourced = json.loads(current.metadata_json)
+    renamed = {**sourced, "source": {**sourced["source"], "fetch_service": "/trainer/fetch_weights"}}
+    for version, metadata, reason, text in ((2, meta, "no_source", "names no source"),
+                                            (3, json.dumps(renamed), "bad_source", "does not carry the signing key")):
+        trainer.weights.publisher.publish(to_message(sign(dataclasses.replace(
+            current, version=version, metadata_json=metadata), key)))
+        assert spin_until(executor, lambda: policy.counts[f"weights_refused_{reason}"] == 1, 10.0), policy.counts
+        assert text in policy.diagnostics()["weights_refusal"]
+    assert policy.policy_version == 1 and trainer.weights.served_chunks == 0
 
 
 def test_a_policy_node_that_starts_late_gets_the_latest_weights_at_once(make_node, executor, tmp_path):

@@ -1,10 +1,12 @@
 """Issue 27 item 1, signed weights, as the attacker: a second process (``weights_attacker.py``) on the test's ROS
 domain announces and serves weights to a running policy node — under a key of its own, with the trusted key's id
 and a genuine signature on its own fields, with an empty SHA-256 or a size of 1 TiB, replaying a recorded genuine
-announcement, or flooding the announcement topic with 300 MB of raw bytes while answering every fetch with junk.
-The node keeps acting with the weights it has, counts each refusal by reason, fetches nothing it should not, stays
-within its memory and answers every period; the genuine trainer's weights still flow, and an older release is
-taken once after the operator's call."""
+announcement, or flooding the announcement topic with 300 MB of raw bytes (and the blob topic with 20 MB) while
+answering every fetch with junk. The node keeps acting with the weights it has, counts each refusal by reason, fetches nothing it should not,
+stays within its memory and answers every period; the genuine trainer's weights still flow, and an older release is
+taken once after the operator's call. Issue 43: an attacker that answers the fetch service first with junk and
+publishes junk on the blob topic, and keeps at it, cannot starve a release that the trainer publishes on the blob
+topic; one served on the fetch service only is taken once it stops."""
 from __future__ import annotations
 
 import dataclasses
@@ -60,11 +62,11 @@ def _files(tmp_path: Path, data: bytes, meta: str) -> tuple[Path, Path]:
     return tmp_path / "evil.safetensors", tmp_path / "evil.json"
 
 
-def _genuine_graph(make_node, executor, tmp_path, **params):
-    """The genuine trainer (a stand-in signing with the trusted key) acting version 1 on a policy node that trusts
-    it, and a feeder playing the simulator."""
+def _genuine_graph(make_node, executor, tmp_path, blob: bool = True, **params):
+    """The genuine trainer (a stand-in signing with the trusted key; ``blob`` false: serving on its fetch service
+    only) acting version 1 on a policy node that trusts it, and a feeder playing the simulator."""
     private, public = key_pair(tmp_path / "keys")
-    trainer = SignedTrainer(make_node, executor, private)
+    trainer = SignedTrainer(make_node, executor, private, blob=blob)
     data, meta = _weights(1)
     first = trainer.release(data, 1, meta)
     policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)], **params)
@@ -163,10 +165,11 @@ def test_an_empty_sha256_or_an_oversized_size_is_refused_before_any_fetch(make_n
 
 def test_a_release_raced_by_junk_answers_is_taken_once_the_attacker_stops(make_node, executor, tmp_path):
     """Issue 43: the attacker answers every fetch with junk before the trainer does (here the genuine server, out of
-    the executor, does not answer at all while it runs). Before, the node dropped the release after three lost
-    fetches and took it only when a newer one came; now it fetches it again with a backoff (0.5 s doubling to
-    10 s) for as long as it is the newest, and takes it once the attacker is gone."""
-    trainer, policy, feeder, first = _genuine_graph(make_node, executor, tmp_path)
+    the executor, does not answer at all while it runs), and the trainer publishes no blob (its signed source names
+    none): the fetch service is the only route. Before, the node dropped the release after three lost fetches and
+    took it only when a newer one came; now it fetches it again with a backoff (0.5 s doubling to 10 s) for as long
+    as it is the newest, and takes it once the attacker is gone."""
+    trainer, policy, feeder, first = _genuine_graph(make_node, executor, tmp_path, blob=False)
     attacker = _attacker("junk", 120)
     try:
         assert attacker.stdout.readline().strip() == "ready"
@@ -192,6 +195,64 @@ def test_a_release_raced_by_junk_answers_is_taken_once_the_attacker_stops(make_n
     assert int(values["weights_fetch_restarts"]) >= 4 and values["weights_fetch_backoff_s"] == "0"
 
 
+def test_an_attacker_racing_the_fetch_and_flooding_the_blob_topic_cannot_starve_a_release(make_node, executor,
+                                                                                          tmp_path):
+    """Issue 43, "fetches that cannot be starved": a second process answers the fetch service the announcements
+    name, before the trainer does (the genuine server, out of the executor, never answers), with a policy file of its
+    own, and publishes that file (cut to the release's size), zeros and a forged manifest on the blob topic ten
+    times a second. A release served on the fetch service only stays starved while it runs (the old limit); the
+    next one, published on the blob topic as well, is taken while the attacker keeps going, and no action ever
+    comes from the attacker's bytes."""
+    trainer, policy, feeder, first = _genuine_graph(make_node, executor, tmp_path)
+    evil, _ = _files(tmp_path, *_weights(99))
+    attacker = _attacker("starve", 120, evil)
+    acted: list[tuple[int, str]] = []                    # (policy_version, weights sha256) of every action
+
+    def act(period: int) -> None:
+        acted.append((feeder.act(period)["team_a_0"].policy_version, policy.checkpoint_sha256))
+
+    try:
+        assert attacker.stdout.readline().strip() == "ready"
+        executor.remove_node(trainer.node)               # the genuine server always slower than the attacker
+        trainer.weights.blob = False                     # version 2: the fetch service only
+        data_2, meta = _weights(2)
+        trainer.release(data_2, 2, meta)
+        assert spin_until(executor, lambda: policy.counts["weights_refused_hash_mismatch"] >= 3, 60.0), policy.counts
+        for period in range(3):
+            act(period)
+        assert policy.policy_version == 1
+        trainer.weights.blob = True                      # version 3: the blob topic as well
+        data_3, _ = _weights(3)
+        trainer.release(data_3, 3, meta)
+        started = time.monotonic()
+        period = 3
+        while policy.policy_version != 3:
+            act(period)
+            period += 1
+            assert time.monotonic() - started < 60.0, policy.weights.diagnostics()
+        took = time.monotonic() - started
+        assert attacker.poll() is None                   # still attacking when the release was taken
+        for _ in range(3):
+            act(period)
+            period += 1
+        values = policy.weights.diagnostics()
+    finally:
+        report = finish_attacker(attacker)
+    print(f"release taken {took:.1f} s after it was announced, the attacker still running; attacker {report}; "
+          f"node {values}")
+    genuine = {1: first.sha256, 3: hashlib.sha256(data_3).hexdigest()}
+    # 0 from the attacker: every action came from a genuine version, and the weights acting were genuine throughout
+    # (read after each action: a swap between the action and the read shows the next version's digest)
+    assert {version for version, _ in acted} == {1, 3}, acted
+    assert {digest for _, digest in acted} <= set(genuine.values()), acted
+    assert acted[-1][0] == 3 and values["weights_route"] == "blob", values     # the trainer's server never answered
+    assert values["weights_refused_load_failed"] == "0", values                 # no junk even reached the loader
+    assert report["fetch_requests"] >= 3 and report["blob_published"] >= 10, report
+    # the attacker's samples reached the node: refused while a release was wanted, ignored while none was
+    assert int(values["weights_blob_refused"]) + int(values["weights_blob_unwanted"]) >= 1, values
+    assert "fake_trainer" in values["weights_fetch_servers"] and "weights_attacker" in values["weights_fetch_servers"]
+
+
 def test_the_backoff_doubles_to_ten_seconds():
     assert [backoff_s(n) for n in range(1, 9)] == [0.5, 1.0, 2.0, 4.0, 8.0, 10.0, 10.0, 10.0]
 
@@ -212,7 +273,8 @@ class _Diagnostics:
 def test_an_oversized_flood_costs_neither_memory_nor_a_period(make_node, executor, tmp_path):
     """The policy node is a process of its own (its memory measured alone, its Fast DDS profiles applied as
     ``ros2 run`` applies them). While it plays, the attacker publishes 300 MB of raw bytes on the announcement topic
-    every second and answers every fetch with junk, racing the genuine trainer's server for a new release."""
+    and 20 MB on the blob topic every second, and answers every fetch with junk, racing the genuine trainer's server
+    for a new release."""
     private, public = key_pair(tmp_path / "keys")
     node = subprocess.Popen([sys.executable, "-m", "policy_node.policy_node", "--ros-args", "-p",
                              "players_per_team:=1", "-p", "team:=a", "-p", f"trusted_weights_keys:=[{public}]"],
@@ -260,7 +322,7 @@ def test_an_oversized_flood_costs_neither_memory_nor_a_period(make_node, executo
     print(f"policy node RSS {baseline:.0f} MB -> peak {peak:.0f} MB; {len(latencies)} periods, round trip max "
           f"{max(latencies) * 1000:.0f} ms; attacker {report}; version {values['policy_version']}, hash refusals "
           f"{values['weights_refused_hash_mismatch']}")
-    assert report["published"] >= 5, report                # 1.5 GB offered
+    assert report["published"] >= 5 and report["blob_published"] >= 5, report     # 1.5 GB and 100 MB offered
     assert peak - baseline < RSS_BOUND_MB, (peak - baseline, output[-3000:])
     # every period answered, none stalled: without the profiles a flood stalled the node 6 s (+570 MB)
     assert max(latencies) < STALL_BOUND_S, (sorted(latencies)[-5:], output[-3000:])

@@ -1,6 +1,7 @@
 """Signed weights without ROS (issue 27 item 1): key files (``security.keys``), the canonical encoding and its
-signature (``security.weights_signing``), the order of releases (``security.weights_order``), the chunked download
-(``security.weights_download``) and the ``dynenv-keys`` command."""
+signature (``security.weights_signing``), the signed source (``security.weights_source``), the order of releases
+(``security.weights_order``), the download from chunks anyone may send (``security.weights_download``) and the
+``dynenv-keys`` command."""
 from __future__ import annotations
 
 import dataclasses
@@ -15,9 +16,10 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 from dynenv_ros.ros import keys_cli
 from dynenv_ros.security import keys
-from dynenv_ros.security.weights_download import ChunkRefused, Download
+from dynenv_ros.security.weights_download import ChunkRefused, Download, SampleRefused, manifest
 from dynenv_ros.security.weights_order import ReleaseOrder
 from dynenv_ros.security.weights_signing import Announcement, Refused, canonical_bytes, check_fields, sign, verify
+from dynenv_ros.security.weights_source import Source, fetch_service_name, source_of, with_source
 
 DATA = bytes(range(256)) * 40
 
@@ -206,23 +208,104 @@ def test_the_high_water_mark_survives_a_restart_in_its_state_file(tmp_path):
         ReleaseOrder(state)
 
 
+# -- the signed source -----------------------------------------------------------------------------------------------
+KEY_ID = "0123456789abcdef"
+
+
+def _sourced(**source) -> Announcement:
+    fields = dict(node="/trainer_node", fetch_service=fetch_service_name("/trainer/fetch_weights", KEY_ID),
+                  blob_topic="/trainer/weights_blob", manifest_sha256=hashlib.sha256(manifest(DATA)).hexdigest())
+    fields.update(source)
+    return _announcement(key_id=KEY_ID, metadata_json=with_source('{"config": {"feature_size": 64}}',
+                                                                  Source(**fields)))
+
+
+def test_the_source_names_the_trainer_and_a_service_that_carries_the_key_id():
+    source = source_of(_sourced())
+    assert source.node == "/trainer_node" and source.fetch_service == "/trainer/fetch_weights_0123456789abcdef"
+    assert source_of(_sourced(blob_topic="")).blob_topic == ""               # a trainer that publishes no blob
+    with pytest.raises(Refused) as old:                                          # a trainer from before issue 43
+        source_of(_announcement(key_id=KEY_ID))
+    assert old.value.reason == "no_source" and "names no source" in str(old.value)
+    for bad in ({"fetch_service": "/trainer/fetch_weights"}, {"fetch_service": "/trainer/fetch_weights_fedcba9876543210"},
+                {"node": "trainer_node"}, {"node": ""}, {"blob_topic": "/a b"}, {"manifest_sha256": "0" * 63}):
+        with pytest.raises(Refused) as refused:
+            source_of(_sourced(**bad))
+        assert refused.value.reason == "bad_source", bad
+    with pytest.raises(Refused) as missing:
+        source_of(_announcement(key_id=KEY_ID, metadata_json='{"source": {"node": "/t"}}'))
+    assert missing.value.reason == "bad_source"
+
+
 # -- the download --------------------------------------------------------------------------------------------------
-def test_a_download_takes_chunks_in_order_and_checks_the_hash():
-    download = Download(len(DATA), hashlib.sha256(DATA).hexdigest(), chunk_bytes=4096)
-    assert len(download.buffer) == len(DATA)                      # exactly the announced size, no more
+NOISE = b"".join(hashlib.sha256(i.to_bytes(2, "big")).digest() for i in range(320))    # 10,240 bytes, no repeats
+
+
+def test_a_download_by_offset_checks_each_chunk_it_can_and_the_whole_file():
+    download = Download(len(NOISE), hashlib.sha256(NOISE).hexdigest(), chunk_bytes=4096)
+    assert len(download.buffer) == len(NOISE) and download.chunks == 3          # exactly the announced size, no more
     while not download.complete:
         offset, length = download.next_range()
         with pytest.raises(ChunkRefused):
-            download.add(offset, DATA[offset:offset + length] + b"x")     # longer than asked
+            download.add(offset, NOISE[offset:offset + length] + b"x")     # longer than asked
         with pytest.raises(ChunkRefused):
-            download.add(offset + 1, DATA[offset + 1:offset + 1 + length])
-        download.add(offset, DATA[offset:offset + length])
-    assert download.finish() == DATA
-    junk = Download(len(DATA), hashlib.sha256(DATA).hexdigest(), chunk_bytes=len(DATA))
-    junk.add(0, bytes(len(DATA)))
+            download.add(offset + 1, NOISE[offset + 1:offset + 1 + length])
+        download.add(offset, NOISE[offset:offset + length])
+    assert download.finish() == NOISE
+    # one chunk: its digest is the file's, signed, so junk is refused as it arrives
+    junk = Download(len(NOISE), hashlib.sha256(NOISE).hexdigest(), chunk_bytes=len(NOISE))
     with pytest.raises(Refused) as refused:
-        junk.finish()
-    assert refused.value.reason == "hash_mismatch"
+        junk.add(0, bytes(len(NOISE)))
+    assert refused.value.reason == "hash_mismatch" and not junk.complete
+    # several chunks and no manifest: the junk chunk is found with the whole file, and only it is dropped
+    partly = Download(len(NOISE), hashlib.sha256(NOISE).hexdigest(), chunk_bytes=4096)
+    partly.add(0, NOISE[:4096])
+    partly.add(4096, bytes(4096))
+    partly.add(8192, NOISE[8192:])
+    with pytest.raises(Refused) as refused:
+        partly.finish()
+    assert refused.value.reason == "hash_mismatch" and partly.next_range() == (0, 4096) and partly.dropped == 3
+
+
+def test_blob_samples_are_placed_by_their_bytes_and_junk_displaces_nothing():
+    chunks = [NOISE[i:i + 4096] for i in range(0, len(NOISE), 4096)]
+    digest = hashlib.sha256(manifest(NOISE, 4096)).hexdigest()
+    download = Download(len(NOISE), hashlib.sha256(NOISE).hexdigest(), digest, chunk_bytes=4096)
+    for sample, reason in ((chunks[0], "unverifiable"), (bytes(5000), "oversized")):
+        with pytest.raises(SampleRefused) as refused:
+            download.offer(sample)                                    # before the manifest: nothing to check against
+        assert refused.value.reason == reason
+    with pytest.raises(SampleRefused):
+        download.offer(manifest(NOISE[::-1], 4096))                     # a manifest, not the signed one
+    assert download.offer(manifest(NOISE, 4096)) == "manifest"
+    # junk of a chunk's length, another release's chunk: refused, the buffer untouched; the genuine chunks land
+    for junk in (bytes(4096), chunks[1][::-1], NOISE[1:4097]):
+        with pytest.raises(SampleRefused) as refused:
+            download.offer(junk)
+        assert refused.value.reason == "unmatched"
+    assert download.buffer == bytearray(len(NOISE))
+    assert download.offer(chunks[2]) == "chunk" and download.offer(chunks[2]) == "duplicate"
+    assert download.offer(chunks[0]) == "chunk" and not download.complete
+    # the fetch service fills the rest; a junk answer is now refused at once (the manifest gives its digest)
+    assert download.next_range() == (4096, 4096)
+    with pytest.raises(Refused):
+        download.add(4096, bytes(4096))
+    download.add(4096, chunks[1])
+    assert download.complete and download.finish() == NOISE
+    # equal chunks have one digest: one sample fills them all (DATA repeats every 256 bytes)
+    periodic = Download(len(DATA), hashlib.sha256(DATA).hexdigest(), hashlib.sha256(manifest(DATA, 4096)).hexdigest(),
+                        chunk_bytes=4096)
+    periodic.offer(manifest(DATA, 4096))
+    assert periodic.offer(DATA[:4096]) == "chunk" and periodic.verified == 2
+
+
+def test_the_manifest_drops_fetched_junk_and_keeps_genuine_chunks():
+    digest = hashlib.sha256(manifest(NOISE, 4096)).hexdigest()
+    download = Download(len(NOISE), hashlib.sha256(NOISE).hexdigest(), digest, chunk_bytes=4096)
+    download.add(0, NOISE[:4096])                                       # unverified: no manifest yet
+    download.add(4096, bytes(4096))                                    # junk from a faster server
+    assert download.offer(manifest(NOISE, 4096)) == "manifest"
+    assert download.dropped == 1 and download.verified == 1 and download.next_range() == (4096, 4096)
 
 
 # -- dynenv-keys ---------------------------------------------------------------------------------------------------

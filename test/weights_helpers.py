@@ -26,11 +26,13 @@ def network_metadata(agent) -> str:
 
 
 class SignedTrainer:
-    """A plain node publishing signed announcements and serving their bytes (``WeightsRelease``)."""
+    """A plain node publishing signed announcements and their bytes, and serving them (``WeightsRelease``);
+    ``blob=False``: served on the fetch service only."""
 
-    def __init__(self, make_node, executor, private_key: Path, run_id: str = "run", name: str = "fake_trainer"):
+    def __init__(self, make_node, executor, private_key: Path, run_id: str = "run", name: str = "fake_trainer",
+                 blob: bool = True):
         self.node = make_node(name)
-        self.weights = WeightsRelease(self.node, load_private_key(private_key), run_id)
+        self.weights = WeightsRelease(self.node, load_private_key(private_key), run_id, blob=blob)
         executor.add_node(self.node)
 
     def release(self, data: bytes, version: int, metadata_json: str) -> Announcement:

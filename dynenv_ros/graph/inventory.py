@@ -2,7 +2,8 @@
 themselves, each with its class and how it is protected.
 
 ``observe(node)`` lists what a running node offers (rclpy's graph API: its publishers, subscriptions, services;
-its declared parameters), with robot names folded to ``<robot>`` and the node's own name to ``~``. ``CLASSES`` (the
+its declared parameters), with robot names folded to ``<robot>``, a signing key's id at the end of a name to
+``<key_id>`` (the trainer's fetch service) and the node's own name to ``~``. ``CLASSES`` (the
 committed table, ``inventory_table.py``) gives each entry a class and a protection; ``render`` writes the table of
 docs/ros_graph.md, "Inventory". test/test_inventory.py starts every node and fails on an entry without a class (a
 node gained a service, topic or parameter nobody classified) or a class without an entry.
@@ -17,10 +18,11 @@ from typing import Any
 from dynenv_ros.graph.inventory_table import CLASSES, KINDS, LABELS, NODES
 
 _ROBOT = re.compile(r"/(team_[ab]_\d+|car_\d+)(?=/|$)")
+_KEY_ID = re.compile(r"_[0-9a-f]{16}$")
 
 
 def _fold(name: str, node_name: str) -> str:
-    name = _ROBOT.sub("/<robot>", name)
+    name = _KEY_ID.sub("_<key_id>", _ROBOT.sub("/<robot>", name))
     own = f"/{node_name}/"
     return "~/" + name[len(own):] if name.startswith(own) else name
 

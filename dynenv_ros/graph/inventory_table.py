@@ -19,7 +19,10 @@ FEEDBACK_MAC = "MAC under `simulator.secret` with `secrets_dir`; else none"
 FRAME_TAG = "tag under `frames.secret` with `authenticated_frames` (train graph); none on a robot"
 NONE = "none (DDS without SROS2)"
 WEIGHTS = "signed release (Ed25519, trusted key, order)"
-FETCH = "answers checked against the signed announcement's SHA-256; a racing answer delays (DoS)"
+FETCH = ("named in the signed announcement, with the key id; answers checked against the signed digests; a racing "
+         "answer delays this route only (the blob topic delivers)")
+BLOB = ("every sample checked against the signed digests (content-addressed); other writers' samples refused, "
+        "counted, never displace the trainer's")
 
 
 def _standard(set_class: str, set_protection: str) -> dict[str, tuple[str, str]]:
@@ -66,16 +69,17 @@ CLASSES: dict[str, dict[str, dict[str, tuple[str, str]]]] = {
                       "~/diagnostics": (READ, NONE)},
         "subscribes": {"/<robot>/detections": (ACTS, FRAME_TAG),
                        "/<robot>/detections_mac": (READ, "the tag itself (HMAC)"),
-                       "/trainer/weights_announcement": (ACTS, WEIGHTS)},
+                       "/trainer/weights_announcement": (ACTS, WEIGHTS), "/trainer/weights_blob": (ACTS, BLOB)},
         "parameters": {**_params(ACTS, "scenario players_per_team n_cars cars team action_mode checkpoint runtime "
                                        "greedy seed decision_deadline pose_frame pose_max_age weights_topic "
-                                       "weights_service weights_run_id trusted_weights_keys max_weights_bytes "
+                                       "weights_run_id trusted_weights_keys max_weights_bytes "
                                        "weights_state_file trusted_operator_keys allow_unsigned_files secrets_dir "
                                        "authenticated_frames runtime_controls"),
                        **_params(READ, "diagnostics_period"), **_RUNTIME_FLAGS}},
     "trainer_node": {
-        "services": {"/trainer/fetch_weights": (READ, FETCH), **_standard(ACTS, RUNTIME)},
+        "services": {"/trainer/fetch_weights_<key_id>": (READ, FETCH), **_standard(ACTS, RUNTIME)},
         "publishes": {**_COMMON_TOPICS, "/trainer/weights_announcement": (ACTS, WEIGHTS),
+                      "/trainer/weights_blob": (ACTS, BLOB),
                       "/trainer/diagnostics": (READ, NONE), "/diagnostics": (READ, NONE)},
         # experience topics are subscribed as games appear: the sim_node's /<robot>/detections (and _mac),
         # /<robot>/action, /<robot>/feedback, /world_state (and _mac), with their protections above

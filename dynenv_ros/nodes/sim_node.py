@@ -157,7 +157,9 @@ class SimNode(Node):
         diag_s = declare_float(self, "diagnostics_period", 1.0, 0.1, 60.0, "Seconds between diagnostics.", **fixed)
         self.wait_for_subscribers = declare_int(
             self, "wait_for_subscribers", 1, 0, 100, "Stepped mode: hold the first observation until every robot's "
-            "detections topic has this many subscribers (policies, recorder).", **fixed)
+            "detections topic has this many subscribers (policies, recorder); with authenticated_frames its tag "
+            "topic (detections_mac) too, so count only readers that verify tags (policy nodes, the trainer).",
+            **fixed)
         self.wait_for_truth_readers = declare_int(
             self, "wait_for_ground_truth_subscribers", 0, 0, 100, "Stepped mode: also hold the first observation "
             "until /world_state has this many subscribers (scripted policies read it).", **fixed)
@@ -379,6 +381,10 @@ class SimNode(Node):
         wanted = self.wait_for_subscribers
         ready = all(p.get_subscription_count() >= wanted for p in self.detection_pubs)
         ready = ready and self.world_pub.get_subscription_count() >= self.wait_for_truth_readers
+        if self.frame_tag_pubs:
+            # ... and as many readers of their tags: a tag sent before its reader matched (discovery is asymmetric,
+            # slow under load) is lost, its frame refused, and the stepped game stalls at its first period
+            ready = ready and all(p.get_subscription_count() >= wanted for p in self.frame_tag_pubs[1:])
         # ... and every controlled robot has someone to act for it, matched by the action inbox's own participant
         # (it discovers writers on its own schedule), so no first action is sent into the void.
         ready = ready and all(self.action_inbox.subscriptions[i].get_publisher_count()

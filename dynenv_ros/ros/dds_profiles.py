@@ -1,10 +1,14 @@
-"""Bounding what DDS itself accepts on the weights announcement topic, before rclpy sees a byte.
+"""Bounding what DDS itself accepts on the weights announcement and blob topics, before rclpy sees a byte.
 
 A bounded message type (WeightsAnnouncement: every field has a maximum) is not enough on its own: rmw_fastrtps lets a
 reader's history grow to any sample size, so Fast DDS reassembled a 300 MB sample of raw bytes (any process can
 publish them) before the type's bound refused it — +290 MB of RSS for the reader (measured). The profiles in
 ``fastdds_bounded.xml`` preallocate that reader's samples at the type's bound instead, and Fast DDS drops a larger
-sample as its first fragment arrives (measured: +1 MB, no pause). Fast DDS reads profiles only at start-up, from
+sample as its first fragment arrives (measured: +1 MB, no pause). The blob topic's reader (chunks of at most
+1 MiB, ``ros.weights_release``) is bounded the same way: a 50 MB raw sample cost its reader +48 MB without the
+profile and nothing with it (measured; rclpy does not check a bounded sequence's length on reading). It starts with
+one preallocated sample and grows as samples arrive: Fast DDS's default of 100 cost +90 MB once the node had
+subscribed to the blob topic twice (measured). Fast DDS reads profiles only at start-up, from
 the environment, so ``use_bounded_profiles`` must run before ``rclpy.init`` (the policy node's ``main`` calls it).
 """
 from __future__ import annotations

@@ -16,6 +16,7 @@ from rclpy.node import Node
 from std_msgs.msg import UInt8MultiArray
 
 from dynenv_ros.ros.authentication import SECRETS_PARAMETER
+from dynenv_ros.ros.drain import take
 from dynenv_ros.ros.parameters import declare_bool
 from dynenv_ros.security.action_auth import SecretError, load_secret, secret_path
 from dynenv_ros.security.frame_auth import FRAMES, REASONS, TAG_SUFFIX, FrameGate, tag_frame
@@ -64,7 +65,8 @@ class FrameReceiver:
     def subscribe(self, frame_topic: str, qos: Any, release: Callable[[list[Any]], None]) -> Any:
         """Read the tags of ``frame_topic`` (fully qualified); ``release`` is called with verified frames."""
         def receive(msg: UInt8MultiArray) -> None:
-            released = self.gate.tag(msg.data, time.monotonic_ns())
+            released = self._queued_tags()
+            released += self.gate.tag(msg.data, time.monotonic_ns())
             self._count()
             if released:
                 release(released)
@@ -73,15 +75,29 @@ class FrameReceiver:
         return sub
 
     def frame(self, item: Any, data: bytes | None, what: str) -> list[Any]:
-        """The frames verified now: ``item`` if its tag came first, else none (it waits for its tag). ``data``
-        None: the frame's bytes could not be computed (a value out of its type's range), refused as
-        ``frame_mac_missing``."""
+        """The frames verified now: ``item`` if its tag came first, else none (it waits for its tag), and any
+        waiting frame whose tag was queued. ``data`` None: the frame's bytes could not be computed (a value out of
+        its type's range), refused as ``frame_mac_missing``."""
+        released = self._queued_tags()
         if data is None:
             self.gate.refuse("frame_mac_missing", f"{what}: a value no genuine frame holds")
-            released: list[Any] = []
         else:
-            released = self.gate.frame(item, data, time.monotonic_ns(), what)
+            released += self.gate.frame(item, data, time.monotonic_ns(), what)
         self._count()
+        return released
+
+    def _queued_tags(self) -> list[Any]:
+        """Take every tag already queued on the companion topics (the executor takes one per subscription per
+        wake-up, and frames are drained in batches), before anything can expire: a node busy for longer than the
+        gate's wait (a loaded machine, a weights swap) refused frames whose tags sat in its queue, and a stepped
+        game stalled. Returns the frames those tags verified."""
+        released: list[Any] = []
+        for sub in self.subscriptions:
+            for _ in range(self.gate.capacity):
+                msg = take(sub)
+                if msg is None:
+                    break
+                released += self.gate.tag(msg.data, time.monotonic_ns(), expire=False)
         return released
 
     def _count(self) -> None:

@@ -19,8 +19,17 @@ STEP_SERVICE = "/sim/step"                        # dynenv_msgs/srv/StepSimulati
 # The training graph (docs/ros_graph.md, "Training over ROS"): absolute, one trainer serves every game's policies.
 WEIGHTS_ANNOUNCEMENT = "/trainer/weights_announcement"  # dynenv_msgs/WeightsAnnouncement, signed; reliable,
 #                                                  transient local, depth 1
-FETCH_WEIGHTS = "/trainer/fetch_weights"          # dynenv_msgs/srv/FetchWeights: an announced file's chunks
+FETCH_WEIGHTS = "/trainer/fetch_weights"          # + "_<key id>": dynenv_msgs/srv/FetchWeights, an announced
+#                                                  file's chunks by offset (security.weights_source)
+WEIGHTS_BLOB = "/trainer/weights_blob"            # dynenv_msgs/srv/FetchWeights_Response: each release's manifest
+#                                                  and chunks; reliable, transient local (ros.weights_release)
 TRAINER_DIAGNOSTICS = "/trainer/diagnostics"      # diagnostic_msgs/DiagnosticArray, about 1 Hz
+
+
+def weights_blob(announcement_topic: str) -> str:
+    """The blob topic beside an announcement topic: ``/trainer/weights_announcement`` → ``/trainer/weights_blob``."""
+    parent, _, _ = announcement_topic.rpartition("/")
+    return f"{parent}/weights_blob" if parent or announcement_topic.startswith("/") else "weights_blob"
 
 
 def local(name: str) -> str:

@@ -16,7 +16,9 @@ type and signs nothing), so the tag travels on a **companion topic**, ``<topic>_
   message: a test checks they agree.
 - **Pairing** (``FrameGate``): a receiver computes the tag it expects for each frame and waits for it on the
   companion topic, at most ``wait_s`` (2 s) and ``capacity`` frames; tags that came first wait for their frame
-  likewise. A frame is used once its tag came; a forged, altered or untagged frame never gets one (a companion tag
+  likewise. A frame or tag that arrives is matched before the others expire, and a receiver takes every tag already
+  queued before it expires anything (``ros/frame_tags.py``), so a node busier than ``wait_s`` does not refuse
+  frames whose tags had come. A frame is used once its tag came; a forged, altered or untagged frame never gets one (a companion tag
   cannot tell the three apart) and is refused as ``frame_mac_missing`` when its wait ends; a genuine frame received
   again after it was used is ``frame_replayed``; a tag of another length is ``tag_malformed``; a tag no frame
   claimed within the wait is ``tag_unmatched``.
@@ -181,13 +183,14 @@ class FrameGate:
     def frame(self, item: Any, data: bytes, now_ns: int, what: Hashable = "") -> list[Any]:
         """A frame of canonical bytes ``data`` arrived (``item``: what to hand on once verified; ``what``: a name
         for the log)."""
-        self.expire(now_ns)
         expected = tag_frame(self.secret, data)
         if expected in self._used:
             self.refuse("frame_replayed", f"{what}: a frame already used arrived again")
             return []
-        if self._tags.pop(expected, None) is not None:
+        if self._tags.pop(expected, None) is not None:       # before the others expire: late is not forged
+            self.expire(now_ns)
             return [self._use(expected, item)]
+        self.expire(now_ns)
         if expected in self._frames:          # the same bytes twice before the tag: the first one waits
             self.refuse("frame_replayed", f"{what}: a frame arrived twice before its tag")
             return []
@@ -198,17 +201,24 @@ class FrameGate:
                                               "waited (forged, altered or untagged)")
         return []
 
-    def tag(self, mac: Any, now_ns: int) -> list[Any]:
-        """A tag arrived on a companion topic."""
-        self.expire(now_ns)
+    def tag(self, mac: Any, now_ns: int, expire: bool = True) -> list[Any]:
+        """A tag arrived on a companion topic. It is matched before the frames waiting expire: a tag that came
+        after the wait (a node too busy to read it in time) still verifies its frame. ``expire`` false: nothing
+        expires (a receiver taking a batch of queued tags expires once, after the batch)."""
         mac = bytes(mac)
         if len(mac) != TAG_BYTES:
+            if expire:
+                self.expire(now_ns)
             self.refuse("tag_malformed", f"a tag of {len(mac)} bytes (want {TAG_BYTES})")
             return []
         for expected, waiting in self._frames.items():
             if hmac.compare_digest(expected, mac):
                 del self._frames[expected]
+                if expire:
+                    self.expire(now_ns)
                 return [self._use(expected, waiting.item[0])]
+        if expire:
+            self.expire(now_ns)
         if mac not in self._used:
             self._tags[mac] = _Waiting(now_ns)
             while len(self._tags) > self.capacity:
