@@ -3,6 +3,10 @@
 - Each pytest-xdist worker gets its own ROS_DOMAIN_ID (derived from the run id, so two concurrent test runs on one
   machine are unlikely to meet) and discovery is limited to this host; subprocesses inherit both.
 - ``ros_context`` gives each test its own rclpy Context; ``make_node`` creates nodes in it; ``executor`` spins them.
+- Markers (pytest.ini): ``ros`` is applied here by test/ros_marking.py's rules (the fixtures above, or a module that
+  imports ROS), or by hand where a test starts ROS only in its subprocesses; while a test that is not ``ros`` runs,
+  ROS is made unavailable to it and its subprocesses, so a missing mark fails the test instead of hiding in
+  ``make test-fast``. ``slow`` is set by hand (docs/setup.md#tests says the threshold).
 """
 from __future__ import annotations
 
@@ -16,6 +20,10 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # test helpers (ros_harness) importable from tests
+
+import ros_marking  # noqa: E402 (a test helper: importable only after the line above)
+
+ROS_GUARD = ros_marking.RosGuard()
 
 
 def worker_domain_id() -> int:
@@ -35,6 +43,43 @@ def pytest_configure(config: pytest.Config) -> None:
     # the repository's committed ledger
     import tempfile
     os.environ["DYNENV_TEST_LEDGER"] = str(Path(tempfile.gettempdir()) / f"dynenv_test_ledger_{os.getpid()}.jsonl")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The ``ros`` mark for every test that uses the ROS fixtures or whose module imports ROS."""
+    for item in items:
+        if item.get_closest_marker("ros"):
+            continue
+        module = getattr(item, "module", None)
+        module_file = Path(module.__file__) if module is not None and module.__file__ else None
+        if ros_marking.ROS_FIXTURES.intersection(getattr(item, "fixturenames", ())) or (
+                module_file is not None and ros_marking.module_uses_ros(module_file)):
+            item.add_marker(pytest.mark.ros)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    if item.get_closest_marker("ros") is None:
+        ROS_GUARD.arm(item.nodeid)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    try:
+        return (yield)
+    finally:
+        ROS_GUARD.disarm()
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[pytest.TestReport]:
+    """A failing test that is not ``ros`` says that ROS was unavailable to it, when ROS is what failed."""
+    report: pytest.TestReport = yield
+    if report.failed and item.get_closest_marker("ros") is None:
+        text = report.longreprtext + "".join(content for _, content in report.sections)
+        if ros_marking.UNAVAILABLE_RMW in text or "not marked `ros`" in text:
+            report.sections.append(("ros marker", ros_marking.hint(item.nodeid)))
+    return report
 
 
 @pytest.fixture
