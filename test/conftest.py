@@ -6,7 +6,7 @@
 - Markers (pytest.ini): ``ros`` is applied here by test/ros_marking.py's rules (the fixtures above, or a module that
   imports ROS), or by hand where a test starts ROS only in its subprocesses; while a test that is not ``ros`` runs,
   ROS is made unavailable to it and its subprocesses, so a missing mark fails the test instead of hiding in
-  ``make test-fast``. ``slow`` is set by hand (docs/setup.md#tests says the threshold).
+  ``make test-fast``. ``slow`` is applied here from test/slow_marking.py's measured list.
 """
 from __future__ import annotations
 
@@ -21,9 +21,12 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # test helpers (ros_harness) importable from tests
 
-import ros_marking  # noqa: E402 (a test helper: importable only after the line above)
+import ros_marking  # noqa: E402 (test helpers: importable only after the line above)
+import slow_marking  # noqa: E402
 
 ROS_GUARD = ros_marking.RosGuard()
+SLOW_ENTRIES_MATCHED = pytest.StashKey[set[str]]()
+FILES_COLLECTED = pytest.StashKey[set[str]]()
 
 
 def worker_domain_id() -> int:
@@ -45,16 +48,23 @@ def pytest_configure(config: pytest.Config) -> None:
     os.environ["DYNENV_TEST_LEDGER"] = str(Path(tempfile.gettempdir()) / f"dynenv_test_ledger_{os.getpid()}.jsonl")
 
 
+@pytest.hookimpl(tryfirst=True)   # before -m deselects: every collected test is seen
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The ``ros`` mark for every test that uses the ROS fixtures or whose module imports ROS."""
+    """The ``ros`` mark for every test that uses the ROS fixtures or whose module imports ROS; ``slow`` for the
+    measured ones. Which slow-list entries named a collected test is kept for test_ros_marking.py."""
+    matched: set[str] = set()
     for item in items:
-        if item.get_closest_marker("ros"):
-            continue
         module = getattr(item, "module", None)
         module_file = Path(module.__file__) if module is not None and module.__file__ else None
-        if ros_marking.ROS_FIXTURES.intersection(getattr(item, "fixturenames", ())) or (
-                module_file is not None and ros_marking.module_uses_ros(module_file)):
+        if item.get_closest_marker("ros") is None and (
+                ros_marking.ROS_FIXTURES.intersection(getattr(item, "fixturenames", ())) or (
+                    module_file is not None and ros_marking.module_uses_ros(module_file))):
             item.add_marker(pytest.mark.ros)
+        if slow_marking.is_slow(item.nodeid):
+            item.add_marker(pytest.mark.slow)
+            matched.update(slow_marking.key_of(item.nodeid))
+    config.stash[SLOW_ENTRIES_MATCHED] = matched
+    config.stash[FILES_COLLECTED] = {Path(str(item.path)).name for item in items}
 
 
 @pytest.hookimpl(tryfirst=True)

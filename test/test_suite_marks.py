@@ -1,11 +1,13 @@
-"""The ``ros`` marker is on every test that starts ROS, so ``make test-fast`` (``-m "not ros and not slow"``) is
-ROS-free: the static rule (test/ros_marking.py) marks what it can see, and a test it cannot see fails until marked.
+"""The markers ``make test-fast`` (``-m "not ros and not slow"``) relies on.
 
-The last two tests run pytest on small test files written here, with this suite's conftest.py, ros_marking.py and
-pytest.ini: the files stand for a future test that forgets its mark.
+``ros`` is on every test that starts ROS, so the subset is ROS-free: the static rule (test/ros_marking.py) marks what
+it can see, and a test it cannot see fails until marked. Two tests here run pytest on small test files written
+here, with this suite's conftest.py, helpers and pytest.ini: the files stand for a future test that forgets its
+mark. ``slow`` comes from test/slow_marking.py's measured list, whose entries must name tests that exist.
 """
 from __future__ import annotations
 
+import ast
 import os
 import shutil
 import subprocess
@@ -16,6 +18,8 @@ from pathlib import Path
 import pytest
 
 import ros_marking
+import slow_marking
+from conftest import FILES_COLLECTED, SLOW_ENTRIES_MATCHED
 
 TEST_DIR = Path(__file__).resolve().parent
 
@@ -52,7 +56,7 @@ def test_the_static_rule_follows_relative_imports_of_the_repository() -> None:
 
 def _suite_copy(tmp_path: Path, files: dict[str, str]) -> tuple[Path, dict[str, str]]:
     """A folder with this suite's conftest.py, ros_marking.py, ros_harness.py and pytest.ini, plus ``files``."""
-    for name in ("conftest.py", "ros_marking.py", "ros_harness.py"):
+    for name in ("conftest.py", "ros_marking.py", "slow_marking.py", "ros_harness.py"):
         shutil.copy(TEST_DIR / name, tmp_path / name)
     shutil.copy(TEST_DIR.parent / "pytest.ini", tmp_path / "pytest.ini")
     for name, text in files.items():
@@ -148,3 +152,38 @@ def test_a_test_that_starts_ros_without_the_mark_fails(tmp_path: Path) -> None:
     }, done.stdout + done.stderr
     assert done.stdout.count("is not marked `ros`, so ROS was unavailable to it") == 2, done.stdout
     assert ros_marking.UNAVAILABLE_RMW in done.stdout   # rcl's own message names the middleware it could not load
+
+
+def test_the_slow_list_is_read_from_a_durations_log() -> None:
+    """Setup, call and teardown add up; a function slow in every parametrization is one entry, one slow in some
+    only is listed by id; the threshold is inclusive."""
+    log = textwrap.dedent("""\
+        ============================== slowest durations ===============================
+        14.00s call     test/test_a.py::test_long
+        1.00s setup    test/test_a.py::test_long
+        3.00s call     test/test_a.py::test_quick
+        20.00s call     test/test_b.py::test_p[x]
+        2.00s call     test/test_b.py::test_p[y]
+        15.00s call     test/test_b.py::test_q[x]
+        16.00s call     test/test_b.py::test_q[y]
+        """)
+    assert slow_marking.entries_from_log(log) == {"test_a.py::test_long": 15.0, "test_b.py::test_p[x]": 20.0,
+                                                  "test_b.py::test_q": 16.0}
+    assert slow_marking.is_slow("test/test_doc_commands.py::test_doc_commands_work_as_written[docs/results.md]")
+    assert not slow_marking.is_slow("test/test_suite_marks.py::test_the_slow_list_is_read_from_a_durations_log")
+
+
+def test_every_slow_entry_names_a_test(request: pytest.FixtureRequest) -> None:
+    """A renamed or removed test would leave its entry marking nothing (and the renamed test in the quick subset):
+    each entry's file must define its function, and when this run collected every test file (``make test``),
+    each entry, parametrization id included, must have marked a collected test."""
+    for entry in slow_marking.MEASURED:
+        file, _, name = entry.partition("::")
+        path = TEST_DIR / file
+        assert path.is_file(), entry
+        functions = {node.name for node in ast.walk(ast.parse(path.read_text()))
+                     if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))}
+        assert name.split("[", 1)[0] in functions, entry
+    every_file = {path.name for path in TEST_DIR.glob("test_*.py")}
+    if every_file <= request.config.stash[FILES_COLLECTED]:
+        assert set(slow_marking.MEASURED) - request.config.stash[SLOW_ENTRIES_MATCHED] == set()
