@@ -19,6 +19,11 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
+# One BLAS / OpenMP thread per process, set before numpy or torch load (they read it then), inherited by the
+# processes tests start. `-n 2` gives each core a worker already; a second thread per worker makes the two wait for
+# each other, and OpenBLAS spins while it waits: the perception leak test took 5x the CPU with its default threads.
+for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # test helpers (ros_harness) importable from tests
 
 import ros_marking  # noqa: E402 (test helpers: importable only after the line above)
