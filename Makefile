@@ -6,7 +6,7 @@ HOST_PY := $(shell command -v python3.11 || command -v python3)
 ARGS ?=
 PYTEST_ARGS ?=
 
-.PHONY: run test lint bootstrap lock bench clean
+.PHONY: run test test-fast lint bootstrap lock bench clean
 
 bootstrap:
 	@test -n "$(HOST_PY)" || { echo "error: Python 3.11 is required (python3.11 not found on PATH)"; exit 2; }
@@ -21,6 +21,10 @@ lint: bootstrap
 
 test: lint
 	@$(VENV_PY) -m pytest -n 2 $(PYTEST_ARGS) test
+
+# The quick, ROS-free subset while working (docs/setup.md#tests): no lint, no test marked `ros` or `slow`.
+test-fast: bootstrap
+	@$(VENV_PY) -m pytest -n 2 -m "not ros and not slow" $(PYTEST_ARGS) test
 
 bench: bootstrap
 	@$(VENV_PY) -m benchmarks $(ARGS)

@@ -3,6 +3,10 @@
 - Each pytest-xdist worker gets its own ROS_DOMAIN_ID (derived from the run id, so two concurrent test runs on one
   machine are unlikely to meet) and discovery is limited to this host; subprocesses inherit both.
 - ``ros_context`` gives each test its own rclpy Context; ``make_node`` creates nodes in it; ``executor`` spins them.
+- Markers (pytest.ini): ``ros`` is applied here by test/ros_marking.py's rules (the fixtures above, or a module that
+  imports ROS), or by hand where a test starts ROS only in its subprocesses; while a test that is not ``ros`` runs,
+  ROS is made unavailable to it and its subprocesses, so a missing mark fails the test instead of hiding in
+  ``make test-fast``. ``slow`` is applied here from test/slow_marking.py's measured list.
 """
 from __future__ import annotations
 
@@ -15,7 +19,19 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
+# One BLAS / OpenMP thread per process, set before numpy or torch load (they read it then), inherited by the
+# processes tests start. `-n 2` gives each core a worker already; a second thread per worker makes the two wait for
+# each other, and OpenBLAS spins while it waits: the perception leak test took 5x the CPU with its default threads.
+for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # test helpers (ros_harness) importable from tests
+
+import ros_marking  # noqa: E402 (test helpers: importable only after the line above)
+import slow_marking  # noqa: E402
+
+ROS_GUARD = ros_marking.RosGuard()
+SLOW_ENTRIES_MATCHED = pytest.StashKey[set[str]]()
+FILES_COLLECTED = pytest.StashKey[set[str]]()
 
 
 def worker_domain_id() -> int:
@@ -35,6 +51,50 @@ def pytest_configure(config: pytest.Config) -> None:
     # the repository's committed ledger
     import tempfile
     os.environ["DYNENV_TEST_LEDGER"] = str(Path(tempfile.gettempdir()) / f"dynenv_test_ledger_{os.getpid()}.jsonl")
+
+
+@pytest.hookimpl(tryfirst=True)   # before -m deselects: every collected test is seen
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The ``ros`` mark for every test that uses the ROS fixtures or whose module imports ROS; ``slow`` for the
+    measured ones. Which slow-list entries named a collected test is kept for test_ros_marking.py."""
+    matched: set[str] = set()
+    for item in items:
+        module = getattr(item, "module", None)
+        module_file = Path(module.__file__) if module is not None and module.__file__ else None
+        if item.get_closest_marker("ros") is None and (
+                ros_marking.ROS_FIXTURES.intersection(getattr(item, "fixturenames", ())) or (
+                    module_file is not None and ros_marking.module_uses_ros(module_file))):
+            item.add_marker(pytest.mark.ros)
+        if slow_marking.is_slow(item.nodeid):
+            item.add_marker(pytest.mark.slow)
+            matched.update(slow_marking.key_of(item.nodeid))
+    config.stash[SLOW_ENTRIES_MATCHED] = matched
+    config.stash[FILES_COLLECTED] = {Path(str(item.path)).name for item in items}
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    if item.get_closest_marker("ros") is None:
+        ROS_GUARD.arm(item.nodeid)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    try:
+        return (yield)
+    finally:
+        ROS_GUARD.disarm()
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[pytest.TestReport]:
+    """A failing test that is not ``ros`` says that ROS was unavailable to it, when ROS is what failed."""
+    report: pytest.TestReport = yield
+    if report.failed and item.get_closest_marker("ros") is None:
+        text = report.longreprtext + "".join(content for _, content in report.sections)
+        if ros_marking.UNAVAILABLE_RMW in text or "not marked `ros`" in text:
+            report.sections.append(("ros marker", ros_marking.hint(item.nodeid)))
+    return report
 
 
 @pytest.fixture

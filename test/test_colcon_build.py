@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parent.parent
 
 
@@ -26,6 +28,7 @@ def copy_working_tree(destination: Path) -> None:
             shutil.copy2(source, target)
 
 
+@pytest.mark.ros   # it runs the installed selfcheck_talker, which loads rclpy
 def test_colcon_builds_both_packages_into_a_ros_layout(tmp_path):
     source = tmp_path / "src" / "dynenv_ros"
     copy_working_tree(source)

@@ -1063,6 +1063,8 @@ PARSE_ONLY: list[tuple[str, str]] = [
                                      "docs/ros_graph.md says this set-up is not tested)"),
     (r"^make test( |$)", "the test suite this test belongs to (running it here would recurse); its recipe and "
                          "PYTEST_ARGS selection are checked"),
+    (r"^make test-fast( |$)", "the quick part of the suite this test belongs to (running it here would recurse); its "
+                              "recipe and marker selection are collected"),
     (r"^make lint( |$)", "runs before the suite in `make test`, which this test belongs to; its recipe is checked"),
     (r"^(python -m )?pytest ", "tests of this suite (the suite runs them); the selection is collected"),
     (r"(--device[ =]|device=)cuda", "needs a CUDA GPU"),

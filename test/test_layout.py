@@ -11,6 +11,8 @@ import pkgutil
 import subprocess
 import sys
 
+import pytest
+
 import dynenv_ros.bags
 import dynenv_ros.core
 import dynenv_ros.envs
@@ -35,6 +37,7 @@ def test_the_light_packages_load_neither_ros_nor_torch():
     assert result.stdout.strip() == "[]", result.stdout
 
 
+@pytest.mark.ros   # its probe process imports the nodes, which load rclpy
 def test_the_trainer_and_the_ros_graph_import_without_ray():
     probe = ("import sys\nimport dynenv_ros.learning.trainer, dynenv_ros.learning.async_trainer, "
              "dynenv_ros.learning.runners, dynenv_ros.learning.train_cli, dynenv_ros.nodes.trainer_node, "

@@ -265,9 +265,13 @@ def test_the_recorded_actions_must_match_what_the_simulator_accepted(tmp_path):
                                                                 "/team_b_0/action": (4, 0)}
 
 
-def test_the_train_graph_runs_games_policies_and_the_trainer_and_summarises(tmp_path, capsys):
+def test_the_train_graph_runs_games_policies_and_the_trainer_and_summarises(tmp_path, capsys, monkeypatch):
     """A short run: the machinery (games in their namespaces, experience reaching the trainer, weights back, the
-    run directory, the curve) for a budget of 3 updates, too few to learn, so the exit status is not checked here; the comparison's rule is checked on fixed numbers below."""
+    run directory, the curve) for a budget of 3 updates, too few to learn, so the exit status is not checked here; the comparison's rule is checked on fixed numbers below.
+    The held-out verdict plays 4 episodes per policy here, not 80: that it plays the trainer's two policies and
+    prints the verdict is what this run shows; the 80 episodes are played by the verdict's own test below."""
+    from dynenv_ros.graph import train_graph
+    monkeypatch.setattr(train_graph, "HELD_OUT_EPISODES", 4)
     arguments = ["--output-dir", str(tmp_path), "--set", f"domain_id={os.environ['ROS_DOMAIN_ID']}",
                  "--set", "graph=train", "--set", "train_updates=3", "--set", "games=2",
                  "--set", "players_per_team=1", "--set", "episode_seconds=2"]
@@ -278,7 +282,7 @@ def test_the_train_graph_runs_games_policies_and_the_trainer_and_summarises(tmp_
     assert summary["diagnostics"]["malformed"] == "0" and not summary["diagnostics"]["learner_error"]
     assert (tmp_path / "trainer" / "policy.safetensors").is_file() and (tmp_path / "bag").is_dir()
     assert "robot-periods learnt" in output and "reward learnt (auxiliary term) per episode" in output, output
-    assert "held-out episodes (80 against the random team, same seeds)" in output, output
+    assert "held-out episodes (4 against the random team, same seeds)" in output, output
     # authenticated actions on: run-local secrets (owner-only), every node given them, nothing refused
     assert sorted(p.name for p in (tmp_path / "secrets").iterdir()) == ["frames.secret", "simulator.secret",
                                                                         "team_a.secret", "team_b.secret"]

@@ -16,6 +16,7 @@ import pytest
 from dynenv_ros.security.keys import generate_key_pair
 
 NETNS_TIMEOUT_S = 150.0
+pytestmark = pytest.mark.ros   # the nodes run as processes inside the namespaces
 
 
 def _ip(*args: str) -> None:

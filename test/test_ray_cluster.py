@@ -4,7 +4,7 @@ command use as users' clusters are used: training with actors on both nodes (ass
 second node killed mid-run (the run goes on, the death counted, nothing lost beyond the rollouts in flight), a grid
 of runs as Ray tasks, and the one-line refusals: an address nobody answers at, more workers than the cluster has.
 
-Everything the cluster needs is in its environment: a per-test auth token (Ray's processes listen on every
+Everything the cluster needs is in its environment: an auth token of its own (Ray's processes listen on every
 interface), failure detection in about a second (the head's health-check settings), no usage statistics. The
 pytest process itself never imports Ray: the trainer and the grid run as the users' commands, in subprocesses."""
 from __future__ import annotations
@@ -89,10 +89,22 @@ class Cluster:
         self.address = f"{self.head_ip}:{self.port}"
         self.head = self._start("head", ["--head", "--port", str(self.port), "--node-ip-address", self.head_ip])
         self._wait_started("head", self.head)
+        self._start_second_node()
+
+    def _start_second_node(self) -> None:
         prefix = ["ip", "netns", "exec", self.namespace] if self.namespace else []
         self.node = self._start("node", ["--address", self.address, "--node-ip-address", self.node_ip], prefix)
         self._wait_started("node", self.node)
         self.node_ids = self._node_ids(expect=2)
+
+    def ensure_two_nodes(self) -> None:
+        """A new second node where a test killed it: once the head has counted the old one dead (so that the ids
+        read next are the new node's), a node started as the first one was."""
+        if self.node is None or self.node.poll() is None:
+            return
+        if len(self._node_ids(expect=1)) != 1:
+            raise RuntimeError("the head still counts the killed node alive after 60 s")
+        self._start_second_node()
 
     def _start(self, name: str, args: list[str], prefix: list[str] = ()) -> subprocess.Popen:
         log = open(self.base / f"{name}.log", "w")
@@ -114,9 +126,11 @@ class Cluster:
 
     def _node_ids(self, expect: int, timeout: float = 60.0) -> dict[str, str]:
         """Node IP → node id of the alive nodes, read by a driver of its own."""
-        script = ("import json, ray; ray.init(address=%r, _node_ip_address=%r, log_to_driver=False, "
+        # os._exit once printed: Ray's own shutdown at exit is not needed here, and on a busy machine it outlasted
+        # the 60 s timeout after the answer was out
+        script = ("import json, os, ray; ray.init(address=%r, _node_ip_address=%r, log_to_driver=False, "
                   "logging_level='ERROR'); print(json.dumps({n['NodeManagerAddress']: n['NodeID'] "
-                  "for n in ray.nodes() if n['Alive']}))") % (self.address, self.head_ip)
+                  "for n in ray.nodes() if n['Alive']}), flush=True); os._exit(0)") % (self.address, self.head_ip)
         deadline = time.monotonic() + timeout
         while True:
             out = subprocess.run([sys.executable, "-c", script], env=self.env, capture_output=True, text=True,
@@ -148,13 +162,21 @@ class Cluster:
         shutil.rmtree(self.base, ignore_errors=True)
 
 
-@pytest.fixture
-def cluster():
+@pytest.fixture(scope="module")
+def shared_cluster():
+    """One cluster for the module's tests (starting one is two Ray processes and a driver: tens of seconds)."""
     made = Cluster()
     try:
         yield made
     finally:
         made.stop()
+
+
+@pytest.fixture
+def cluster(shared_cluster):
+    """The shared cluster with both its nodes, whatever the test before did to the second one."""
+    shared_cluster.ensure_two_nodes()
+    return shared_cluster
 
 
 def _train(cluster: Cluster, run_dir: Path, *extra: str) -> subprocess.Popen:

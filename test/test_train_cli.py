@@ -109,8 +109,10 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
     for name, value in agent.state_dict().items():
         assert torch.equal(value, model_state["agent." + name]), name
     out = tmp_path / "eval.json"
+    # a 2 s episode: what is checked is which weights were evaluated, not how they play
     assert eval_main([str(run_dir), "--opponent", "random", "--episodes", "1", "--seeds", "0", "--quiet",
-                      "--players-per-team", str(cfg.players_per_team), "--out", str(out)]) == 0
+                      "--players-per-team", str(cfg.players_per_team), "--episode-seconds", "2",
+                      "--out", str(out)]) == 0
     digest = hashlib.sha256((latest / "model.safetensors").read_bytes()).hexdigest()
     assert json.loads(out.read_text())["evaluated"]["sha256"] == digest
 
