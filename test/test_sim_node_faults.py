@@ -127,9 +127,9 @@ def test_realtime_streams_are_bounded_and_stepped_streams_lossless(make_node, ex
     stepped = make_node(SimNode, parameter_overrides=[Parameter("players_per_team", value=1),
                                                       Parameter("wait_for_subscribers", value=0)])
     for sim, frame_depth, feedback_depth in ((realtime, 25, 5), (stepped, None, None)):
-        outlet = sim.outlet
-        for publisher, depth in ([(p, frame_depth) for p in [outlet.clock_pub, outlet.world_pub] + outlet.detection_pubs]
-                                 + [(p, feedback_depth) for p in outlet.feedback_pubs]):
+        out = sim.outlet
+        for publisher, depth in ([(p, frame_depth) for p in [out.clock_pub, out.world_pub] + out.detection_pubs]
+                                 + [(p, feedback_depth) for p in out.feedback_pubs]):
             qos = publisher.qos_profile
             assert qos.reliability == ReliabilityPolicy.RELIABLE
             if depth is None:

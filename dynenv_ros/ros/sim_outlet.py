@@ -208,8 +208,9 @@ class SimOutlet:
                 break
             if not waited:
                 waited = True
-                self.node.get_logger().warning(f"{publisher.topic_name}: a reader does not acknowledge (killed?); waiting up to "
-                               f"{STEPPED_PUBLISH_PATIENCE_S:.0f} s for DDS to drop it", throttle_duration_sec=5.0)
+                self.node.get_logger().warning(f"{publisher.topic_name}: a reader does not acknowledge (killed?); "
+                                               f"waiting up to {STEPPED_PUBLISH_PATIENCE_S:.0f} s for DDS to drop it",
+                                               throttle_duration_sec=5.0)
             time.sleep(0.01)
         self.counts["publish_failed"] += 1
         self.node.get_logger().error(f"could not publish on {publisher.topic_name}: its readers are stuck",
