@@ -221,12 +221,13 @@ def test_recorder_signalled_while_it_is_being_built_still_finishes_the_bag(tmp_p
     Here the signal is sent from the constructor itself, after the subscriptions exist."""
     bag = tmp_path / "early"
     script = ("import os, signal\n"
-              "from dynenv_ros.nodes.recorder import Recorder, run_recorder\n"
+              "from dynenv_ros.nodes.recorder import Recorder\n"
+              "from dynenv_ros.ros.signal_runner import run_draining\n"
               "class Early(Recorder):\n"
               "    def __init__(self, **kw):\n"
               "        super().__init__(**kw)\n"
               "        os.kill(os.getpid(), signal.SIGINT)\n"
-              f"raise SystemExit(run_recorder(Early, ['--ros-args', '-p', 'output:={bag}']))\n")
+              f"raise SystemExit(run_draining(Early, ['--ros-args', '-p', 'output:={bag}']))\n")
     done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert "finished" in done.stdout + done.stderr, done.stderr

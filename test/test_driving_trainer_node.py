@@ -57,7 +57,7 @@ def test_the_trainer_rebuilds_what_the_driving_policy_saw_and_chose(make_node, e
     counts = trainer.assembler.counts
     assert counts["missing"] == 0 and counts["malformed"] == 0 and counts["late"] == 0, counts
     assert counts["actions_rounded"] == 0, counts
-    assert trainer.games == {""} and {r for _, r in trainer.robots} == {"car_0", "car_1"}
+    assert trainer.readers.games == {""} and {r for _, r in trainer.readers.robots} == {"car_0", "car_1"}
     assert trainer.learner.agent.scenario == "driving" and not trainer.background.error
 
 

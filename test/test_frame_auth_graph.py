@@ -87,7 +87,7 @@ def test_no_forged_frame_reaches_the_policys_decisions_or_the_trainers_experienc
     for node in (trainer, sim, policy, watcher):
         executor.add_node(node)
     attacker = _attacker(secrets, 150)
-    gate, learner_gate = policy.frame_gate.gate, trainer.frame_gate.gate
+    gate, learner_gate = policy.frame_gate.gate, trainer.readers.frame_gate.gate
     try:
         assert spin_until(executor, lambda: trainer.learner.updates >= 3 and gate.counts["frame_replayed"] >= 5
                           and gate.counts["frame_mac_missing"] >= 30 and learner_gate.counts["frame_mac_missing"]

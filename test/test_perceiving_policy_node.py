@@ -190,7 +190,7 @@ def _stepped_game(make_node, executor, seed: int, periods: int, namespace: str) 
     for n in (sim, *robots):
         executor.add_node(n)
     assert spin_until(executor, lambda: sim.periods_run >= periods, 60.0), sim.session.counts
-    assert sim.world_pub.get_subscription_count() == 0             # nobody reads the ground truth
+    assert sim.outlet.world_pub.get_subscription_count() == 0             # nobody reads the ground truth
     assert sim.session.counts["missing"] == 0
     actions = [[(a.walk, a.turn, a.kick, a.head_yaw_delta) for a in r.sent_log[:periods]] for r in robots]
     truth = [(o.id, round(o.x, 9), round(o.y, 9), round(o.yaw, 9)) for o in sim.session.world.snapshot().objects]

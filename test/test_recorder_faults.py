@@ -93,10 +93,11 @@ def test_a_full_disk_is_reported_on_diagnostics_and_the_written_part_stays_reada
     for message in before:
         publisher.publish(message)
     # a quiet recorder still hands its open chunk to the OS within a second (flush timer)
-    assert spin_until(executor, lambda: recorder.bag.flushed_messages == len(before), 5.0), recorder.counts
+    recording = recorder.recording
+    assert spin_until(executor, lambda: recording.bag.flushed_messages == len(before), 5.0), recorder.counts
     assert any(s.level == DiagnosticStatus.OK for s in statuses) or spin_until(
         executor, lambda: any(s.level == DiagnosticStatus.OK for s in statuses), 3.0)
-    storage = recorder.bag._storage
+    storage = recording.bag._storage
     storage._file = _FullDisk(storage._file)
     for message in during:
         publisher.publish(message)
@@ -104,12 +105,12 @@ def test_a_full_disk_is_reported_on_diagnostics_and_the_written_part_stays_reada
         [s.message for s in statuses]
     for message in after:
         publisher.publish(message)
-    assert spin_until(executor, lambda: recorder.dropped == len(during) + len(after), 5.0), recorder.dropped
+    assert spin_until(executor, lambda: recording.dropped == len(during) + len(after), 5.0), recording.dropped
     error = next(s for s in statuses if s.level == DiagnosticStatus.ERROR)
     assert "not recording" in error.message and "disk full" in error.message
     assert {v.key: v.value for v in error.values}["messages_written"] == str(len(before))
     recorder.finish()
-    assert recorder.recovered == len(before)
+    assert recording.recovered == len(before)
     info = bag_info(bag)   # reindexed at the end: readable without --ignore-damage
     assert info["message_count"] == len(before)
     assert {t["name"]: t["count"] for t in info["topics"]} == {topics.WORLD_STATE: len(before)}

@@ -73,7 +73,7 @@ def test_with_runtime_controls_off_no_call_changes_the_game_or_the_learning(make
                                      for n in ("learning_rate", "use_sim_time")], seen
     periods = sim.periods_run
     assert spin_until(executor, lambda: sim.periods_run >= periods + 3, 60.0)
-    assert sim.session.episode_id == episode and sim.missing_action == "none" and sim.auto_reset
+    assert sim.session.episode_id == episode and sim.session.missing_action == "none" and sim.game.auto_reset
     assert trainer.learner.optimizer.param_groups[0]["lr"] == rate == 1e-4
     assert not trainer.get_parameter("use_sim_time").value and not sim.get_parameter("use_sim_time").value
     assert sim.diagnostics()["runtime_controls"] == "off" and trainer.diagnostics()["runtime_controls"] == "off"
@@ -92,7 +92,7 @@ def test_with_the_local_default_the_same_calls_change_the_game(make_node, execut
     seen = _attack(executor, 20.0)                 # up to 5 s to discover each service on a loaded machine
     assert seen["reset"] != "absent" and seen["reset"]["success"] and seen["step"]["success"], seen
     assert [r["successful"] for r in seen["/sim_node"]] == [True, True, True]
-    assert sim.session.episode_id > episode and sim.missing_action == "hold" and not sim.auto_reset, \
+    assert sim.session.episode_id > episode and sim.session.missing_action == "hold" and not sim.game.auto_reset, \
         (episode, sim.session.episode_id, seen)
 
 

@@ -11,9 +11,9 @@ from rclpy.parameter import Parameter
 
 from dynenv_ros.envs.robocup_v0 import parallel_env
 from dynenv_ros.envs.soccer_session import SoccerSession
-from dynenv_ros.nodes import sim_node as sim_node_module
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.perception.params import load_preset
+from dynenv_ros.ros import sim_outlet as sim_outlet_module
 from dynenv_ros.ros import topics
 from dynenv_ros.soccer.config import SoccerConfig
 from ros_harness import spin_until
@@ -48,9 +48,9 @@ def test_ill_typed_reset_options_and_seeds_are_refused_and_the_node_lives_on(mak
     for options in BAD_OPTIONS:
         reply = _call(executor, reset, ResetSimulation.Request(options_yaml=options))
         assert not reply.success and reply.message.startswith("reset refused"), (options, reply.message)
-    episodes = sim.episodes_started
+    episodes = sim.game.episodes_started
     reply = _call(executor, reset, ResetSimulation.Request(use_seed=True, seed=5, options_yaml="{kickoff_team: b}"))
-    assert reply.success and sim.episodes_started == episodes + 1      # the .srv comment's example works
+    assert reply.success and sim.game.episodes_started == episodes + 1      # the .srv comment's example works
 
 
 def test_the_env_refuses_ill_typed_options_with_a_value_error():
@@ -92,21 +92,21 @@ def test_re_setting_the_real_time_factor_never_starves_the_timer(make_node, exec
     (1.0 <-> 0.99) — restarted the timer each time, so it never fired. Then a speed-up from a 5 s frame period to
     10 ms must not wait for the old period."""
     sim, client = _sim(make_node, executor, mode="realtime", real_time_factor=1.0)
-    assert spin_until(executor, lambda: sim.frames_published > 0, 5.0)
+    assert spin_until(executor, lambda: sim.game.frames_published > 0, 5.0)
     for values in ((1.0, 1.0), (0.99, 1.0)):
-        before, deadline, k = sim.frames_published, time.monotonic() + 2.0, 0
+        before, deadline, k = sim.game.frames_published, time.monotonic() + 2.0, 0
         while time.monotonic() < deadline:
             assert sim.set_parameters([Parameter("real_time_factor", value=values[k % 2])])[0].successful
             k += 1
             end = time.monotonic() + 0.05
             while time.monotonic() < end:
                 executor.spin_once(timeout_sec=0.01)
-        assert sim.frames_published - before >= 10, (values, sim.frames_published - before)   # ~20 due
+        assert sim.game.frames_published - before >= 10, (values, sim.game.frames_published - before)   # ~20 due
     assert sim.set_parameters([Parameter("real_time_factor", value=0.02)])[0].successful
     spin_until(executor, lambda: False, 0.2)
     assert sim.set_parameters([Parameter("real_time_factor", value=10.0)])[0].successful
-    count = sim.frames_published
-    assert spin_until(executor, lambda: sim.frames_published >= count + 5, 2.0)
+    count = sim.game.frames_published
+    assert spin_until(executor, lambda: sim.game.frames_published >= count + 5, 2.0)
 
 
 def test_an_oversized_options_string_is_refused_before_parsing(make_node, executor):
@@ -127,8 +127,9 @@ def test_realtime_streams_are_bounded_and_stepped_streams_lossless(make_node, ex
     stepped = make_node(SimNode, parameter_overrides=[Parameter("players_per_team", value=1),
                                                       Parameter("wait_for_subscribers", value=0)])
     for sim, frame_depth, feedback_depth in ((realtime, 25, 5), (stepped, None, None)):
-        for publisher, depth in ([(p, frame_depth) for p in [sim.clock_pub, sim.world_pub] + sim.detection_pubs]
-                                 + [(p, feedback_depth) for p in sim.feedback_pubs]):
+        out = sim.outlet
+        for publisher, depth in ([(p, frame_depth) for p in [out.clock_pub, out.world_pub] + out.detection_pubs]
+                                 + [(p, feedback_depth) for p in out.feedback_pubs]):
             qos = publisher.qos_profile
             assert qos.reliability == ReliabilityPolicy.RELIABLE
             if depth is None:
@@ -178,20 +179,20 @@ class _RefusingPublisher:
 def test_a_refused_publish_costs_realtime_one_attempt_and_stepped_mode_retries(make_node, executor, monkeypatch):
     sim, _ = _sim(make_node, executor, mode="realtime")
     stuck = _RefusingPublisher()
-    sim._publish(stuck, object())
+    sim.outlet.publish(stuck, object())
     assert stuck.attempts == 1                                    # no retry loop in real time
     assert sim.session.counts["publish_failed"] == 1
     # stepped mode stays lossless past a killed reader: a writer refusing for 1.5 s (the old patience was 1 s)
     stepped, _ = _sim(make_node, executor)
     recovering, message = _RefusingPublisher(refuse_s=1.5), object()
-    stepped._publish(recovering, message)
+    stepped.outlet.publish(recovering, message)
     assert recovering.delivered == [message] and recovering.attempts > 10
     assert stepped.session.counts["publish_failed"] == 0
     # a reader that never acknowledges: given up after the patience (shortened here), counted
-    monkeypatch.setattr(sim_node_module, "STEPPED_PUBLISH_PATIENCE_S", 0.2)
+    monkeypatch.setattr(sim_outlet_module, "STEPPED_PUBLISH_PATIENCE_S", 0.2)
     stuck = _RefusingPublisher()
     started = time.monotonic()
-    stepped._publish(stuck, object())
+    stepped.outlet.publish(stuck, object())
     assert time.monotonic() - started >= 0.2 and stuck.attempts > 1 and not stuck.delivered
     assert stepped.session.counts["publish_failed"] == 1
 
@@ -286,7 +287,7 @@ def test_wait_for_recorder_waits_until_a_dynenv_recorder_has_matched_every_actio
             KeyValue(key=f"matched_publishers:{topics.action(n)}", value=str(c)) for n, c in zip(names, counts)])]))
 
     matched((1, 0))                                  # the recorder has not matched team_b_0's policy yet
-    assert spin_until(executor, lambda: sim.recorder_matched.get(topics.action("team_b_0")) == 0, 5.0)
+    assert spin_until(executor, lambda: sim.reporting.recorder_matched.get(topics.action("team_b_0")) == 0, 5.0)
     spin_until(executor, lambda: sim.started, 1.5)
     assert not sim.started, "started before the recorder had matched team_b_0's action publisher"
     matched((1, 1))
@@ -348,13 +349,13 @@ def test_a_recorder_that_stops_writing_turns_the_simulator_diagnostics_to_error(
     recorder = client.create_publisher(DiagnosticArray, "/recorder/diagnostics", latched(1))
     recorder.publish(DiagnosticArray(status=[DiagnosticStatus(level=DiagnosticStatus.OK, name="recorder",
                                                               message="recording 9 topics")]))
-    assert spin_until(executor, lambda: sim.recorder_sub.get_publisher_count() == 1, 5.0)
+    assert spin_until(executor, lambda: sim.reporting.recorder_sub.get_publisher_count() == 1, 5.0)
     sim._publish_diagnostics()
     assert spin_until(executor, lambda: len(seen) >= 1, 5.0)
     assert seen[-1].level != DiagnosticStatus.ERROR and "recorder_error" not in sim.diagnostics()
     recorder.publish(DiagnosticArray(status=[DiagnosticStatus(
         level=DiagnosticStatus.ERROR, name="recorder", message="not recording: [Errno 28] No space left on device")]))
-    assert spin_until(executor, lambda: sim.recorder_error != "", 5.0)
+    assert spin_until(executor, lambda: sim.reporting.recorder_error != "", 5.0)
     sim._publish_diagnostics()
     assert spin_until(executor, lambda: len(seen) >= 2, 5.0)
     assert seen[-1].level == DiagnosticStatus.ERROR and "No space left" in seen[-1].message
@@ -496,11 +497,11 @@ if point == "inbox_thread_started":                  # inside ActionInbox(), its
             interrupt()
     threading.Thread.start = start_then_interrupt
 else:                                                # the constructor's next step after the inbox
-    diagnostics = sim_node.Diagnostics
+    diagnostics = sim_node.SimDiagnostics
     def interrupt_then_diagnostics(*args, **kwargs):
         interrupt()
         return diagnostics(*args, **kwargs)
-    sim_node.Diagnostics = interrupt_then_diagnostics
+    sim_node.SimDiagnostics = interrupt_then_diagnostics
 sys.exit(sim_node.main(["sim_node", "--ros-args", "-p", "mode:=realtime", "-p", "players_per_team:=1"]))
 """
 

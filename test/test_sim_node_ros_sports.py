@@ -71,7 +71,7 @@ def test_ros_sports_messages_mirror_each_frame_and_the_game(make_node, executor)
 
 def test_ros_sports_is_off_by_default(make_node):
     sim = _sim(make_node)
-    assert not sim.ros_sports
+    assert not sim.settings.ros_sports
     names = {name for name, _ in sim.get_publisher_names_and_types_by_node("sim_node", sim.get_namespace())}
     assert not any("soccer_vision_3d" in n or n.endswith("/gc/data") for n in names)
 

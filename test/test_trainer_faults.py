@@ -103,8 +103,8 @@ def test_hostile_experience_is_dropped_and_counted(make_node, executor, tmp_path
     actions = hostile.create_publisher(Action, "/team_a_0/action", action_stream())     # posing as a policy
     feedback = hostile.create_publisher(StepFeedback, "/team_a_0/feedback", sim_stream())
     executor.add_node(hostile)
-    assert spin_until(executor, lambda: ("", "team_a_0") in trainer.robots and actions.get_subscription_count() >= 1
-                      and feedback.get_subscription_count() >= 1, 20.0)
+    assert spin_until(executor, lambda: ("", "team_a_0") in trainer.readers.robots
+                      and actions.get_subscription_count() >= 1 and feedback.get_subscription_count() >= 1, 20.0)
     bad = [(detections, DetectionArray(robot_id=0, episode_id=1, motion_period=0, frame_index=7, frames_per_period=5)),
            (detections, DetectionArray(robot_id=0, episode_id=1, motion_period=0, frame_index=0, frames_per_period=0)),
            (detections, DetectionArray(robot_id=3, episode_id=1, motion_period=0, frame_index=0, frames_per_period=5)),
@@ -118,7 +118,7 @@ def test_hostile_experience_is_dropped_and_counted(make_node, executor, tmp_path
         publisher.publish(msg)
     assert spin_until(executor, lambda: trainer.assembler.counts["malformed"] == len(bad), 10.0), \
         trainer.assembler.counts
-    assert trainer.received["errors"] == 0 and not trainer.background.error
+    assert trainer.readers.received["errors"] == 0 and not trainer.background.error
     # and the graph still trains: a real game after the attack
     sim, policy = _game(make_node, executor, seed=5, trusted=tmp_path / "keys")
     assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()

@@ -64,7 +64,7 @@ def test_the_trainer_rebuilds_what_the_policy_saw_and_chose(make_node, executor,
     assert stats["behaviour_log_prob_error"] < 1e-3, stats
     counts = trainer.assembler.counts
     assert counts["missing"] == 0 and counts["malformed"] == 0 and counts["late"] == 0, counts
-    assert trainer.games == {""} and {r for _, r in trainer.robots} == {"team_a_0", "team_b_0"}
+    assert trainer.readers.games == {""} and {r for _, r in trainer.readers.robots} == {"team_a_0", "team_b_0"}
 
 
 def test_weights_flow_back_and_the_policy_acts_with_new_versions(make_node, executor, tmp_path):
@@ -90,7 +90,7 @@ def test_several_games_in_their_namespaces_feed_one_trainer(make_node, executor,
     _game(make_node, executor, "/game_1", seed=3, trusted=tmp_path / "keys")
     _game(make_node, executor, "/game_2", seed=7, trusted=tmp_path / "keys")
     assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
-    assert trainer.games == {"/game_1", "/game_2"}
+    assert trainer.readers.games == {"/game_1", "/game_2"}
     assert {(g, r) for g, r in trainer.learner.states} == {(g, r) for g in ("/game_1", "/game_2")
                                                            for r in ("team_a_0", "team_b_0")}
     assert trainer.assembler.counts["missing"] == 0
@@ -122,7 +122,7 @@ def test_parameters_are_checked_on_set_and_reach_the_learner(make_node, executor
     executor.add_node(sim)
     executor.add_node(policy)
     assert spin_until(executor, lambda: trainer.assembler.counts["sequences"] >= 2, 60.0), trainer.diagnostics()
-    assert {robot for _, robot in trainer.robots} == {"team_a_0", "team_b_0"}
+    assert {robot for _, robot in trainer.readers.robots} == {"team_a_0", "team_b_0"}
     assert {robot for _, robot in trainer.assembler.streams} == {"team_a_0"}
 
 

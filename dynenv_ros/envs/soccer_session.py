@@ -1,6 +1,7 @@
 """The soccer world served to asynchronous controllers (ROS nodes, sockets, tests): actions arrive one robot at a
 time, are validated and kept per motion period; a period runs when all controlled robots have acted, or when told
-to. ROS-free: the simulator node (``nodes/sim_node.py``) only converts what comes in and goes out.
+to. ROS-free: the simulator node's game (``sim_game.py``) serves it, and the node (``nodes/sim_node.py``) only
+converts what comes in and goes out.
 """
 from __future__ import annotations
 

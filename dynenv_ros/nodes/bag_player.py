@@ -49,12 +49,13 @@ from rosidl_parser.definition import AbstractNestedType, NamespacedType
 from dynenv_ros.bags.inspect import BagError, BagReader, open_bag
 from dynenv_ros.bags.qos import playback_qos
 from dynenv_ros.bags.typestore import dynenv_typestore
-from dynenv_ros.nodes.recorder import RCLError, message_class, run_until_signal
 from dynenv_ros.ros.bag_qos import describe, ros_qos
 from dynenv_ros.ros.diagnostics import Heartbeat
+from dynenv_ros.ros.message_classes import message_class
 from dynenv_ros.ros.node_runner import NodeExit
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.qos import sim_stream
+from dynenv_ros.ros.signal_runner import RCLError, run_until_signal
 
 TICK_S = 0.002            # playback timer period: the timing resolution at rate > 0
 BATCH = 200               # messages per timer callback at most, so other callbacks of the executor still run

@@ -19,53 +19,45 @@ diagnostic_msgs/DiagnosticArray, reliable + transient-local depth 1, about 1 Hz)
 simulator and the graph can see it; at the end the recorder reindexes what reached the disk and exits 1.
 While recording, the same topic says OK with the counts.
 
-Bag time of a message is its receive time in ns, like ``ros2 bag record``: wall time, or with ``use_sim_time:=true``
-(``--use-sim-time``) the latest /clock value recorded; the sim time
-stays in each message's header.stamp. Subscriptions are KEEP_ALL, reliable and transient local when every
-publisher of the topic offers it (as rosbag2 adapts them), so a recorder that falls behind holds a reliable publisher
-back instead of silently losing messages (once the writer's history is full, the publisher's publish() fails after
-Fast DDS's blocking time rather than dropping), and latched messages (/tf_static) are received however late the
-recorder starts. Each topic's metadata records the profile every publisher discovered on it offers
-(``offered_qos_profiles``, rosbag2 version 9), which the player republishes with. The bag is finished (MCAP footer,
-metadata.yaml) on every exit path and a summary (messages per topic) is logged. SIGINT/SIGTERM first drain what is
-already on its way (until no message arrived for DRAIN_QUIET_S, at most DRAIN_MAX_S), then finish the bag and exit 0; a second
-signal finishes at once.
+Bag time (``bags/recording.py``, the bag's ROS-free part): a message's receive time, wall or with
+``use_sim_time:=true`` the latest /clock recorded; the sim time stays in its header.stamp. Subscriptions are
+KEEP_ALL, reliable and transient local when every publisher of the topic offers it (as rosbag2 adapts them), so a
+recorder that falls behind holds a reliable publisher back instead of silently losing messages (once the writer's
+history is full, the publisher's publish() fails after Fast DDS's blocking time rather than dropping), and latched
+messages (/tf_static) are received however late the recorder starts. Each topic's metadata records the profile every
+publisher discovered on it offers (``offered_qos_profiles``, rosbag2 version 9), which the player republishes with.
+The bag is finished (MCAP footer, metadata.yaml) on every exit path and a summary (messages per topic) is logged.
+SIGINT/SIGTERM first drain what is already on its way (until no message arrived for DRAIN_QUIET_S, at most
+DRAIN_MAX_S), then finish the bag and exit 0; a second signal finishes at once.
 
 ``dynenv-record --output DIR --topics T ... --duration S`` (``cli_main``) is the same node with argparse options.
 """
 from __future__ import annotations
 
 import argparse
-import errno
-import importlib
-import signal
-import struct
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from datetime import datetime, timezone
 from typing import Any
 
-from rclpy.exceptions import ParameterException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from dynenv_ros.bags.mcap import CHUNK_MAX_AGE_S, FLUSH_PERIOD_S
-from dynenv_ros.bags.recovery import RecoveryError, reindex
-from dynenv_ros.bags.typestore import dynenv_typestore
-from dynenv_ros.bags.writer import BagWriter
+from dynenv_ros.bags.recording import Recording
 from dynenv_ros.ros.bag_qos import bag_qos, describe
-from dynenv_ros.ros.node_runner import NodeExit, run_node
+from dynenv_ros.ros.diagnostics import STANDARD_TOPIC as STANDARD_DIAGNOSTICS, Diagnostics
+from dynenv_ros.ros.message_classes import message_class
+from dynenv_ros.ros.node_runner import NodeExit
 from dynenv_ros.ros.parameters import declare_float, declare_str, declare_str_list
 from dynenv_ros.ros.qos import recording_qos
-from dynenv_ros.ros.diagnostics import STANDARD_TOPIC as STANDARD_DIAGNOSTICS, Diagnostics
+from dynenv_ros.ros.signal_runner import run_draining
 from dynenv_ros.ros.topics import MATCHED_PREFIX, RECORDER_DIAGNOSTICS, SIM_PUBLISHED_TYPES, local
-
-RCLError = _rclpy.RCLError
 
 # The simulator's topics, the policies' actions and the vision adapter's standard detections.
 RECORDED_TYPES = frozenset(SIM_PUBLISHED_TYPES | {"dynenv_msgs/msg/Action", "vision_msgs/msg/Detection3DArray"})
@@ -74,19 +66,6 @@ DRAIN_QUIET_S = 0.25      # after a stop request, finish once no message arrived
 DRAIN_MAX_S = 2.0         # ... or after this long at most (a publisher that keeps publishing)
 DIAGNOSTICS_TOPIC = RECORDER_DIAGNOSTICS
 DIAGNOSTICS_PERIOD_S = 1.0
-
-
-def message_class(type_name: str) -> type:
-    """The generated Python class of "pkg/msg/Name" (what rosidl_runtime_py.utilities.get_message does; that
-    package is not among our PyPI wheels)."""
-    try:
-        package, kind, name = type_name.split("/")
-    except ValueError:
-        raise ValueError(f"not a ROS message type name: {type_name!r} (expected pkg/msg/Name)") from None
-    try:
-        return getattr(importlib.import_module(f"{package}.{kind}"), name)
-    except (ImportError, AttributeError) as error:
-        raise ImportError(f"message type {type_name} is not installed: {error}") from error
 
 
 def default_output() -> str:
@@ -108,13 +87,11 @@ class Recorder(Node):
                                       read_only=True)
         self.requested = {self.resolve_topic_name(t) for t in requested}
         self.exit_when_done = exit_when_done
-        self.failure = ""             # why nothing is being recorded any more ("" while recording)
-        self.dropped = 0              # messages received but not on disk because a write failed
-        self.recovered: int | None = None   # messages the reindex after a failure kept
         self.finished = False
         self._subscriptions: list[Any] = []
         try:
-            self.bag = BagWriter(self.output, dynenv_typestore())
+            # With use_sim_time the bag time is the latest /clock value this node recorded (bags/recording.py).
+            self.recording = Recording(self.output, bool(self.get_parameter("use_sim_time").value))
         except FileExistsError as error:
             raise ParameterException(str(error), ["output"]) from None
         except OSError as error:   # read-only or foreign directory, disk full: one line, exit 2
@@ -124,10 +101,6 @@ class Recorder(Node):
 
         self._diagnostics = Diagnostics(self, local(DIAGNOSTICS_TOPIC), QoSProfile(   # and /diagnostics
             depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        # With use_sim_time the bag time is the latest /clock value this node recorded (read from the raw bytes,
-        # so it never depends on callback order between the clock and the data).
-        self._use_sim_time = bool(self.get_parameter("use_sim_time").value)
-        self._sim_ns = 0
         self.subscribed: dict[str, str] = {}          # topic → type
         self._ignored: set[tuple[str, tuple[str, ...]]] = set()   # warned about once
         self._started = time.monotonic()
@@ -145,7 +118,12 @@ class Recorder(Node):
     @property
     def counts(self) -> dict[str, int]:
         """Messages written per topic so far."""
-        return dict(self.bag.counts)
+        return self.recording.counts
+
+    @property
+    def failure(self) -> str:
+        """Why nothing is being recorded any more ("" while recording)."""
+        return self.recording.failure
 
     def _wanted(self, topic: str, types: list[str]) -> bool:
         if self.requested:
@@ -190,7 +168,7 @@ class Recorder(Node):
                     f" recording {getattr(qos, policy).name.lower()}, which matches them all")
         try:
             cls = message_class(msgtype)
-            self.bag.add_topic(topic, msgtype, [bag_qos(p) for p in offered])
+            self.recording.bag.add_topic(topic, msgtype, [bag_qos(p) for p in offered])
         except (ImportError, ValueError, KeyError) as error:
             return str(error)
         except OSError as error:   # its definition could not be written: the bag is full or broken
@@ -210,64 +188,46 @@ class Recorder(Node):
         return ""
 
     def _on_message(self, topic: str, data: bytes) -> None:
-        if topic == "/clock" and len(data) >= 12:   # CDR: 4-byte header, int32 sec, uint32 nanosec
-            sec, nanosec = struct.unpack_from("<iI", data, 4)
-            self._sim_ns = sec * 1_000_000_000 + nanosec
         self._last_message = time.monotonic()
-        if self.failure:
-            self.dropped += 1
-        elif not self.bag.closed:
-            stamp = self._sim_ns if self._use_sim_time else time.time_ns()
-            try:
-                self.bag.write(topic, stamp, data)
-            except OSError as error:
-                self._failed(error, this_message=1)
+        try:
+            self.recording.write(topic, data)
+        except OSError as error:
+            self._failed(error, this_message=1)
 
     def _flush(self) -> None:
         """Hand a quiet topic's open chunk to the OS once it is CHUNK_MAX_AGE_S old (busy ones close by size)."""
-        if self.failure or self.bag.closed:
+        if self.failure or self.recording.bag.closed:
             return
         try:
-            self.bag.flush(max_age_s=CHUNK_MAX_AGE_S)
+            self.recording.bag.flush(max_age_s=CHUNK_MAX_AGE_S)
         except OSError as error:
             self._failed(error)
 
     def _failed(self, error: OSError, this_message: int = 0) -> None:
         """A write failed: stop recording (the file now ends in a partial record), say so once, tell the graph."""
-        reason = "disk full" if error.errno == errno.ENOSPC else (error.strerror or str(error))
-        self.failure = f"cannot write {self.output}: {reason}"
-        # accepted but not on disk (the chunk that failed and any still open), and the message being written
-        self.dropped += sum(self.bag.counts.values()) - self.bag.flushed_messages + this_message
-        self.get_logger().error(f"{self.failure}: nothing is being recorded any more; the "
-                                f"{self.bag.flushed_messages} messages already on disk are kept and the bag is "
-                                "reindexed when the recorder stops")
-        self.bag.abort()
+        self.get_logger().error(self.recording.fail(error, this_message))
         self.publish_diagnostics()
 
     def publish_diagnostics(self) -> None:
         """OK with the counts while recording, ERROR "not recording: <why>" after a write failed."""
+        from builtin_interfaces.msg import Time
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from std_msgs.msg import Header
 
         if not self.context.ok():
             return
-        written = self.bag.flushed_messages if self.failure else sum(self.bag.counts.values())
+        written = self.recording.written
         status = DiagnosticStatus(
             level=DiagnosticStatus.ERROR if self.failure else DiagnosticStatus.OK, name="recorder",
             message=f"not recording: {self.failure}" if self.failure else f"recording {len(self.subscribed)} topics",
             hardware_id=self.output,
             values=[KeyValue(key="output", value=self.output), KeyValue(key="messages_written", value=str(written)),
-                    KeyValue(key="messages_dropped", value=str(self.dropped))]
+                    KeyValue(key="messages_dropped", value=str(self.recording.dropped))]
             + [KeyValue(key=MATCHED_PREFIX + s.topic_name, value=str(s.get_publisher_count()))
                for s in self._subscriptions])
         now = time.time_ns()
-        self._diagnostics.publish(DiagnosticArray(header=self._header(now), status=[status]))
-
-    @staticmethod
-    def _header(now_ns: int) -> Any:
-        from std_msgs.msg import Header
-        from builtin_interfaces.msg import Time
-
-        return Header(stamp=Time(sec=now_ns // 1_000_000_000, nanosec=now_ns % 1_000_000_000))
+        header = Header(stamp=Time(sec=now // 1_000_000_000, nanosec=now % 1_000_000_000))
+        self._diagnostics.publish(DiagnosticArray(header=header, status=[status]))
 
     def request_stop(self, drain: bool = True) -> None:
         """Stop soon (what SIGINT/SIGTERM do): with ``drain``, first keep taking the messages that are already on
@@ -299,106 +259,20 @@ class Recorder(Node):
         for subscription in self._subscriptions:
             self.destroy_subscription(subscription)
         self._subscriptions.clear()
-        if not self.failure:
-            try:
-                self.bag.close()
-            except OSError as error:   # the index did not fit: what is on disk is reindexed below
-                self.failure = f"cannot finish {self.output}: {error.strerror or error}"
-                self.bag.abort()
-        if self.failure:
-            summary = self._recover()
-        else:
-            counts = self.counts
-            lines = [f"  {topic}: {count}" for topic, count in sorted(counts.items())]
-            summary = (f"bag {self.output} finished: {sum(counts.values())} messages on {len(counts)} topics"
-                       + ("\n" + "\n".join(lines) if lines else ""))
+        summary = self.recording.close()
         if self.context.ok():
             (self.get_logger().error if self.failure else self.get_logger().info)(summary)
         else:   # after SIGINT/SIGTERM the logger's /rosout publisher is gone and would complain
             print(f"[recorder] {summary}", file=sys.stderr, flush=True)
 
-    def _recover(self) -> str:
-        """After a write failure: index what reached the disk (truncating the partial record frees its space)."""
-        try:
-            report = reindex(self.output)
-        except (OSError, RecoveryError) as error:
-            return (f"bag {self.output} NOT finished ({self.failure}); recovering it failed too ({error}): run "
-                    f"`dynenv-bag reindex {self.output}` once there is space")
-        self.recovered = report.messages
-        return (f"bag {self.output} NOT complete ({self.failure}; {self.dropped} messages dropped): "
-                f"{report.describe()}")
-
     def destroy_node(self) -> None:
-        if hasattr(self, "bag"):   # the constructor may have failed before the bag existed
+        if hasattr(self, "recording"):   # the constructor may have failed before the bag existed
             self.finish()
         super().destroy_node()
 
 
-def run_until_signal(make_node: Callable[[], Node], args: Sequence[str] | None = None) -> int:
-    """``run_node`` for nodes that must exit 0 on SIGINT/SIGTERM even while a callback is running.
-
-    rclpy's handler (installed by ``rclpy.init``) shuts the context down and then calls the Python handler that was
-    there before. Two things go wrong with the defaults: Python's SIGINT handler raises KeyboardInterrupt wherever
-    the interpreter is, and a signal that arrives during a callback makes the executor's next wait raise RCLError
-    ("context is not valid") instead of ExternalShutdownException, i.e. a traceback and exit status 1. Here the
-    Python handlers only record the signal, and an RCLError after a recorded signal is a normal shutdown (exit 0).
-    ``run_node``'s ``finally`` has destroyed the node either way.
-    """
-    received: list[int] = []
-    stop_signals = (signal.SIGINT, signal.SIGTERM)
-    previous = {s: signal.signal(s, lambda signum, frame: received.append(signum)) for s in stop_signals}
-    try:
-        return run_node(make_node, args)
-    except RCLError:
-        if received:
-            return 0
-        raise
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-
-
-def run_recorder(make_node: Callable[[], Recorder], args: Sequence[str] | None = None) -> int:
-    """Run a recorder that drains on SIGINT/SIGTERM instead of letting rclpy shut the context down at once.
-
-    A recorder is stopped right after the publishers finish (the main job's graph sends SIGINT when the simulator
-    exits); messages they already sent may still wait in this node's queue, and rclpy's own handler would drop
-    them. So rclpy's handlers are uninstalled and ours ask the node to stop after draining (``request_stop``); a
-    second signal stops without draining, a third raises KeyboardInterrupt (run_node still finishes the bag).
-    """
-    from rclpy.signals import uninstall_signal_handlers
-
-    received: list[int] = []
-    nodes: list[Recorder] = []
-
-    def on_signal(signum: int, frame: Any) -> None:
-        received.append(signum)
-        if len(received) >= 3:
-            raise KeyboardInterrupt
-        if nodes:
-            nodes[0].request_stop(drain=len(received) == 1)
-        # else the node is still being built (its subscriptions may already be matched, so a publisher can have
-        # sent and signalled already): make() passes the stop on once it exists, and the bag is still finished
-
-    def make() -> Recorder:
-        uninstall_signal_handlers()   # restores on_signal, which was installed before rclpy.init
-        node = make_node()
-        nodes.append(node)
-        if received:
-            node.request_stop(drain=len(received) == 1)
-        return node
-
-    stop_signals = (signal.SIGINT, signal.SIGTERM)
-    previous = {s: signal.signal(s, on_signal) for s in stop_signals}
-    try:
-        return run_node(make, args)
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-
-
 def main(args: Sequence[str] | None = None) -> int:
-    return run_recorder(Recorder, args)
+    return run_draining(Recorder, args)
 
 
 def cli_main(argv: Sequence[str] | None = None) -> int:
@@ -419,7 +293,7 @@ def cli_main(argv: Sequence[str] | None = None) -> int:
         overrides.append(Parameter("topics", Parameter.Type.STRING_ARRAY, list(options.topics)))
     if options.duration is not None:
         overrides.append(Parameter("duration", Parameter.Type.DOUBLE, float(options.duration)))
-    return run_recorder(lambda: Recorder(parameter_overrides=overrides), [sys.argv[0], *ros_args])
+    return run_draining(lambda: Recorder(parameter_overrides=overrides), [sys.argv[0], *ros_args])
 
 
 if __name__ == "__main__":
