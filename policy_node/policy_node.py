@@ -141,8 +141,16 @@ class PolicyNode(OperatorServices, WeightsFollowing, NodeDiagnostics, Node):
         # last: the lock refuses every parameter set from now on, declarations included
         lock_when_off(self, self.runtime_controls, "greedy and use_sim_time stay as started")
 
-    # the core's state, read by diagnostics, the mixins and tests
-    policy = property(lambda self: self.batch.policy)
+    @property
+    def policy(self) -> Any:
+        """The policy acting (``BatchPolicy.policy``): set once a policy passed its check (tests set fakes)."""
+        return self.batch.policy
+
+    @policy.setter
+    def policy(self, policy: Any) -> None:
+        self.batch.policy = policy
+
+    # the core's state, read by diagnostics and tests
     pose_wanted = property(lambda self: self.batch.pose_wanted)
     dropped_detections = property(lambda self: self.batch.dropped_detections)
     latencies_ms = property(lambda self: self.decider.latencies_ms)
