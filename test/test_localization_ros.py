@@ -24,7 +24,8 @@ from dynenv_ros.ros.pose_estimates import (LOST_ROW, EmulatedOdometry, PoseHisto
                                            pose_batch, pose_message, pose_problem, stamp_ns)
 from dynenv_ros.ros.qos import sim_stream
 from dynenv_ros.ros.tf import robot_transforms, tf_qos
-from policy_node.policy_node import PolicyNode, uses_pose
+from policy_node.batch_policy import uses_pose
+from policy_node.policy_node import PolicyNode
 from ros_harness import spin_until
 
 ROBOTS = ["team_a_0", "team_b_0"]
@@ -257,14 +258,14 @@ def test_a_policy_taking_the_pose_gets_the_simulators_estimate_of_each_periods_l
     policy._subscribe_poses()
     assert policy.pose_wanted and set(policy.pose_subs) == set(ROBOTS)
     batches = []
-    padded = policy._padded
+    padded = policy.batch.padded
 
     def record(memories, periods):
         observation = padded(memories, periods)
         batches.append(([stamp_ns(p[-1].header.stamp) for p in periods], observation[POSE_KEY].copy()))
         return observation
 
-    policy._padded = record
+    policy.batch.padded = record
     for node in (sim, policy):
         executor.add_node(node)
     assert spin_until(executor, lambda: sim.periods_run >= 4, 30.0), sim.session.counts

@@ -95,13 +95,13 @@ def test_closing_at_the_deadline_makes_the_collected_frames_ready():
 
 
 def test_the_network_sees_a_missing_frame_as_a_frame_with_nothing_in_it():
-    """The policy node's filler (``_empty_like``) packed as the network gets it: no detection rows (masks 0), the
+    """The policy node's filler (``node_inputs.empty_like``) packed as the network gets it: no detection rows (masks 0), the
     robot's own state carried over, as in a simulated frame whose detections were all missed."""
     from dynenv_msgs.msg import Detection, DetectionArray
     from geometry_msgs.msg import Point
 
     from dynenv_ros.envs.detection_messages import pack_messages
-    from policy_node.policy_node import _empty_like
+    from policy_node.node_inputs import empty_like
 
     def frame(index: int) -> DetectionArray:
         msg = DetectionArray(episode_id=1, motion_period=3, frame_index=index, frames_per_period=5, head_yaw=0.3,
@@ -111,7 +111,7 @@ def test_the_network_sees_a_missing_frame_as_a_frame_with_nothing_in_it():
         msg.header.stamp.sec, msg.header.stamp.nanosec = 2, index * 100 * MS
         return msg
 
-    period, missing = fill({0: frame(0), 1: frame(1), 3: frame(3)}, 5, 100 * MS, _empty_like)
+    period, missing = fill({0: frame(0), 1: frame(1), 3: frame(3)}, 5, 100 * MS, empty_like)
     assert missing == 2 and period[4].header.stamp.nanosec == 400 * MS and period[4].motion_period == 3
     observation, _ = pack_messages([period], [(0, 0, 0, 0.0)])
     assert observation["object_mask"][0].sum(axis=-1).tolist() == [1, 1, 0, 1, 0]

@@ -32,7 +32,9 @@ from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.nodes.sim_node import SimNode
 from dynenv_ros.ros.node_runner import NodeExit
 from dynenv_ros.ros.qos import sim_stream
-from policy_node.policy_node import DETECTION_DEPTH, STAND_STILL, PolicyNode
+from policy_node.batch_policy import STAND_STILL
+from policy_node.node_inputs import DETECTION_DEPTH
+from policy_node.policy_node import PolicyNode
 from policy_node.scripted_policy import ScriptedPolicyNode
 from operator_helpers import operator_params, signed_call
 from ros_harness import spin_until

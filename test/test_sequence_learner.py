@@ -15,7 +15,7 @@ from dynenv_ros.learning.experience import ExperienceAssembler
 from dynenv_ros.learning.experience_scenarios import SoccerExperience
 from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
 from experience_game import HEAD_MAX, HEAD_UNITS, play
-from policy_node.policy_node import version_of
+from policy_node.policy_files import version_of
 from test_experience import _feed
 
 T = 4

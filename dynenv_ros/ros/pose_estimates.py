@@ -2,7 +2,7 @@
 ``geometry_msgs/PoseWithCovarianceStamped`` and the REP 105 frames, and the way back, from any localization's
 messages to the policy's ``pose_estimate`` input (``envs/pose_features.py``).
 
-Both directions live here, so the message layout is defined once:
+The message layout is defined here, once; the way back reads it (ROS-free, ``envs/pose_messages.py``):
 
 - **Message** (``pose_message``): header frame ``map`` (the field frame, REP 103: x toward team B's goal, z up),
   stamp = the vision frame's sim time; position (x, y, 0), a yaw-only quaternion; the 6x6 covariance row-major over
@@ -16,40 +16,31 @@ Both directions live here, so the message layout is defined once:
   episode starts a new odometry (a rebooted robot): odom is where the robot stood at the kickoff.
 - **map → odom** = estimate ∘ odometry⁻¹, so map → odom → base_link is the estimate (REP 105: map → odom carries
   the localization's corrections and may jump).
-- **The way back** (``pose_problem``, ``PoseHistory``, ``pose_batch``): a message is refused (with the reason) for a
-  frame other than the expected one, a non-finite pose or used covariance entry, a quaternion that is not a unit one
-  (|q| off by more than 1 %), or a negative variance; the used entries are slots 0, 1, 5, 6, 7, 11, 30, 31, 35 (x, y,
-  yaw and their cross terms; the unused dimensions are ignored, whatever a stack puts there).
+- **The way back** (``pose_problem``, ``PoseHistory``, ``pose_batch``, re-exported here): in
+  ``envs/pose_messages.py``, which reads the messages by attribute, so the policy node's ROS-free decider uses it.
 """
 from __future__ import annotations
 
 import math
-from collections import Counter, deque
 from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseWithCovarianceStamped
 
-from dynenv_ros.envs.pose_features import POSE_BOUND, POSE_COLUMNS, pose_features
+from dynenv_ros.envs.pose_messages import (COV_X, COV_Y, COV_YAW, HISTORY_DEPTH, LOST_ROW, USED_SLOTS,  # noqa: F401
+                                           PoseHistory, message_pose, pose_batch, pose_problem, stamp_ns)
 from dynenv_ros.ros.conversions import WORLD_FRAME
 from dynenv_ros.ros.parameters import declare_float, declare_str
 from dynenv_ros.sim.frames import (compose, ground_truth_frame, inverse, odom_frame,  # noqa: F401
                                    yaw_quaternion)
 
-COV_X, COV_Y, COV_YAW = 0, 7, 35            # the variances' slots in the row-major 6x6 (x, y, z, roll, pitch, yaw)
 UNUSED_SLOTS = (14, 21, 28)                  # z, roll, pitch
 UNUSED_VARIANCE = 1e6                        # "not estimated" (m², rad²)
-USED_SLOTS = tuple(6 * r + c for r in (0, 1, 5) for c in (0, 1, 5))
-# What a robot's pose input holds while it has no usable estimate ("lost"): no position, no heading, every
-# standard deviation at the observation's bound.
-LOST_ROW = np.array((0.0, 0.0, 0.0, 0.0, POSE_BOUND, POSE_BOUND, POSE_BOUND), np.float32)
-assert len(LOST_ROW) == len(POSE_COLUMNS)
 # EmulatedOdometry: faster than this within one frame is a robot carried, not walked (a NAO walks ≈ 0.1–0.3 m/s).
 CARRIED_SPEED = 2.0                          # m/s
 CARRIED_MIN_STEP = 0.2                       # m: the threshold never drops below this (fast vision rates)
 CARRIED_TURN = math.pi / 2                   # rad within one frame
-HISTORY_DEPTH = 128                          # estimates kept per robot (two periods of the largest frame count)
 
 
 class EmulatedOdometry:
@@ -88,10 +79,6 @@ class EmulatedOdometry:
         return poses
 
 
-def stamp_ns(stamp: Time) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
 _COVARIANCE_TEMPLATE = np.zeros(36)
 _COVARIANCE_TEMPLATE[list(UNUSED_SLOTS)] = UNUSED_VARIANCE
 
@@ -111,70 +98,6 @@ def pose_message(estimate: Sequence[float], variances: Sequence[float], stamp: T
     return msg
 
 
-def pose_problem(msg: PoseWithCovarianceStamped, frame_id: str = WORLD_FRAME) -> str:
-    """Why ``msg`` cannot be a pose estimate ("" if it can)."""
-    if msg.header.frame_id != frame_id:
-        return f"frame_id {msg.header.frame_id!r}, expected {frame_id!r}"
-    p, q = msg.pose.pose.position, msg.pose.pose.orientation
-    values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
-    if not all(math.isfinite(v) for v in values):
-        return "non-finite pose"
-    norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
-    if abs(norm - 1.0) > 0.01:
-        return f"orientation is not a unit quaternion (|q| = {norm:.3g})"
-    covariance = np.asarray(msg.pose.covariance, float)
-    used = covariance[list(USED_SLOTS)]
-    if not np.isfinite(used).all():
-        return "non-finite covariance in x, y or yaw"
-    variances = covariance[[COV_X, COV_Y, COV_YAW]]
-    if (variances < 0).any():
-        return f"negative variance (x, y, yaw: {', '.join(f'{v:.3g}' for v in variances)})"
-    return ""
-
-
-def message_pose(msg: PoseWithCovarianceStamped) -> tuple[np.ndarray, np.ndarray]:
-    """(x, y, yaw) and the (x, y, yaw) variances of a message that passed ``pose_problem``."""
-    p, q = msg.pose.pose.position, msg.pose.pose.orientation
-    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-    covariance = msg.pose.covariance
-    return (np.array((p.x, p.y, yaw)),
-            np.array((covariance[COV_X], covariance[COV_Y], covariance[COV_YAW]), float))
-
-
-class PoseHistory:
-    """One robot's recent estimates (stamp, pose, variances), oldest first. A message stamped before the newest
-    held means the clock went back (a restarted simulator, a looping bag): the history starts again from it."""
-
-    def __init__(self, depth: int = HISTORY_DEPTH) -> None:
-        self.entries: deque[tuple[int, np.ndarray, np.ndarray]] = deque(maxlen=depth)
-        self.restarts = 0
-
-    def add(self, msg: PoseWithCovarianceStamped) -> None:
-        """File a message that passed ``pose_problem``."""
-        stamp = stamp_ns(msg.header.stamp)
-        if self.entries and stamp < self.entries[-1][0]:
-            self.entries.clear()
-            self.restarts += 1
-        self.entries.append((stamp, *message_pose(msg)))
-
-    def at(self, stamp: int, max_age_ns: int) -> tuple[tuple[np.ndarray, np.ndarray] | None, str]:
-        """The newest estimate stamped at or before ``stamp`` (ns) and "pose_used"; (None, "pose_missing") without
-        one, (None, "pose_stale") when it is more than ``max_age_ns`` older. Older entries are forgotten."""
-        chosen = None
-        for k in range(len(self.entries) - 1, -1, -1):
-            if self.entries[k][0] <= stamp:
-                chosen = k
-                break
-        if chosen is None:
-            return None, "pose_missing"
-        for _ in range(chosen):
-            self.entries.popleft()
-        when, pose, variances = self.entries[0]
-        if stamp - when > max_age_ns:
-            return None, "pose_stale"
-        return (pose, variances), "pose_used"
-
-
 def declare_pose_input(node, when: str) -> tuple[float, str]:
     """The read-only parameters of a node that reads ``<robot>/pose_estimate``: ``pose_max_age`` (s) and
     ``pose_frame``; ``when`` starts the age's description (which estimates it applies to)."""
@@ -185,28 +108,6 @@ def declare_pose_input(node, when: str) -> tuple[float, str]:
     return max_age, frame
 
 
-def pose_batch(histories: Sequence[PoseHistory], stamps: Sequence[int], teams: Sequence[int], max_age_ns: int,
-               counts: Counter[str] | None = None) -> np.ndarray:
-    """(B, 7) float32 ``pose_estimate`` rows: robot b's estimate at or before ``stamps[b]`` (ns: its period's last
-    frame) in its team's frame (``teams[b]`` ±1), ``LOST_ROW`` where it has none recent enough. ``counts`` gets
-    one of pose_used, pose_missing, pose_stale per robot."""
-    rows = np.tile(LOST_ROW, (len(histories), 1))
-    found = []
-    for b, (history, stamp) in enumerate(zip(histories, stamps)):
-        entry, status = history.at(stamp, max_age_ns)
-        if counts is not None:
-            counts[status] += 1
-        if entry is not None:
-            found.append((b, entry))
-    if found:
-        index = [b for b, _ in found]
-        estimates = np.array([pose for _, (pose, _) in found])
-        covariances = np.zeros((len(found), 3, 3))
-        covariances[:, [0, 1, 2], [0, 1, 2]] = [variances for _, (_, variances) in found]
-        rows[index] = pose_features(estimates, covariances, np.asarray(teams, float)[index])
-    return rows
-
-
-__all__ = ["COV_X", "COV_Y", "COV_YAW", "UNUSED_SLOTS", "UNUSED_VARIANCE", "LOST_ROW", "EmulatedOdometry",
+__all__ = ["COV_X", "COV_Y", "COV_YAW", "HISTORY_DEPTH", "UNUSED_SLOTS", "UNUSED_VARIANCE", "LOST_ROW", "EmulatedOdometry",
            "PoseHistory", "compose", "declare_pose_input", "ground_truth_frame", "inverse", "message_pose", "odom_frame", "pose_batch",
            "pose_message", "pose_problem", "stamp_ns"]
