@@ -80,8 +80,8 @@ class SequenceLearner:
         self.settings = update_settings(cfg)
         seeds = np.random.SeedSequence(cfg.seed).spawn(4)
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
-        agent = make_agent(cfg)   # the in-process trainer's agent for cfg (driving: its action mode's heads)
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only
+        agent = make_agent(cfg)   # the in-process trainer's agent for cfg (driving: its action mode's heads)
         self.learner = Learner(agent, cfg.ltp_horizon).eval()
         self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
         self.env_steps = self.updates = self.episodes = 0

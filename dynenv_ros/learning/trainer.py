@@ -81,8 +81,8 @@ class Trainer:
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
         self.rng = np.random.default_rng(seeds[1])
         self.env_seed = int(seeds[2].generate_state(1)[0])
-        agent = make_agent(cfg)
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only; no global RNG use after this
+        agent = make_agent(cfg)
         self.learner = Learner(agent, cfg.ltp_horizon).to(self.device)
         # fused: one kernel over all 200-odd parameter tensors (CPU and CUDA) — 8x cheaper than the per-tensor loop
         self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps,
