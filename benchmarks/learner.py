@@ -42,14 +42,14 @@ def measure(args: Any) -> dict[str, Any]:
     import torch
     from torch.utils.flop_counter import FlopCounterMode
 
-    from dynenv_ros.learning.agents import make_agent
-    from dynenv_ros.learning.algorithms import update
+    from dynenv_ros.learning.algo.networks import make_agent
+    from dynenv_ros.learning.algo.ppo import update
     from dynenv_ros.learning.config import load_config
-    from dynenv_ros.learning.heads import Learner
-    from dynenv_ros.learning.rollout_transfer import unflatten
-    from dynenv_ros.learning.rollout_worker import RolloutWorker
+    from dynenv_ros.learning.algo.networks import Learner
+    from dynenv_ros.learning.distributed.rollout_transfer import unflatten
+    from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker
     from dynenv_ros.learning.train_cli import preset_path
-    from dynenv_ros.learning.trainer import update_settings
+    from dynenv_ros.learning.algo.ppo import update_settings
     from benchmarks.timing import torch_threads
     torch_threads(1)
     cfg = load_config(preset_path(args.config), list(args.overrides))

@@ -56,7 +56,7 @@ def _config(name: str, args: Any):
 
 
 def _measure_sync(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
-    from dynenv_ros.learning.algorithms import update
+    from dynenv_ros.learning.algo.ppo import update
     from dynenv_ros.learning.trainer import Trainer
     with tempfile.TemporaryDirectory() as run_dir:
         trainer = Trainer(cfg, run_dir, progress=False)
@@ -91,7 +91,7 @@ def _measure_sync(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
 
 
 def _measure_async(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
-    from dynenv_ros.learning.algorithms import update
+    from dynenv_ros.learning.algo.ppo import update
     from dynenv_ros.learning.async_trainer import AsyncTrainer
     with tempfile.TemporaryDirectory() as run_dir:
         trainer = AsyncTrainer(cfg, run_dir, progress=False, log=lambda line: None)

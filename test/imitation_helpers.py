@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, head_outputs, imitation_loss, run_sequence
+from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss, imitation_loss
+from dynenv_ros.learning.algo.policy import head_outputs, run_sequence
 
 
 def imitation_settings(**on) -> UpdateSettings:

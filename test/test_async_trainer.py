@@ -18,15 +18,16 @@ import numpy as np
 import pytest
 import torch
 
-from dynenv_ros.learning.agents import make_agent
+from dynenv_ros.learning.algo.networks import make_agent
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout_transfer import AttachedSlots, RolloutSlots, flatten, join, spec_of, unflatten
-from dynenv_ros.learning.rollout_worker import RolloutWorker, shard_sizes
-from dynenv_ros.learning.shared_weights import AttachedWeights, SharedWeights, pack, unpack
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.distributed.rollout_transfer import (AttachedSlots, RolloutSlots, flatten, join, spec_of,
+                                                              unflatten)
+from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, shard_sizes
+from dynenv_ros.learning.distributed.shared_weights import AttachedWeights, SharedWeights, pack, unpack
 from dynenv_ros.learning.train_cli import main
 from dynenv_ros.learning.runners import make_trainer
-from dynenv_ros.learning.worker_pool import ProcessPool, WorkerPoolError
+from dynenv_ros.learning.distributed.worker_pool import ProcessPool, WorkerPoolError
 
 ROOT = Path(__file__).resolve().parent.parent
 # 1v1 on a small budget: two learning robots per world in self-play, ground-truth perception, no curiosity
@@ -297,8 +298,8 @@ WALK_CHOICES = 5
 def _walks_forward(policy: Path, seed: int) -> tuple[float, np.ndarray]:
     """Share of the trained policy's sampled walks that go forward, and the approach reward per robot-period, over
     four rollouts of fresh worlds."""
-    from dynenv_ros.learning import checkpoints
-    from dynenv_ros.learning.worlds import make_worlds
+    from dynenv_ros.learning.run import checkpoints
+    from dynenv_ros.learning.sampling.worlds import make_worlds
     cfg = TrainConfig(**TINY_TASK)
     agent, _ = checkpoints.load_policy(str(policy))
     learner = Learner(agent, cfg.ltp_horizon)
@@ -313,7 +314,7 @@ def _walks_forward(policy: Path, seed: int) -> tuple[float, np.ndarray]:
 
 
 def _untrained_forward_share(seed: int) -> tuple[float, int]:
-    from dynenv_ros.learning.worlds import make_worlds
+    from dynenv_ros.learning.sampling.worlds import make_worlds
     cfg = TrainConfig(**TINY_TASK)
     torch.manual_seed(seed)
     learner = Learner(make_agent(cfg), cfg.ltp_horizon)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from dynenv_ros.driving.config import DrivingConfig
-from dynenv_ros.learning.experience import ExperienceAssembler
-from dynenv_ros.learning.experience_scenarios import DrivingExperience
+from dynenv_ros.learning.messages.assembly import ExperienceAssembler
+from dynenv_ros.learning.messages.scenarios import DrivingExperience
 from experience_game import W, play_driving, shuffled_in_windows
 from test_experience import _feed
 

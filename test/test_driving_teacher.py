@@ -13,8 +13,8 @@ from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.driving.world import DrivingWorld
 from dynenv_ros.envs.vector import DrivingVectorEnv, _seeds
 from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from imitation_helpers import follow_labels, imitate, imitation_measures, touched_by_imitation
 
 # docs/driving.md: the steering limit is 2° per 100 ms (0.349 rad/s); a continuous label's steering is the command / it

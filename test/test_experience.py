@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from dynenv_ros.learning.experience import ExperienceAssembler, batch
-from dynenv_ros.learning.experience_scenarios import SoccerExperience
+from dynenv_ros.learning.messages.assembly import ExperienceAssembler, batch
+from dynenv_ros.learning.messages.scenarios import SoccerExperience
 from experience_game import HEAD_MAX, HEAD_UNITS, play, shuffled_in_windows
 
 T = 4

@@ -103,7 +103,7 @@ def test_a_run_against_the_league_trains_and_logs_the_members(tmp_path, runner):
 
 def test_team_sizes_give_each_worker_its_size_with_one_layout(tmp_path):
     from dynenv_ros.envs.padded_layout import EXTRA_OBJECT_SLOTS
-    from dynenv_ros.learning.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
+    from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
     cfg = TrainConfig(**{**SMALL, "runner": "async", "opponent": "perceiving", "players_per_team": 1,
                          "team_sizes": [1, 3], "workers": 2, "num_envs": 2})
     shapes = []

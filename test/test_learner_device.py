@@ -7,7 +7,7 @@ docs/benchmarks.md records the GPU run that checks them.)"""
 import pytest
 import torch
 
-from dynenv_ros.learning.algorithms import update
+from dynenv_ros.learning.algo.ppo import update
 from dynenv_ros.learning.config import load_config
 from dynenv_ros.learning.train_cli import preset_path
 from dynenv_ros.learning.trainer import Trainer

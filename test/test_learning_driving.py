@@ -11,11 +11,11 @@ import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import BatchStep, DrivingVectorEnv
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, update
-from dynenv_ros.learning.advantages import generalized_advantages
+from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss, update
+from dynenv_ros.learning.algo.advantages import generalized_advantages
 from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from dynenv_ros.sim.reward_terms import RewardTerm
 
 EMPTY_ROADS = {"pedestrians": {"count_min": 0, "count_max": 0}, "obstacles": {"count_min": 0, "count_max": 0}}
@@ -260,7 +260,7 @@ def test_trainer_writes_a_driving_run(tmp_path, algorithm, mode, teacher):
     assert json.loads((run / "config.json").read_text())["scenario"] == "driving"
     agent, meta = load_policy(run / "policy.safetensors")
     assert agent.scenario == "driving" and agent.action_mode == mode
-    from dynenv_ros.learning.agents import policy_from_training_checkpoint
+    from dynenv_ros.learning.run.checkpoints import policy_from_training_checkpoint
     again, _ = policy_from_training_checkpoint(run)          # the final checkpoint holds the same policy
     assert again.scenario == "driving" and again.action_mode == mode
     for name, value in agent.state_dict().items():
@@ -329,7 +329,7 @@ def test_ppo_learns_to_drive_towards_the_destination_within_seconds():
 def test_rcm_and_pred_train_the_attention_weighted_forward_model(variant, forward, rcm):
     """The RCM rows' forward loss is optimised (it was computed and dropped: use_forward came from the plain ICM
     switch only), in both scenarios."""
-    from dynenv_ros.learning.trainer import update_settings
+    from dynenv_ros.learning.algo.ppo import update_settings
     for scenario in ("robocup", "driving"):
         settings = update_settings(TrainConfig(scenario=scenario, variant=variant))
         assert (settings.use_forward, settings.use_rcm) == (forward, rcm)

@@ -7,9 +7,9 @@ import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import SoccerVectorEnv
-from dynenv_ros.learning.algorithms import UpdateSettings, update
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.ppo import UpdateSettings, update
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.actions import Walk
 

@@ -10,10 +10,10 @@ import torch
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.teacher import action_indices
 from dynenv_ros.envs.vector import SoccerVectorEnv, _seeds
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss
+from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk, parse_action
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.scripted import act_all, team_policies

@@ -7,9 +7,10 @@ import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import SoccerVectorEnv
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, update
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector, policy_step
+from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss, update
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.sampling.collector import RolloutCollector
+from dynenv_ros.learning.algo.policy import policy_step
 
 EPISODE_PERIODS = 4     # episode_seconds 2.0 / 0.5 s per motion period
 
@@ -35,7 +36,7 @@ def rollout_setup():
 def _grads(learner, settings, rollout):
     learner.zero_grad(set_to_none=True)
     tensors = rollout.as_tensors()
-    from dynenv_ros.learning.advantages import generalized_advantages
+    from dynenv_ros.learning.algo.advantages import generalized_advantages
     adv, ret = generalized_advantages(tensors["rewards"], tensors["values"], tensors["episode_end"],
                                       tensors["truncated"], tensors["final_values"], settings.gamma,
                                       settings.gae_lambda)
@@ -100,7 +101,7 @@ def test_ppo_first_minibatch_has_ratio_one_and_no_clipping(rollout_setup):
     _, learner, _, rollout = rollout_setup
     logged = {}
     tensors = rollout.as_tensors()
-    from dynenv_ros.learning.advantages import generalized_advantages
+    from dynenv_ros.learning.algo.advantages import generalized_advantages
     adv, ret = generalized_advantages(tensors["rewards"], tensors["values"], tensors["episode_end"],
                                       tensors["truncated"], tensors["final_values"], 0.99, 0.95)
     learner.eval()
@@ -212,7 +213,7 @@ def test_privileged_pose_seeding_is_off_by_default_and_trains_the_seeder_when_on
 
 def test_intrinsic_reward_adds_its_own_advantage_and_trains_its_critic(rollout_setup):
     _, learner, _, rollout = rollout_setup
-    from dynenv_ros.learning.algorithms import _intrinsic
+    from dynenv_ros.learning.algo.ppo import _intrinsic
     settings = UpdateSettings(intrinsic_reward_coef=1.0)
     advantages, returns, reward = _intrinsic(learner, rollout.as_tensors(), settings)
     ended = torch.from_numpy(rollout.episode_end)

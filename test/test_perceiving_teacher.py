@@ -134,8 +134,8 @@ SMALL = {"algorithm": "ppo", "variant": "pred", "players_per_team": 1, "num_envs
     ("async", {"workers": 1, "localization": "estimate", "teacher_driven_worlds": 1}),
 ])
 def test_a_tiny_run_with_the_perceiving_teacher_trains_and_checkpoints(tmp_path, runner, extra):
-    from dynenv_ros.learning.checkpoints import read_checkpoint_meta
-    from dynenv_ros.learning.run_log import CSV_NAME, read_metrics
+    from dynenv_ros.learning.run.checkpoints import read_checkpoint_meta
+    from dynenv_ros.learning.run.metrics import CSV_NAME, read_metrics
     from dynenv_ros.learning.runners import make_trainer
     cfg = TrainConfig(**SMALL, runner=runner, **extra, total_env_steps=16)
     run = tmp_path / "run"

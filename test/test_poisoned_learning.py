@@ -10,12 +10,12 @@ import torch
 from dynenv_ros.agent.checkpoint import load_checkpoint, load_policy, policy_bytes, save_checkpoint, save_policy
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import SoccerVectorEnv
-from dynenv_ros.learning.algorithms import UpdateSettings, update
-from dynenv_ros.learning.checkpoints import load_training_checkpoint, save_training_checkpoint
-from dynenv_ros.learning.experience import ExperienceAssembler
-from dynenv_ros.learning.experience_scenarios import SoccerExperience
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.ppo import UpdateSettings, update
+from dynenv_ros.learning.run.checkpoints import load_training_checkpoint, save_training_checkpoint
+from dynenv_ros.learning.messages.assembly import ExperienceAssembler
+from dynenv_ros.learning.messages.scenarios import SoccerExperience
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from experience_game import HEAD_MAX, HEAD_UNITS, play
 
 T = 4
@@ -155,7 +155,7 @@ def test_a_poisoned_rollout_skips_the_update_and_leaves_the_weights(rollout_setu
         tensors["rewards"][0, 0] = float("nan")
     optimizer = torch.optim.Adam(learner.parameters(), lr=1e-3)
     before = _weights(learner)
-    with caplog.at_level(logging.ERROR, logger="dynenv_ros.learning.algorithms"):
+    with caplog.at_level(logging.ERROR, logger="dynenv_ros.learning.algo.ppo"):
         stats = update(learner, optimizer, tensors, UpdateSettings(algorithm="ppo" if ppo else "a2c", minibatches=1,
                                                                    epochs=2))
     after = _weights(learner)
@@ -228,7 +228,7 @@ def test_non_finite_weights_are_never_saved_or_published(tmp_path):
 def test_a_training_checkpoint_with_a_nan_is_refused_on_load(tmp_path):
     model = DynEnvAgent()
     save_training_checkpoint(tmp_path / "run", 1, model, None, {})
-    import dynenv_ros.learning.checkpoints as checkpoints
+    import dynenv_ros.learning.run.checkpoints as checkpoints
     with torch.no_grad():
         model.kick_head.weight[0, 0] = float("nan")
     original = checkpoints.refuse_non_finite

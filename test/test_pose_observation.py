@@ -261,8 +261,8 @@ def test_bad_localization_settings_are_refused_naming_the_key(changes, message):
 
 
 def test_the_setting_reads_from_an_override_and_reaches_the_agent_and_the_worlds():
-    from dynenv_ros.learning.agents import make_agent
-    from dynenv_ros.learning.worlds import make_env
+    from dynenv_ros.learning.algo.networks import make_agent
+    from dynenv_ros.learning.sampling.worlds import make_env
     cfg = load_config(None, ["localization=estimate", "players_per_team=1", "perception=none"])
     assert cfg.localization == "estimate" and make_agent(cfg).uses_pose is True
     env, _ = make_env(cfg, 1, "inprocess")
@@ -274,7 +274,7 @@ def test_the_setting_reads_from_an_override_and_reaches_the_agent_and_the_worlds
 
 
 def test_ros_experience_refuses_the_estimate_with_the_reason(tmp_path):
-    from dynenv_ros.learning.sequence_learner import SequenceLearner
+    from dynenv_ros.learning.messages.message_trainer import SequenceLearner
     with pytest.raises(ConfigError, match="carries none yet"):
         SequenceLearner(TrainConfig(localization="estimate", algorithm="ppo", players_per_team=1), tmp_path / "run")
 
@@ -289,7 +289,7 @@ SMALL = {"algorithm": "ppo", "variant": "pred", "players_per_team": 1, "num_envs
 def test_a_tiny_run_with_the_estimate_trains_checkpoints_resumes_and_evaluates(tmp_path, runner):
     from dynenv_ros.agent.export import OnnxPolicy
     from dynenv_ros.evaluation.soccer import evaluate
-    from dynenv_ros.learning.checkpoints import read_checkpoint_meta
+    from dynenv_ros.learning.run.checkpoints import read_checkpoint_meta
     from dynenv_ros.learning.train_cli import main
     from dynenv_ros.learning.runners import make_trainer
     extra = {"runner": "async", "workers": 1} if runner == "async" else {}

@@ -1,7 +1,7 @@
 """PPO's losses against numbers worked out by hand (issue 26): the clipped surrogate (inside the clip range, clipped
 above 1 + ε and below 1 − ε, the min() keeping the unclipped term), advantage normalisation, the value loss plain
 and clipped, the entropy bonus, and decoupled PPO's proximal clip centre and behaviour weight
-(``learning.algorithms._minibatch_loss``, ``_proximal``, ``_fused_proximal``).
+(``learning.algo.ppo._minibatch_loss``, ``_proximal``, ``_fused_proximal``).
 
 A stub network stands in for the agent: one two-way categorical head whose probability of the taken action (action 0)
 is chosen per robot — so each ratio π/π_old is an exact fraction — and chosen critic values. One step (T = 1), 2–4
@@ -16,8 +16,8 @@ from types import SimpleNamespace
 import pytest
 import torch
 
-from dynenv_ros.learning import algorithms
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, _proximal
+from dynenv_ros.learning.algo import ppo as algorithms
+from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss, _proximal
 
 TOL = 2e-6            # the literals are rounded to 6 decimals
 

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from dynenv_ros.agent.checkpoint import save_policy, sha256
-from dynenv_ros.learning.compute import ComputeMeter, cpu_seconds_of_tree, machine
+from dynenv_ros.learning.run.compute import ComputeMeter, cpu_seconds_of_tree, machine
 from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.runners import make_trainer
 

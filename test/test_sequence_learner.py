@@ -11,9 +11,9 @@ import torch
 
 from dynenv_ros.agent.checkpoint import policy_from_bytes
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.experience import ExperienceAssembler
-from dynenv_ros.learning.experience_scenarios import SoccerExperience
-from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
+from dynenv_ros.learning.messages.assembly import ExperienceAssembler
+from dynenv_ros.learning.messages.scenarios import SoccerExperience
+from dynenv_ros.learning.messages.message_trainer import BackgroundLearner, SequenceLearner
 from experience_game import HEAD_MAX, HEAD_UNITS, play
 from policy_node.policy_node import version_of
 from test_experience import _feed

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.train_cli import main
 from dynenv_ros.learning.trainer import Trainer
@@ -102,7 +102,7 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
 
     # killed before it wrote policy.safetensors, the run can still be evaluated: its latest checkpoint's policy
     from dynenv_ros.evaluation.cli import main as eval_main
-    from dynenv_ros.learning.agents import policy_from_training_checkpoint
+    from dynenv_ros.learning.run.checkpoints import policy_from_training_checkpoint
     assert not (run_dir / "policy.safetensors").exists()
     agent, meta = policy_from_training_checkpoint(run_dir)
     assert meta["checkpoint"]["path"] == str(latest) and not agent.training
@@ -129,7 +129,7 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
 
 
 def test_metrics_csv_survives_a_row_cut_by_a_kill(tmp_path):
-    from dynenv_ros.learning.run_log import RunLogger, read_metrics
+    from dynenv_ros.learning.run.metrics import RunLogger, read_metrics
     (tmp_path / "metrics.csv").write_text("env_steps,update,wall_seconds,name,value\n48,1,0.5,train/loss,1.5\n96,2,1.")
     logger = RunLogger(tmp_path, tensorboard=False)
     logger.log(96, 2, 1.0, {"train/loss": 0.5})
@@ -139,7 +139,7 @@ def test_metrics_csv_survives_a_row_cut_by_a_kill(tmp_path):
 
 
 def test_empty_metrics_file_gets_its_header(tmp_path):
-    from dynenv_ros.learning.run_log import RunLogger
+    from dynenv_ros.learning.run.metrics import RunLogger
     (tmp_path / "metrics.csv").write_text("")          # killed before the header reached the disk
     RunLogger(tmp_path, tensorboard=False).close()
     assert (tmp_path / "metrics.csv").read_text() == "env_steps,update,wall_seconds,name,value\n"

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from dynenv_ros.evaluation.cli import main as eval_main
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.train_cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -207,7 +207,7 @@ def test_the_disk_estimate_covers_what_a_run_writes(tmp_path):
     every head (pred: Adam then holds moments of every parameter; a baseline run's unused heads have none, so its
     estimate errs on the safe side), and the estimate of the whole run is at least what a finished run left."""
     from dynenv_ros.learning.config import load_config
-    from dynenv_ros.learning.disk_budget import LOG_BYTES, run_disk_bytes
+    from dynenv_ros.learning.run.disk_budget import LOG_BYTES, run_disk_bytes
     from dynenv_ros.learning.train_cli import preset_path
     run_dir = tmp_path / "run"
     pred = [*TINY, "--set", "variant=pred"]

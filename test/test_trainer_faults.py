@@ -12,7 +12,7 @@ import warnings
 from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
 from dynenv_msgs.srv import AcceptOlderWeights
 
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.nodes.trainer_node import TrainerNode
 from dynenv_ros.ros.qos import action_stream, sim_stream
 from policy_node.policy_node import PolicyNode

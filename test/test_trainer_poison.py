@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from dynenv_ros.agent.checkpoint import load_policy
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.run import checkpoints
 from ros_harness import spin_until
 from test_trainer_node import _game, _trainer
 

@@ -9,7 +9,7 @@ import numpy as np
 from dynenv_ros.learning.config import load_config
 from dynenv_ros.learning.train_cli import preset_path
 from dynenv_ros.learning.trainer import Trainer
-from dynenv_ros.learning.algorithms import update
+from dynenv_ros.learning.algo.ppo import update
 out = {}
 for dev in ("cpu", "cuda"):
     cfg = load_config(preset_path("paper_a2c"), [f"device={dev}", "backend=inprocess", "num_envs=2",

@@ -18,7 +18,7 @@ allowed, makes a 163 MB file), ``feature_size`` 1..``MAX_FEATURE_SIZE`` (1024; t
 then checked against the network the config describes built on torch's ``meta`` device (no memory), so a config
 that the tensors do not match is refused before the real network is allocated.
 
-This module is the single implementation of the format; ``dynenv_ros.learning.checkpoints`` re-exports
+This module is the single implementation of the format; ``dynenv_ros.learning.run.checkpoints`` re-exports
 ``save_policy``/``load_policy`` and uses the helpers here (atomic writes, state-dict fitting) for the training
 checkpoints. ``save_checkpoint``/``load_checkpoint`` are the older names the policy node uses.
 """

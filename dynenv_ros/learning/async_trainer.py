@@ -26,10 +26,10 @@ from pathlib import Path
 from typing import Any
 
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.rollout_transfer import join
-from dynenv_ros.learning.rollout_worker import resolve_workers
+from dynenv_ros.learning.distributed.rollout_transfer import join
+from dynenv_ros.learning.distributed.rollout_worker import resolve_workers
 from dynenv_ros.learning.trainer import Experience, Trainer
-from dynenv_ros.learning.worker_pool import Delivery, WorkerPoolError
+from dynenv_ros.learning.distributed.worker_pool import Delivery, WorkerPoolError
 
 WAIT_POLL_S = 1.0            # how often a waiting learner checks its deadline and its workers
 
@@ -53,10 +53,10 @@ class AsyncTrainer(Trainer):
         self.env = self.collector = self.opponent = None
         cfg = self.cfg
         if cfg.backend == "ray":
-            from dynenv_ros.learning.ray_pool import RayPool
+            from dynenv_ros.learning.distributed.ray_pool import RayPool
             self.pool = RayPool(cfg, self.learner, first_update=self.updates, log=self._log_line)
         else:
-            from dynenv_ros.learning.worker_pool import ProcessPool
+            from dynenv_ros.learning.distributed.worker_pool import ProcessPool
             self.pool = ProcessPool(cfg, self.learner, resolve_workers(cfg), first_update=self.updates,
                                     log=self._log_line)
         self.layout_shapes = None       # known once a worker said hello (set in _experience)
@@ -124,7 +124,7 @@ class AsyncTrainer(Trainer):
 
     def finish(self) -> dict[str, Any]:
         if self.layout_shapes is None:          # no rollout ever arrived: the layout from a one-world env
-            from dynenv_ros.learning.worlds import make_env
+            from dynenv_ros.learning.sampling.worlds import make_env
             env, _ = make_env(self.cfg, 1, "inprocess")
             self.layout_shapes = {k: list(v) for k, v in env.layout.shapes().items()}
             env.close()

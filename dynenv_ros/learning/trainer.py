@@ -5,7 +5,7 @@ reuses its pieces (``RolloutCollector``, ``update``, ``checkpoints``).
 A run directory holds: ``config.json`` (the resolved config), ``metrics.csv`` and ``tensorboard/`` (every scalar),
 ``checkpoints/`` (the last few, safetensors + JSON, see ``checkpoints``), and at the end ``policy.safetensors``,
 ``policy.onnx``, ``curves.png`` and ``summary.json`` (with ``best_policy_window``, also ``best_policy.safetensors``:
-``learning.best_policy``). Resuming (``--resume RUN_DIR``) restores the networks, the
+``learning.run.best_policy``). Resuming (``--resume RUN_DIR``) restores the networks, the
 optimiser, the step counters and the random generators from the latest checkpoint; the worlds restart with fresh
 episodes seeded from (seed, update), since a world's physics state is not checkpointed — an episode cut by a kill
 is simply not counted.
@@ -26,38 +26,17 @@ from typing import Any
 import numpy as np
 import torch
 
-from dynenv_ros.learning import checkpoints, compiled
-from dynenv_ros.learning.agents import make_agent
-from dynenv_ros.learning.algorithms import UpdateSettings, update
-from dynenv_ros.learning.best_policy import BestPolicy
-from dynenv_ros.learning.compute import ComputeMeter
+from dynenv_ros.learning.run import checkpoints
+from dynenv_ros.learning.algo import compiled
+from dynenv_ros.learning.algo.networks import make_agent
+from dynenv_ros.learning.algo.ppo import update, update_settings
+from dynenv_ros.learning.run.best_policy import BestPolicy
+from dynenv_ros.learning.run.compute import ComputeMeter
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import Rollout
-from dynenv_ros.learning.run_log import RunLogger, as_logged, plot_curves
-from dynenv_ros.learning.worlds import make_worlds, soccer_config, teacher_driven_share
-
-VERSION = "dynenv_ros.learning/1"
-
-
-def update_settings(cfg: TrainConfig) -> UpdateSettings:
-    """The variant's loss switches and the config's numbers, in the form ``update`` takes. ``use_forward`` is on
-    for ICM's plain forward model *and* RCM's attention-weighted one (``use_rcm`` picks the weighting): ``update``
-    adds the forward loss only under ``use_forward``."""
-    losses = cfg.losses()
-    ppo = cfg.algorithm == "ppo"
-    return UpdateSettings(
-        algorithm=cfg.algorithm, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
-        epochs=cfg.ppo_epochs if ppo else 1, minibatches=cfg.ppo_minibatches if ppo else 1, clip=cfg.ppo_clip,
-        clip_value_loss=cfg.clip_value_loss, normalize_advantages=cfg.normalize_advantages,
-        target_kl=cfg.target_kl, value_coef=cfg.value_coef, entropy_coef=cfg.entropy_coef,
-        max_grad_norm=cfg.max_grad_norm, forward_coef=cfg.forward_coef, inverse_coef=cfg.inverse_coef,
-        ltp_coef=cfg.ltp_coef, self_supervised_coef=cfg.self_supervised_coef,
-        use_forward=losses.forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
-        use_localization=losses.localization, use_reconstruction=losses.reconstruction,
-        intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0),
-        proximal=ppo and cfg.runner == "async")
-
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.experience import Rollout
+from dynenv_ros.learning.run.metrics import RunLogger, as_logged, plot_curves
+from dynenv_ros.learning.sampling.worlds import make_worlds, soccer_config, teacher_driven_share
 
 @dataclass
 class Experience:
@@ -116,7 +95,7 @@ class Trainer:
 
     # -- checkpoints ------------------------------------------------------------------------------------------
     def _meta(self) -> dict[str, Any]:
-        return {"version": VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
+        return {"version": checkpoints.META_VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
                 "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
                 "episodes": self.episodes, "wall_seconds": self.wall_before + self._elapsed(),
                 "observation_layout": self.layout_shapes,

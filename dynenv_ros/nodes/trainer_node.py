@@ -10,11 +10,11 @@ policy node it finds on the ROS graph, and streams new weights back to the polic
   e.g. ``/game_1/team_a_0/detections``, ``/game_1/car_0/detections``; the root namespace is a game too) it
   subscribes to the robot's detections, actions (with the behaviour policy's learning fields) and step feedback,
   and to the game's ``world_state`` when the variant learns localization or reconstruction (soccer).
-  ``learning.experience`` assembles per-robot sequences aligned by episode and motion period, counting what is
+  ``learning.messages.assembly`` assembles per-robot sequences aligned by episode and motion period, counting what is
   late, duplicated, out of order, missing or malformed. Each step is the action the simulator ran (its feedback
   names it by digest); with ``secrets_dir`` only actions carrying their team's MAC and feedback carrying the
   simulator's are read (``security.action_auth``; refusals counted and logged once per diagnostics period).
-- Learning: ``learning.sequence_learner`` in a thread of its own, so no callback waits for a gradient step; PPO
+- Learning: ``learning.messages.message_trainer`` in a thread of its own, so no callback waits for a gradient step; PPO
   against the stored behaviour log-probabilities, sequences older than ``max_policy_lag`` versions dropped
   (docs/decisions.md). Run directory, logs (CSV, TensorBoard) and checkpoints as ``dynenv-train`` writes them,
   plus ``policy_start.safetensors``, the policy a fresh run starts from (what it learnt is measured against it).
@@ -50,11 +50,11 @@ from dynenv_ros.agent.checkpoint import FORMAT, agent_config
 from dynenv_ros.driving.config import MAX_CARS, DrivingConfig
 from dynenv_ros.learning.config import ACTION_MODES, SCENARIOS, VARIANTS, ConfigError, TrainConfig
 from dynenv_ros.core.writable import NotWritable, check_run_dir
-from dynenv_ros.learning.checkpoints import START_POLICY, list_checkpoints
-from dynenv_ros.learning.disk_budget import run_disk_bytes
-from dynenv_ros.learning.experience import REFUSALS, ExperienceAssembler
-from dynenv_ros.learning.experience_scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
-from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
+from dynenv_ros.learning.run.checkpoints import START_POLICY, list_checkpoints
+from dynenv_ros.learning.run.disk_budget import run_disk_bytes
+from dynenv_ros.learning.messages.assembly import REFUSALS, ExperienceAssembler
+from dynenv_ros.learning.messages.scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
+from dynenv_ros.learning.messages.message_trainer import BackgroundLearner, SequenceLearner
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.diagnostics import Diagnostics
 from dynenv_ros.ros.runtime_controls import declare_runtime_controls, lock_when_off

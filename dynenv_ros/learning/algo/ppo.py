@@ -34,13 +34,12 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from dynenv_ros.agent.inputs import side_inputs, streams_from_padded, StreamBatch
 from dynenv_ros.agent.losses import (icm_losses, localization_loss, ltp_loss, masked_mean, rcm_forward_loss,
                                      reconstruction_loss)
-from dynenv_ros.envs.padded_layout import SOCCER, LayoutSpec
-from dynenv_ros.learning.advantages import generalized_advantages
-from dynenv_ros.learning.heads import Learner, action_features
-from dynenv_ros.learning.rollout import head_outputs, layout_spec
+from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.algo.advantages import generalized_advantages
+from dynenv_ros.learning.algo.networks import Learner, action_features
+from dynenv_ros.learning.algo.policy import head_outputs, log_prob_entropy, run_sequence
 
 LOG = logging.getLogger(__name__)
 BALL_ANCHOR = ((0.0, 0.0),)
@@ -84,39 +83,6 @@ class UpdateSettings:
         return self.algorithm == "ppo"
 
 
-def _flat(x: Tensor) -> Tensor:
-    return x.reshape(-1, *x.shape[2:])
-
-
-def sequence_inputs(obs: Mapping[str, Tensor], head_max: float | None, spec: LayoutSpec = SOCCER,
-                    pose: bool = False) -> tuple[StreamBatch, StreamBatch, Tensor, Tensor]:
-    """The network's inputs for observations with (T, B) leading axes (``spec``: the layout's, soccer's default;
-    ``pose``: the agent's ``uses_pose``)."""
-    T, B = obs["game"].shape[:2]
-    flat = {k: _flat(v) for k, v in obs.items()}
-    previous, self_state = side_inputs(flat, head_max, spec, pose=pose)
-    landmarks, objects = streams_from_padded(obs, spec)
-    return landmarks, objects, previous.reshape(T, B, -1), self_state.reshape(T, B, -1)
-
-
-def run_sequence(agent: Any, obs: Mapping[str, Tensor], state: tuple[Tensor, ...], starts: Tensor) -> Any:
-    landmarks, objects, previous, self_state = sequence_inputs(obs, agent.head_max, layout_spec(agent),
-                                                               getattr(agent, "uses_pose", False))
-    return agent.forward_sequence(landmarks, objects, previous, self_state, state, starts)
-
-
-def log_prob_entropy(agent: Any, out: Any, actions: Tensor) -> tuple[Tensor, Tensor]:
-    """log π(a|s) and the policy entropy, each summed over the action heads; (T, B) inputs give (T, B)."""
-    T, B = actions.shape[:2]
-    step = head_outputs(out, flat=True)
-    dists = agent.distributions(step)
-    flat_actions = _flat(actions).unbind(-1)
-    log_prob = sum(d.log_prob(a.float() if isinstance(d, torch.distributions.Normal) else a)
-                   for d, a in zip(dists, flat_actions))
-    entropy = sum(d.entropy() for d in dists)
-    return log_prob.reshape(T, B), entropy.reshape(T, B)
-
-
 def self_supervised_losses(out: Any, targets: Mapping[str, Tensor], use_localization: bool,
                            use_reconstruction: bool) -> dict[str, Tensor]:
     """Localization (pose) and reconstruction (ball, robots) losses over every observation of the rollout."""
@@ -133,6 +99,25 @@ def self_supervised_losses(out: Any, targets: Mapping[str, Tensor], use_localiza
         losses["recon_ball_position"] = ball["position"].detach()
         losses["recon_robot_position"] = robots["position"].detach()
     return losses
+
+
+def update_settings(cfg: TrainConfig) -> UpdateSettings:
+    """The variant's loss switches and the config's numbers, in the form ``update`` takes. ``use_forward`` is on
+    for ICM's plain forward model *and* RCM's attention-weighted one (``use_rcm`` picks the weighting): ``update``
+    adds the forward loss only under ``use_forward``."""
+    losses = cfg.losses()
+    ppo = cfg.algorithm == "ppo"
+    return UpdateSettings(
+        algorithm=cfg.algorithm, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
+        epochs=cfg.ppo_epochs if ppo else 1, minibatches=cfg.ppo_minibatches if ppo else 1, clip=cfg.ppo_clip,
+        clip_value_loss=cfg.clip_value_loss, normalize_advantages=cfg.normalize_advantages,
+        target_kl=cfg.target_kl, value_coef=cfg.value_coef, entropy_coef=cfg.entropy_coef,
+        max_grad_norm=cfg.max_grad_norm, forward_coef=cfg.forward_coef, inverse_coef=cfg.inverse_coef,
+        ltp_coef=cfg.ltp_coef, self_supervised_coef=cfg.self_supervised_coef,
+        use_forward=losses.forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
+        use_localization=losses.localization, use_reconstruction=losses.reconstruction,
+        intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0),
+        proximal=ppo and cfg.runner == "async")
 
 
 NONFINITE_SKIPS = ("nonfinite_loss_skipped", "nonfinite_gradient_skipped")

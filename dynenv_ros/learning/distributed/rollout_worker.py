@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from dynenv_ros.learning.agents import make_agent
+from dynenv_ros.learning.algo.networks import make_agent
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout_transfer import flatten
-from dynenv_ros.learning.worlds import Worlds, make_worlds, teacher_driven_share
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.distributed.rollout_transfer import flatten
+from dynenv_ros.learning.sampling.worlds import Worlds, make_worlds, teacher_driven_share
 
 
 def usable_cores() -> int:

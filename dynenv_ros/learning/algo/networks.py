@@ -15,6 +15,8 @@ from dynenv_ros.agent import driving_actions
 from dynenv_ros.agent.losses import (ROBOCUP_HEADS, ForwardModel, InverseModel, LongTermPredictor, RCMAttention,
                                      one_hot_actions)
 from dynenv_ros.agent.network import POSE_SIZE, DynEnvAgent
+from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.soccer.config import SoccerConfig
 
 DRIVING_HEADS: tuple[int, ...] = (driving_actions.ACCELERATION_CHOICES, driving_actions.STEERING_CHOICES)
 
@@ -72,3 +74,13 @@ class Learner(nn.Module):
         cell = self.seeded_cell(pose)
         zeros = torch.zeros_like(cell)
         return (zeros, cell, zeros.clone(), zeros.clone())
+
+
+def make_agent(cfg: TrainConfig) -> DynEnvAgent:
+    """The untrained agent a run of ``cfg`` trains (its scenario, width, head and action mode, and whether it takes
+    the pose estimate: ``localization: estimate``)."""
+    if cfg.driving:
+        return DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
+    motion = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode}).motion
+    return DynEnvAgent(cfg.feature_size, cfg.head_mode, motion.head_units, motion.head_max_delta,
+                       uses_pose=cfg.localization == "estimate")

@@ -3,7 +3,7 @@ losses) ground truth, assembled into fixed-length sequences the learner's ``upda
 (messages are read by attribute: rclpy's, rosbags' and plain objects alike). The trainer node feeds it from live
 topics, ``dynenv-train --from-bag`` from recorded bags. What differs between soccer and driving (agent names, the
 padded layout, how an Action becomes the learnt action and the previous action shown, per-agent episode ends) is the
-scenario's (``learning.experience_scenarios``); everything below holds for both.
+scenario's (``learning.messages.scenarios``); everything below holds for both.
 
 The alignment (docs/ros_graph.md, "Training over ROS"). Per stream — one robot of one game (``source``, e.g. the
 game's namespace) — an *observation slot* (episode e, period p) gathers:
@@ -18,7 +18,7 @@ game's namespace) — an *observation slot* (episode e, period p) gathers:
 
 Step t of a sequence is slot (e, p): observation p, its answer, and the feedback of period p + 1 (reward, episode
 end). After an episode's end the next slot is the robot's next episode's period 0 (``starts``), as in the in-process
-rollouts (``learning.rollout``); a truncated episode is bootstrapped with the value the policy gave the episode's
+rollouts (``learning.sampling.collector``); a truncated episode is bootstrapped with the value the policy gave the episode's
 final observation (the answer it sent to it, which the simulator ignores) or, when it sent none (a stepped policy
 node that already sees the next episode skips it), with the value of the last observation acted on
 (``bootstrap_estimated``). A sequence of T steps needs T + 1 slots:
@@ -71,8 +71,8 @@ import numpy as np
 
 from dynenv_ros.envs.detection_messages import frame_problem, pack_messages
 from dynenv_ros.envs.learning_targets import LearningTargets, empty_targets
-from dynenv_ros.learning.experience_scenarios import ExperienceScenario
-from dynenv_ros.learning.rollout import STEP_ARRAYS, StepArrays
+from dynenv_ros.learning.messages.scenarios import ExperienceScenario
+from dynenv_ros.learning.algo.experience import STEP_ARRAYS, StepArrays
 from dynenv_ros.security.action_auth import GameSecrets, action_digest, check_action, check_feedback
 
 STATUS_FALLEN = 1                 # ObjectState.STATUS_FALLEN
@@ -129,7 +129,7 @@ class Slot:
 
 @dataclass(eq=False)
 class Sequence(StepArrays):
-    """T steps of one stream, in the arrays of ``learning.rollout.Rollout`` for one robot (no robot axis):
+    """T steps of one stream, in the arrays of ``learning.algo.experience.Rollout`` for one robot (no robot axis):
     obs (T+1, ...), actions (T, width) as the scenario stores them (soccer (T, 4) int64, the head as its discrete
     index; driving (T, 2) int64 or (T, 3) float32), log_probs (T,), values (T+1,), rewards (T,),
     reward_terms (T, 4), episode_end, truncated, final_values (T,), starts, can_act (T+1,), targets (T+1, ...) or
@@ -161,7 +161,7 @@ class _Stream:
 class ExperienceAssembler:
     """Sequences of ``steps`` periods from the messages of any number of streams. ``scenario`` (e.g.
     ``SoccerExperience(players_per_team, frames, head_max, head_units)`` or ``DrivingExperience(config)``, module
-    ``learning.experience_scenarios``) names the agents, fixes the observation layout and converts actions;
+    ``learning.messages.scenarios``) names the agents, fixes the observation layout and converts actions;
     ``with_targets`` builds the self-supervised targets from ground truth (soccer). ``learns(robot_name)`` picks
     which agents' experience is kept (all by default). ``secrets``: authenticated actions and feedback required
     (module docstring); ``horizon``: periods an answer or feedback may run ahead of its stream's frames."""

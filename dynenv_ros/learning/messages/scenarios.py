@@ -1,4 +1,4 @@
-"""What the experience assembler (``learning.experience``) needs to know of a scenario, so one assembler serves soccer
+"""What the experience assembler (``learning.messages.assembly``) needs to know of a scenario, so one assembler serves soccer
 robots and driving cars — and a third scenario is one more class here, not a fork of the assembler. ROS-free.
 
 A scenario says: its agents' names (and the pattern the trainer node discovers them by), the padded layout a period
@@ -26,7 +26,7 @@ import numpy as np
 
 from dynenv_ros.agent.driving_actions import BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem
 from dynenv_ros.envs.padded_layout import PaddedLayout
-from dynenv_ros.learning.rollout import can_act
+from dynenv_ros.learning.algo.policy import can_act
 
 WALKS, TURNS, KICKS = 5, 3, 3     # Action.msg's soccer choices
 STAND_STILL = (0.0, 0.0, 0.0, 0.0)

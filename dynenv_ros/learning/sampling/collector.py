@@ -1,45 +1,9 @@
-"""Rollouts: the vectorised soccer batch stepped by the current policy, stored as fixed-shape arrays.
-
-One rollout is T motion periods of every world. Stored per step t and learning robot b (robots flattened world
-by world, ``(E, A_learning) -> B``):
-
-- ``obs[key]`` (T+1, B, ...): the padded observation layout (``envs.padded_layout``), observation t being what
-  the policy acted on at step t; observation T is the one after the last step (the next rollout's first).
-- ``actions`` (T, B, 4) int64, ``log_probs`` and ``values`` (T, B) of the behaviour policy at acting time (PPO's
-  ratio is taken against these, never against resampled actions — DynEnv's PPO bug, docs/original.md §12.13).
-- ``rewards`` (T, B) and ``reward_terms`` (T, B, 4); ``episode_end``, ``truncated`` (T, B); ``final_values``
-  (T, B): the critic at the finished episode's final observation (truncation bootstrap).
-- ``starts`` (T+1, B): observation t is an episode's first (the recurrent state is zeroed before it).
-- ``can_act`` (T+1, B): the robot was neither fallen nor penalized, so its action had an effect.
-- ``targets`` (T+1, B, ...): the self-supervised targets of observation t (``SoccerVectorEnv(targets=True)``),
-  with ``ball_known`` / ``robots_known``: seen at least once since the episode began (DynEnv wiped this memory
-  every 6-step rollout, §12.18; here it lasts the episode).
-- ``initial_state``: the recurrent state before step 0, so the learner re-runs whole sequences from it.
-- ``teacher_actions`` (T, B, width) (a vector env made with ``teacher=...`` only): the scripted teacher's action in
-  the state of observation t (``envs.teacher``), the imitation loss's label, in the dtype and units of ``actions``
-  (soccer (T, B, 4) int64; driving its action mode's); the learner's own action is executed (except in
-  teacher-driven worlds, soccer only).
-- ``teacher_driven`` (B,) bool: the robot executed the teacher's actions in this rollout (DAgger's β share of the
-  worlds, ``drive_with_teacher``); its steps are off-policy, so the learner leaves them out of the policy, entropy
-  and value terms and learns from them only by imitation and the auxiliary losses.
-
-Driving (``DrivingVectorEnv``, ``agent.scenario == 'driving'``): every car of every world learns; ``actions`` are
-(T, B, 2) int64 [acceleration, steering] or (T, B, 3) float32 normalised [throttle, brake, steering / limit] (the
-env gets the steering times its limit), ``reward_terms`` keep the env's four terms. Per-car termination
-(``BatchStep.agents_terminated``): a car's episode ends at the step it crashed or got home with its team's bonus
-decided — ``episode_end`` True, ``truncated`` False there (terminated: no bootstrap); the steps after it, until its
-world's episode ends, are *dead*: ``alive`` (T+1, B) False, ``can_act`` False, reward 0, ``episode_end`` True (so no
-return flows across them) — the learner takes no sample of any kind from them (policy, value, entropy, curiosity).
-A car still driving when its world hits the time limit ends truncated (bootstrapped from its final observation). The
-recurrent state restarts with the world's next episode. Finished episodes are reported per car with ``home`` and
-``crashed``.
-
-Everything is numpy until ``as_tensors``; nothing per detection is ever a Python object.
+"""The in-process rollouts: ``RolloutCollector`` steps the vectorised batch (``SoccerVectorEnv`` or
+``DrivingVectorEnv``) with the current policy, T periods at a time, into a ``Rollout`` (``algo.experience``: what
+its arrays hold, soccer and driving).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Any, Callable, Mapping
 
 import numpy as np
@@ -47,13 +11,12 @@ import torch
 from torch import Tensor
 
 from dynenv_ros.agent.driving_actions import commands as driving_commands
-from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.agent.network import DynEnvAgent, State
-from dynenv_ros.envs.padded_layout import PROPRIOCEPTION_COLUMNS, SOCCER, LayoutSpec
 from dynenv_ros.envs.vector import SoccerVectorEnv
+from dynenv_ros.learning.algo.experience import Rollout
+from dynenv_ros.learning.algo.policy import (action_log_prob, action_width, can_act, device_of, policy_step,
+                                             reset_state, sample_actions)
 
-FALLEN = PROPRIOCEPTION_COLUMNS.index("fallen")
-PENALIZED = PROPRIOCEPTION_COLUMNS.index("penalized")
 TARGET_KEYS = ("pose", "ball", "robots", "ball_seen", "robots_seen")
 
 
@@ -63,171 +26,9 @@ def flatten_robots(value: np.ndarray, robots: np.ndarray) -> np.ndarray:
     return picked.reshape(-1, *picked.shape[2:])
 
 
-def can_act(proprioception: np.ndarray) -> np.ndarray:
-    """(…, F, 4) proprioception → (…) bool: neither fallen nor penalized at the period's last frame."""
-    last = proprioception[..., -1, :]
-    return (last[..., FALLEN] < 0.5) & (last[..., PENALIZED] < 0.5)
-
-
-def device_of(module: torch.nn.Module) -> torch.device:
-    return next(module.parameters()).device
-
-
-_DRIVING_SPEC: list[LayoutSpec] = []
-
 # driving's ego columns (perception.driving_model.EGO_COLUMNS) in the proprioception rows
 EGO_CRASHED, EGO_FINISHED = 6, 7
 
-
-def layout_spec(agent: Any) -> LayoutSpec:
-    """The padded layout's spec an agent reads: soccer's, or driving's of the default ``DrivingConfig`` (its only
-    config-dependent value is the steering limit, which scales the previous action; ``agent.layout_spec`` set by
-    the trainer from its env overrides it)."""
-    spec = getattr(agent, "layout_spec", None)
-    if spec is not None:
-        return spec
-    if getattr(agent, "scenario", "soccer") != "driving":
-        return SOCCER
-    if not _DRIVING_SPEC:
-        from dynenv_ros.driving.config import DrivingConfig
-        from dynenv_ros.envs.driving_observations import driving_layout_spec
-        _DRIVING_SPEC.append(driving_layout_spec(DrivingConfig()))
-    return _DRIVING_SPEC[0]
-
-
-def action_width(agent: Any) -> tuple[int, Any]:
-    """(columns, dtype) of one stored action: soccer 4 int64; driving discrete 2 int64, continuous 3 float32."""
-    if getattr(agent, "scenario", "soccer") != "driving":
-        return 4, np.int64
-    return (2, np.int64) if agent.action_mode == "discrete" else (3, np.float32)
-
-
-def head_outputs(step: Any, steps: int | None = None, flat: bool = False) -> SimpleNamespace:
-    """The action-head outputs of an acting step or a sequence (the fields ``agent.distributions`` reads): soccer's
-    walk, turn, kick, head; driving's acceleration and steering, or command. ``steps``: keep the first T periods of a
-    sequence; ``flat``: merge its (T, B) leading axes. Tensors stay on their device."""
-    names = ("acceleration", "steering", "command") if getattr(step, "walk", None) is None else \
-        ("walk", "turn", "kick", "head")
-    out = {}
-    for name in names:
-        value = getattr(step, name, None)
-        if value is None:               # driving's heads of the other action mode
-            out[name] = None
-            continue
-        if steps is not None:
-            value = value[:steps]
-        if flat:
-            value = value.reshape(-1, *value.shape[2:])
-        out[name] = value
-    return SimpleNamespace(**out)
-
-
-def _cpu(value: Tensor | None) -> Tensor | None:
-    return None if value is None else value.cpu()
-
-
-def policy_step(agent: DynEnvAgent, obs: Mapping[str, Any], state: State):
-    """One acting forward on padded observations with robots leading (numpy or torch), on the agent's device."""
-    device = device_of(agent)
-    spec = layout_spec(agent)
-    landmarks, objects = streams_from_padded(obs, spec)
-    previous, self_state = side_inputs(obs, agent.head_max, spec, pose=getattr(agent, "uses_pose", False))
-    if device.type != "cpu":
-        landmarks, objects = (type(b)(b.features.to(device), b.kind.to(device), b.mask.to(device))
-                              for b in (landmarks, objects))
-        previous, self_state = previous.to(device), self_state.to(device)
-    return agent(landmarks, objects, previous, self_state, state)
-
-
-def reset_state(state: State, starts: Tensor) -> State:
-    """The state with the rows of robots starting an episode zeroed."""
-    keep = (~starts.to(state[0].device)).to(state[0].dtype).unsqueeze(-1)
-    return tuple(s * keep for s in state)  # type: ignore[return-value]
-
-
-def sample_actions(agent: DynEnvAgent, step: Any, generator: torch.Generator | None, greedy: bool = False
-                   ) -> tuple[Tensor, Tensor]:
-    """(actions (B, 4) — driving (B, 2) or (B, 3) —, their log-probabilities (B,)) on the CPU — the sum over the
-    action heads. Sampling is on the CPU whatever the learner's device, with one CPU generator: the draws are the
-    same on any device, the actions only where the device's logits agree to the last bit (docs/benchmarks.md)."""
-    heads = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
-    actions = agent.act(heads, generator=generator, greedy=greedy)
-    log_prob = sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
-    return actions, log_prob
-
-
-def action_log_prob(agent: DynEnvAgent, step: Any, actions: Tensor) -> Tensor:
-    """(B,) log-probability of given (B, 4) actions under an acting step's distributions, on the CPU."""
-    heads = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
-    return sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
-
-
-@dataclass(eq=False)      # identity: arrays have no truth value (a queue's remove compares its elements)
-class StepArrays:
-    """The arrays every learner input has, per step (see the module docstring): a rollout of the vectorised batch
-    (robot axis B) or one robot's sequence assembled from messages (``learning.experience``, no robot axis)."""
-    obs: dict[str, np.ndarray]
-    actions: np.ndarray
-    log_probs: np.ndarray
-    values: np.ndarray
-    rewards: np.ndarray
-    reward_terms: np.ndarray
-    episode_end: np.ndarray
-    truncated: np.ndarray
-    final_values: np.ndarray
-    starts: np.ndarray
-    can_act: np.ndarray
-
-
-@dataclass(eq=False)
-class Rollout(StepArrays):
-    """One rollout's arrays (see the module docstring); ``robots_per_world`` learning robots in each world."""
-    initial_state: State
-    targets: dict[str, np.ndarray] = field(default_factory=dict)
-    seed_pose: np.ndarray | None = None     # (B, 6) privileged seeding only: the noisy true pose at step 0
-    teacher_actions: np.ndarray | None = None   # (T, B, width) teacher labels (a vector env's teacher=...) or None
-    teacher_driven: np.ndarray | None = None    # (B,) bool: executed the teacher's actions (off-policy rows)
-    alive: np.ndarray | None = None             # (T+1, B) bool, driving: the car's episode had not ended yet
-
-    @property
-    def steps(self) -> int:
-        return self.actions.shape[0]
-
-    @property
-    def robots(self) -> int:
-        return self.actions.shape[1]
-
-    def as_tensors(self, device: torch.device | str = "cpu") -> dict[str, Any]:
-        """Every array as a tensor on ``device`` (observation and target dicts stay dicts)."""
-        extra = {}
-        if self.seed_pose is not None:
-            extra["seed_pose"] = self.seed_pose
-        if self.teacher_actions is not None:
-            extra["teacher_actions"] = self.teacher_actions
-        if self.teacher_driven is not None and self.teacher_driven.any():
-            extra["teacher_driven"] = self.teacher_driven
-        if self.alive is not None:
-            extra["alive"] = self.alive
-        arrays = {name: getattr(self, name) for name in STEP_ARRAYS}
-        return arrays_as_tensors({**arrays, **extra, "obs": self.obs, "targets": self.targets},
-                                 self.initial_state, device)
-
-
-# The per-step arrays of a rollout (see the module docstring), in the form ``algorithms.update`` takes.
-STEP_ARRAYS = ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
-               "final_values", "starts", "can_act")
-
-
-def arrays_as_tensors(arrays: Mapping[str, Any], initial_state: State, device: torch.device | str = "cpu"
-                      ) -> dict[str, Any]:
-    """A rollout's numpy arrays (``STEP_ARRAYS``, ``obs`` and ``targets`` dicts, optional extras such as
-    ``teacher_actions``) → the tensors ``algorithms.update`` takes, with ``initial_state``."""
-    def tensor(x: np.ndarray) -> Tensor:
-        return torch.from_numpy(np.ascontiguousarray(x)).to(device)
-    out: dict[str, Any] = {key: (tensor(value) if not isinstance(value, Mapping)
-                                 else {k: tensor(v) for k, v in value.items()}) for key, value in arrays.items()}
-    out["initial_state"] = tuple(s.to(device) for s in initial_state)
-    return out
 
 
 class Opponent:

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from dynenv_ros.agent.checkpoint import load_policy, save_policy
-from dynenv_ros.learning.run_log import CSV_NAME, read_metrics, series_by_step
+from dynenv_ros.learning.run.metrics import CSV_NAME, read_metrics, series_by_step
 
 BEST_POLICY = "best_policy.safetensors"
 METRIC = "episode/return"

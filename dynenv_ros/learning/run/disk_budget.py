@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import torch
 
-from dynenv_ros.learning.agents import make_agent
+from dynenv_ros.learning.algo.networks import make_agent
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.heads import Learner
+from dynenv_ros.learning.algo.networks import Learner
 
 FLOAT_BYTES = 4
 LOG_BYTES = 32 * 2**20      # metrics.csv and TensorBoard of a long run (a 700 k-step run wrote 0.6 MB)

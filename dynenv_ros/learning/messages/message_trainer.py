@@ -1,4 +1,4 @@
-"""The learner fed by message-assembled experience (``learning.experience``): the in-process trainer's networks,
+"""The learner fed by message-assembled experience (``learning.messages.assembly``): the in-process trainer's networks,
 losses (``algorithms.update``), run directory, logs and checkpoints, with no simulator of its own. The trainer node
 runs it in a background thread (``BackgroundLearner``), ``dynenv-train --from-bag`` directly.
 
@@ -8,7 +8,7 @@ step of which was chosen more than ``max_policy_lag`` versions ago is dropped (c
 the behaviour policy sent (``Action.value``), as PPO does with its rollout values.
 
 Both scenarios: ``cfg.scenario`` 'driving' learns the driving agent (``cfg.action_mode``) from the cars' sequences;
-they hold no step after a car's own episode end (``learning.experience``), so no alive mask is needed.
+they hold no step after a car's own episode end (``learning.messages.assembly``), so no alive mask is needed.
 
 Recurrent state: a sequence that ``continues`` its stream's previous one starts from the state the learner's
 network reached at the end of that one (computed after each update, no gradient — R2D2's "stored state", stale
@@ -29,15 +29,15 @@ import torch
 
 from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.learning import checkpoints
-from dynenv_ros.learning.algorithms import NONFINITE_SKIPS, log_prob_entropy, run_sequence, update
+from dynenv_ros.learning.run import checkpoints
+from dynenv_ros.learning.algo.ppo import NONFINITE_SKIPS, update, update_settings
+from dynenv_ros.learning.algo.policy import log_prob_entropy, run_sequence
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.experience import Sequence, batch
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import arrays_as_tensors
-from dynenv_ros.learning.run_log import RunLogger
-from dynenv_ros.learning.agents import make_agent
-from dynenv_ros.learning.trainer import VERSION, update_settings
+from dynenv_ros.learning.messages.assembly import Sequence, batch
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.experience import arrays_as_tensors
+from dynenv_ros.learning.run.metrics import RunLogger
+from dynenv_ros.learning.algo.networks import make_agent
 
 MAX_QUEUE = 4096          # sequences waiting for the learner; beyond, the oldest are dropped (counted)
 
@@ -257,7 +257,7 @@ class SequenceLearner:
 
     # -- weights, logs, checkpoints ---------------------------------------------------------------------------------
     def meta(self) -> dict[str, Any]:
-        return {"version": VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
+        return {"version": checkpoints.META_VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
                 "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
                 "episodes": self.episodes, "wall_seconds": self.wall_before + time.perf_counter() - self._started,
                 "source": "messages", "code_revision": checkpoints.code_revision(),

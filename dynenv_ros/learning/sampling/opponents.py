@@ -10,7 +10,8 @@ import numpy as np
 import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.learning.rollout import Opponent, policy_step, reset_state, sample_actions
+from dynenv_ros.learning.sampling.collector import Opponent
+from dynenv_ros.learning.algo.policy import policy_step, reset_state, sample_actions
 from dynenv_ros.soccer.scripted import DEFAULT_SCRIPTED
 
 SCRIPTED_TEAM = DEFAULT_SCRIPTED      # what "scripted" means, here as in dynenv-eval

@@ -1,5 +1,5 @@
 """Learning from recorded bags (``dynenv-train --from-bag BAG …``): the recorder's MCAP bags give the same per-robot
-sequences as the live trainer node (``learning.experience``, fed from the bag in time order), and the learner trains
+sequences as the live trainer node (``learning.messages.assembly``, fed from the bag in time order), and the learner trains
 offline on them:
 
 - **behaviour cloning** of whoever chose the recorded actions (a scripted team, a robot's own stack, the scripted
@@ -36,15 +36,14 @@ import numpy as np
 import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.learning import checkpoints
-from dynenv_ros.learning.algorithms import UpdateSettings, update
+from dynenv_ros.learning.run import checkpoints
+from dynenv_ros.learning.algo.ppo import UpdateSettings, update
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.experience import ExperienceAssembler, Sequence, batch
-from dynenv_ros.learning.experience_scenarios import DRIVING_AGENT, SOCCER_AGENT, experience_scenario
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import arrays_as_tensors
-from dynenv_ros.learning.run_log import RunLogger
-from dynenv_ros.learning.trainer import VERSION
+from dynenv_ros.learning.messages.assembly import ExperienceAssembler, Sequence, batch
+from dynenv_ros.learning.messages.scenarios import DRIVING_AGENT, SOCCER_AGENT, experience_scenario
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.experience import arrays_as_tensors
+from dynenv_ros.learning.run.metrics import RunLogger
 from dynenv_ros.soccer.config import SoccerConfig
 
 
@@ -54,7 +53,7 @@ def agent_topic(agent_pattern: str) -> re.Pattern[str]:
                       r"(?P<kind>detections|action|feedback)$")
 
 
-# The agents' topics of each scenario, as ``learning.experience_scenarios`` names the agents.
+# The agents' topics of each scenario, as ``learning.messages.scenarios`` names the agents.
 AGENT_TOPICS = {"robocup": agent_topic(SOCCER_AGENT), "driving": agent_topic(DRIVING_AGENT)}
 WORLD_TOPIC = re.compile(r"^(?P<source>(/[A-Za-z0-9_]+)*)/world_state$")
 
@@ -197,7 +196,7 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
             logger.log(env_steps, updates, time.perf_counter() - started,
                        {f"bc/{k}": v for k, v in means.items()} | {"bc/epoch": float(epoch)})
     learner.eval()
-    meta = {"version": VERSION, "source": "bags", "bags": [str(p) for p in paths], "updates": updates,
+    meta = {"version": checkpoints.META_VERSION, "source": "bags", "bags": [str(p) for p in paths], "updates": updates,
             "env_steps": env_steps, "episodes": 0, "wall_seconds": time.perf_counter() - started,
             "config": cfg.to_dict(), "code_revision": checkpoints.code_revision()}
     checkpoints.save_training_checkpoint(run, env_steps, learner, optimizer, meta, {}, keep=cfg.keep_checkpoints)

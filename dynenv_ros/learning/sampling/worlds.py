@@ -12,9 +12,10 @@ import torch
 
 from dynenv_ros.envs.vector import DrivingVectorEnv, SoccerVectorEnv
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.opponents import SCRIPTED_TEAM, RandomOpponent, SnapshotOpponent, WorldScriptedOpponent
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.sampling.opponents import (SCRIPTED_TEAM, RandomOpponent, SnapshotOpponent,
+                                                    WorldScriptedOpponent)
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from dynenv_ros.soccer.config import SoccerConfig
 
 # DynEnv's privileged seeding noise: N(0, 0.05²) in its normalised units (1 unit = 5.2 m) on x, y; 0.05 on the

@@ -1,6 +1,6 @@
 """How a rollout travels from a rollout worker to the learner: as a flat dict of named numpy arrays (``flatten`` /
 ``unflatten``), written into a slot of shared memory (``RolloutSlots``, worker processes on this machine) or shipped
-through Ray's object store (``learning.ray_pool``), and joined with other workers' rollouts along the robot axis
+through Ray's object store (``learning.distributed.ray_pool``), and joined with other workers' rollouts along the robot axis
 (``join``).
 
 Why a flat dict: it is the one form both transports carry without pickling anything per detection, and its spec
@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from dynenv_ros.envs.vector import SharedArrays, close_blocks
-from dynenv_ros.learning.rollout import STEP_ARRAYS, Rollout
+from dynenv_ros.learning.algo.experience import STEP_ARRAYS, Rollout
 
 Spec = dict[str, tuple[tuple[int, ...], str]]
 # Rollout fields that are optional (None or {} when the run does not make them); step arrays are always there.

@@ -32,10 +32,10 @@ from typing import Any, Callable
 import torch
 
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.rollout import Rollout
-from dynenv_ros.learning.rollout_transfer import AttachedSlots, RolloutSlots, spec_of
-from dynenv_ros.learning.rollout_worker import RolloutWorker, shard_sizes
-from dynenv_ros.learning.shared_weights import AttachedWeights, SharedWeights
+from dynenv_ros.learning.algo.experience import Rollout
+from dynenv_ros.learning.distributed.rollout_transfer import AttachedSlots, RolloutSlots, spec_of
+from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, shard_sizes
+from dynenv_ros.learning.distributed.shared_weights import AttachedWeights, SharedWeights
 
 HELLO_TIMEOUT_S = 300.0       # a worker builds its worlds and collects its first rollout within this
 

@@ -21,11 +21,11 @@ from typing import Any, Callable
 import torch
 
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.ray_connection import RayConnectionError, cluster_cpus, connect
-from dynenv_ros.learning.rollout_transfer import unflatten
-from dynenv_ros.learning.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
-from dynenv_ros.learning.shared_weights import pack, unpack
-from dynenv_ros.learning.worker_pool import Delivery, WorkerPoolError, one_line, replace_or_go_on
+from dynenv_ros.learning.distributed.ray_connection import RayConnectionError, cluster_cpus, connect
+from dynenv_ros.learning.distributed.rollout_transfer import unflatten
+from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
+from dynenv_ros.learning.distributed.shared_weights import pack, unpack
+from dynenv_ros.learning.distributed.worker_pool import Delivery, WorkerPoolError, one_line, replace_or_go_on
 
 QUEUED_CALLS = 2             # collect calls per actor: one running, one waiting
 

@@ -48,12 +48,17 @@ from dynenv_ros.core.revision import code_revision
 from dynenv_ros.agent.checkpoint import (FORMAT as POLICY_FORMAT, atomic_write, check_state_dict_fits, fsync_dir,
                                          json_dumps, load_policy, read_safetensors, refuse_non_finite,
                                          save_policy, sha256, tensors_for_saving, write_synced)
+from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.learning.algo.networks import Learner, make_agent
+from dynenv_ros.learning.config import TrainConfig
 
 __all__ = ["FORMAT", "POLICY_FORMAT", "CheckpointWarning", "save_training_checkpoint", "load_training_checkpoint",
            "read_checkpoint_meta", "resolve_checkpoint", "list_checkpoints", "capture_rng_state",
-           "restore_rng_state", "save_policy", "load_policy", "sha256"]
+           "restore_rng_state", "save_policy", "load_policy", "sha256", "policy_from_training_checkpoint"]
 
 FORMAT = "dynenv_training/1"
+# the "version" of a run's meta (in its checkpoints and policy files): what wrote it
+META_VERSION = "dynenv_ros.learning/1"
 CHECKPOINTS = "checkpoints"
 LATEST = "latest"
 # In a fresh run's directory (the trainer node's): the policy file it starts from, to measure what it learnt against.
@@ -387,3 +392,18 @@ def restore_rng_state(extra: Mapping[str, torch.Tensor]) -> None:
         for name, state in extra.items():
             if name.startswith("rng.cuda.") and int(name.rsplit(".", 1)[1]) < torch.cuda.device_count():
                 torch.cuda.set_rng_state(state.to(torch.uint8), int(name.rsplit(".", 1)[1]))
+
+
+def policy_from_training_checkpoint(path: str | Path) -> tuple[DynEnvAgent, dict[str, Any]]:
+    """The policy of a training checkpoint — a ``step_*`` folder, or a run folder or its ``checkpoints`` folder (then
+    the latest valid one) — in eval mode on the CPU, with the checkpoint's meta: to evaluate a run part-way, or one
+    stopped before it wrote ``policy.safetensors``. The agent is rebuilt from the config the checkpoint carries.
+    ValueError for a missing, damaged or foreign checkpoint, or weights that do not fit."""
+    meta = read_checkpoint_meta(path)
+    try:
+        cfg = TrainConfig.from_dict(meta["config"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise ValueError(f"checkpoint {meta['checkpoint']['path']} has no usable training config: {error}") from None
+    agent = make_agent(cfg)
+    meta, _ = load_training_checkpoint(meta["checkpoint"]["path"], Learner(agent, cfg.ltp_horizon))
+    return agent.eval(), meta
