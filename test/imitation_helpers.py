@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss, imitation_loss
+from dynenv_ros.learning.algo.auxiliary import imitation_loss
+from dynenv_ros.learning.algo.ppo import UpdateSettings, minibatch_loss
 from dynenv_ros.learning.algo.policy import head_outputs, run_sequence
 
 
@@ -21,7 +22,7 @@ def imitation_update_loss(learner, tensors, coef: float = 1.0) -> torch.Tensor:
     """The update's minibatch loss over every row of a rollout with only the imitation term (weight ``coef``)."""
     T, B = tensors["actions"].shape[:2]
     zeros = torch.zeros(T, B)
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, imitation_settings(imitation_coef=coef),
+    loss, _ = minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, imitation_settings(imitation_coef=coef),
                               lambda *a: None)
     return loss
 

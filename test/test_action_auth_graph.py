@@ -147,7 +147,7 @@ def test_forged_and_replayed_messages_leave_learning_going_on_genuine_experience
     attacker = _attacker(secrets, 150)
     counts = trainer.assembler.counts
     try:
-        assert spin_until(executor, lambda: trainer.learner.updates >= 5 and counts["action_mac_invalid"] >= 20
+        assert spin_until(executor, lambda: trainer.learner.progress.updates >= 5 and counts["action_mac_invalid"] >= 20
                           and counts["action_mac_missing"] >= 5 and counts["feedback_mac_missing"] >= 5
                           and counts["feedback_mac_invalid"] >= 5, 200.0), trainer.diagnostics()
         spin_until(executor, lambda: False, 1.5)

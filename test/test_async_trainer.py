@@ -26,7 +26,7 @@ from dynenv_ros.learning.distributed.rollout_transfer import (AttachedSlots, Rol
 from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, shard_sizes
 from dynenv_ros.learning.distributed.shared_weights import AttachedWeights, SharedWeights, pack, unpack
 from dynenv_ros.learning.train_cli import main
-from dynenv_ros.learning.runners import make_trainer
+from dynenv_ros.learning.trainer import Trainer
 from dynenv_ros.learning.distributed.worker_pool import ProcessPool, WorkerPoolError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -224,7 +224,7 @@ def _metrics(run_dir: Path) -> dict[str, list[float]]:
 
 def test_an_async_run_learns_within_its_lag_bound_and_writes_a_whole_run_directory(tmp_path):
     cfg = small(runner="async", workers=1, total_env_steps=64, max_policy_lag=1, num_envs=2)
-    summary = make_trainer(cfg, tmp_path / "run", progress=False).run()
+    summary = Trainer(cfg, tmp_path / "run", progress=False).run()
     assert summary["env_steps"] >= 64 and summary["runner"] == "async" and summary["worker_deaths"] == 0
     metrics = _metrics(tmp_path / "run")
     assert max(metrics["async/policy_lag_max"]) <= 1
@@ -339,7 +339,7 @@ def test_the_tiny_task_is_learnt_asynchronously_as_in_process_at_equal_env_steps
     for runner in ("sync", "async"):
         extra = {"backend": "inprocess"} if runner == "sync" else {"workers": 1}
         cfg = TrainConfig(**{**TINY_TASK, "runner": runner, "seed": seed, **extra})
-        summary = make_trainer(cfg, tmp_path / runner, progress=False).run()
+        summary = Trainer(cfg, tmp_path / runner, progress=False).run()
         assert summary["env_steps"] >= 640
         forward, _ = _walks_forward(tmp_path / runner / "policy.safetensors", seed=11)
         assert forward > 0.8, (runner, forward)
@@ -379,7 +379,7 @@ def test_every_kind_of_run_trains_asynchronously(tmp_path, changes, logged):
     with privileged seeding (the worker acts with the learner's seeder), several epochs, driving in both action
     modes: each runs through the workers and learns finite losses."""
     cfg = small(runner="async", workers=1, total_env_steps=24, **changes)
-    summary = make_trainer(cfg, tmp_path / "run", progress=False).run()
+    summary = Trainer(cfg, tmp_path / "run", progress=False).run()
     assert summary["env_steps"] >= 24 and summary["worker_deaths"] == 0 and "stop_reason" not in summary
     metrics = _metrics(tmp_path / "run")
     assert metrics[logged] and all(np.isfinite(v) for v in metrics[logged])

@@ -50,7 +50,7 @@ def test_the_trainer_rebuilds_what_the_driving_policy_saw_and_chose(make_node, e
     trainer, sim, policy = _driving_graph(make_node, executor, tmp_path, action_mode, learning_rate=1e-7)
     for group in trainer.learner.optimizer.param_groups:
         group["lr"] = 0.0
-    assert spin_until(executor, lambda: trainer.learner.updates >= 3
+    assert spin_until(executor, lambda: trainer.learner.progress.updates >= 3
                       and "behaviour_log_prob_error" in trainer.learner.last_stats, 120.0), trainer.diagnostics()
     stats = trainer.learner.last_stats
     assert stats["behaviour_log_prob_error"] < 1e-3, stats

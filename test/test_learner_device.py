@@ -30,7 +30,7 @@ def test_acting_and_an_update_make_no_tensor_on_the_default_device(tmp_path, pre
         before = [p.detach().clone() for p in trainer.learner.parameters()]
         with torch.device("meta"):
             trainer.learner.eval()
-            rollout = trainer.collector.collect(cfg.rollout_length)
+            rollout = trainer.source.collector.collect(cfg.rollout_length)
             trainer.learner.train()
             stats = update(trainer.learner, trainer.optimizer, rollout.as_tensors(trainer.device),
                            trainer.settings, trainer.generator)
@@ -38,4 +38,4 @@ def test_acting_and_an_update_make_no_tensor_on_the_default_device(tmp_path, pre
         changed = sum(not torch.equal(a, p.detach()) for a, p in zip(before, trainer.learner.parameters()))
         assert changed > 0 and all(torch.isfinite(torch.tensor(v)) for v in stats.values())
     finally:
-        trainer.env.close()
+        trainer.close()

@@ -11,7 +11,7 @@ import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import BatchStep, DrivingVectorEnv
-from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss, update
+from dynenv_ros.learning.algo.ppo import UpdateSettings, minibatch_loss, update
 from dynenv_ros.learning.algo.advantages import generalized_advantages
 from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
 from dynenv_ros.learning.algo.networks import Learner
@@ -158,7 +158,7 @@ def _loss_and_grads(learner, tensors, settings):
                                       tensors["truncated"], tensors["final_values"], settings.gamma,
                                       settings.gae_lambda)
     learner.zero_grad(set_to_none=True)
-    loss, _ = _minibatch_loss(learner, tensors, rows, adv, ret, settings, lambda *a: None)
+    loss, _ = minibatch_loss(learner, tensors, rows, adv, ret, settings, lambda *a: None)
     loss.backward()
     return float(loss.detach()), {n: p.grad.clone() for n, p in learner.named_parameters() if p.grad is not None}
 

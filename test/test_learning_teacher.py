@@ -10,7 +10,7 @@ import torch
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.teacher import action_indices
 from dynenv_ros.envs.vector import SoccerVectorEnv, _seeds
-from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss
+from dynenv_ros.learning.algo.ppo import UpdateSettings, minibatch_loss
 from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.algo.networks import Learner
 from dynenv_ros.learning.sampling.collector import RolloutCollector
@@ -156,10 +156,10 @@ def test_teacher_driven_worlds_execute_the_labels_and_give_the_rl_terms_nothing(
     ones = torch.ones(T, B)
     rl_only = UpdateSettings(policy_coef=1.0, value_coef=1.0, entropy_coef=0.1, use_forward=False, use_rcm=False,
                              use_inverse=False, use_ltp=False, imitation_coef=0.0)
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
+    loss, _ = minibatch_loss(learner, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
     assert float(loss.detach()) == 0.0
     tensors["teacher_driven"] = torch.tensor([True, True, False, False])
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
+    loss, _ = minibatch_loss(learner, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
     assert float(loss.detach()) != 0.0
 
 

@@ -7,7 +7,7 @@ import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import SoccerVectorEnv
-from dynenv_ros.learning.algo.ppo import UpdateSettings, _minibatch_loss, update
+from dynenv_ros.learning.algo.ppo import UpdateSettings, minibatch_loss, update
 from dynenv_ros.learning.algo.networks import Learner
 from dynenv_ros.learning.sampling.collector import RolloutCollector
 from dynenv_ros.learning.algo.policy import policy_step
@@ -40,7 +40,7 @@ def _grads(learner, settings, rollout):
     adv, ret = generalized_advantages(tensors["rewards"], tensors["values"], tensors["episode_end"],
                                       tensors["truncated"], tensors["final_values"], settings.gamma,
                                       settings.gae_lambda)
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(rollout.robots), adv, ret, settings,
+    loss, _ = minibatch_loss(learner, tensors, torch.arange(rollout.robots), adv, ret, settings,
                               lambda *a: None)
     loss.backward()
     return {name: (p.grad is not None and bool(p.grad.abs().sum() > 0)) for name, p in learner.named_parameters()}
@@ -105,7 +105,7 @@ def test_ppo_first_minibatch_has_ratio_one_and_no_clipping(rollout_setup):
     adv, ret = generalized_advantages(tensors["rewards"], tensors["values"], tensors["episode_end"],
                                       tensors["truncated"], tensors["final_values"], 0.99, 0.95)
     learner.eval()
-    _minibatch_loss(learner, tensors, torch.arange(rollout.robots), adv, ret, UpdateSettings(algorithm="ppo"),
+    minibatch_loss(learner, tensors, torch.arange(rollout.robots), adv, ret, UpdateSettings(algorithm="ppo"),
                     lambda name, value: logged.setdefault(name, float(value)))
     assert abs(logged["approx_kl"]) < 1e-6
     assert logged["clip_fraction"] == 0.0

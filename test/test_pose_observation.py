@@ -279,6 +279,15 @@ def test_ros_experience_refuses_the_estimate_with_the_reason(tmp_path):
         SequenceLearner(TrainConfig(localization="estimate", algorithm="ppo", players_per_team=1), tmp_path / "run")
 
 
+def test_learning_from_bags_refuses_the_estimate_with_the_reason(tmp_path):
+    # a recording holds no pose estimate: an agent that takes one cannot be cloned from it (it was built without one)
+    from dynenv_ros.learning.messages.bags import train_from_bags
+    with pytest.raises(ValueError, match="carries none yet"):
+        train_from_bags(TrainConfig(localization="estimate"), [ROOT / "bags" / "sample_2v2_realistic_30s"],
+                        tmp_path / "run")
+    assert not (tmp_path / "run").exists()
+
+
 SMALL = {"algorithm": "ppo", "variant": "pred", "players_per_team": 1, "num_envs": 2, "perception": "realistic",
          "rollout_length": 4, "ltp_horizon": 2, "feature_size": 16, "ppo_epochs": 1, "ppo_minibatches": 1,
          "log_every_updates": 1, "checkpoint_every_minutes": 10.0, "episode_seconds": 5.0,
@@ -291,11 +300,11 @@ def test_a_tiny_run_with_the_estimate_trains_checkpoints_resumes_and_evaluates(t
     from dynenv_ros.evaluation.soccer import evaluate
     from dynenv_ros.learning.run.checkpoints import read_checkpoint_meta
     from dynenv_ros.learning.train_cli import main
-    from dynenv_ros.learning.runners import make_trainer
+    from dynenv_ros.learning.trainer import Trainer
     extra = {"runner": "async", "workers": 1} if runner == "async" else {}
     cfg = TrainConfig(**SMALL, **extra, total_env_steps=16)
     run = tmp_path / "run"
-    summary = make_trainer(cfg, run, progress=False).run()
+    summary = Trainer(cfg, run, progress=False).run()
     assert summary["env_steps"] >= 16 and summary["updates"] >= 2
     policy, _ = load_policy(run / "policy.safetensors")
     assert policy.uses_pose is True

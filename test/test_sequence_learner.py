@@ -41,7 +41,7 @@ def test_an_update_gives_a_new_version_whose_weights_a_policy_node_loads(sequenc
     before = {k: v.clone() for k, v in learner.agent.state_dict().items()}
     first = [s for s in sequences if s.index == 0]
     stats = learner.learn(first)
-    assert learner.version == 2 and learner.env_steps == 2 * T
+    assert learner.version == 2 and learner.progress.env_steps == 2 * T
     assert any(not torch.equal(before[k], v) for k, v in learner.agent.state_dict().items())
     for key in ("policy_loss", "value_loss", "entropy", "lag_versions_mean", "behaviour_log_prob_error"):
         assert key in stats and stats[key] == stats[key], key          # present and not NaN
@@ -84,7 +84,7 @@ def test_a_checkpoint_resumes_the_update_count_and_the_weights(sequences, tmp_pa
     learner.save_checkpoint()
     learner.close()
     again = SequenceLearner(_config(), run, resume=True, batch_sequences=2)
-    assert again.version == 2 and again.env_steps == 2 * T
+    assert again.version == 2 and again.progress.env_steps == 2 * T
     for (name, a), b in zip(again.agent.state_dict().items(), learner.agent.state_dict().values()):
         assert torch.equal(a, b), name
 
@@ -105,7 +105,7 @@ def test_the_learner_thread_takes_each_streams_waiting_sequences_in_order(sequen
         time.sleep(0.05)
     background.stop()
     assert not background.error, background.error
-    assert updates == [2, 3] and background.depth() == 0 and learner.env_steps == 8 * T
+    assert updates == [2, 3] and background.depth() == 0 and learner.progress.env_steps == 8 * T
     assert learner.counts["state_restarts"] == 0     # every batch continued both streams in order
     assert {stream: entry[0] for stream, entry in learner.states.items()} == {("game", "team_a_0"): 3,
                                                                                ("game", "team_b_0"): 3}
@@ -173,7 +173,7 @@ def test_the_learner_resumes_a_run_directory_dynenv_train_wrote(tmp_path):
                        "--set", "total_env_steps=8"]) == 0
     cfg = TrainConfig.from_dict(json.loads((run / "config.json").read_text()))
     learner = SequenceLearner(cfg, run, resume=True, batch_sequences=1, log=False)
-    assert learner.updates == json.loads((run / "summary.json").read_text())["updates"] and learner.version >= 2
+    assert learner.progress.updates == json.loads((run / "summary.json").read_text())["updates"] and learner.version >= 2
     agent, _ = policy_from_bytes((run / "policy.safetensors").read_bytes(), "the run's policy")
     for (name, a), b in zip(agent.state_dict().items(), learner.agent.state_dict().values()):
         assert torch.equal(a, b), name

@@ -85,8 +85,8 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
         model_state, _ = checkpoints.read_safetensors((latest / "model.safetensors").read_bytes())
         for name, value in trainer.learner.state_dict().items():
             assert torch.equal(value, model_state[name]), name
-        assert trainer.env_steps == saved_steps and trainer.env_steps % 4 == 0 and trainer.env_steps > 0
-        assert trainer.updates == trainer.env_steps // 4
+        assert trainer.progress.env_steps == saved_steps and trainer.progress.env_steps % 4 == 0 and trainer.progress.env_steps > 0
+        assert trainer.progress.updates == trainer.progress.env_steps // 4
         # the optimizer resumes with exactly the saved state; a parameter whose loss term had no gradient in
         # some update (a class absent from that batch) has a smaller Adam step, which is why steps may differ
         saved_optimizer, _ = checkpoints.read_safetensors((latest / "optimizer.safetensors").read_bytes())
@@ -96,9 +96,9 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
             if kind == "state":
                 assert torch.equal(torch.as_tensor(resumed[int(index)][field]), value), key
         adam_steps = [float(s["step"]) for s in trainer.optimizer.state.values()]
-        assert max(adam_steps) == float(trainer.updates) and min(adam_steps) >= 1.0
+        assert max(adam_steps) == float(trainer.progress.updates) and min(adam_steps) >= 1.0
     finally:
-        trainer.env.close()
+        trainer.close()
 
     # killed before it wrote policy.safetensors, the run can still be evaluated: its latest checkpoint's policy
     from dynenv_ros.evaluation.cli import main as eval_main

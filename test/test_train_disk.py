@@ -116,9 +116,9 @@ def test_disk_full_mid_run_stops_cleanly_and_keeps_the_last_checkpoint(tmp_path,
     trainer = Trainer(TrainConfig.from_dict(json.loads((run_dir / "config.json").read_text())), run_dir,
                       resume=True, progress=False)
     try:
-        assert trainer.env_steps == 0
+        assert trainer.progress.env_steps == 0
     finally:
-        trainer.env.close()
+        trainer.close()
 
 
 def test_sigkill_right_after_the_first_checkpoint_then_resume_continues(tmp_path, capsys):

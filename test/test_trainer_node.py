@@ -59,7 +59,7 @@ def test_the_trainer_rebuilds_what_the_policy_saw_and_chose(make_node, executor,
     for group in trainer.learner.optimizer.param_groups:
         group["lr"] = 0.0
     sim, policy = _game(make_node, executor, trusted=tmp_path / "keys")
-    assert spin_until(executor, lambda: trainer.learner.updates >= 3, 90.0), str(trainer.diagnostics())
+    assert spin_until(executor, lambda: trainer.learner.progress.updates >= 3, 90.0), str(trainer.diagnostics())
     stats = trainer.learner.last_stats
     assert stats["behaviour_log_prob_error"] < 1e-3, stats
     counts = trainer.assembler.counts
@@ -70,7 +70,7 @@ def test_the_trainer_rebuilds_what_the_policy_saw_and_chose(make_node, executor,
 def test_weights_flow_back_and_the_policy_acts_with_new_versions(make_node, executor, tmp_path):
     trainer = _trainer(make_node, executor, tmp_path / "run", learning_rate=1e-3, max_policy_lag=2)
     sim, policy = _game(make_node, executor, trusted=tmp_path / "keys")
-    assert spin_until(executor, lambda: trainer.learner.updates >= 4, 120.0), trainer.diagnostics()
+    assert spin_until(executor, lambda: trainer.learner.progress.updates >= 4, 120.0), trainer.diagnostics()
     assert spin_until(executor, lambda: policy.policy_version >= 3, 30.0), (policy.policy_version, policy.counts)
     assert policy.weights_acting[0] == trainer.run_id and policy.counts["weights_refused"] == 0
     stats = trainer.learner.last_stats
@@ -89,7 +89,7 @@ def test_several_games_in_their_namespaces_feed_one_trainer(make_node, executor,
     trainer = _trainer(make_node, executor, tmp_path / "run", batch_sequences=4)
     _game(make_node, executor, "/game_1", seed=3, trusted=tmp_path / "keys")
     _game(make_node, executor, "/game_2", seed=7, trusted=tmp_path / "keys")
-    assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
+    assert spin_until(executor, lambda: trainer.learner.progress.updates >= 2, 120.0), trainer.diagnostics()
     assert trainer.games == {"/game_1", "/game_2"}
     assert {(g, r) for g, r in trainer.learner.states} == {(g, r) for g in ("/game_1", "/game_2")
                                                            for r in ("team_a_0", "team_b_0")}

@@ -47,7 +47,7 @@ def test_forged_actions_and_rewards_from_another_process_cannot_kill_learning(ma
         sim, _ = _game(make_node, executor, seed=5, trusted=tmp_path / "keys")
         ran = _executed(sim)
         counts = trainer.assembler.counts
-        assert spin_until(executor, lambda: trainer.learner.updates >= 6 and counts["out_of_range"] >= 20
+        assert spin_until(executor, lambda: trainer.learner.progress.updates >= 6 and counts["out_of_range"] >= 20
                           and counts["malformed"] >= 10 and counts["rivals_resolved"] >= 5, 150.0), \
             trainer.diagnostics()
     finally:

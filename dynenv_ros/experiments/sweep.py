@@ -114,7 +114,7 @@ def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str
     checkpoint, or a temporary one), evaluate the policy, return the small files."""
     from dynenv_ros.learning.run.checkpoints import list_checkpoints
     from dynenv_ros.learning.config import TrainConfig
-    from dynenv_ros.learning.runners import make_trainer
+    from dynenv_ros.learning.trainer import Trainer
     cfg = TrainConfig.from_dict(cfg_dict)
     started = time.time()
     with tempfile.TemporaryDirectory(prefix=f"dynenv-sweep-{name}-") as temporary:
@@ -122,7 +122,7 @@ def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str
         resume = run_dir.is_dir() and bool(list_checkpoints(run_dir))
         if run_dir.is_dir() and not resume:          # killed before its first checkpoint: nothing to keep
             shutil.rmtree(run_dir)
-        summary = make_trainer(cfg, run_dir, resume=resume, progress=False).run()
+        summary = Trainer(cfg, run_dir, resume=resume, progress=False).run()
         result = _evaluate(cfg, run_dir / "policy.safetensors", evaluation)
         files = {f: (run_dir / f).read_bytes() for f in RUN_FILES if (run_dir / f).is_file()}
     import platform

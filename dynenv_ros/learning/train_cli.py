@@ -102,10 +102,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"dynenv-train: --resume {run_dir}: no checkpoint yet (the run stopped before its first); starting "
               f"it again from the beginning", file=sys.stderr)
         resume = False
-    from dynenv_ros.learning.runners import make_trainer
+    from dynenv_ros.learning.trainer import Trainer
     from dynenv_ros.learning.distributed.worker_pool import WorkerPoolError
     try:
-        trainer = make_trainer(cfg, run_dir, resume=resume, progress=not args.no_progress)
+        trainer = Trainer(cfg, run_dir, resume=resume, progress=not args.no_progress)
     except (ValueError, WorkerPoolError) as error:   # a checkpoint that does not fit; workers that cannot start
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2

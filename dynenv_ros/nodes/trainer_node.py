@@ -259,11 +259,11 @@ class TrainerNode(Node):
 
     def _check_budget(self) -> None:
         """Either budget ends the run: updates make a run comparable across machine speeds, minutes cap it."""
-        spent = ("update budget" if self.max_updates and self.learner.updates >= self.max_updates else
+        spent = ("update budget" if self.max_updates and self.learner.progress.updates >= self.max_updates else
                  "time budget" if self.deadline is not None and time.monotonic() >= self.deadline else None)
         if spent is not None:
             self.get_logger().info(f"{spent} spent: version {self.learner.version}, "
-                                   f"{self.learner.updates} updates, {self.learner.env_steps} steps learnt")
+                                   f"{self.learner.progress.updates} updates, {self.learner.progress.env_steps} steps learnt")
             raise NodeExit(0)
 
     # -- experience ---------------------------------------------------------------------------------------------
@@ -376,7 +376,7 @@ class TrainerNode(Node):
             self.episodes.extend(finished)
         scalars["experience/queue_depth"] = float(self.background.depth())
         learner.log(scalars)
-        if learner.updates % self.publish_every == 0:
+        if learner.progress.updates % self.publish_every == 0:
             self._publish_weights()
 
     def _publish_weights(self) -> None:
@@ -408,11 +408,11 @@ class TrainerNode(Node):
     def diagnostics(self) -> dict[str, str]:
         now = time.monotonic()
         counts = self.assembler.counts
-        self._steps_window.append((now, counts["steps"], self.learner.updates))
+        self._steps_window.append((now, counts["steps"], self.learner.progress.updates))
         (t0, s0, u0), (t1, s1, u1) = self._steps_window[0], self._steps_window[-1]
         span = max(t1 - t0, 1e-9)
         stats = self.learner.last_stats
-        values = {"version": str(self.learner.version), "updates": str(self.learner.updates),
+        values = {"version": str(self.learner.version), "updates": str(self.learner.progress.updates),
                   "games": str(len(self.games)), "robots": str(len(self.robots)),
                   "experience_steps_per_s": f"{(s1 - s0) / span:.1f}" if t1 > t0 else "0.0",
                   "updates_per_s": f"{(u1 - u0) / span:.3f}" if t1 > t0 else "0.000",
@@ -469,8 +469,8 @@ class TrainerNode(Node):
         by_version: dict[int, list[float]] = {}
         for episode in self.episodes:
             by_version.setdefault(int(episode["version"]), []).append(episode["return"])
-        return {"version": self.learner.version, "updates": self.learner.updates,
-                "env_steps": self.learner.env_steps, "wall_seconds": self.learner.meta()["wall_seconds"],
+        return {"version": self.learner.version, "updates": self.learner.progress.updates,
+                "env_steps": self.learner.progress.env_steps, "wall_seconds": self.learner.meta()["wall_seconds"],
                 "reward_weights": self.learner.reward_weights.tolist(),
                 "episodes": [[int(e["version"]), e["return"]] for e in self.episodes],
                 "returns_by_version": {v: {"episodes": len(r), "mean_return": statistics.fmean(r)}

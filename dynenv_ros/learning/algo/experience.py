@@ -1,4 +1,5 @@
-"""What the algorithm learns from: a rollout's arrays, their tensors, and one update's experience.
+"""What the algorithm learns from: a rollout's arrays and their tensors (``Rollout``), one update's experience
+(``Experience``), and where experience comes from (``ExperienceSource``, the training loop's one input: ``loop``).
 
 One rollout is T motion periods of every world. Stored per step t and learning robot b (robots flattened world
 by world, ``(E, A_learning) -> B``):
@@ -39,7 +40,7 @@ Everything is numpy until ``as_tensors``; nothing per detection is ever a Python
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Mapping, Protocol
 
 import numpy as np
 import torch
@@ -51,7 +52,7 @@ from dynenv_ros.agent.network import State
 @dataclass(eq=False)      # identity: arrays have no truth value (a queue's remove compares its elements)
 class StepArrays:
     """The arrays every learner input has, per step (see the module docstring): a rollout of the vectorised batch
-    (robot axis B) or one robot's sequence assembled from messages (``learning.experience``, no robot axis)."""
+    (robot axis B) or one robot's sequence assembled from messages (``messages.assembly``, no robot axis)."""
     obs: dict[str, np.ndarray]
     actions: np.ndarray
     log_probs: np.ndarray
@@ -99,7 +100,7 @@ class Rollout(StepArrays):
                                  self.initial_state, device)
 
 
-# The per-step arrays of a rollout (see the module docstring), in the form ``algorithms.update`` takes.
+# The per-step arrays of a rollout (see the module docstring), in the form ``ppo.update`` takes.
 STEP_ARRAYS = ("actions", "log_probs", "values", "rewards", "reward_terms", "episode_end", "truncated",
                "final_values", "starts", "can_act")
 
@@ -107,10 +108,49 @@ STEP_ARRAYS = ("actions", "log_probs", "values", "rewards", "reward_terms", "epi
 def arrays_as_tensors(arrays: Mapping[str, Any], initial_state: State, device: torch.device | str = "cpu"
                       ) -> dict[str, Any]:
     """A rollout's numpy arrays (``STEP_ARRAYS``, ``obs`` and ``targets`` dicts, optional extras such as
-    ``teacher_actions``) → the tensors ``algorithms.update`` takes, with ``initial_state``."""
+    ``teacher_actions``) → the tensors ``ppo.update`` takes, with ``initial_state``."""
     def tensor(x: np.ndarray) -> Tensor:
         return torch.from_numpy(np.ascontiguousarray(x)).to(device)
     out: dict[str, Any] = {key: (tensor(value) if not isinstance(value, Mapping)
                                  else {k: tensor(v) for k, v in value.items()}) for key, value in arrays.items()}
     out["initial_state"] = tuple(s.to(device) for s in initial_state)
     return out
+
+
+@dataclass
+class Experience:
+    """What one update learns from: ``batch``, the tensors ``ppo.update`` takes (a rollout's, several workers' rollouts
+    joined, or message sequences batched), the env steps in it, the episodes that finished while it was gathered, and
+    scalars to log about it (averaged over a log window, or the maximum for ``*_max``)."""
+    batch: Mapping[str, Any]
+    env_steps: int
+    finished: list[dict[str, float]] = field(default_factory=list)
+    scalars: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Progress:
+    """How far a run has come: env steps learnt from, updates made, episodes finished (what its checkpoints keep)."""
+    env_steps: int = 0
+    updates: int = 0
+    episodes: int = 0
+
+
+class ExperienceSource(Protocol):
+    """Where a run's experience comes from: this process's worlds (``sampling.in_process``), rollout workers
+    (``distributed.pool_source``: processes or Ray actors), the trainer node's messages and recorded bags
+    (``messages``). The loop pulls from it, so a source decides how long it waits and what it drops."""
+
+    def next(self, progress: Progress, deadline: float) -> Experience | None:
+        """The next experience to learn from; None when none came before ``deadline`` (``time.perf_counter``'s
+        clock) or the source has nothing more to give."""
+        ...
+
+    def learned(self, progress: Progress) -> None:
+        """The update on the last experience is made and counted in ``progress``: hand out the new weights, give
+        back what the experience held."""
+        ...
+
+    def close(self) -> None:
+        """Stop whatever the source runs (worlds, workers); a second call does nothing."""
+        ...

@@ -28,21 +28,20 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from dynenv_ros.agent.losses import (icm_losses, localization_loss, ltp_loss, masked_mean, rcm_forward_loss,
-                                     reconstruction_loss)
-from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.agent.losses import icm_losses, ltp_loss, masked_mean
 from dynenv_ros.learning.algo.advantages import generalized_advantages
+from dynenv_ros.learning.algo.auxiliary import continuous_icm_losses, imitation_loss, self_supervised_losses
 from dynenv_ros.learning.algo.networks import Learner, action_features
 from dynenv_ros.learning.algo.policy import head_outputs, log_prob_entropy, run_sequence
+from dynenv_ros.learning.config import TrainConfig
 
 LOG = logging.getLogger(__name__)
-BALL_ANCHOR = ((0.0, 0.0),)
 
 
 @dataclass
@@ -83,24 +82,6 @@ class UpdateSettings:
         return self.algorithm == "ppo"
 
 
-def self_supervised_losses(out: Any, targets: Mapping[str, Tensor], use_localization: bool,
-                           use_reconstruction: bool) -> dict[str, Tensor]:
-    """Localization (pose) and reconstruction (ball, robots) losses over every observation of the rollout."""
-    losses: dict[str, Tensor] = {}
-    if use_localization:
-        losses["localization"] = localization_loss(out.pose, targets["pose"])
-    if use_reconstruction:
-        ball = reconstruction_loss(out.ball.unsqueeze(-2), out.ball_confidence.unsqueeze(-1),
-                                   targets["ball"].unsqueeze(-2), targets["ball_known"].unsqueeze(-1) > 0.5,
-                                   anchors=BALL_ANCHOR)
-        robots = reconstruction_loss(out.robots, out.robot_confidence, targets["robots"],
-                                     targets["robots_known"] > 0.5, binary_fields=(4, 5))
-        losses["reconstruction"] = sum(ball.values()) + sum(robots.values())
-        losses["recon_ball_position"] = ball["position"].detach()
-        losses["recon_robot_position"] = robots["position"].detach()
-    return losses
-
-
 def update_settings(cfg: TrainConfig) -> UpdateSettings:
     """The variant's loss switches and the config's numbers, in the form ``update`` takes. ``use_forward`` is on
     for ICM's plain forward model *and* RCM's attention-weighted one (``use_rcm`` picks the weighting): ``update``
@@ -118,6 +99,173 @@ def update_settings(cfg: TrainConfig) -> UpdateSettings:
         use_localization=losses.localization, use_reconstruction=losses.reconstruction,
         intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0),
         proximal=ppo and cfg.runner == "async")
+
+
+@dataclass
+class ActorCriticLoss:
+    """PPO's (A2C's) loss of a minibatch and its parts, scalar tensors: ``total`` = policy_coef·policy +
+    value_coef·value − entropy_coef·entropy; ``approx_kl`` and ``clip_fraction`` carry no gradient."""
+    total: Tensor
+    policy: Tensor
+    value: Tensor
+    entropy: Tensor
+    approx_kl: Tensor
+    clip_fraction: Tensor
+
+
+def ppo_loss(log_prob: Tensor, old_log_prob: Tensor, advantages: Tensor, entropy: Tensor, value: Tensor,
+             returns: Tensor, acting: Tensor, alive: Tensor, s: UpdateSettings, old_value: Tensor | None = None
+             ) -> ActorCriticLoss:
+    """The policy, value and entropy terms over (T, B) steps, as CleanRL's ``ppo.py`` writes them.
+
+    - policy: PPO's clipped surrogate −mean min(r·A, clip(r, 1 − ε, 1 + ε)·A), r = exp(log π − log π_old) against
+      the behaviour's ``old_log_prob`` (``s.algorithm`` 'ppo', ε = ``s.clip``); A2C's −mean log π·A otherwise;
+    - value: mean (V − returns)², or with ``s.clip_value_loss`` the larger of that and (V_clipped − returns)², V_clipped
+      = ``old_value`` + clip(V − ``old_value``, −ε, ε);
+    - entropy: the mean of the per-robot policy entropy (a bonus: subtracted).
+
+    Policy, entropy, KL and clip fraction average over the steps where the robot could ``act`` (its action had an
+    effect), the value over the steps it was ``alive`` (bool masks, (T, B)). ``advantages`` as the update uses them
+    (normalised, weighted)."""
+    log_ratio = log_prob - old_log_prob
+    ratio = log_ratio.exp()
+    if s.ppo:
+        surrogate = torch.minimum(ratio * advantages, ratio.clamp(1 - s.clip, 1 + s.clip) * advantages)
+        policy_loss = -masked_mean(surrogate, acting)
+    else:
+        policy_loss = -masked_mean(log_prob * advantages, acting)
+    value_error = (value - returns) ** 2
+    if s.clip_value_loss:
+        if old_value is None:
+            raise ValueError("clip_value_loss needs the behaviour values (old_value)")
+        clipped = old_value + (value - old_value).clamp(-s.clip, s.clip)
+        value_error = torch.maximum(value_error, (clipped - returns) ** 2)
+    value_loss = masked_mean(value_error, alive)
+    entropy_mean = masked_mean(entropy, acting)
+    total = s.policy_coef * policy_loss + s.value_coef * value_loss - s.entropy_coef * entropy_mean
+    with torch.no_grad():
+        approx_kl = masked_mean((ratio - 1) - log_ratio, acting)
+        clip_fraction = masked_mean(((ratio - 1).abs() > s.clip).float(), acting)
+    return ActorCriticLoss(total, policy_loss, value_loss, entropy_mean, approx_kl, clip_fraction)
+
+
+def minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, advantages: Tensor | None,
+                   returns: Tensor | None, s: UpdateSettings, log: Callable[[str, Tensor | float], None],
+                   intrinsic_returns: Tensor | None = None, intrinsic_advantages: Tensor | None = None
+                   ) -> tuple[Tensor, float]:
+    """(loss, approximate KL) of one minibatch of robot sequences (``rows``): the sequences re-run from their start
+    state, PPO's (A2C's) terms (``ppo_loss``), then the auxiliary ones the settings switch on (curiosity, the
+    self-supervised heads, imitation: ``auxiliary``); ``log(name, value)`` takes every term. ``advantages`` None:
+    decoupled PPO fused into this pass (``_fused_proximal``)."""
+    agent = learner.agent
+    T = rollout["actions"].shape[0]
+    every_row = len(rows) == rollout["actions"].shape[1] and bool((rows == torch.arange(len(rows), device=rows.device)).all())
+    obs = rollout["obs"] if every_row else {k: v[:, rows] for k, v in rollout["obs"].items()}   # A2C: no copy
+    out = run_sequence(agent, obs, _initial_state(learner, rollout, rows), rollout["starts"][:, rows])
+    actions = rollout["actions"][:, rows]
+    acting = rollout["can_act"][:T, rows]
+    everywhere = rollout["alive"][:T, rows] if "alive" in rollout else torch.ones_like(acting)
+    if "teacher_driven" in rollout:       # rows that executed the teacher's actions: off-policy, no RL terms there
+        on_policy = ~rollout["teacher_driven"][rows].unsqueeze(0).expand_as(acting)
+        imitated, acting, everywhere = acting, acting & on_policy, on_policy
+    else:
+        imitated = acting
+    step_out = head_outputs(out, steps=T)
+    log_prob, entropy = log_prob_entropy(agent, step_out, actions)
+    if advantages is None:
+        adv, target, old_log_prob, weights = _fused_proximal(rollout, rows, log_prob, out.value.detach(), s,
+                                                             intrinsic_advantages, log)
+    else:
+        adv, target, old_log_prob = advantages[:, rows], returns[:, rows], rollout["log_probs"][:, rows]
+        weights = rollout["sample_weights"][:, rows] if "sample_weights" in rollout else None
+    if s.normalize_advantages:
+        valid = adv[acting] if acting.any() else adv.reshape(-1)
+        adv = (adv - valid.mean()) / (valid.std(unbiased=False) + 1e-8)
+    if weights is not None:               # decoupled PPO: the behaviour policy's correction
+        adv = adv * weights
+    old_value = rollout["values"][:T, rows] if s.clip_value_loss else None
+    terms = ppo_loss(log_prob, old_log_prob, adv, entropy, out.value[:T], target, acting, everywhere, s, old_value)
+    loss = terms.total
+    if intrinsic_returns is not None:
+        intrinsic_value = learner.intrinsic_critic(out.phi[:T].detach()).squeeze(-1)
+        intrinsic_value_loss = ((intrinsic_value - intrinsic_returns[:, rows]) ** 2).mean()
+        loss = loss + s.value_coef * intrinsic_value_loss
+        log("intrinsic_value_loss", intrinsic_value_loss.detach())
+    log("policy_loss", terms.policy.detach())
+    log("value_loss", terms.value.detach())
+    log("entropy", terms.entropy.detach())
+    log("approx_kl", terms.approx_kl)
+    log("clip_fraction", terms.clip_fraction)
+
+    curious = s.use_forward or s.use_inverse or s.use_ltp
+    if curious:
+        transition = imitated & ~rollout["episode_end"][:, rows]     # every executed action, whoever chose it
+        onehot = action_features(actions, learner.action_heads, learner.continuous_actions)
+        heads = learner.curiosity
+        phi = out.phi
+        if learner.continuous_actions:
+            icm = continuous_icm_losses(phi, onehot, heads, transition, s.use_rcm)
+        else:
+            icm = icm_losses(phi, onehot, actions, heads.forward_model, heads.inverse_model, transition,
+                             attention=heads.rcm_attention if s.use_rcm else None)
+        if s.use_forward:
+            loss = loss + s.forward_coef * icm["forward"]
+            log("forward_loss", icm["forward"].detach())
+        if s.use_inverse:
+            loss = loss + s.inverse_coef * icm["inverse"]
+            log("inverse_loss", icm["inverse"].detach())
+        if s.use_ltp:
+            ltp = ltp_loss(phi, onehot, heads.ltp, heads.ltp_attention, transition)
+            loss = loss + s.ltp_coef * ltp.loss
+            log("ltp_loss", ltp.loss.detach())
+    if s.use_localization or s.use_reconstruction:
+        targets = {k: v[:, rows] for k, v in rollout["targets"].items()}
+        supervised = self_supervised_losses(out, targets, s.use_localization, s.use_reconstruction)
+        for name in ("localization", "reconstruction"):
+            if name in supervised:
+                loss = loss + s.self_supervised_coef * supervised[name]
+        for name, value in supervised.items():
+            log(f"{name}_loss" if not name.startswith("recon_") else name, value.detach())
+        if s.use_localization:
+            with torch.no_grad():
+                error = (out.pose[..., :2] - targets["pose"][..., :2]).norm(dim=-1)
+            for metres in (0.25, 0.5, 1.0):
+                log(f"localization_within_{int(metres * 100)}cm", (error < metres).float().mean())
+    if s.imitation_coef > 0.0 and "teacher_actions" in rollout:
+        imitation, agreement = imitation_loss(agent, step_out, rollout["teacher_actions"][:, rows], imitated)
+        loss = loss + s.imitation_coef * imitation
+        log("imitation_loss", imitation.detach())
+        for name, value in agreement.items():
+            log(name, value)
+    log("loss", loss.detach())
+    return loss, float(terms.approx_kl)
+
+
+def _initial_state(learner: Learner, rollout: Mapping[str, Any], rows: Tensor) -> tuple[Tensor, ...]:
+    if "seed_pose" in rollout:       # privileged seeding: rebuilt with gradient, so the seeder learns
+        return learner.seeded_state(rollout["seed_pose"][rows])
+    return tuple(x[rows] for x in rollout["initial_state"])
+
+
+def _fused_proximal(rollout: Mapping[str, Any], rows: Tensor, log_prob: Tensor, values: Tensor, s: UpdateSettings,
+                    intrinsic_advantages: Tensor | None, log) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Decoupled PPO's proximal quantities of one minibatch from its own forward pass (one epoch: the weights have
+    not stepped on these rows yet): (advantages and returns from the current critic, the proximal
+    log-probabilities, the truncated weights min(1, π_prox / π_behaviour)) — what ``_proximal`` gets from a pass of
+    its own. A minibatch holds whole robot sequences, so its returns need nothing from other rows."""
+    with torch.no_grad():
+        advantages, returns = generalized_advantages(
+            rollout["rewards"][:, rows], values, rollout["episode_end"][:, rows], rollout["truncated"][:, rows],
+            rollout["final_values"][:, rows], s.gamma, s.gae_lambda)
+        if intrinsic_advantages is not None:
+            advantages = advantages + intrinsic_advantages[:, rows]
+        proximal = log_prob.detach()
+        log_ratio = proximal - rollout["log_probs"][:, rows]
+        weights = log_ratio.clamp(max=0.0).exp()
+        log("proximal_weight", weights.mean())
+        log("proximal_kl", ((log_ratio.exp() - 1) - log_ratio).mean())
+        log("explained_variance", 1.0 - torch.var(returns - values[:-1]) / torch.var(returns).clamp(min=1e-8))
+    return advantages, returns, proximal, weights
 
 
 NONFINITE_SKIPS = ("nonfinite_loss_skipped", "nonfinite_gradient_skipped")
@@ -165,7 +313,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
         order = torch.randperm(B, generator=generator, device="cpu") if minibatches > 1 else torch.arange(B, device="cpu")
         for chunk in order.chunk(minibatches):
             started = time.perf_counter()
-            loss, kl = _minibatch_loss(learner, rollout, chunk, advantages, returns, s, log, intrinsic_returns,
+            loss, kl = minibatch_loss(learner, rollout, chunk, advantages, returns, s, log, intrinsic_returns,
                                        intrinsic_advantages)
             optimizer.zero_grad(set_to_none=True)
             if not bool(torch.isfinite(loss.detach())):
@@ -219,12 +367,6 @@ def _proximal(learner: Learner, rollout: Mapping[str, Any], stats: dict[str, lis
     return {**rollout, "log_probs": log_prob, "values": out.value.reshape(T + 1, B), "sample_weights": weights}
 
 
-def _initial_state(learner: Learner, rollout: Mapping[str, Any], rows: Tensor) -> tuple[Tensor, ...]:
-    if "seed_pose" in rollout:       # privileged seeding: rebuilt with gradient, so the seeder learns
-        return learner.seeded_state(rollout["seed_pose"][rows])
-    return tuple(x[rows] for x in rollout["initial_state"])
-
-
 @torch.no_grad()
 def _intrinsic(learner: Learner, rollout: Mapping[str, Any], s: UpdateSettings) -> tuple[Tensor, Tensor, Tensor]:
     """Curiosity as a reward (off in the paper, docs/original.md §6.3): the forward model's error on each transition
@@ -245,170 +387,3 @@ def _intrinsic(learner: Learner, rollout: Mapping[str, Any], s: UpdateSettings) 
     advantages, returns = generalized_advantages(reward, values, ended, torch.zeros_like(ended),
                                                  torch.zeros_like(reward), s.gamma, s.gae_lambda)
     return advantages, returns, reward
-
-
-def _fused_proximal(rollout: Mapping[str, Any], rows: Tensor, log_prob: Tensor, values: Tensor, s: UpdateSettings,
-                    intrinsic_advantages: Tensor | None, log) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """Decoupled PPO's proximal quantities of one minibatch from its own forward pass (one epoch: the weights have
-    not stepped on these rows yet): (advantages and returns from the current critic, the proximal
-    log-probabilities, the truncated weights min(1, π_prox / π_behaviour)) — what ``_proximal`` gets from a pass of
-    its own. A minibatch holds whole robot sequences, so its returns need nothing from other rows."""
-    with torch.no_grad():
-        advantages, returns = generalized_advantages(
-            rollout["rewards"][:, rows], values, rollout["episode_end"][:, rows], rollout["truncated"][:, rows],
-            rollout["final_values"][:, rows], s.gamma, s.gae_lambda)
-        if intrinsic_advantages is not None:
-            advantages = advantages + intrinsic_advantages[:, rows]
-        proximal = log_prob.detach()
-        log_ratio = proximal - rollout["log_probs"][:, rows]
-        weights = log_ratio.clamp(max=0.0).exp()
-        log("proximal_weight", weights.mean())
-        log("proximal_kl", ((log_ratio.exp() - 1) - log_ratio).mean())
-        log("explained_variance", 1.0 - torch.var(returns - values[:-1]) / torch.var(returns).clamp(min=1e-8))
-    return advantages, returns, proximal, weights
-
-
-def _minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, advantages: Tensor | None,
-                    returns: Tensor | None, s: UpdateSettings, log, intrinsic_returns: Tensor | None = None,
-                    intrinsic_advantages: Tensor | None = None) -> tuple[Tensor, float]:
-    """The loss of one minibatch of robot sequences. ``advantages`` None: decoupled PPO fused into this pass
-    (``_fused_proximal``)."""
-    agent = learner.agent
-    T = rollout["actions"].shape[0]
-    every_row = len(rows) == rollout["actions"].shape[1] and bool((rows == torch.arange(len(rows), device=rows.device)).all())
-    obs = rollout["obs"] if every_row else {k: v[:, rows] for k, v in rollout["obs"].items()}   # A2C: no copy
-    out = run_sequence(agent, obs, _initial_state(learner, rollout, rows), rollout["starts"][:, rows])
-    actions = rollout["actions"][:, rows]
-    acting = rollout["can_act"][:T, rows]
-    everywhere = rollout["alive"][:T, rows] if "alive" in rollout else torch.ones_like(acting)
-    if "teacher_driven" in rollout:       # rows that executed the teacher's actions: off-policy, no RL terms there
-        on_policy = ~rollout["teacher_driven"][rows].unsqueeze(0).expand_as(acting)
-        imitated, acting, everywhere = acting, acting & on_policy, on_policy
-    else:
-        imitated = acting
-    step_out = head_outputs(out, steps=T)
-    log_prob, entropy = log_prob_entropy(agent, step_out, actions)
-    if advantages is None:
-        adv, target, old_log_prob, weights = _fused_proximal(rollout, rows, log_prob, out.value.detach(), s,
-                                                             intrinsic_advantages, log)
-    else:
-        adv, target, old_log_prob = advantages[:, rows], returns[:, rows], rollout["log_probs"][:, rows]
-        weights = rollout["sample_weights"][:, rows] if "sample_weights" in rollout else None
-    if s.normalize_advantages:
-        valid = adv[acting] if acting.any() else adv.reshape(-1)
-        adv = (adv - valid.mean()) / (valid.std(unbiased=False) + 1e-8)
-    if weights is not None:               # decoupled PPO: the behaviour policy's correction
-        adv = adv * weights
-    log_ratio = log_prob - old_log_prob
-    ratio = log_ratio.exp()
-    if s.ppo:
-        surrogate = torch.minimum(ratio * adv, ratio.clamp(1 - s.clip, 1 + s.clip) * adv)
-        policy_loss = -masked_mean(surrogate, acting)
-    else:
-        policy_loss = -masked_mean(log_prob * adv, acting)
-    value = out.value[:T]
-    value_error = (value - target) ** 2
-    if s.clip_value_loss:
-        old = rollout["values"][:T, rows]
-        clipped = old + (value - old).clamp(-s.clip, s.clip)
-        value_error = torch.maximum(value_error, (clipped - target) ** 2)
-    value_loss = masked_mean(value_error, everywhere)
-    entropy_mean = masked_mean(entropy, acting)
-    loss = s.policy_coef * policy_loss + s.value_coef * value_loss - s.entropy_coef * entropy_mean
-    if intrinsic_returns is not None:
-        intrinsic_value = learner.intrinsic_critic(out.phi[:T].detach()).squeeze(-1)
-        intrinsic_value_loss = ((intrinsic_value - intrinsic_returns[:, rows]) ** 2).mean()
-        loss = loss + s.value_coef * intrinsic_value_loss
-        log("intrinsic_value_loss", intrinsic_value_loss.detach())
-    with torch.no_grad():
-        approx_kl = masked_mean((ratio - 1) - log_ratio, acting)
-        clip_fraction = masked_mean(((ratio - 1).abs() > s.clip).float(), acting)
-    log("policy_loss", policy_loss.detach())
-    log("value_loss", value_loss.detach())
-    log("entropy", entropy_mean.detach())
-    log("approx_kl", approx_kl)
-    log("clip_fraction", clip_fraction)
-
-    curious = s.use_forward or s.use_inverse or s.use_ltp
-    if curious:
-        transition = imitated & ~rollout["episode_end"][:, rows]     # every executed action, whoever chose it
-        onehot = action_features(actions, learner.action_heads, learner.continuous_actions)
-        heads = learner.curiosity
-        phi = out.phi
-        if learner.continuous_actions:
-            icm = continuous_icm_losses(phi, onehot, heads, transition, s.use_rcm)
-        else:
-            icm = icm_losses(phi, onehot, actions, heads.forward_model, heads.inverse_model, transition,
-                             attention=heads.rcm_attention if s.use_rcm else None)
-        if s.use_forward:
-            loss = loss + s.forward_coef * icm["forward"]
-            log("forward_loss", icm["forward"].detach())
-        if s.use_inverse:
-            loss = loss + s.inverse_coef * icm["inverse"]
-            log("inverse_loss", icm["inverse"].detach())
-        if s.use_ltp:
-            ltp = ltp_loss(phi, onehot, heads.ltp, heads.ltp_attention, transition)
-            loss = loss + s.ltp_coef * ltp.loss
-            log("ltp_loss", ltp.loss.detach())
-    if s.use_localization or s.use_reconstruction:
-        targets = {k: v[:, rows] for k, v in rollout["targets"].items()}
-        supervised = self_supervised_losses(out, targets, s.use_localization, s.use_reconstruction)
-        for name in ("localization", "reconstruction"):
-            if name in supervised:
-                loss = loss + s.self_supervised_coef * supervised[name]
-        for name, value in supervised.items():
-            log(f"{name}_loss" if not name.startswith("recon_") else name, value.detach())
-        if s.use_localization:
-            with torch.no_grad():
-                error = (out.pose[..., :2] - targets["pose"][..., :2]).norm(dim=-1)
-            for metres in (0.25, 0.5, 1.0):
-                log(f"localization_within_{int(metres * 100)}cm", (error < metres).float().mean())
-    if s.imitation_coef > 0.0 and "teacher_actions" in rollout:
-        imitation, agreement = imitation_loss(agent, step_out, rollout["teacher_actions"][:, rows], imitated)
-        loss = loss + s.imitation_coef * imitation
-        log("imitation_loss", imitation.detach())
-        for name, value in agreement.items():
-            log(name, value)
-    log("loss", loss.detach())
-    return loss, float(approx_kl)
-
-
-def continuous_icm_losses(phi: Tensor, actions: Tensor, heads: Any, mask: Tensor, use_rcm: bool
-                          ) -> dict[str, Tensor]:
-    """``icm_losses`` for a continuous action vector (driving's 3 normalised values): the same (RCM-weighted)
-    forward loss on [φ_t, a_t] with φ_{t+1} detached, and an inverse model that regresses a_t from (φ_t, φ_{t+1})
-    — the masked mean over transitions of the mean squared error over the action's dimensions."""
-    phi_t, phi_next = phi[:-1], phi[1:]
-    target = phi_next.detach()
-    pred = heads.forward_model(phi_t, actions)
-    if use_rcm:
-        forward = rcm_forward_loss(pred, target, heads.rcm_attention(target), mask)
-    else:
-        forward = masked_mean(((pred - target) ** 2).mean(-1), mask)
-    (guess,) = heads.inverse_model(phi_t, phi_next)
-    inverse = masked_mean(((guess - actions) ** 2).mean(-1), mask)
-    return {"forward": forward, "inverse": inverse}
-
-
-def imitation_loss(agent: Any, out: Any, teacher: Tensor, acting: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
-    """−log π(teacher's action | s) summed over the heads, averaged over the steps where the robot could act; and
-    agreement over those steps. Categorical heads (soccer's walk, turn, kick, head; driving's acceleration,
-    steering): the fraction where the policy's most likely action equals the teacher's on every head
-    (``teacher_agreement``) and on each head (``teacher_agreement_<head>``). Driving's continuous head: the mean
-    absolute difference between the policy's mean command and the teacher's (normalised units,
-    ``teacher_command_error``) — there is no most likely value to agree on."""
-    log_prob, _ = log_prob_entropy(agent, out, teacher)
-    driving = getattr(agent, "scenario", "soccer") == "driving"
-    with torch.no_grad():
-        if driving and agent.action_mode == "continuous":
-            T, B = teacher.shape[:2]
-            means = torch.stack([d.mean for d in agent.distributions(head_outputs(out, flat=True))], -1)
-            error = (means.reshape(T, B, -1) - teacher).abs().mean(-1)
-            agreement = {"teacher_command_error": masked_mean(error, acting)}
-        else:
-            heads = ("acceleration", "steering") if driving else ("walk", "turn", "kick", "head")
-            same = torch.stack([getattr(out, h).argmax(-1) for h in heads], -1) == teacher
-            agreement = {"teacher_agreement": masked_mean(same.all(-1).float(), acting)}
-            agreement.update({f"teacher_agreement_{h}": masked_mean(same[..., i].float(), acting)
-                              for i, h in enumerate(heads)})
-    return -masked_mean(log_prob, acting), agreement

@@ -3,7 +3,7 @@ sequences as the live trainer node (``learning.messages.assembly``, fed from the
 offline on them:
 
 - **behaviour cloning** of whoever chose the recorded actions (a scripted team, a robot's own stack, the scripted
-  drivers): the imitation loss −log π(recorded action | observation) (``algorithms.imitation_loss``), a warm start;
+  drivers): the imitation loss −log π(recorded action | observation) (``algo.auxiliary.imitation_loss``), a warm start;
 - **the self-supervised heads** (soccer): localization (pose) and reconstruction (ball, robots) from the ground
   truth the bag holds (``/world_state`` and the feedback's seen objects) — the paper's pretraining, from real
   recordings.
@@ -36,15 +36,15 @@ import numpy as np
 import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.learning.run import checkpoints
+from dynenv_ros.learning.algo.experience import Experience, Progress, arrays_as_tensors
+from dynenv_ros.learning.algo.loop import train
+from dynenv_ros.learning.algo.networks import Learner, make_agent
 from dynenv_ros.learning.algo.ppo import UpdateSettings, update
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.messages.assembly import ExperienceAssembler, Sequence, batch
 from dynenv_ros.learning.messages.scenarios import DRIVING_AGENT, SOCCER_AGENT, experience_scenario
-from dynenv_ros.learning.algo.networks import Learner
-from dynenv_ros.learning.algo.experience import arrays_as_tensors
+from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.run.metrics import RunLogger
-from dynenv_ros.soccer.config import SoccerConfig
 
 
 def agent_topic(agent_pattern: str) -> re.Pattern[str]:
@@ -137,6 +137,38 @@ def clone_settings(cfg: TrainConfig, with_targets: bool) -> UpdateSettings:
                           self_supervised_coef=cfg.self_supervised_coef, imitation_coef=1.0)
 
 
+class BagSource:
+    """The bags' sequences (of ``steps`` periods) as the training loop's experience (``algo.loop``): ``epochs``
+    passes, each in a fresh random order (``generator``, drawn as a pass starts), ``batch_sequences`` per update."""
+
+    def __init__(self, sequences: list[Sequence], epochs: int, batch_sequences: int, generator: torch.Generator,
+                 agent: DynEnvAgent, steps: int) -> None:
+        self.sequences, self.epochs, self.batch_sequences, self.steps = sequences, epochs, batch_sequences, steps
+        self.generator, self.agent = generator, agent
+        self.epoch = -1                 # the pass the last batch came from
+        self.epoch_done = False         # the last batch ended its pass
+        self._order: list[int] = []
+        self._next = 0
+
+    def next(self, progress: Progress, deadline: float) -> Experience | None:
+        if self._next >= len(self._order):
+            if self.epoch + 1 >= self.epochs:
+                return None
+            self.epoch += 1
+            self._order = torch.randperm(len(self.sequences), generator=self.generator).tolist()
+            self._next = 0
+        chosen = [self.sequences[i] for i in self._order[self._next:self._next + self.batch_sequences]]
+        self._next += self.batch_sequences
+        self.epoch_done = self._next >= len(self._order)
+        return Experience(_tensors(chosen, self.agent), self.steps * len(chosen))
+
+    def learned(self, progress: Progress) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
 def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Path, epochs: int = 10,
                     batch_sequences: int = 16, with_targets: bool = True, learns=None,
                     log: bool = True) -> dict[str, Any]:
@@ -151,6 +183,9 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
                          f"scenario is {cfg.scenario!r}: use {hint}")
     if scenario == "driving" and learns is not None:
         raise ValueError("--team applies to soccer bags; every car of a driving bag is cloned")
+    if cfg.localization != "none":
+        raise ValueError("localization: 'estimate' trains on the simulator's pose estimates; a recording carries "
+                         "none yet: use localization: none here")
     players, frames = bag_layout(paths, scenario)
     if cfg.head_mode != "discrete":
         raise ValueError("head_mode: learning from bags supports the discrete head only")
@@ -168,38 +203,40 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
     seeds = np.random.SeedSequence(cfg.seed).spawn(2)
     generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
     torch.manual_seed(int(seeds[1].generate_state(1)[0]))          # parameter init only
-    if driving:
-        agent = DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
-    else:
-        motion = SoccerConfig.from_mapping({"players_per_team": players}).motion
-        agent = DynEnvAgent(cfg.feature_size, "discrete", motion.head_units, motion.head_max_delta)
+    agent = make_agent(cfg)
     learner = Learner(agent, cfg.ltp_horizon)
     optimizer = torch.optim.Adam(learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
     settings = clone_settings(cfg, with_targets)
     (run / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
     logger = RunLogger(run) if log else None
     history: list[dict[str, float]] = []
-    updates = env_steps = 0
-    for epoch in range(epochs):
-        order = torch.randperm(len(sequences), generator=generator).tolist()
-        epoch_stats: dict[str, list[float]] = {}
-        for start in range(0, len(order), batch_sequences):
-            chosen = [sequences[i] for i in order[start:start + batch_sequences]]
-            stats = update(learner, optimizer, _tensors(chosen, agent), settings, generator)
-            updates += 1
-            env_steps += cfg.rollout_length * len(chosen)
-            for key, value in stats.items():
-                epoch_stats.setdefault(key, []).append(value)
-        means = {k: float(np.mean(v)) for k, v in epoch_stats.items()}
-        history.append(means)
-        if logger is not None:
-            logger.log(env_steps, updates, time.perf_counter() - started,
-                       {f"bc/{k}": v for k, v in means.items()} | {"bc/epoch": float(epoch)})
+    epoch_stats: dict[str, list[float]] = {}
+    source = BagSource(sequences, epochs, batch_sequences, generator, agent, cfg.rollout_length)
+    progress = Progress()
+
+    def learn(experience: Experience) -> dict[str, float]:
+        return update(learner, optimizer, experience.batch, settings, generator)
+
+    def record(experience: Experience, stats: dict[str, float], waited: float, learnt: float) -> None:
+        """Each pass's means, logged as it ends."""
+        for key, value in stats.items():
+            epoch_stats.setdefault(key, []).append(value)
+        if source.epoch_done:
+            means = {k: float(np.mean(v)) for k, v in epoch_stats.items()}
+            epoch_stats.clear()
+            history.append(means)
+            if logger is not None:
+                logger.log(progress.env_steps, progress.updates, time.perf_counter() - started,
+                           {f"bc/{k}": v for k, v in means.items()} | {"bc/epoch": float(source.epoch)})
+
+    train(source, learn, progress, record)
     learner.eval()
-    meta = {"version": checkpoints.META_VERSION, "source": "bags", "bags": [str(p) for p in paths], "updates": updates,
-            "env_steps": env_steps, "episodes": 0, "wall_seconds": time.perf_counter() - started,
-            "config": cfg.to_dict(), "code_revision": checkpoints.code_revision()}
-    checkpoints.save_training_checkpoint(run, env_steps, learner, optimizer, meta, {}, keep=cfg.keep_checkpoints)
+    meta = {"version": checkpoints.META_VERSION, "source": "bags", "bags": [str(p) for p in paths],
+            "updates": progress.updates, "env_steps": progress.env_steps, "episodes": 0,
+            "wall_seconds": time.perf_counter() - started, "config": cfg.to_dict(),
+            "code_revision": checkpoints.code_revision()}
+    checkpoints.save_training_checkpoint(run, progress.env_steps, learner, optimizer, meta, {},
+                                         keep=cfg.keep_checkpoints)
     from dynenv_ros.agent.checkpoint import save_policy
     save_policy(agent, str(run / "policy.safetensors"), {k: v for k, v in meta.items() if k != "config"})
     if logger is not None:
@@ -208,7 +245,7 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
             "reconstruction_loss", "localization_within_50cm")
     summary = {"scenario": scenario, "sequences": len(sequences), "robot_periods": len(sequences) * cfg.rollout_length,
                "n_cars" if driving else "players_per_team": players, "frames_per_period": frames, "epochs": epochs,
-               "updates": updates,
+               "updates": progress.updates,
                "counts": dict(counts), "first_epoch": {k: history[0][k] for k in keys if k in history[0]},
                "last_epoch": {k: history[-1][k] for k in keys if k in history[-1]},
                "wall_seconds": time.perf_counter() - started}

@@ -29,15 +29,15 @@ import torch
 
 from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.learning.run import checkpoints
-from dynenv_ros.learning.algo.ppo import NONFINITE_SKIPS, update, update_settings
+from dynenv_ros.learning.algo.experience import Experience, Progress, arrays_as_tensors
+from dynenv_ros.learning.algo.loop import learn_from, train
+from dynenv_ros.learning.algo.networks import Learner, make_agent
 from dynenv_ros.learning.algo.policy import log_prob_entropy, run_sequence
+from dynenv_ros.learning.algo.ppo import NONFINITE_SKIPS, update, update_settings
 from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.messages.assembly import Sequence, batch
-from dynenv_ros.learning.algo.networks import Learner
-from dynenv_ros.learning.algo.experience import arrays_as_tensors
+from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.run.metrics import RunLogger
-from dynenv_ros.learning.algo.networks import make_agent
 
 MAX_QUEUE = 4096          # sequences waiting for the learner; beyond, the oldest are dropped (counted)
 
@@ -84,7 +84,7 @@ class SequenceLearner:
         agent = make_agent(cfg)   # the in-process trainer's agent for cfg (driving: its action mode's heads)
         self.learner = Learner(agent, cfg.ltp_horizon).eval()
         self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
-        self.env_steps = self.updates = self.episodes = 0
+        self.progress = Progress()
         self.wall_before = 0.0
         self._started = time.perf_counter()
         if initial_policy and not resume:      # a warm start: a policy file (e.g. dynenv-train --from-bag's)
@@ -97,8 +97,8 @@ class SequenceLearner:
                 meta, _ = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
             except ValueError as error:
                 raise ConfigError("resume", str(error)) from None
-            self.env_steps, self.updates = int(meta["env_steps"]), int(meta["updates"])
-            self.episodes, self.wall_before = int(meta.get("episodes", 0)), float(meta.get("wall_seconds", 0.0))
+            self.progress = Progress(int(meta["env_steps"]), int(meta["updates"]), int(meta.get("episodes", 0)))
+            self.wall_before = float(meta.get("wall_seconds", 0.0))
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
         self.logger = RunLogger(self.run_dir) if log else None
         self.states: dict[tuple[str, str], tuple[int, tuple[torch.Tensor, ...]]] = {}   # stream -> (index, state)
@@ -107,6 +107,7 @@ class SequenceLearner:
         self.counts: Counter[str] = Counter()
         self.published: dict[int, float] = {self.version: time.time()}   # version -> wall time handed out
         self.last_stats: dict[str, float] = {}
+        self._learning: tuple[list[Sequence], dict[str, Any]] | None = None      # what the update in hand is on
 
     def _load_initial(self, path: Path) -> None:
         from dynenv_ros.agent.checkpoint import agent_config, load_policy
@@ -118,7 +119,7 @@ class SequenceLearner:
 
     @property
     def version(self) -> int:
-        return self.updates + 1
+        return self.progress.updates + 1
 
     @property
     def agent(self) -> DynEnvAgent:
@@ -140,9 +141,15 @@ class SequenceLearner:
         return True
 
     def learn(self, sequences: list[Sequence]) -> dict[str, float]:
-        """One PPO update on these sequences. A stream may bring several, consecutive ones (a learner that fell
-        behind takes what waits rather than letting it go stale): the first starts from the stream's stored state,
-        each next one from the state the current network reaches at the end of the one before (no gradient)."""
+        """One PPO update on these sequences (one step of the training loop, ``algo.loop``). A stream may bring
+        several, consecutive ones (a learner that fell behind takes what waits rather than letting it go stale): the
+        first starts from the stream's stored state, each next one from the state the current network reaches at
+        the end of the one before (no gradient)."""
+        return learn_from(self.experience(sequences), self.step, self.progress, self)
+
+    def experience(self, sequences: list[Sequence]) -> Experience:
+        """The update's experience of these sequences: their batch with each row's start state, the episodes their
+        ends finish (counted from here on), and what the update logs of them (lag, behaviour alignment)."""
         now = time.time()
         sequences = sorted(sequences, key=lambda q: (q.stream, q.index))
         arrays = batch(sequences)
@@ -169,28 +176,38 @@ class SequenceLearner:
         tensors = arrays_as_tensors({k: v for k, v in arrays.items() if k != "versions"}, tuple(initial))
         self._chain_states(tensors, follows)
         alignment = self._alignment(tensors, known_state)
+        versions = arrays["versions"]
+        lag = self.version - versions
+        scalars = {"lag_versions_mean": float(lag.mean()), "lag_versions_max": float(lag.max()),
+                   "lag_seconds_mean": float(np.mean([now - self.published.get(int(v), now)
+                                                      for v in versions.ravel()]))}
+        if alignment is not None:
+            scalars["behaviour_log_prob_error"] = alignment
+        finished = self._account(sequences, arrays["rewards"])
+        self._learning = (sequences, tensors)
+        T = arrays["actions"].shape[0]
+        return Experience(tensors, T * B, finished, scalars)
+
+    def step(self, experience: Experience) -> dict[str, float]:
+        """The algorithm's step: the update, its skipped steps counted, with what it logs of the experience."""
         self.learner.train()
-        stats = update(self.learner, self.optimizer, tensors, self.settings, self.generator)
+        stats = update(self.learner, self.optimizer, experience.batch, self.settings, self.generator)
         self.learner.eval()
         for name in NONFINITE_SKIPS:            # skipped steps (logged at ERROR by update): the node's diagnostics
             self.counts[name] += int(stats.get(name, 0))
-        self._store_states(sequences, tensors)
-        versions = arrays["versions"]
-        lag = self.version - versions
-        stats["lag_versions_mean"] = float(lag.mean())
-        stats["lag_versions_max"] = float(lag.max())
-        stats["lag_seconds_mean"] = float(np.mean([now - self.published.get(int(v), now) for v in versions.ravel()]))
-        if alignment is not None:
-            stats["behaviour_log_prob_error"] = alignment
-        self._account(sequences, arrays["rewards"])
-        T = arrays["actions"].shape[0]
-        self.env_steps += T * B
-        self.updates += 1
+        stats.update(experience.scalars)
+        self.last_stats = stats
+        return stats
+
+    def learned(self, progress: Progress) -> None:
+        """After the update: each stream's next start state from the new weights, and the new version's time."""
+        if self._learning is not None:
+            sequences, tensors = self._learning
+            self._store_states(sequences, tensors)
+            self._learning = None
         self.published[self.version] = time.time()
         for old in [v for v in self.published if v < self.version - 4 * (self.max_policy_lag + 1)]:
             del self.published[old]
-        self.last_stats = stats
-        return stats
 
     @torch.no_grad()
     def _alignment(self, tensors: dict[str, Any], known_state: np.ndarray) -> float | None:
@@ -237,9 +254,10 @@ class SequenceLearner:
         for i, b in enumerate(rows):
             self.states[sequences[b].stream] = (sequences[b].index, tuple(s[i].clone() for s in ends))
 
-    def _account(self, sequences: list[Sequence], rewards: np.ndarray) -> None:
-        """Episode returns of the reward learnt; an episode counts once its end is learnt from, under the
-        version that chose its last action."""
+    def _account(self, sequences: list[Sequence], rewards: np.ndarray) -> list[dict[str, float]]:
+        """Episode returns of the reward learnt: the episodes these sequences end (each under the version that
+        chose its last action), added to ``finished``; an episode counts once its end is learnt from."""
+        finished: list[dict[str, float]] = []
         for b, sequence in enumerate(sequences):
             total = self.returns.get(sequence.stream, 0.0)
             if sequence.starts[0]:      # an episode's start, or a cut (its beginning unknown: not counted)
@@ -250,19 +268,20 @@ class SequenceLearner:
                 total += float(rewards[t, b])
                 if sequence.episode_end[t]:
                     if total == total:                            # whole episodes only
-                        self.finished.append({"version": float(sequence.versions[t]), "return": total})
-                        self.episodes += 1
+                        finished.append({"version": float(sequence.versions[t]), "return": total})
                     total = 0.0
             self.returns[sequence.stream] = total
+        self.finished.extend(finished)
+        return finished
 
     # -- weights, logs, checkpoints ---------------------------------------------------------------------------------
     def meta(self) -> dict[str, Any]:
         return {"version": checkpoints.META_VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
-                "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
-                "episodes": self.episodes, "wall_seconds": self.wall_before + time.perf_counter() - self._started,
+                "algorithm": self.cfg.algorithm, "env_steps": self.progress.env_steps,
+                "updates": self.progress.updates, "episodes": self.progress.episodes, "wall_seconds": self.wall_before + time.perf_counter() - self._started,
                 "source": "messages", "code_revision": checkpoints.code_revision(),
                 # what dynenv-train --resume restores (its worlds' generator): the same run directory serves both
-                "numpy_rng": np.random.default_rng(self.cfg.seed + self.updates).bit_generator.state}
+                "numpy_rng": np.random.default_rng(self.cfg.seed + self.progress.updates).bit_generator.state}
 
     def weights(self) -> bytes:
         """The current policy as a policy file's bytes (what the trainer node announces and serves); its meta's updates give
@@ -275,10 +294,10 @@ class SequenceLearner:
 
     def log(self, scalars: dict[str, float]) -> None:
         if self.logger is not None:
-            self.logger.log(self.env_steps, self.updates, self.meta()["wall_seconds"], scalars)
+            self.logger.log(self.progress.env_steps, self.progress.updates, self.meta()["wall_seconds"], scalars)
 
     def save_checkpoint(self) -> Path:
-        return checkpoints.save_training_checkpoint(self.run_dir, self.env_steps, self.learner, self.optimizer,
+        return checkpoints.save_training_checkpoint(self.run_dir, self.progress.env_steps, self.learner, self.optimizer,
                                                     self.meta(), {}, keep=self.cfg.keep_checkpoints)
 
     def close(self) -> None:
@@ -288,8 +307,8 @@ class SequenceLearner:
 
 
 class BackgroundLearner:
-    """``SequenceLearner`` in a thread of its own: ``put`` (from ROS callbacks) never waits for a gradient step.
-    Each batch takes the oldest waiting sequence of up to ``batch_sequences`` streams (a stream's next sequence
+    """``SequenceLearner`` in a thread of its own, which runs the training loop (``algo.loop``) with this queue as its
+    experience source: ``put`` (from ROS callbacks) never waits for a gradient step. Each batch takes the oldest waiting sequence of up to ``batch_sequences`` streams (a stream's next sequence
     waits for the next batch: it needs the state this one ends in). ``on_update(learner, stats)`` runs in the
     thread after each update (the node publishes the weights from it); checkpoints every
     ``cfg.checkpoint_every_minutes``."""
@@ -346,25 +365,40 @@ class BackgroundLearner:
         self.queue = deque(q for q in self.queue if id(q) not in taken)
         return chosen
 
-    def _run(self) -> None:
+    def next(self, progress: Progress, deadline: float) -> Experience | None:
+        """The learner's experience of the next batch of waiting sequences (the loop's source); None once stopped."""
         while not self._stop.is_set():
-            try:
-                with self.wake:
-                    sequences = self._next_batch()
-                    if sequences is None:
-                        self.wake.wait(timeout=0.2)
-                        continue
-                stats = self.learner.learn(sequences)
-                if self.on_update is not None:
-                    self.on_update(self.learner, stats)
-                every = self.learner.cfg.checkpoint_every_minutes * 60.0
-                if time.monotonic() - self._last_checkpoint > every:
-                    self.learner.save_checkpoint()
-                    self._last_checkpoint = time.monotonic()
-            except Exception as error:         # a learner that fails says so and stops learning; nothing crashes
-                self.error = f"{type(error).__name__}: {error}"
-                self.counts["failed_updates"] += 1
-                return
+            with self.wake:
+                sequences = self._next_batch()
+                if sequences is None:
+                    self.wake.wait(timeout=0.2)
+                    continue
+            return self.learner.experience(sequences)
+        return None
+
+    def learned(self, progress: Progress) -> None:
+        self.learner.learned(progress)
+
+    def close(self) -> None:
+        self.stop()
+
+    def _record(self, experience: Experience, stats: dict[str, float], waited: float, learnt: float) -> None:
+        """After each update: ``on_update``, and a checkpoint every ``checkpoint_every_minutes``."""
+        if self.on_update is not None:
+            self.on_update(self.learner, stats)
+        every = self.learner.cfg.checkpoint_every_minutes * 60.0
+        if time.monotonic() - self._last_checkpoint > every:
+            self.learner.save_checkpoint()
+            self._last_checkpoint = time.monotonic()
+
+    def _run(self) -> None:
+        """The training loop over the queue, until ``stop``."""
+        try:
+            train(self, self.learner.step, self.learner.progress, self._record,
+                  until=lambda progress: not self._stop.is_set())
+        except Exception as error:         # a learner that fails says so and stops learning; nothing crashes
+            self.error = f"{type(error).__name__}: {error}"
+            self.counts["failed_updates"] += 1
 
     def stop(self, timeout: float = 30.0) -> None:
         self._stop.set()

@@ -27,7 +27,7 @@ both from ``SeedSequence(seed)`` (child 0 train, 1 test; grandchild b), so the f
 - ``meta`` () str: JSON with the format, seeds, counts and settings.
 
 **train** trains the agent's localization stream, pose head, object stream and reconstruction head on
-localization + reconstruction loss (``algorithms.self_supervised_losses``, weights 1; no RL), Adam lr 1e-3 with
+localization + reconstruction loss (``algo.auxiliary.self_supervised_losses``, weights 1; no RL), Adam lr 1e-3 with
 cosine annealing to 1e-4 over the epochs, minibatches of whole robot-sequences (default 16 = DynEnv's 4 sequences ×
 4 robots), each robot-sequence starting from the zero recurrent state. A validation split of whole sequences is
 held out of train.npz (``--validation-fraction``, default 1/8; 0 validates on the test set, as DynEnv did — then

@@ -7,6 +7,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import torch
 
+from dynenv_ros.learning.algo.auxiliary import self_supervised_losses
+from dynenv_ros.learning.algo.policy import run_sequence
 from dynenv_ros.learning.pretrain.data import OBS_KEYS, Split
 
 UNIT_METRES = 5.2                    # DynEnv's normalised unit (520 px at 1 px = 1 cm)
@@ -69,16 +71,12 @@ def initial_state(agent: Any, pose0: torch.Tensor, seeder: PoseSeeder | None,
 
 def forward(agent: Any, obs: Mapping[str, torch.Tensor], pose0: torch.Tensor, seeder: PoseSeeder | None,
             generator: torch.Generator | None) -> Any:
-    from dynenv_ros.learning.algo.policy import run_sequence
-
     T, B = obs["game"].shape[:2]
     state = initial_state(agent, pose0, seeder, generator)
     return run_sequence(agent, obs, state, torch.zeros(T, B, dtype=torch.bool))
 
 
 def losses(out: Any, targets: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    from dynenv_ros.learning.algo.ppo import self_supervised_losses
-
     parts = self_supervised_losses(out, targets, use_localization=True, use_reconstruction=True)
     parts["loss"] = parts["localization"] + parts["reconstruction"]
     return parts
