@@ -17,7 +17,7 @@ from typing import Mapping
 import numpy as np
 import torch
 
-from dynenv_ros.envs.vector import SharedArrays, close_blocks
+from dynenv_ros.core.shared_arrays import SharedArrays, close_blocks
 from dynenv_ros.learning.algo.experience import STEP_ARRAYS, Rollout
 
 Spec = dict[str, tuple[tuple[int, ...], str]]

@@ -19,7 +19,7 @@ from multiprocessing import shared_memory
 import numpy as np
 import torch
 
-from dynenv_ros.envs.vector import SharedArrays, close_blocks
+from dynenv_ros.core.shared_arrays import SharedArrays, close_blocks
 
 _SEQUENCE, _VERSION = 0, 1
 
