@@ -20,7 +20,7 @@ import torch
 
 from dynenv_ros.learning.algo.networks import make_agent
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.distributed.rollout_transfer import (AttachedSlots, RolloutSlots, flatten, join, spec_of,
                                                               unflatten)
 from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, shard_sizes
@@ -71,8 +71,8 @@ def test_shards_split_the_worlds_evenly_larger_first():
 
 
 # -- what travels ----------------------------------------------------------------------------------------------------
-def _weights_state(learner: torch.nn.Module) -> dict[str, torch.Tensor]:
-    return {k: v.clone() for k, v in learner.state_dict().items()}
+def _weights_state(networks: torch.nn.Module) -> dict[str, torch.Tensor]:
+    return {k: v.clone() for k, v in networks.state_dict().items()}
 
 
 def test_a_rollout_survives_flattening_joining_and_a_slot_of_shared_memory():
@@ -109,9 +109,9 @@ def test_a_rollout_survives_flattening_joining_and_a_slot_of_shared_memory():
 def test_weights_reach_a_reader_whole_and_only_when_newer():
     cfg = small()
     torch.manual_seed(1)
-    source = Learner(make_agent(cfg), cfg.ltp_horizon)
+    source = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
     torch.manual_seed(2)
-    target = Learner(make_agent(cfg), cfg.ltp_horizon)
+    target = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
     shared = SharedWeights(source)
     reader = AttachedWeights(shared.names(), target)
     try:
@@ -152,10 +152,10 @@ def test_a_worker_process_delivers_what_the_same_worker_makes_in_process():
     bit-identical, so nothing is lost or reordered on the way."""
     cfg = small(runner="async", workers=1, use_localization=True)
     torch.manual_seed(0)
-    learner = Learner(make_agent(cfg), cfg.ltp_horizon)
-    pool = ProcessPool(cfg, learner, workers=1, first_update=0, log=lambda line: None)
+    networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
+    pool = ProcessPool(cfg, networks, workers=1, first_update=0, log=lambda line: None)
     here = _worker(cfg)
-    unpack(pack(learner)[0], here.learner)
+    unpack(pack(networks)[0], here.networks)
     here.adopt(0)
     try:
         for _ in range(3):
@@ -175,9 +175,9 @@ def test_a_worker_process_delivers_what_the_same_worker_makes_in_process():
 
 def test_a_killed_worker_is_counted_and_replaced_then_the_run_stops_cleanly_when_none_is_left(tmp_path):
     cfg = small(runner="async", workers=1, worker_restarts=1)
-    learner = Learner(make_agent(cfg), cfg.ltp_horizon)
+    networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
     lines: list[str] = []
-    pool = ProcessPool(cfg, learner, workers=1, first_update=0, log=lines.append)
+    pool = ProcessPool(cfg, networks, workers=1, first_update=0, log=lines.append)
     try:
         first = pool.get(timeout=120)
         assert first is not None
@@ -204,8 +204,8 @@ def test_a_killed_worker_is_counted_and_replaced_then_the_run_stops_cleanly_when
 def test_a_worker_that_fails_stops_the_run_with_its_reason(tmp_path):
     cfg = small(runner="async", workers=1)
     # the learner's networks are narrower than the ones the worker builds from the config: its weights do not fit
-    learner = Learner(make_agent(small(feature_size=8)), cfg.ltp_horizon)
-    pool = ProcessPool(cfg, learner, workers=1, first_update=0, log=lambda line: None)
+    networks = TrainingNetworks(make_agent(small(feature_size=8)), cfg.ltp_horizon)
+    pool = ProcessPool(cfg, networks, workers=1, first_update=0, log=lambda line: None)
     try:
         with pytest.raises(WorkerPoolError, match="rollout worker 0 failed: ValueError: shared weights hold"):
             pool.get(timeout=120)
@@ -302,8 +302,8 @@ def _walks_forward(policy: Path, seed: int) -> tuple[float, np.ndarray]:
     from dynenv_ros.learning.sampling.worlds import make_worlds
     cfg = TrainConfig(**TINY_TASK)
     agent, _ = checkpoints.load_policy(str(policy))
-    learner = Learner(agent, cfg.ltp_horizon)
-    worlds = make_worlds(cfg, learner, cfg.num_envs, "inprocess", torch.Generator().manual_seed(seed),
+    networks = TrainingNetworks(agent, cfg.ltp_horizon)
+    worlds = make_worlds(cfg, networks, cfg.num_envs, "inprocess", torch.Generator().manual_seed(seed),
                          np.random.default_rng(seed), seed=seed)
     try:
         rollouts = [worlds.collector.collect(10) for _ in range(4)]
@@ -317,8 +317,8 @@ def _untrained_forward_share(seed: int) -> tuple[float, int]:
     from dynenv_ros.learning.sampling.worlds import make_worlds
     cfg = TrainConfig(**TINY_TASK)
     torch.manual_seed(seed)
-    learner = Learner(make_agent(cfg), cfg.ltp_horizon)
-    worlds = make_worlds(cfg, learner, cfg.num_envs, "inprocess", torch.Generator().manual_seed(seed),
+    networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
+    worlds = make_worlds(cfg, networks, cfg.num_envs, "inprocess", torch.Generator().manual_seed(seed),
                          np.random.default_rng(seed), seed=seed)
     try:
         actions = np.concatenate([worlds.collector.collect(10).actions[..., 0].ravel() for _ in range(4)])

@@ -33,9 +33,9 @@ def test_the_window_is_checked_with_the_config():
     with pytest.raises(ConfigError, match="best_policy_window: must be in 1..100000, got 0"):
         TrainConfig(best_policy_window=0)
     assert TrainConfig().best_policy_window is None          # off by default: only the last policy
-    from dynenv_ros.learning.messages.message_trainer import SequenceLearner
+    from dynenv_ros.learning.messages.message_trainer import MessageTrainer
     with pytest.raises(ConfigError, match="best_policy_window: .*the trainer node and --from-bag do not"):
-        SequenceLearner(TrainConfig(algorithm="ppo", best_policy_window=10), "unused-run-dir")
+        MessageTrainer(TrainConfig(algorithm="ppo", best_policy_window=10), "unused-run-dir")
 
 
 def test_a_run_keeps_the_policy_where_training_best_finds_the_peak_and_a_resume_goes_on(tmp_path):

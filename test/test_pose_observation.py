@@ -274,9 +274,9 @@ def test_the_setting_reads_from_an_override_and_reaches_the_agent_and_the_worlds
 
 
 def test_ros_experience_refuses_the_estimate_with_the_reason(tmp_path):
-    from dynenv_ros.learning.messages.message_trainer import SequenceLearner
+    from dynenv_ros.learning.messages.message_trainer import MessageTrainer
     with pytest.raises(ConfigError, match="carries none yet"):
-        SequenceLearner(TrainConfig(localization="estimate", algorithm="ppo", players_per_team=1), tmp_path / "run")
+        MessageTrainer(TrainConfig(localization="estimate", algorithm="ppo", players_per_team=1), tmp_path / "run")
 
 
 def test_learning_from_bags_refuses_the_estimate_with_the_reason(tmp_path):

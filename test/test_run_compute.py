@@ -79,18 +79,18 @@ def test_init_policy_starts_every_network_from_the_file(tmp_path):
     cfg = TrainConfig(**{**SMALL, "seed": 1})
     source = Trainer(cfg, tmp_path / "a", progress=False)
     with torch.no_grad():
-        for p in source.learner.agent.parameters():
+        for p in source.networks.agent.parameters():
             p.add_(0.5)                             # weights no fresh seed-0 run starts with
     path = tmp_path / "start.safetensors"
-    save_policy(source.learner.agent, str(path))
+    save_policy(source.networks.agent, str(path))
     source.close()
 
     started = Trainer(TrainConfig(**{**SMALL, "init_policy": str(path)}), tmp_path / "b", progress=False)
     fresh = Trainer(TrainConfig(**SMALL), tmp_path / "c", progress=False)
-    want = source.learner.agent.state_dict()
-    for key, value in started.learner.agent.state_dict().items():
+    want = source.networks.agent.state_dict()
+    for key, value in started.networks.agent.state_dict().items():
         assert torch.equal(value, want[key]), key
-    assert any(not torch.equal(v, want[k]) for k, v in fresh.learner.agent.state_dict().items())
+    assert any(not torch.equal(v, want[k]) for k, v in fresh.networks.agent.state_dict().items())
     started.cfg = TrainConfig(**{**SMALL, "init_policy": str(path), "total_env_steps": 8})
     summary = started.run()
     assert summary["init_policy_sha256"] == sha256(path)
@@ -100,7 +100,7 @@ def test_init_policy_starts_every_network_from_the_file(tmp_path):
 def test_an_init_policy_that_does_not_fit_is_refused_naming_the_key(tmp_path):
     other = Trainer(TrainConfig(**{**SMALL, "feature_size": 8}), tmp_path / "a", progress=False)
     path = tmp_path / "narrow.safetensors"
-    save_policy(other.learner.agent, str(path))
+    save_policy(other.networks.agent, str(path))
     other.close()
     with pytest.raises(ValueError, match="does not fit the model: key"):
         Trainer(TrainConfig(**{**SMALL, "init_policy": str(path)}), tmp_path / "b", progress=False)

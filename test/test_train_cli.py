@@ -83,7 +83,7 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
     try:
         latest = checkpoints.resolve_checkpoint(run_dir)
         model_state, _ = checkpoints.read_safetensors((latest / "model.safetensors").read_bytes())
-        for name, value in trainer.learner.state_dict().items():
+        for name, value in trainer.networks.state_dict().items():
             assert torch.equal(value, model_state[name]), name
         assert trainer.progress.env_steps == saved_steps and trainer.progress.env_steps % 4 == 0 and trainer.progress.env_steps > 0
         assert trainer.progress.updates == trainer.progress.env_steps // 4

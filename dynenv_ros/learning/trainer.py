@@ -31,7 +31,7 @@ import torch
 from dynenv_ros.learning.algo import compiled
 from dynenv_ros.learning.algo.experience import Experience, Progress
 from dynenv_ros.learning.algo.loop import train
-from dynenv_ros.learning.algo.networks import Learner, make_agent
+from dynenv_ros.learning.algo.networks import TrainingNetworks, make_agent
 from dynenv_ros.learning.algo.ppo import update, update_settings
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.distributed.pool_source import PoolSource
@@ -63,9 +63,9 @@ class Trainer:
         self.env_seed = int(seeds[2].generate_state(1)[0])
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only; no global RNG use after this
         agent = make_agent(cfg)
-        self.learner = Learner(agent, cfg.ltp_horizon).to(self.device)
+        self.networks = TrainingNetworks(agent, cfg.ltp_horizon).to(self.device)
         # fused: one kernel over all 200-odd parameter tensors (CPU and CUDA) — 8x cheaper than the per-tensor loop
-        self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps,
+        self.optimizer = torch.optim.Adam(self.networks.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps,
                                           fused=self.device.type in ("cpu", "cuda"))
         self.progress = Progress()
         self.wall_before = 0.0
@@ -88,9 +88,9 @@ class Trainer:
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
         self.source: InProcessSource | PoolSource
         if cfg.runner == "async":
-            self.source = PoolSource(cfg, self.learner, self.progress.updates, self.device, self._log_line)
+            self.source = PoolSource(cfg, self.networks, self.progress.updates, self.device, self._log_line)
         else:       # the worlds restart with fresh episodes seeded from (seed, update)
-            self.source = InProcessSource(cfg, self.learner, self.generator, self.rng,
+            self.source = InProcessSource(cfg, self.networks, self.generator, self.rng,
                                           self.env_seed + self.progress.updates, self.device)
         self.layout_shapes = self.source.layout_shapes    # async: known once a worker said hello
         self.logger = RunLogger(self.run_dir)
@@ -110,12 +110,12 @@ class Trainer:
 
     def save_checkpoint(self) -> Path:
         extra = {"torch_generator": self.generator.get_state()}
-        return checkpoints.save_training_checkpoint(self.run_dir, self.progress.env_steps, self.learner,
+        return checkpoints.save_training_checkpoint(self.run_dir, self.progress.env_steps, self.networks,
                                                     self.optimizer, self._meta(), extra,
                                                     keep=self.cfg.keep_checkpoints)
 
     def _resume(self) -> None:
-        meta, extra = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
+        meta, extra = checkpoints.load_training_checkpoint(self.run_dir, self.networks, self.optimizer)
         self.progress = Progress(int(meta["env_steps"]), int(meta["updates"]), int(meta.get("episodes", 0)))
         self.wall_before = float(meta.get("wall_seconds", 0.0))
         self.rng.bit_generator.state = meta["numpy_rng"]
@@ -126,13 +126,13 @@ class Trainer:
     def _load_encoder(self, path: str) -> None:
         """The localization and object streams (and reconstruction head) of a pretrained policy file."""
         pretrained, _ = checkpoints.load_policy(path)
-        if getattr(pretrained, "uses_pose", False) != self.learner.agent.uses_pose:
+        if getattr(pretrained, "uses_pose", False) != self.networks.agent.uses_pose:
             raise ValueError(f"pretrained encoder {path} {'takes' if pretrained.uses_pose else 'does not take'} the "
                              f"pose estimate and this run's agent (localization: {self.cfg.localization}) "
-                             f"{'does' if self.learner.agent.uses_pose else 'does not'}: the streams' inputs differ")
+                             f"{'does' if self.networks.agent.uses_pose else 'does not'}: the streams' inputs differ")
         wanted = ("localization.", "pose_head.", "objects.", "reconstruction.")
         state = {k: v for k, v in pretrained.state_dict().items() if k.startswith(wanted)}
-        missing = self.learner.agent.load_state_dict(state, strict=False)
+        missing = self.networks.agent.load_state_dict(state, strict=False)
         if missing.unexpected_keys:
             raise ValueError(f"pretrained encoder {path} has unexpected keys, e.g. {missing.unexpected_keys[0]}")
 
@@ -140,8 +140,8 @@ class Trainer:
         """Every network from a policy file (``init_policy``); it must fit this run's agent exactly."""
         from dynenv_ros.agent.checkpoint import check_state_dict_fits
         policy, _ = checkpoints.load_policy(path)
-        check_state_dict_fits(self.learner.agent, policy.state_dict(), f"init_policy {path}")
-        self.learner.agent.load_state_dict(policy.state_dict())
+        check_state_dict_fits(self.networks.agent, policy.state_dict(), f"init_policy {path}")
+        self.networks.agent.load_state_dict(policy.state_dict())
 
     # -- the loop ---------------------------------------------------------------------------------------------
     def _elapsed(self) -> float:
@@ -203,9 +203,9 @@ class Trainer:
 
     def learn(self, experience: Experience) -> dict[str, float]:
         """The algorithm's step: the update, with this run's imitation weight (``teacher``) at this step count."""
-        self.learner.train()
+        self.networks.train()
         self.settings.imitation_coef = self.cfg.imitation_weight(self.progress.env_steps)
-        stats = update(self.learner, self.optimizer, experience.batch, self.settings, self.generator)
+        stats = update(self.networks, self.optimizer, experience.batch, self.settings, self.generator)
         if self.cfg.teacher is not None:
             stats["imitation_coef"] = self.settings.imitation_coef
         return stats
@@ -257,7 +257,7 @@ class Trainer:
             # the value as metrics.csv holds it, so the peak is where training-best finds it
             average = self.best_policy.observe(as_logged(scalars["episode/return"]))
             if average is not None:         # the curve's new peak: keep this policy
-                self.best_policy.save(self.run_dir, self.learner.agent, self._policy_meta(), average)
+                self.best_policy.save(self.run_dir, self.networks.agent, self._policy_meta(), average)
         if bar is not None:
             postfix = {"sps": f"{scalars['speed/env_steps_per_second']:.0f}"}
             if returns:
@@ -271,7 +271,7 @@ class Trainer:
             self.layout_shapes = {k: list(v) for k, v in env.layout.shapes().items()}
             env.close()
         self.save_checkpoint()
-        agent = self.learner.agent
+        agent = self.networks.agent
         checkpoints.save_policy(agent, str(self.run_dir / "policy.safetensors"), self._policy_meta())
         from dynenv_ros.agent.export import export_onnx
         compiled.restore()                  # the exporter traces the eager functions

@@ -50,7 +50,7 @@ class CuriosityHeads(nn.Module):
         self.ltp_attention = RCMAttention(feature_size)
 
 
-class Learner(nn.Module):
+class TrainingNetworks(nn.Module):
     """Everything the optimiser trains: the agent, the curiosity heads, an intrinsic critic (used only when
     curiosity is also an intrinsic reward) and the pose seeder (used only with privileged pose seeding)."""
 

@@ -37,7 +37,7 @@ from torch import Tensor
 from dynenv_ros.agent.losses import icm_losses, ltp_loss, masked_mean
 from dynenv_ros.learning.algo.advantages import generalized_advantages
 from dynenv_ros.learning.algo.auxiliary import continuous_icm_losses, imitation_loss, self_supervised_losses
-from dynenv_ros.learning.algo.networks import Learner, action_features
+from dynenv_ros.learning.algo.networks import TrainingNetworks, action_features
 from dynenv_ros.learning.algo.policy import head_outputs, log_prob_entropy, run_sequence
 from dynenv_ros.learning.config import TrainConfig
 
@@ -149,7 +149,7 @@ def ppo_loss(log_prob: Tensor, old_log_prob: Tensor, advantages: Tensor, entropy
     return ActorCriticLoss(total, policy_loss, value_loss, entropy_mean, approx_kl, clip_fraction)
 
 
-def minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, advantages: Tensor | None,
+def minibatch_loss(networks: TrainingNetworks, rollout: Mapping[str, Any], rows: Tensor, advantages: Tensor | None,
                    returns: Tensor | None, s: UpdateSettings, log: Callable[[str, Tensor | float], None],
                    intrinsic_returns: Tensor | None = None, intrinsic_advantages: Tensor | None = None
                    ) -> tuple[Tensor, float]:
@@ -157,11 +157,11 @@ def minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, a
     state, PPO's (A2C's) terms (``ppo_loss``), then the auxiliary ones the settings switch on (curiosity, the
     self-supervised heads, imitation: ``auxiliary``); ``log(name, value)`` takes every term. ``advantages`` None:
     decoupled PPO fused into this pass (``_fused_proximal``)."""
-    agent = learner.agent
+    agent = networks.agent
     T = rollout["actions"].shape[0]
     every_row = len(rows) == rollout["actions"].shape[1] and bool((rows == torch.arange(len(rows), device=rows.device)).all())
     obs = rollout["obs"] if every_row else {k: v[:, rows] for k, v in rollout["obs"].items()}   # A2C: no copy
-    out = run_sequence(agent, obs, _initial_state(learner, rollout, rows), rollout["starts"][:, rows])
+    out = run_sequence(agent, obs, _initial_state(networks, rollout, rows), rollout["starts"][:, rows])
     actions = rollout["actions"][:, rows]
     acting = rollout["can_act"][:T, rows]
     everywhere = rollout["alive"][:T, rows] if "alive" in rollout else torch.ones_like(acting)
@@ -187,7 +187,7 @@ def minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, a
     terms = ppo_loss(log_prob, old_log_prob, adv, entropy, out.value[:T], target, acting, everywhere, s, old_value)
     loss = terms.total
     if intrinsic_returns is not None:
-        intrinsic_value = learner.intrinsic_critic(out.phi[:T].detach()).squeeze(-1)
+        intrinsic_value = networks.intrinsic_critic(out.phi[:T].detach()).squeeze(-1)
         intrinsic_value_loss = ((intrinsic_value - intrinsic_returns[:, rows]) ** 2).mean()
         loss = loss + s.value_coef * intrinsic_value_loss
         log("intrinsic_value_loss", intrinsic_value_loss.detach())
@@ -200,10 +200,10 @@ def minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, a
     curious = s.use_forward or s.use_inverse or s.use_ltp
     if curious:
         transition = imitated & ~rollout["episode_end"][:, rows]     # every executed action, whoever chose it
-        onehot = action_features(actions, learner.action_heads, learner.continuous_actions)
-        heads = learner.curiosity
+        onehot = action_features(actions, networks.action_heads, networks.continuous_actions)
+        heads = networks.curiosity
         phi = out.phi
-        if learner.continuous_actions:
+        if networks.continuous_actions:
             icm = continuous_icm_losses(phi, onehot, heads, transition, s.use_rcm)
         else:
             icm = icm_losses(phi, onehot, actions, heads.forward_model, heads.inverse_model, transition,
@@ -241,9 +241,9 @@ def minibatch_loss(learner: Learner, rollout: Mapping[str, Any], rows: Tensor, a
     return loss, float(terms.approx_kl)
 
 
-def _initial_state(learner: Learner, rollout: Mapping[str, Any], rows: Tensor) -> tuple[Tensor, ...]:
+def _initial_state(networks: TrainingNetworks, rollout: Mapping[str, Any], rows: Tensor) -> tuple[Tensor, ...]:
     if "seed_pose" in rollout:       # privileged seeding: rebuilt with gradient, so the seeder learns
-        return learner.seeded_state(rollout["seed_pose"][rows])
+        return networks.seeded_state(rollout["seed_pose"][rows])
     return tuple(x[rows] for x in rollout["initial_state"])
 
 
@@ -278,7 +278,7 @@ def _skip_step(optimizer: torch.optim.Optimizer, what: str, value: float) -> Non
     LOG.error("non-finite %s (%r): the update step is skipped, the weights are unchanged", what, value)
 
 
-def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[str, Any], settings: UpdateSettings,
+def update(networks: TrainingNetworks, optimizer: torch.optim.Optimizer, rollout: Mapping[str, Any], settings: UpdateSettings,
            generator: torch.Generator | None = None) -> dict[str, float]:
     """One PPO or A2C update on a rollout (``Rollout.as_tensors()``); returns the logged scalars."""
     s = settings
@@ -289,7 +289,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
     # rows, is the proximal one, so it costs no extra pass (``_fused_proximal``)
     fused = s.proximal and s.ppo and epochs == 1
     if s.proximal and s.ppo and not fused:
-        rollout = _proximal(learner, rollout, stats)
+        rollout = _proximal(networks, rollout, stats)
     advantages = returns = None
     if not fused:
         advantages, returns = generalized_advantages(
@@ -298,7 +298,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
     minibatches = max(1, min(s.minibatches, B))
     intrinsic_returns = intrinsic_advantages = None
     if s.intrinsic_reward_coef > 0:
-        intrinsic_advantages, intrinsic_returns, intrinsic = _intrinsic(learner, rollout, s)
+        intrinsic_advantages, intrinsic_returns, intrinsic = _intrinsic(networks, rollout, s)
         if advantages is not None:
             advantages = advantages + intrinsic_advantages
         stats["intrinsic_reward"] = [float(intrinsic.mean())]
@@ -313,7 +313,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
         order = torch.randperm(B, generator=generator, device="cpu") if minibatches > 1 else torch.arange(B, device="cpu")
         for chunk in order.chunk(minibatches):
             started = time.perf_counter()
-            loss, kl = minibatch_loss(learner, rollout, chunk, advantages, returns, s, log, intrinsic_returns,
+            loss, kl = minibatch_loss(networks, rollout, chunk, advantages, returns, s, log, intrinsic_returns,
                                        intrinsic_advantages)
             optimizer.zero_grad(set_to_none=True)
             if not bool(torch.isfinite(loss.detach())):
@@ -322,7 +322,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
                 continue
             loss.backward()
             backward_done = time.perf_counter()
-            norm = torch.nn.utils.clip_grad_norm_(learner.parameters(), s.max_grad_norm, foreach=True)
+            norm = torch.nn.utils.clip_grad_norm_(networks.parameters(), s.max_grad_norm, foreach=True)
             if not bool(torch.isfinite(norm)):
                 _skip_step(optimizer, "gradient norm", float(norm))
                 stats.setdefault("nonfinite_gradient_skipped", []).append(1.0)
@@ -349,7 +349,7 @@ def update(learner: Learner, optimizer: torch.optim.Optimizer, rollout: Mapping[
 
 
 @torch.no_grad()
-def _proximal(learner: Learner, rollout: Mapping[str, Any], stats: dict[str, list[float]]) -> dict[str, Any]:
+def _proximal(networks: TrainingNetworks, rollout: Mapping[str, Any], stats: dict[str, list[float]]) -> dict[str, Any]:
     """Decoupled PPO for experience that lags (Hilton et al. 2022, "Batch size-invariance for policy
     optimization"): one forward pass with the weights as they are now gives the proximal log-probabilities (the
     clip's centre from here on), the current critic's values (fresher advantages than the behaviour's), and the
@@ -358,8 +358,8 @@ def _proximal(learner: Learner, rollout: Mapping[str, Any], stats: dict[str, lis
     in the rollout)."""
     T, B = rollout["actions"].shape[:2]
     rows = torch.arange(B, device="cpu")
-    out = run_sequence(learner.agent, rollout["obs"], _initial_state(learner, rollout, rows), rollout["starts"])
-    log_prob, _ = log_prob_entropy(learner.agent, head_outputs(out, steps=T), rollout["actions"])
+    out = run_sequence(networks.agent, rollout["obs"], _initial_state(networks, rollout, rows), rollout["starts"])
+    log_prob, _ = log_prob_entropy(networks.agent, head_outputs(out, steps=T), rollout["actions"])
     log_ratio = log_prob - rollout["log_probs"]
     weights = log_ratio.clamp(max=0.0).exp()
     stats["proximal_weight"] = [float(weights.mean())]
@@ -368,22 +368,22 @@ def _proximal(learner: Learner, rollout: Mapping[str, Any], stats: dict[str, lis
 
 
 @torch.no_grad()
-def _intrinsic(learner: Learner, rollout: Mapping[str, Any], s: UpdateSettings) -> tuple[Tensor, Tensor, Tensor]:
+def _intrinsic(networks: TrainingNetworks, rollout: Mapping[str, Any], s: UpdateSettings) -> tuple[Tensor, Tensor, Tensor]:
     """Curiosity as a reward (off in the paper, docs/original.md §6.3): the forward model's error on each transition
     (attention-weighted under RCM), scaled by ``intrinsic_reward_coef``, with its own critic and advantage —
     added to the extrinsic advantage. An episode's last transition has no successor and earns nothing."""
     T, B = rollout["actions"].shape[:2]
     rows = torch.arange(B, device="cpu")
-    out = run_sequence(learner.agent, rollout["obs"], _initial_state(learner, rollout, rows), rollout["starts"])
+    out = run_sequence(networks.agent, rollout["obs"], _initial_state(networks, rollout, rows), rollout["starts"])
     phi = out.phi
-    heads = learner.curiosity
-    taken = action_features(rollout["actions"], learner.action_heads, learner.continuous_actions)
+    heads = networks.curiosity
+    taken = action_features(rollout["actions"], networks.action_heads, networks.continuous_actions)
     error = (heads.forward_model(phi[:-1], taken) - phi[1:]) ** 2
     if s.use_rcm:
         error = error * heads.rcm_attention(phi[1:])
     ended = rollout["episode_end"]
     reward = s.intrinsic_reward_coef * error.mean(-1) * (~ended).to(error.dtype)
-    values = learner.intrinsic_critic(phi).squeeze(-1)
+    values = networks.intrinsic_critic(phi).squeeze(-1)
     advantages, returns = generalized_advantages(reward, values, ended, torch.zeros_like(ended),
                                                  torch.zeros_like(reward), s.gamma, s.gae_lambda)
     return advantages, returns, reward

@@ -23,7 +23,7 @@ from typing import Any, Callable
 import torch
 
 from dynenv_ros.learning.algo.experience import Experience, Progress
-from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.distributed.rollout_transfer import join
 from dynenv_ros.learning.distributed.rollout_worker import resolve_workers
@@ -39,7 +39,7 @@ class PoolSource:
     # what the time before each update is: the learner waiting for rollouts
     wait_scalar = "speed/learner_wait_seconds_per_update"
 
-    def __init__(self, cfg: TrainConfig, networks: Learner, first_update: int, device: torch.device,
+    def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, first_update: int, device: torch.device,
                  log: Callable[[str], None]) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
         self.dropped = 0

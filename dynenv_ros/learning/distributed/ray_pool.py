@@ -44,7 +44,7 @@ class RolloutActor:
 
     def collect(self, weights: Any, version: int, env_steps: int) -> tuple[dict[str, Any], dict[str, Any]]:
         if version != self.worker.version:
-            unpack(weights, self.worker.learner)
+            unpack(weights, self.worker.networks)
             self.worker.adopt(version)
         arrays, info = self.worker.collect(env_steps)
         info["node"] = self.node_id()
@@ -68,7 +68,7 @@ class _Actor:
 class RayPool:
     """``workers`` Ray actors (default: the cluster's CPUs, less one when the learner's CPU is one of them)."""
 
-    def __init__(self, cfg: TrainConfig, learner: torch.nn.Module, first_update: int,
+    def __init__(self, cfg: TrainConfig, networks: torch.nn.Module, first_update: int,
                  log: Callable[[str], None] = print) -> None:
         self.cfg, self.log, self.first_update = cfg, log, first_update
         self.deaths = self.restarts = 0
@@ -96,7 +96,7 @@ class RayPool:
         self._remote = self.ray.remote(num_cpus=1, max_restarts=0)(RolloutActor)
         self._actors = [_Actor(i, a, n) for i, (a, n) in enumerate(shard_sizes(cfg.num_envs, workers))]
         self._calls: dict[Any, int] = {}
-        self.publish(learner, first_update)
+        self.publish(networks, first_update)
         self._env_steps = 0
         for actor in self._actors:
             self._start(actor)
@@ -125,8 +125,8 @@ class RayPool:
         self._calls[reference] = actor.index
         actor.queued += 1
 
-    def publish(self, learner: torch.nn.Module, version: int) -> None:
-        self._weights = self.ray.put(pack(learner)[0])
+    def publish(self, networks: torch.nn.Module, version: int) -> None:
+        self._weights = self.ray.put(pack(networks)[0])
         self._version = version
 
     def _died(self, actor: _Actor, why: str) -> None:

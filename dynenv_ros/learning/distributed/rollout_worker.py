@@ -19,7 +19,7 @@ import torch
 
 from dynenv_ros.learning.algo.networks import make_agent
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.distributed.rollout_transfer import flatten
 from dynenv_ros.learning.sampling.worlds import Worlds, make_worlds, teacher_driven_share
 
@@ -66,8 +66,8 @@ class RolloutWorker:
         self.rng = np.random.default_rng(seeds[1])
         self.world_seed = int(seeds[2].generate_state(1)[0])
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only, overwritten by the weights
-        self.learner = Learner(make_agent(cfg), cfg.ltp_horizon).eval()
-        for parameter in self.learner.parameters():
+        self.networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon).eval()
+        for parameter in self.networks.parameters():
             parameter.requires_grad_(False)
         self.version = -1                       # the learner's update count of the weights acted with
         self.worlds: Worlds | None = None
@@ -81,10 +81,10 @@ class RolloutWorker:
 
     @property
     def layout_spec(self) -> Any:
-        return getattr(self.learner.agent, "layout_spec", None)
+        return getattr(self.networks.agent, "layout_spec", None)
 
     def adopt(self, version: int) -> None:
-        """The weights now in ``self.learner`` are the learner's after ``version`` updates. A snapshot opponent takes
+        """The weights now in ``self.networks`` are the learner's after ``version`` updates. A snapshot opponent takes
         a copy every ``snapshot_every_updates`` updates, as the in-process trainer's does."""
         if version == self.version:
             return
@@ -92,7 +92,7 @@ class RolloutWorker:
         if self.worlds is not None and self.cfg.opponent in ("snapshot", "league"):
             due = version // self.cfg.snapshot_every_updates
             if due > self._snapshots:
-                self.worlds.opponent.refresh(self.learner.agent)
+                self.worlds.opponent.refresh(self.networks.agent)
                 self._snapshots = due
 
     def _ensure_worlds(self) -> None:
@@ -100,7 +100,7 @@ class RolloutWorker:
             if self.version < 0:
                 raise RuntimeError("a rollout worker needs the learner's weights before its first rollout")
             self._snapshots = self.version // self.cfg.snapshot_every_updates
-            self.worlds = make_worlds(self.cfg, self.learner, self.num_envs, "inprocess", self.generator, self.rng,
+            self.worlds = make_worlds(self.cfg, self.networks, self.num_envs, "inprocess", self.generator, self.rng,
                                       seed=self.world_seed)
 
     def collect(self, env_steps: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:

@@ -8,7 +8,7 @@ program order, which x86-64 guarantees (TSO), as on every machine this project r
 torn copy would be possible.
 
 Every floating-point tensor of the module's ``state_dict`` is carried (the agent, the curiosity heads, the pose
-seeder): a worker's acting copy is the whole ``Learner``, so privileged pose seeding acts with the learner's
+seeder): a worker's acting copy is the whole ``TrainingNetworks``, so privileged pose seeding acts with the learner's
 seeder. Versions count the learner's updates; -1 means nothing was published yet.
 """
 from __future__ import annotations

@@ -96,8 +96,8 @@ def worker_main(conn: Connection, cfg_dict: dict[str, Any], index: int, first_wo
     try:
         cfg = TrainConfig.from_dict(cfg_dict)
         worker = RolloutWorker(cfg, index, first_world, num_envs, incarnation, first_update)
-        weights = AttachedWeights(weights_names, worker.learner)
-        worker.adopt(weights.load_into(worker.learner, -1))
+        weights = AttachedWeights(weights_names, worker.networks)
+        worker.adopt(weights.load_into(worker.networks, -1))
         env_steps = 0
         arrays, info = worker.collect(env_steps)
         conn.send(("hello", spec_of(arrays), worker.layout_shapes, worker.layout_spec))
@@ -115,7 +115,7 @@ def worker_main(conn: Connection, cfg_dict: dict[str, Any], index: int, first_wo
             slot = free.pop(0)
             slots.write(slot, arrays)
             conn.send(("ready", slot, info))
-            worker.adopt(weights.load_into(worker.learner, worker.version))
+            worker.adopt(weights.load_into(worker.networks, worker.version))
             arrays, info = worker.collect(env_steps)
     except (EOFError, BrokenPipeError, ConnectionResetError):
         return                                  # the learner is gone or closed the pipe
@@ -151,7 +151,7 @@ class _Handle:
 class ProcessPool:
     """``workers`` worker processes over ``cfg.num_envs`` worlds; ``get`` returns the next rollout."""
 
-    def __init__(self, cfg: TrainConfig, learner: torch.nn.Module, workers: int, first_update: int,
+    def __init__(self, cfg: TrainConfig, networks: torch.nn.Module, workers: int, first_update: int,
                  log: Callable[[str], None] = print) -> None:
         self.cfg, self.log = cfg, log
         self.first_update = first_update
@@ -160,8 +160,8 @@ class ProcessPool:
         self.layout_shapes: dict[str, list[int]] | None = None
         self.layout_spec: Any = None
         self._context = mp.get_context("spawn")
-        self._weights = SharedWeights(learner)
-        self._weights.publish(learner, first_update)
+        self._weights = SharedWeights(networks)
+        self._weights.publish(networks, first_update)
         self._handles = [_Handle(i, a, n) for i, (a, n) in enumerate(shard_sizes(cfg.num_envs, workers))]
         try:
             for handle in self._handles:
@@ -218,8 +218,8 @@ class ProcessPool:
         handle.ready = True
 
     # -- the learner's side -----------------------------------------------------------------------------------
-    def publish(self, learner: torch.nn.Module, version: int) -> None:
-        self._weights.publish(learner, version)
+    def publish(self, networks: torch.nn.Module, version: int) -> None:
+        self._weights.publish(networks, version)
 
     def get(self, timeout: float) -> Delivery | None:
         """The next rollout any worker finished, or None after ``timeout`` seconds. Handles handshakes and deaths on

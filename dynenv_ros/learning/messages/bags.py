@@ -38,7 +38,7 @@ import torch
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.learning.algo.experience import Experience, Progress, arrays_as_tensors
 from dynenv_ros.learning.algo.loop import train
-from dynenv_ros.learning.algo.networks import Learner, make_agent
+from dynenv_ros.learning.algo.networks import TrainingNetworks, make_agent
 from dynenv_ros.learning.algo.ppo import UpdateSettings, update
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.messages.assembly import ExperienceAssembler, Sequence, batch
@@ -204,8 +204,8 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
     generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
     torch.manual_seed(int(seeds[1].generate_state(1)[0]))          # parameter init only
     agent = make_agent(cfg)
-    learner = Learner(agent, cfg.ltp_horizon)
-    optimizer = torch.optim.Adam(learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
+    networks = TrainingNetworks(agent, cfg.ltp_horizon)
+    optimizer = torch.optim.Adam(networks.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
     settings = clone_settings(cfg, with_targets)
     (run / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
     logger = RunLogger(run) if log else None
@@ -215,7 +215,7 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
     progress = Progress()
 
     def learn(experience: Experience) -> dict[str, float]:
-        return update(learner, optimizer, experience.batch, settings, generator)
+        return update(networks, optimizer, experience.batch, settings, generator)
 
     def record(experience: Experience, stats: dict[str, float], waited: float, learnt: float) -> None:
         """Each pass's means, logged as it ends."""
@@ -230,12 +230,12 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
                            {f"bc/{k}": v for k, v in means.items()} | {"bc/epoch": float(source.epoch)})
 
     train(source, learn, progress, record)
-    learner.eval()
+    networks.eval()
     meta = {"version": checkpoints.META_VERSION, "source": "bags", "bags": [str(p) for p in paths],
             "updates": progress.updates, "env_steps": progress.env_steps, "episodes": 0,
             "wall_seconds": time.perf_counter() - started, "config": cfg.to_dict(),
             "code_revision": checkpoints.code_revision()}
-    checkpoints.save_training_checkpoint(run, progress.env_steps, learner, optimizer, meta, {},
+    checkpoints.save_training_checkpoint(run, progress.env_steps, networks, optimizer, meta, {},
                                          keep=cfg.keep_checkpoints)
     from dynenv_ros.agent.checkpoint import save_policy
     save_policy(agent, str(run / "policy.safetensors"), {k: v for k, v in meta.items() if k != "config"})

@@ -1,6 +1,6 @@
-"""The learner fed by message-assembled experience (``learning.messages.assembly``): the in-process trainer's networks,
-losses (``algorithms.update``), run directory, logs and checkpoints, with no simulator of its own. The trainer node
-runs it in a background thread (``BackgroundLearner``), ``dynenv-train --from-bag`` directly.
+"""The trainer fed by message-assembled experience (``learning.messages.assembly``): the in-process trainer's networks,
+losses (``algo.ppo.update``), run directory, logs and checkpoints, with no simulator of its own. The trainer node
+runs it in a background thread (``TrainingThread``).
 
 Off-policy correction (docs/decisions.md, "Learning from experience that lags"): PPO's clipped ratio against the
 behaviour log-probabilities the policy nodes sent (``Action.log_prob``), with a bound on staleness — a sequence any
@@ -31,7 +31,7 @@ from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.learning.algo.experience import Experience, Progress, arrays_as_tensors
 from dynenv_ros.learning.algo.loop import learn_from, train
-from dynenv_ros.learning.algo.networks import Learner, make_agent
+from dynenv_ros.learning.algo.networks import TrainingNetworks, make_agent
 from dynenv_ros.learning.algo.policy import log_prob_entropy, run_sequence
 from dynenv_ros.learning.algo.ppo import NONFINITE_SKIPS, update, update_settings
 from dynenv_ros.learning.config import ConfigError, TrainConfig
@@ -42,7 +42,7 @@ from dynenv_ros.learning.run.metrics import RunLogger
 MAX_QUEUE = 4096          # sequences waiting for the learner; beyond, the oldest are dropped (counted)
 
 
-class SequenceLearner:
+class MessageTrainer:
     """Updates on batches of ``batch_sequences`` sequences. ``version`` = 1 + updates: what the weights it hands
     out are called (``WeightsAnnouncement.version``, ``Action.policy_version``)."""
 
@@ -82,8 +82,8 @@ class SequenceLearner:
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only
         agent = make_agent(cfg)   # the in-process trainer's agent for cfg (driving: its action mode's heads)
-        self.learner = Learner(agent, cfg.ltp_horizon).eval()
-        self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
+        self.networks = TrainingNetworks(agent, cfg.ltp_horizon).eval()
+        self.optimizer = torch.optim.Adam(self.networks.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps)
         self.progress = Progress()
         self.wall_before = 0.0
         self._started = time.perf_counter()
@@ -94,7 +94,7 @@ class SequenceLearner:
                 raise ConfigError("initial_policy", str(error)) from None
         if resume:
             try:
-                meta, _ = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
+                meta, _ = checkpoints.load_training_checkpoint(self.run_dir, self.networks, self.optimizer)
             except ValueError as error:
                 raise ConfigError("resume", str(error)) from None
             self.progress = Progress(int(meta["env_steps"]), int(meta["updates"]), int(meta.get("episodes", 0)))
@@ -123,7 +123,7 @@ class SequenceLearner:
 
     @property
     def agent(self) -> DynEnvAgent:
-        return self.learner.agent
+        return self.networks.agent
 
     def set_learning_rate(self, value: float) -> None:
         for group in self.optimizer.param_groups:
@@ -190,9 +190,9 @@ class SequenceLearner:
 
     def step(self, experience: Experience) -> dict[str, float]:
         """The algorithm's step: the update, its skipped steps counted, with what it logs of the experience."""
-        self.learner.train()
-        stats = update(self.learner, self.optimizer, experience.batch, self.settings, self.generator)
-        self.learner.eval()
+        self.networks.train()
+        stats = update(self.networks, self.optimizer, experience.batch, self.settings, self.generator)
+        self.networks.eval()
         for name in NONFINITE_SKIPS:            # skipped steps (logged at ERROR by update): the node's diagnostics
             self.counts[name] += int(stats.get(name, 0))
         stats.update(experience.scalars)
@@ -297,7 +297,7 @@ class SequenceLearner:
             self.logger.log(self.progress.env_steps, self.progress.updates, self.meta()["wall_seconds"], scalars)
 
     def save_checkpoint(self) -> Path:
-        return checkpoints.save_training_checkpoint(self.run_dir, self.progress.env_steps, self.learner, self.optimizer,
+        return checkpoints.save_training_checkpoint(self.run_dir, self.progress.env_steps, self.networks, self.optimizer,
                                                     self.meta(), {}, keep=self.cfg.keep_checkpoints)
 
     def close(self) -> None:
@@ -306,16 +306,16 @@ class SequenceLearner:
             self.logger = None
 
 
-class BackgroundLearner:
-    """``SequenceLearner`` in a thread of its own, which runs the training loop (``algo.loop``) with this queue as its
+class TrainingThread:
+    """``MessageTrainer`` in a thread of its own, which runs the training loop (``algo.loop``) with this queue as its
     experience source: ``put`` (from ROS callbacks) never waits for a gradient step. Each batch takes the oldest waiting sequence of up to ``batch_sequences`` streams (a stream's next sequence
-    waits for the next batch: it needs the state this one ends in). ``on_update(learner, stats)`` runs in the
+    waits for the next batch: it needs the state this one ends in). ``on_update(trainer, stats)`` runs in the
     thread after each update (the node publishes the weights from it); checkpoints every
     ``cfg.checkpoint_every_minutes``."""
 
-    def __init__(self, learner: SequenceLearner, on_update: Callable[[SequenceLearner, dict[str, float]], None]
+    def __init__(self, trainer: MessageTrainer, on_update: Callable[[MessageTrainer, dict[str, float]], None]
                  | None = None, max_queue: int = MAX_QUEUE) -> None:
-        self.learner, self.on_update = learner, on_update
+        self.trainer, self.on_update = trainer, on_update
         self.queue: deque[Sequence] = deque()
         self.max_queue = max_queue
         self.lock = threading.Lock()
@@ -346,38 +346,38 @@ class BackgroundLearner:
     def _next_batch(self) -> list[Sequence] | None:
         """Under the lock: a batch once ``batch_sequences`` streams have a fresh sequence waiting — with every
         waiting sequence of those streams that continues the one before it, up to ``max_batch_sequences``."""
-        learner = self.learner
-        for sequence in [q for q in self.queue if not learner.fresh(q)]:
+        trainer = self.trainer
+        for sequence in [q for q in self.queue if not trainer.fresh(q)]:
             self.queue.remove(sequence)
         by_stream: dict[tuple[str, str], list[Sequence]] = {}
         for sequence in self.queue:
             chain = by_stream.setdefault(sequence.stream, [])
             if not chain or (sequence.index == chain[-1].index + 1 and sequence.continues):
                 chain.append(sequence)
-        if len(by_stream) < learner.batch_sequences:
+        if len(by_stream) < trainer.batch_sequences:
             return None
         chosen = [chain[0] for chain in by_stream.values()]
         for depth in range(1, max(len(c) for c in by_stream.values())):
             for chain in by_stream.values():
-                if depth < len(chain) and len(chosen) < learner.max_batch_sequences:
+                if depth < len(chain) and len(chosen) < trainer.max_batch_sequences:
                     chosen.append(chain[depth])
         taken = {id(q) for q in chosen}
         self.queue = deque(q for q in self.queue if id(q) not in taken)
         return chosen
 
     def next(self, progress: Progress, deadline: float) -> Experience | None:
-        """The learner's experience of the next batch of waiting sequences (the loop's source); None once stopped."""
+        """The trainer's experience of the next batch of waiting sequences (the loop's source); None once stopped."""
         while not self._stop.is_set():
             with self.wake:
                 sequences = self._next_batch()
                 if sequences is None:
                     self.wake.wait(timeout=0.2)
                     continue
-            return self.learner.experience(sequences)
+            return self.trainer.experience(sequences)
         return None
 
     def learned(self, progress: Progress) -> None:
-        self.learner.learned(progress)
+        self.trainer.learned(progress)
 
     def close(self) -> None:
         self.stop()
@@ -385,16 +385,16 @@ class BackgroundLearner:
     def _record(self, experience: Experience, stats: dict[str, float], waited: float, learnt: float) -> None:
         """After each update: ``on_update``, and a checkpoint every ``checkpoint_every_minutes``."""
         if self.on_update is not None:
-            self.on_update(self.learner, stats)
-        every = self.learner.cfg.checkpoint_every_minutes * 60.0
+            self.on_update(self.trainer, stats)
+        every = self.trainer.cfg.checkpoint_every_minutes * 60.0
         if time.monotonic() - self._last_checkpoint > every:
-            self.learner.save_checkpoint()
+            self.trainer.save_checkpoint()
             self._last_checkpoint = time.monotonic()
 
     def _run(self) -> None:
         """The training loop over the queue, until ``stop``."""
         try:
-            train(self, self.learner.step, self.learner.progress, self._record,
+            train(self, self.trainer.step, self.trainer.progress, self._record,
                   until=lambda progress: not self._stop.is_set())
         except Exception as error:         # a learner that fails says so and stops learning; nothing crashes
             self.error = f"{type(error).__name__}: {error}"

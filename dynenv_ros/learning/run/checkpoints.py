@@ -49,7 +49,7 @@ from dynenv_ros.agent.checkpoint import (FORMAT as POLICY_FORMAT, atomic_write, 
                                          json_dumps, load_policy, read_safetensors, refuse_non_finite,
                                          save_policy, sha256, tensors_for_saving, write_synced)
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.learning.algo.networks import Learner, make_agent
+from dynenv_ros.learning.algo.networks import TrainingNetworks, make_agent
 from dynenv_ros.learning.config import TrainConfig
 
 __all__ = ["FORMAT", "POLICY_FORMAT", "CheckpointWarning", "save_training_checkpoint", "load_training_checkpoint",
@@ -405,5 +405,5 @@ def policy_from_training_checkpoint(path: str | Path) -> tuple[DynEnvAgent, dict
     except (KeyError, TypeError, ValueError) as error:
         raise ValueError(f"checkpoint {meta['checkpoint']['path']} has no usable training config: {error}") from None
     agent = make_agent(cfg)
-    meta, _ = load_training_checkpoint(meta["checkpoint"]["path"], Learner(agent, cfg.ltp_horizon))
+    meta, _ = load_training_checkpoint(meta["checkpoint"]["path"], TrainingNetworks(agent, cfg.ltp_horizon))
     return agent.eval(), meta

@@ -12,7 +12,7 @@ import torch
 
 from dynenv_ros.learning.algo.networks import make_agent
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.networks import TrainingNetworks
 
 FLOAT_BYTES = 4
 LOG_BYTES = 32 * 2**20      # metrics.csv and TensorBoard of a long run (a 700 k-step run wrote 0.6 MB)
@@ -21,10 +21,10 @@ LOG_BYTES = 32 * 2**20      # metrics.csv and TensorBoard of a long run (a 700 k
 def run_disk_bytes(cfg: TrainConfig) -> tuple[int, str]:
     """(bytes a run of ``cfg`` needs on disk, how that number is made up, for the refusal's message)."""
     with torch.device("meta"):
-        learner = Learner(make_agent(cfg), cfg.ltp_horizon)
-    parameters = sum(p.numel() for p in learner.parameters())
-    trainable = sum(p.numel() for p in learner.parameters() if p.requires_grad)
-    policy = sum(p.numel() for p in learner.agent.parameters())
+        networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
+    parameters = sum(p.numel() for p in networks.parameters())
+    trainable = sum(p.numel() for p in networks.parameters() if p.requires_grad)
+    policy = sum(p.numel() for p in networks.agent.parameters())
     checkpoint = FLOAT_BYTES * (parameters + 2 * trainable)
     copies = cfg.keep_checkpoints + 1
     policy_files = 2 + (cfg.best_policy_window is not None)        # safetensors, ONNX, best_policy.safetensors

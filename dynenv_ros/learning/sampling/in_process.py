@@ -9,7 +9,7 @@ from typing import Any
 import torch
 
 from dynenv_ros.learning.algo.experience import Experience, Progress
-from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.sampling.worlds import make_worlds, teacher_driven_share
 
@@ -21,7 +21,7 @@ class InProcessSource:
     # what the time before each update is: collecting
     wait_scalar = "speed/rollout_seconds_per_update"
 
-    def __init__(self, cfg: TrainConfig, networks: Learner, generator: torch.Generator, rng: Any, seed: int,
+    def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, generator: torch.Generator, rng: Any, seed: int,
                  device: torch.device) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
         worlds = make_worlds(cfg, networks, cfg.num_envs, cfg.backend, generator, rng, seed=seed)

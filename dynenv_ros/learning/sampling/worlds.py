@@ -12,7 +12,7 @@ import torch
 
 from dynenv_ros.envs.vector import DrivingVectorEnv, SoccerVectorEnv
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.algo.networks import Learner
+from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.sampling.opponents import (SCRIPTED_TEAM, RandomOpponent, SnapshotOpponent,
                                                     WorldScriptedOpponent)
 from dynenv_ros.learning.sampling.collector import RolloutCollector
@@ -82,12 +82,12 @@ class Worlds:
     collector: RolloutCollector
 
 
-def make_worlds(cfg: TrainConfig, learner: Learner, num_envs: int, backend: str, generator: torch.Generator,
+def make_worlds(cfg: TrainConfig, networks: TrainingNetworks, num_envs: int, backend: str, generator: torch.Generator,
                 rng: np.random.Generator, seed: int) -> Worlds:
     """``num_envs`` worlds of ``cfg``'s scenario stepped by ``learner.agent`` (``backend``: the vector env's), the
     opponent the config names and the collector; ``generator`` samples actions, ``rng`` draws random opponents and
     seeding noise, ``seed`` seeds the worlds."""
-    agent = learner.agent
+    agent = networks.agent
     env, learning = make_env(cfg, num_envs, backend)
     if cfg.driving:
         agent.layout_spec = env.layout.spec
@@ -100,7 +100,7 @@ def make_worlds(cfg: TrainConfig, learner: Learner, num_envs: int, backend: str,
         opponent = WorldScriptedOpponent()
     seeding: dict[str, Any] = {}
     if cfg.privileged_pose_seeding:
-        seeding = {"pose_seeder": learner.seeded_state, "seed_noise": SEED_NOISE, "rng": rng}
+        seeding = {"pose_seeder": networks.seeded_state, "seed_noise": SEED_NOISE, "rng": rng}
     try:
         collector = RolloutCollector(env, agent, learning, opponent, generator, seed=seed,
                                      reward_transform=reward_transform(cfg), **seeding)
