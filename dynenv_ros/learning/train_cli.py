@@ -59,7 +59,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (logs still written)")
     parser.add_argument("--from-bag", nargs="+", metavar="BAG", help="learn offline from recorded bags: behaviour "
                         "cloning of the recorded actions and (soccer) the localization/reconstruction heads "
-                        "(learning/from_bag.py); rollout_length sets the sequence length; a driving bag needs a "
+                        "(learning/messages/bags.py); rollout_length sets the sequence length; a driving bag needs a "
                         "driving config (--config driving_quick)")
     parser.add_argument("--epochs", type=int, default=10, help="--from-bag: passes over the sequences")
     parser.add_argument("--batch-sequences", type=int, default=16, help="--from-bag: sequences per update")

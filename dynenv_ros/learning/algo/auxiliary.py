@@ -4,7 +4,7 @@ imitation of a teacher (not in the paper; ``TrainConfig.teacher``). Pretraining 
 """
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any, Mapping, cast
 
 import torch
 from torch import Tensor
@@ -27,7 +27,7 @@ def self_supervised_losses(out: Any, targets: Mapping[str, Tensor], use_localiza
                                    anchors=BALL_ANCHOR)
         robots = reconstruction_loss(out.robots, out.robot_confidence, targets["robots"],
                                      targets["robots_known"] > 0.5, binary_fields=(4, 5))
-        losses["reconstruction"] = sum(ball.values()) + sum(robots.values())
+        losses["reconstruction"] = cast(Tensor, sum(ball.values()) + sum(robots.values()))
         losses["recon_ball_position"] = ball["position"].detach()
         losses["recon_robot_position"] = robots["position"].detach()
     return losses

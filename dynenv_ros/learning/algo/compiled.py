@@ -36,7 +36,8 @@ def compile_hot_paths() -> bool:
         original = getattr(owner, name)
         compiled = torch.compile(original, dynamic=True)
 
-        def guarded(*args: Any, _compiled=compiled, _original=original, _owner=owner, _name=name, **kwargs: Any):
+        def guarded(*args: Any, _compiled: Any = compiled, _original: Any = original, _owner: type = owner,
+                    _name: str = name, **kwargs: Any) -> Any:
             try:
                 return _compiled(*args, **kwargs)
             except Exception as error:           # a backend failure (no compiler, an unsupported op): eager for good

@@ -78,11 +78,11 @@ class Rollout(StepArrays):
 
     @property
     def steps(self) -> int:
-        return self.actions.shape[0]
+        return int(self.actions.shape[0])
 
     @property
     def robots(self) -> int:
-        return self.actions.shape[1]
+        return int(self.actions.shape[1])
 
     def as_tensors(self, device: torch.device | str = "cpu") -> dict[str, Any]:
         """Every array as a tensor on ``device`` (observation and target dicts stay dicts)."""

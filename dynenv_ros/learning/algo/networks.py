@@ -1,6 +1,8 @@
-"""The learner's modules beside the policy network: the paper's curiosity heads (ICM forward and inverse models,
-the RCM attention, the LTP predictors and their attention), an optional intrinsic critic and the privileged pose
-seeder. Only the policy network (``DynEnvAgent``) ships; these exist for training and are checkpointed with it.
+"""The networks a run trains: the agent of its config (``make_agent``, the one place an agent for training is built:
+the trainer, the rollout workers, the trainer node, learning from bags, pretraining, the evaluation of a checkpoint)
+and, beside it in ``TrainingNetworks``, the paper's curiosity heads (ICM forward and inverse models, the RCM
+attention, the LTP predictors and their attention), an optional intrinsic critic and the privileged pose seeder.
+Only the policy network (``DynEnvAgent``) ships; the rest exist for training and are checkpointed with it.
 
 The curiosity models' action input follows the agent's action heads (``action_heads``): soccer's one-hot walk, turn,
 kick, head (5 + 3 + 3 + 7 = 18); driving's discrete one-hot acceleration and steering (3 + 3 = 6, as the paper);

@@ -5,7 +5,7 @@ what the rollouts act with and what the update re-runs.
 from __future__ import annotations
 
 from types import SimpleNamespace
-from typing import Any, Mapping
+from typing import Any, Mapping, cast
 
 import numpy as np
 import torch
@@ -37,7 +37,7 @@ def layout_spec(agent: Any) -> LayoutSpec:
     the trainer from its env overrides it)."""
     spec = getattr(agent, "layout_spec", None)
     if spec is not None:
-        return spec
+        return cast(LayoutSpec, spec)
     if getattr(agent, "scenario", "soccer") != "driving":
         return SOCCER
     if not _DRIVING_SPEC:
@@ -60,7 +60,7 @@ def head_outputs(step: Any, steps: int | None = None, flat: bool = False) -> Sim
     sequence; ``flat``: merge its (T, B) leading axes. Tensors stay on their device."""
     names = ("acceleration", "steering", "command") if getattr(step, "walk", None) is None else \
         ("walk", "turn", "kick", "head")
-    out = {}
+    out: dict[str, Tensor | None] = {}
     for name in names:
         value = getattr(step, name, None)
         if value is None:               # driving's heads of the other action mode
@@ -78,7 +78,7 @@ def _cpu(value: Tensor | None) -> Tensor | None:
     return None if value is None else value.cpu()
 
 
-def policy_step(agent: DynEnvAgent, obs: Mapping[str, Any], state: State):
+def policy_step(agent: DynEnvAgent, obs: Mapping[str, Any], state: State) -> Any:
     """One acting forward on padded observations with robots leading (numpy or torch), on the agent's device."""
     device = device_of(agent)
     spec = layout_spec(agent)
@@ -102,16 +102,16 @@ def sample_actions(agent: DynEnvAgent, step: Any, generator: torch.Generator | N
     """(actions (B, 4) — driving (B, 2) or (B, 3) —, their log-probabilities (B,)) on the CPU — the sum over the
     action heads. Sampling is on the CPU whatever the learner's device, with one CPU generator: the draws are the
     same on any device, the actions only where the device's logits agree to the last bit (docs/benchmarks.md)."""
-    heads = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
+    heads: Any = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
     actions = agent.act(heads, generator=generator, greedy=greedy)
-    log_prob = sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
+    log_prob = cast(Tensor, sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1))))
     return actions, log_prob
 
 
 def action_log_prob(agent: DynEnvAgent, step: Any, actions: Tensor) -> Tensor:
     """(B,) log-probability of given (B, 4) actions under an acting step's distributions, on the CPU."""
-    heads = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
-    return sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1)))
+    heads: Any = SimpleNamespace(**{k: _cpu(v) for k, v in vars(head_outputs(step)).items()})
+    return cast(Tensor, sum(d.log_prob(a) for d, a in zip(agent.distributions(heads), actions.unbind(-1))))
 
 
 def _flat(x: Tensor) -> Tensor:

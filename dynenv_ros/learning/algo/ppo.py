@@ -17,7 +17,7 @@ log-probabilities (DynEnv's PPO had the sign flipped and compared freshly resamp
 no effect there, so those samples only add variance). Entropy is per agent (the sum over the action heads of each
 robot's own policy entropy), not DynEnv's "batch entropy" of the mean policy (§9.4).
 
-Driving (``learner.agent.scenario == 'driving'``): the same update over cars, with driving's heads (two categorical
+Driving (``networks.agent.scenario == 'driving'``): the same update over cars, with driving's heads (two categorical
 or three clipped Gaussians, ``agent.driving_actions``) and inputs (its layout spec); the rollout's ``alive`` mask
 (T+1, B) removes every step after a car's own episode end from every term — value included; the curiosity models
 take the one-hot [3, 3] actions (discrete) or the continuous action vector, whose inverse model regresses it
@@ -172,10 +172,12 @@ def minibatch_loss(networks: TrainingNetworks, rollout: Mapping[str, Any], rows:
         imitated = acting
     step_out = head_outputs(out, steps=T)
     log_prob, entropy = log_prob_entropy(agent, step_out, actions)
+    weights: Tensor | None
     if advantages is None:
         adv, target, old_log_prob, weights = _fused_proximal(rollout, rows, log_prob, out.value.detach(), s,
                                                              intrinsic_advantages, log)
     else:
+        assert returns is not None                  # given with the advantages
         adv, target, old_log_prob = advantages[:, rows], returns[:, rows], rollout["log_probs"][:, rows]
         weights = rollout["sample_weights"][:, rows] if "sample_weights" in rollout else None
     if s.normalize_advantages:
@@ -248,7 +250,8 @@ def _initial_state(networks: TrainingNetworks, rollout: Mapping[str, Any], rows:
 
 
 def _fused_proximal(rollout: Mapping[str, Any], rows: Tensor, log_prob: Tensor, values: Tensor, s: UpdateSettings,
-                    intrinsic_advantages: Tensor | None, log) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+                    intrinsic_advantages: Tensor | None, log: Callable[[str, Tensor | float], None]
+                    ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """Decoupled PPO's proximal quantities of one minibatch from its own forward pass (one epoch: the weights have
     not stepped on these rows yet): (advantages and returns from the current critic, the proximal
     log-probabilities, the truncated weights min(1, π_prox / π_behaviour)) — what ``_proximal`` gets from a pass of

@@ -84,7 +84,7 @@ class Worlds:
 
 def make_worlds(cfg: TrainConfig, networks: TrainingNetworks, num_envs: int, backend: str, generator: torch.Generator,
                 rng: np.random.Generator, seed: int) -> Worlds:
-    """``num_envs`` worlds of ``cfg``'s scenario stepped by ``learner.agent`` (``backend``: the vector env's), the
+    """``num_envs`` worlds of ``cfg``'s scenario stepped by ``networks.agent`` (``backend``: the vector env's), the
     opponent the config names and the collector; ``generator`` samples actions, ``rng`` draws random opponents and
     seeding noise, ``seed`` seeds the worlds."""
     agent = networks.agent
