@@ -41,7 +41,7 @@ from dynenv_ros.learning.run.best_policy import BestPolicy
 from dynenv_ros.learning.run.compute import ComputeMeter
 from dynenv_ros.learning.run.metrics import RunLogger, as_logged, plot_curves
 from dynenv_ros.learning.sampling.in_process import InProcessSource
-from dynenv_ros.learning.sampling.worlds import make_env, soccer_config
+from dynenv_ros.learning.sampling.worlds import make_env
 
 
 class Trainer:
@@ -56,7 +56,6 @@ class Trainer:
         torch.set_num_threads(cfg.torch_threads)
         self.device = torch.device(cfg.device)
         self.settings = update_settings(cfg)
-        self.soccer = soccer_config(cfg)
         seeds = np.random.SeedSequence(cfg.seed).spawn(4)
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
         self.rng = np.random.default_rng(seeds[1])
