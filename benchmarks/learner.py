@@ -1,4 +1,4 @@
-"""dynenv-bench learner: the learner's forward + backward against the machine's FLOP limit.
+"""dynenv-bench networks: the learner's forward + backward against the machine's FLOP limit.
 
 - The work: one PPO update of a training preset (default ``async``) on a real rollout of its worlds (collected
   first, not timed), every minibatch's forward, backward, gradient clip and Adam step, on one thread.
@@ -42,14 +42,14 @@ def measure(args: Any) -> dict[str, Any]:
     import torch
     from torch.utils.flop_counter import FlopCounterMode
 
-    from dynenv_ros.learning.agents import make_agent
-    from dynenv_ros.learning.algorithms import update
+    from dynenv_ros.learning.algo.networks import make_agent
+    from dynenv_ros.learning.algo.ppo import update
     from dynenv_ros.learning.config import load_config
-    from dynenv_ros.learning.heads import Learner
-    from dynenv_ros.learning.rollout_transfer import unflatten
-    from dynenv_ros.learning.rollout_worker import RolloutWorker
+    from dynenv_ros.learning.algo.networks import TrainingNetworks
+    from dynenv_ros.learning.distributed.rollout_transfer import unflatten
+    from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker
     from dynenv_ros.learning.train_cli import preset_path
-    from dynenv_ros.learning.trainer import update_settings
+    from dynenv_ros.learning.algo.ppo import update_settings
     from benchmarks.timing import torch_threads
     torch_threads(1)
     cfg = load_config(preset_path(args.config), list(args.overrides))
@@ -62,17 +62,17 @@ def measure(args: Any) -> dict[str, Any]:
     robot_steps = rollout["actions"].shape[0] * rollout["actions"].shape[1] * (cfg.ppo_epochs if cfg.algorithm ==
                                                                                  "ppo" else 1)
     torch.manual_seed(0)
-    learner = Learner(make_agent(cfg), cfg.ltp_horizon)
-    optimizer = torch.optim.Adam(learner.parameters(), lr=cfg.learning_rate, fused=True)
+    networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
+    optimizer = torch.optim.Adam(networks.parameters(), lr=cfg.learning_rate, fused=True)
     settings, generator = update_settings(cfg), torch.Generator().manual_seed(0)
-    update(learner, optimizer, rollout, settings, generator)        # warm-up
+    update(networks, optimizer, rollout, settings, generator)        # warm-up
     with FlopCounterMode(display=False) as counter:
-        update(learner, optimizer, rollout, settings, generator)
+        update(networks, optimizer, rollout, settings, generator)
     flops = counter.get_total_flops()
     runs = []
     for _ in range(args.repeat):
         started, wall = time.process_time(), time.perf_counter()
-        update(learner, optimizer, rollout, settings, generator)
+        update(networks, optimizer, rollout, settings, generator)
         runs.append((time.process_time() - started, time.perf_counter() - wall))
     n = args.gemm
     a, b = torch.randn(n, n), torch.randn(n, n)

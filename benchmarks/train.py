@@ -56,81 +56,74 @@ def _config(name: str, args: Any):
 
 
 def _measure_sync(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
-    from dynenv_ros.learning.algorithms import update
+    from dynenv_ros.learning.algo.loop import learn_from
     from dynenv_ros.learning.trainer import Trainer
     with tempfile.TemporaryDirectory() as run_dir:
         trainer = Trainer(cfg, run_dir, progress=False)
+        source = trainer.source
         per_update = cfg.num_envs * cfg.rollout_length
         split = {"rollout": 0.0, "forward_backward": 0.0, "optimizer": 0.0, "other": 0.0}
-        workers = _vector_worker_pids(trainer.env)
+        workers = _vector_worker_pids(source.env)
         for k in range(args.warmup + updates):
             if k == args.warmup:
                 clock = Clock(workers)
                 start = clock.read()
             t0 = time.perf_counter()
-            trainer.learner.eval()
-            rollout = trainer.collector.collect(cfg.rollout_length)
+            experience = source.next(trainer.progress, math.inf)
             t1 = time.perf_counter()
-            trainer.learner.train()
-            stats = update(trainer.learner, trainer.optimizer, rollout.as_tensors(trainer.device),
-                           trainer.settings, trainer.generator)
+            stats = learn_from(experience, trainer.learn, trainer.progress, source)
             t2 = time.perf_counter()
             if k >= args.warmup:
                 split["rollout"] += t1 - t0
                 _learner_split(split, stats, t2 - t1)
         span = clock.read() - start
         wall, cpu = span.wall_s, span.cpu_s
-        trainer.env.close()
+        trainer.close()
     steps = updates * per_update
     return {"runner": "sync", "algorithm": cfg.algorithm, "variant": cfg.variant, "num_envs": cfg.num_envs,
             "players_per_team": cfg.players_per_team, "rollout_length": cfg.rollout_length,
-            "robots_learning": cfg.num_envs * len(trainer.collector.learning_robots), "processes": 1 + len(workers),
+            "robots_learning": cfg.num_envs * len(source.collector.learning_robots), "processes": 1 + len(workers),
             "env_steps_per_s": steps / wall, "env_steps_per_cpu_s": steps / cpu, "cpu_s": cpu, "wall_s": wall,
             **{f"ms_per_update_{k}": 1000 * v / updates for k, v in split.items()},
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
 def _measure_async(cfg: Any, args: Any, updates: int) -> dict[str, Any]:
-    from dynenv_ros.learning.algorithms import update
-    from dynenv_ros.learning.async_trainer import AsyncTrainer
+    from dynenv_ros.learning.algo.loop import learn_from
+    from dynenv_ros.learning.trainer import Trainer
     with tempfile.TemporaryDirectory() as run_dir:
-        trainer = AsyncTrainer(cfg, run_dir, progress=False, log=lambda line: None)
+        trainer = Trainer(cfg, run_dir, progress=False, log=lambda line: None)
+        source = trainer.source
         try:
-            trainer._started, trainer._pending = time.perf_counter(), []
             split = {"wait": 0.0, "forward_backward": 0.0, "optimizer": 0.0, "other": 0.0}
             lags: list[float] = []
             steps = 0
             for k in range(args.warmup + updates):
                 if k == args.warmup:
-                    workers = trainer.pool.pids() if hasattr(trainer.pool, "pids") else []
+                    workers = source.pool.pids() if hasattr(source.pool, "pids") else []
                     clock = Clock(workers)
                     start = clock.read()
                 t0 = time.perf_counter()
-                batch = trainer._experience(math.inf)
+                experience = source.next(trainer.progress, math.inf)
                 t1 = time.perf_counter()
-                trainer.learner.train()
-                stats = update(trainer.learner, trainer.optimizer, batch.rollout.as_tensors(trainer.device),
-                               trainer.settings, trainer.generator)
+                stats = learn_from(experience, trainer.learn, trainer.progress, source)
                 t2 = time.perf_counter()
-                trainer.env_steps += batch.env_steps
-                trainer.updates += 1
-                trainer._learned(batch)
                 if k >= args.warmup:
-                    steps += batch.env_steps
-                    lags.append(batch.scalars["async/policy_lag"])
+                    steps += experience.env_steps
+                    lags.append(experience.scalars["async/policy_lag"])
                     split["wait"] += t1 - t0
                     _learner_split(split, stats, t2 - t1)
             span = clock.read() - start
             wall, cpu = span.wall_s, span.cpu_s
-            robots = batch.rollout.robots
+            robots = experience.batch["actions"].shape[1]
         finally:
-            trainer._stop_rollouts()
+            trainer.close()
     return {"runner": "async", "algorithm": cfg.algorithm, "variant": cfg.variant, "num_envs": cfg.num_envs,
             "players_per_team": cfg.players_per_team, "rollout_length": cfg.rollout_length,
             "robots_learning": robots, "processes": 1 + len(workers), "workers": len(workers),
             "env_steps_per_s": steps / wall, "env_steps_per_cpu_s": steps / cpu, "cpu_s": cpu, "wall_s": wall,
             "policy_lag_mean": statistics.fmean(lags),
-            "dropped_rollouts": trainer.dropped,
+            "dropped_rollouts": source.dropped,
             **{f"ms_per_update_{k}": 1000 * v / updates for k, v in split.items()},
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, head_outputs, imitation_loss, run_sequence
+from dynenv_ros.learning.algo.auxiliary import imitation_loss
+from dynenv_ros.learning.algo.ppo import UpdateSettings, minibatch_loss
+from dynenv_ros.learning.algo.policy import head_outputs, run_sequence
 
 
 def imitation_settings(**on) -> UpdateSettings:
@@ -16,39 +18,39 @@ def imitation_settings(**on) -> UpdateSettings:
     return UpdateSettings(**base)
 
 
-def imitation_update_loss(learner, tensors, coef: float = 1.0) -> torch.Tensor:
+def imitation_update_loss(networks, tensors, coef: float = 1.0) -> torch.Tensor:
     """The update's minibatch loss over every row of a rollout with only the imitation term (weight ``coef``)."""
     T, B = tensors["actions"].shape[:2]
     zeros = torch.zeros(T, B)
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), zeros, zeros, imitation_settings(imitation_coef=coef),
+    loss, _ = minibatch_loss(networks, tensors, torch.arange(B), zeros, zeros, imitation_settings(imitation_coef=coef),
                               lambda *a: None)
     return loss
 
 
-def touched_by_imitation(learner, tensors) -> set[str]:
+def touched_by_imitation(networks, tensors) -> set[str]:
     """Names of the parameters the imitation loss gives a non-zero gradient."""
-    learner.zero_grad(set_to_none=True)
-    imitation_update_loss(learner, tensors).backward()
-    return {n for n, p in learner.named_parameters() if p.grad is not None and p.grad.abs().sum() > 0}
+    networks.zero_grad(set_to_none=True)
+    imitation_update_loss(networks, tensors).backward()
+    return {n for n, p in networks.named_parameters() if p.grad is not None and p.grad.abs().sum() > 0}
 
 
-def imitate(learner, tensors, updates: int, lr: float = 3e-3) -> None:
+def imitate(networks, tensors, updates: int, lr: float = 3e-3) -> None:
     """``updates`` Adam steps on the imitation loss alone."""
-    optimizer = torch.optim.Adam(learner.parameters(), lr=lr)
+    optimizer = torch.optim.Adam(networks.parameters(), lr=lr)
     for _ in range(updates):
-        loss = imitation_update_loss(learner, tensors)
+        loss = imitation_update_loss(networks, tensors)
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
 
 
-def imitation_measures(learner, tensors) -> tuple[float, dict[str, float]]:
+def imitation_measures(networks, tensors) -> tuple[float, dict[str, float]]:
     """The imitation loss of the policy now over every step of the rollout, and its agreement measures."""
     T, B = tensors["actions"].shape[:2]
     with torch.no_grad():
-        out = run_sequence(learner.agent, tensors["obs"], tensors["initial_state"], tensors["starts"])
+        out = run_sequence(networks.agent, tensors["obs"], tensors["initial_state"], tensors["starts"])
         acting = torch.ones(T, B, dtype=torch.bool)
-        loss, agree = imitation_loss(learner.agent, head_outputs(out, steps=T), tensors["teacher_actions"], acting)
+        loss, agree = imitation_loss(networks.agent, head_outputs(out, steps=T), tensors["teacher_actions"], acting)
     return float(loss), {k: float(v) for k, v in agree.items()}
 
 

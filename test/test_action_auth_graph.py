@@ -147,7 +147,7 @@ def test_forged_and_replayed_messages_leave_learning_going_on_genuine_experience
     attacker = _attacker(secrets, 150)
     counts = trainer.assembler.counts
     try:
-        assert spin_until(executor, lambda: trainer.learner.updates >= 5 and counts["action_mac_invalid"] >= 20
+        assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 5 and counts["action_mac_invalid"] >= 20
                           and counts["action_mac_missing"] >= 5 and counts["feedback_mac_missing"] >= 5
                           and counts["feedback_mac_invalid"] >= 5, 200.0), trainer.diagnostics()
         spin_until(executor, lambda: False, 1.5)
@@ -162,10 +162,10 @@ def test_forged_and_replayed_messages_leave_learning_going_on_genuine_experience
     assert learnt and all(FORGED_LOG_PROB not in s.log_probs.tolist() for s in learnt)
     assert all(FORGED_REWARD not in s.reward_terms[:, 0].tolist() for s in learnt)
     assert int(diagnostics.get("nonfinite_loss_skipped", 0)) == 0, diagnostics
-    for name, tensor in trainer.learner.agent.state_dict().items():
+    for name, tensor in trainer.message_trainer.agent.state_dict().items():
         assert bool(torch.isfinite(tensor).all()), name
-    stats = [v for v in trainer.learner.last_stats.values() if isinstance(v, float)]
-    assert all(torch.isfinite(torch.tensor(stats))), trainer.learner.last_stats
+    stats = [v for v in trainer.message_trainer.last_stats.values() if isinstance(v, float)]
+    assert all(torch.isfinite(torch.tensor(stats))), trainer.message_trainer.last_stats
     lines = [line for line in watcher.refusal_lines if line.startswith("trainer_node")]
     assert lines and "action_mac_invalid" in " ".join(lines), (lines[-3:], output)
     trainer.destroy_node()                           # the policy file is loadable, so finite

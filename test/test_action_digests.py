@@ -1,6 +1,6 @@
 """Issue 27 items 2 and 3, in process and as the attacker: the trainer learns the action the simulator ran — the one
 ``StepFeedback.action_digest`` names — whatever forged rivals reached it first, refuses messages far ahead of the
-game, and with secrets refuses actions and feedback without a valid MAC (``learning.experience``)."""
+game, and with secrets refuses actions and feedback without a valid MAC (``learning.messages.assembly``)."""
 from __future__ import annotations
 
 import copy
@@ -8,8 +8,8 @@ import copy
 import numpy as np
 import pytest
 
-from dynenv_ros.learning.experience import MAX_CANDIDATES, ExperienceAssembler
-from dynenv_ros.learning.experience_scenarios import SoccerExperience
+from dynenv_ros.learning.messages.assembly import MAX_CANDIDATES, ExperienceAssembler
+from dynenv_ros.learning.messages.scenarios import SoccerExperience
 from dynenv_ros.security import action_auth as auth
 from experience_game import HEAD_MAX, HEAD_UNITS, play
 

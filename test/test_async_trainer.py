@@ -18,15 +18,16 @@ import numpy as np
 import pytest
 import torch
 
-from dynenv_ros.learning.agents import make_agent
+from dynenv_ros.learning.algo.networks import make_agent
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout_transfer import AttachedSlots, RolloutSlots, flatten, join, spec_of, unflatten
-from dynenv_ros.learning.rollout_worker import RolloutWorker, shard_sizes
-from dynenv_ros.learning.shared_weights import AttachedWeights, SharedWeights, pack, unpack
+from dynenv_ros.learning.algo.networks import TrainingNetworks
+from dynenv_ros.learning.distributed.rollout_transfer import (AttachedSlots, RolloutSlots, flatten, join, spec_of,
+                                                              unflatten)
+from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, shard_sizes
+from dynenv_ros.learning.distributed.shared_weights import AttachedWeights, SharedWeights, pack, unpack
 from dynenv_ros.learning.train_cli import main
-from dynenv_ros.learning.runners import make_trainer
-from dynenv_ros.learning.worker_pool import ProcessPool, WorkerPoolError
+from dynenv_ros.learning.trainer import Trainer
+from dynenv_ros.learning.distributed.worker_pool import ProcessPool, WorkerPoolError
 
 ROOT = Path(__file__).resolve().parent.parent
 # 1v1 on a small budget: two learning robots per world in self-play, ground-truth perception, no curiosity
@@ -70,8 +71,8 @@ def test_shards_split_the_worlds_evenly_larger_first():
 
 
 # -- what travels ----------------------------------------------------------------------------------------------------
-def _weights_state(learner: torch.nn.Module) -> dict[str, torch.Tensor]:
-    return {k: v.clone() for k, v in learner.state_dict().items()}
+def _weights_state(networks: torch.nn.Module) -> dict[str, torch.Tensor]:
+    return {k: v.clone() for k, v in networks.state_dict().items()}
 
 
 def test_a_rollout_survives_flattening_joining_and_a_slot_of_shared_memory():
@@ -108,9 +109,9 @@ def test_a_rollout_survives_flattening_joining_and_a_slot_of_shared_memory():
 def test_weights_reach_a_reader_whole_and_only_when_newer():
     cfg = small()
     torch.manual_seed(1)
-    source = Learner(make_agent(cfg), cfg.ltp_horizon)
+    source = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
     torch.manual_seed(2)
-    target = Learner(make_agent(cfg), cfg.ltp_horizon)
+    target = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
     shared = SharedWeights(source)
     reader = AttachedWeights(shared.names(), target)
     try:
@@ -151,10 +152,10 @@ def test_a_worker_process_delivers_what_the_same_worker_makes_in_process():
     bit-identical, so nothing is lost or reordered on the way."""
     cfg = small(runner="async", workers=1, use_localization=True)
     torch.manual_seed(0)
-    learner = Learner(make_agent(cfg), cfg.ltp_horizon)
-    pool = ProcessPool(cfg, learner, workers=1, first_update=0, log=lambda line: None)
+    networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
+    pool = ProcessPool(cfg, networks, workers=1, first_update=0, log=lambda line: None)
     here = _worker(cfg)
-    unpack(pack(learner)[0], here.learner)
+    unpack(pack(networks)[0], here.networks)
     here.adopt(0)
     try:
         for _ in range(3):
@@ -174,9 +175,9 @@ def test_a_worker_process_delivers_what_the_same_worker_makes_in_process():
 
 def test_a_killed_worker_is_counted_and_replaced_then_the_run_stops_cleanly_when_none_is_left(tmp_path):
     cfg = small(runner="async", workers=1, worker_restarts=1)
-    learner = Learner(make_agent(cfg), cfg.ltp_horizon)
+    networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
     lines: list[str] = []
-    pool = ProcessPool(cfg, learner, workers=1, first_update=0, log=lines.append)
+    pool = ProcessPool(cfg, networks, workers=1, first_update=0, log=lines.append)
     try:
         first = pool.get(timeout=120)
         assert first is not None
@@ -203,8 +204,8 @@ def test_a_killed_worker_is_counted_and_replaced_then_the_run_stops_cleanly_when
 def test_a_worker_that_fails_stops_the_run_with_its_reason(tmp_path):
     cfg = small(runner="async", workers=1)
     # the learner's networks are narrower than the ones the worker builds from the config: its weights do not fit
-    learner = Learner(make_agent(small(feature_size=8)), cfg.ltp_horizon)
-    pool = ProcessPool(cfg, learner, workers=1, first_update=0, log=lambda line: None)
+    networks = TrainingNetworks(make_agent(small(feature_size=8)), cfg.ltp_horizon)
+    pool = ProcessPool(cfg, networks, workers=1, first_update=0, log=lambda line: None)
     try:
         with pytest.raises(WorkerPoolError, match="rollout worker 0 failed: ValueError: shared weights hold"):
             pool.get(timeout=120)
@@ -223,7 +224,7 @@ def _metrics(run_dir: Path) -> dict[str, list[float]]:
 
 def test_an_async_run_learns_within_its_lag_bound_and_writes_a_whole_run_directory(tmp_path):
     cfg = small(runner="async", workers=1, total_env_steps=64, max_policy_lag=1, num_envs=2)
-    summary = make_trainer(cfg, tmp_path / "run", progress=False).run()
+    summary = Trainer(cfg, tmp_path / "run", progress=False).run()
     assert summary["env_steps"] >= 64 and summary["runner"] == "async" and summary["worker_deaths"] == 0
     metrics = _metrics(tmp_path / "run")
     assert max(metrics["async/policy_lag_max"]) <= 1
@@ -297,12 +298,12 @@ WALK_CHOICES = 5
 def _walks_forward(policy: Path, seed: int) -> tuple[float, np.ndarray]:
     """Share of the trained policy's sampled walks that go forward, and the approach reward per robot-period, over
     four rollouts of fresh worlds."""
-    from dynenv_ros.learning import checkpoints
-    from dynenv_ros.learning.worlds import make_worlds
+    from dynenv_ros.learning.run import checkpoints
+    from dynenv_ros.learning.sampling.worlds import make_worlds
     cfg = TrainConfig(**TINY_TASK)
     agent, _ = checkpoints.load_policy(str(policy))
-    learner = Learner(agent, cfg.ltp_horizon)
-    worlds = make_worlds(cfg, learner, cfg.num_envs, "inprocess", torch.Generator().manual_seed(seed),
+    networks = TrainingNetworks(agent, cfg.ltp_horizon)
+    worlds = make_worlds(cfg, networks, cfg.num_envs, "inprocess", torch.Generator().manual_seed(seed),
                          np.random.default_rng(seed), seed=seed)
     try:
         rollouts = [worlds.collector.collect(10) for _ in range(4)]
@@ -313,11 +314,11 @@ def _walks_forward(policy: Path, seed: int) -> tuple[float, np.ndarray]:
 
 
 def _untrained_forward_share(seed: int) -> tuple[float, int]:
-    from dynenv_ros.learning.worlds import make_worlds
+    from dynenv_ros.learning.sampling.worlds import make_worlds
     cfg = TrainConfig(**TINY_TASK)
     torch.manual_seed(seed)
-    learner = Learner(make_agent(cfg), cfg.ltp_horizon)
-    worlds = make_worlds(cfg, learner, cfg.num_envs, "inprocess", torch.Generator().manual_seed(seed),
+    networks = TrainingNetworks(make_agent(cfg), cfg.ltp_horizon)
+    worlds = make_worlds(cfg, networks, cfg.num_envs, "inprocess", torch.Generator().manual_seed(seed),
                          np.random.default_rng(seed), seed=seed)
     try:
         actions = np.concatenate([worlds.collector.collect(10).actions[..., 0].ravel() for _ in range(4)])
@@ -338,7 +339,7 @@ def test_the_tiny_task_is_learnt_asynchronously_as_in_process_at_equal_env_steps
     for runner in ("sync", "async"):
         extra = {"backend": "inprocess"} if runner == "sync" else {"workers": 1}
         cfg = TrainConfig(**{**TINY_TASK, "runner": runner, "seed": seed, **extra})
-        summary = make_trainer(cfg, tmp_path / runner, progress=False).run()
+        summary = Trainer(cfg, tmp_path / runner, progress=False).run()
         assert summary["env_steps"] >= 640
         forward, _ = _walks_forward(tmp_path / runner / "policy.safetensors", seed=11)
         assert forward > 0.8, (runner, forward)
@@ -378,7 +379,7 @@ def test_every_kind_of_run_trains_asynchronously(tmp_path, changes, logged):
     with privileged seeding (the worker acts with the learner's seeder), several epochs, driving in both action
     modes: each runs through the workers and learns finite losses."""
     cfg = small(runner="async", workers=1, total_env_steps=24, **changes)
-    summary = make_trainer(cfg, tmp_path / "run", progress=False).run()
+    summary = Trainer(cfg, tmp_path / "run", progress=False).run()
     assert summary["env_steps"] >= 24 and summary["worker_deaths"] == 0 and "stop_reason" not in summary
     metrics = _metrics(tmp_path / "run")
     assert metrics[logged] and all(np.isfinite(v) for v in metrics[logged])

@@ -9,8 +9,8 @@ import math
 import pytest
 
 from dynenv_ros.evaluation.training_statistic import training_statistic
-from dynenv_ros.learning import checkpoints
-from dynenv_ros.learning.best_policy import BEST_POLICY, BestPolicy
+from dynenv_ros.learning.run import checkpoints
+from dynenv_ros.learning.run.best_policy import BEST_POLICY, BestPolicy
 from dynenv_ros.learning.config import ConfigError, TrainConfig
 from dynenv_ros.learning.train_cli import main
 
@@ -33,9 +33,9 @@ def test_the_window_is_checked_with_the_config():
     with pytest.raises(ConfigError, match="best_policy_window: must be in 1..100000, got 0"):
         TrainConfig(best_policy_window=0)
     assert TrainConfig().best_policy_window is None          # off by default: only the last policy
-    from dynenv_ros.learning.sequence_learner import SequenceLearner
+    from dynenv_ros.learning.messages.message_trainer import MessageTrainer
     with pytest.raises(ConfigError, match="best_policy_window: .*the trainer node and --from-bag do not"):
-        SequenceLearner(TrainConfig(algorithm="ppo", best_policy_window=10), "unused-run-dir")
+        MessageTrainer(TrainConfig(algorithm="ppo", best_policy_window=10), "unused-run-dir")
 
 
 def test_a_run_keeps_the_policy_where_training_best_finds_the_peak_and_a_resume_goes_on(tmp_path):
@@ -63,7 +63,7 @@ def test_a_run_keeps_the_policy_where_training_best_finds_the_peak_and_a_resume_
 def test_a_damaged_or_foreign_kept_file_does_not_stop_a_resume(tmp_path):
     """A kept file cut short by a full disk, or kept over another window, is not a peak to beat: the resumed run
     tracks from scratch and replaces it at its next peak (the training checkpoint, not this file, is what resumes)."""
-    from dynenv_ros.learning.best_policy import kept_average
+    from dynenv_ros.learning.run.best_policy import kept_average
     path = tmp_path / BEST_POLICY
     path.write_bytes(b"\x10\x00\x00\x00\x00\x00\x00\x00{not json")
     assert BestPolicy.resume(tmp_path, 3, 0).best == -math.inf and kept_average(path, 3) == -math.inf

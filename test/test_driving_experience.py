@@ -1,4 +1,4 @@
-"""Experience assembled from a driving game's messages (learning/experience.py with the driving scenario): each
+"""Experience assembled from a driving game's messages (learning/messages/assembly.py with the driving scenario): each
 car's steps hold the action its agent chose (discrete indices, or the normalised continuous command on its bounds),
 the behaviour log-probability, value, reward and the car's own episode end; nothing of a car's periods after its own
 end is learnt; disorder changes nothing; late, duplicate, lost and malformed messages are counted."""
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from dynenv_ros.driving.config import DrivingConfig
-from dynenv_ros.learning.experience import ExperienceAssembler
-from dynenv_ros.learning.experience_scenarios import DrivingExperience
+from dynenv_ros.learning.messages.assembly import ExperienceAssembler
+from dynenv_ros.learning.messages.scenarios import DrivingExperience
 from experience_game import W, play_driving, shuffled_in_windows
 from test_experience import _feed
 

@@ -10,7 +10,7 @@ from rclpy.parameter import Parameter
 
 from dynenv_ros.agent.checkpoint import load_policy
 from dynenv_ros.bags.inspect import open_bag
-from dynenv_ros.learning.from_bag import bag_layout, bag_scenario, bag_sequences
+from dynenv_ros.learning.messages.bags import bag_layout, bag_scenario, bag_sequences
 from dynenv_ros.learning.train_cli import main as train_main
 from experience_game import W
 from ros_harness import spin_until

@@ -13,8 +13,8 @@ from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.driving.world import DrivingWorld
 from dynenv_ros.envs.vector import DrivingVectorEnv, _seeds
 from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.networks import TrainingNetworks
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from imitation_helpers import follow_labels, imitate, imitation_measures, touched_by_imitation
 
 # docs/driving.md: the steering limit is 2° per 100 ms (0.349 rad/s); a continuous label's steering is the command / it
@@ -81,12 +81,12 @@ def _setup(mode, seed=1):
                            config={"n_cars": 2, "action_mode": mode})
     agent = DynEnvAgent(16, scenario="driving", action_mode=mode)
     collector = RolloutCollector(env, agent, np.arange(2), None, torch.Generator().manual_seed(seed), seed=seed)
-    return env, Learner(agent, horizon=2), collector
+    return env, TrainingNetworks(agent, horizon=2), collector
 
 
 @pytest.mark.parametrize("mode", ["discrete", "continuous"])
 def test_the_labels_are_stored_and_imitation_alone_brings_the_policy_to_the_driver(mode):
-    env, learner, collector = _setup(mode)
+    env, networks, collector = _setup(mode)
     first = env.teacher_actions
     try:
         rollout = collector.collect(12)
@@ -96,11 +96,11 @@ def test_the_labels_are_stored_and_imitation_alone_brings_the_policy_to_the_driv
     assert rollout.teacher_actions.shape == (12, 4, width)
     np.testing.assert_array_equal(rollout.teacher_actions[0], first.reshape(4, width))
     tensors = rollout.as_tensors()
-    touched = touched_by_imitation(learner, tensors)
+    touched = touched_by_imitation(networks, tensors)
     assert not any(n.startswith("agent.critic") for n in touched) and touched
-    loss0, agree0 = imitation_measures(learner, tensors)
-    imitate(learner, tensors, 80)
-    loss1, agree1 = imitation_measures(learner, tensors)
+    loss0, agree0 = imitation_measures(networks, tensors)
+    imitate(networks, tensors, 80)
+    loss1, agree1 = imitation_measures(networks, tensors)
     assert loss1 < loss0 - 0.5
     if mode == "discrete":          # an untrained policy picks the driver's row of 3 x 3 by chance: ~1/9 of the time
         assert agree0["teacher_agreement"] < 0.5 and agree1["teacher_agreement"] > 0.9

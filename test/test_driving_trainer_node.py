@@ -48,17 +48,17 @@ def test_the_trainer_rebuilds_what_the_driving_policy_saw_and_chose(make_node, e
     recurrent state and actions (indices, or normalised commands — those on a bound scored as the mass beyond it)
     mean what the policy saw."""
     trainer, sim, policy = _driving_graph(make_node, executor, tmp_path, action_mode, learning_rate=1e-7)
-    for group in trainer.learner.optimizer.param_groups:
+    for group in trainer.message_trainer.optimizer.param_groups:
         group["lr"] = 0.0
-    assert spin_until(executor, lambda: trainer.learner.updates >= 3
-                      and "behaviour_log_prob_error" in trainer.learner.last_stats, 120.0), trainer.diagnostics()
-    stats = trainer.learner.last_stats
+    assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 3
+                      and "behaviour_log_prob_error" in trainer.message_trainer.last_stats, 120.0), trainer.diagnostics()
+    stats = trainer.message_trainer.last_stats
     assert stats["behaviour_log_prob_error"] < 1e-3, stats
     counts = trainer.assembler.counts
     assert counts["missing"] == 0 and counts["malformed"] == 0 and counts["late"] == 0, counts
     assert counts["actions_rounded"] == 0, counts
     assert trainer.readers.games == {""} and {r for _, r in trainer.readers.robots} == {"car_0", "car_1"}
-    assert trainer.learner.agent.scenario == "driving" and not trainer.background.error
+    assert trainer.message_trainer.agent.scenario == "driving" and not trainer.background.error
 
 
 def test_driving_weights_flow_back_and_the_policy_drives_with_new_versions(make_node, executor, tmp_path):
@@ -74,7 +74,7 @@ def test_driving_weights_flow_back_and_the_policy_drives_with_new_versions(make_
     assert spin_until(executor, lambda: other.counts["weights_refused"] >= 1, 10.0), other.counts
     assert "continuous driving policy" in other.weights_refusal and other.policy_version == 0
     assert other.counts["weights_refused_wrong_network"] >= 1          # refused before anything was fetched
-    assert trainer.learner.agent.action_mode == "continuous" and trainer.learner.last_stats["lag_versions_max"] <= 2
+    assert trainer.message_trainer.agent.action_mode == "continuous" and trainer.message_trainer.last_stats["lag_versions_max"] <= 2
     periods = sim.periods_run
     assert spin_until(executor, lambda: sim.periods_run >= periods + 5, 30.0)     # still driving on new weights
     assert not any(k.startswith("rejected") and v for k, v in sim.session.counts.items()), dict(sim.session.counts)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from dynenv_ros.agent.checkpoint import save_checkpoint
+from dynenv_ros.agent.checkpoint import save_policy
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.robocup_v0 import parallel_env
 from dynenv_ros.evaluation.best import seed_values
@@ -238,7 +238,7 @@ def test_cli_bad_arguments_exit_2_with_one_line(argv, tmp_path, capsys):
 
 def test_cli_checkpoint_against_itself_and_random_baseline(tmp_path, capsys):
     policy = tmp_path / "agent.safetensors"
-    save_checkpoint(untrained_agent(), policy)
+    save_policy(untrained_agent(), policy)
     out = tmp_path / "agent.json"
     assert main([str(policy), "--opponent", str(policy), "--episodes", "2", "--seeds", "0", "--episode-seconds",
                  "3", "--players-per-team", "1", "--out", str(out), "--quiet", "--greedy"]) == 0

@@ -1,4 +1,4 @@
-"""Experience assembled from messages (learning/experience.py) is the game that was played: every step's action,
+"""Experience assembled from messages (learning/messages/assembly.py) is the game that was played: every step's action,
 behaviour log-probability, value, reward, episode end and bootstrap value are those sent and received, in order;
 disorder, duplicates, losses and hostile messages are counted and never crash it."""
 from __future__ import annotations
@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from dynenv_ros.learning.experience import ExperienceAssembler, batch
-from dynenv_ros.learning.experience_scenarios import SoccerExperience
+from dynenv_ros.learning.messages.assembly import ExperienceAssembler, batch
+from dynenv_ros.learning.messages.scenarios import SoccerExperience
 from experience_game import HEAD_MAX, HEAD_UNITS, play, shuffled_in_windows
 
 T = 4

@@ -89,7 +89,7 @@ def test_no_forged_frame_reaches_the_policys_decisions_or_the_trainers_experienc
     attacker = _attacker(secrets, 150)
     gate, learner_gate = policy.frame_gate.gate, trainer.readers.frame_gate.gate
     try:
-        assert spin_until(executor, lambda: trainer.learner.updates >= 3 and gate.counts["frame_replayed"] >= 5
+        assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 3 and gate.counts["frame_replayed"] >= 5
                           and gate.counts["frame_mac_missing"] >= 30 and learner_gate.counts["frame_mac_missing"]
                           >= 30 and sim.periods_run >= 20, 200.0), \
             (policy.diagnostics(), trainer.diagnostics())
@@ -106,7 +106,7 @@ def test_no_forged_frame_reaches_the_policys_decisions_or_the_trainers_experienc
     # 0 forged frames reached the policy's decisions or the trainer's experience; the game and learning went on
     assert acted_on and learnt and _forged(acted_on) == 0 and _forged(learnt) == 0, output
     assert sim.session.counts["missing"] == 0 and int(policy.diagnostics()["decisions"]) >= 20
-    assert not trainer.background.error and trainer.learner.updates >= 3
+    assert not trainer.background.error and trainer.message_trainer.progress.updates >= 3
     # every world state the simulator published carries a tag that verifies (the bystander takes one message per
     # wake-up of the executor the nodes share, so it may still be catching up)
     assert spin_until(executor, lambda: len(world_states) >= 100, 60.0), len(world_states)

@@ -11,7 +11,7 @@ import pytest
 from dynenv_ros.agent.checkpoint import load_policy
 from dynenv_ros.bags.inspect import open_bag
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.from_bag import bag_layout, bag_sequences, train_from_bags
+from dynenv_ros.learning.messages.bags import bag_layout, bag_sequences, train_from_bags
 from dynenv_ros.learning.train_cli import main as train_main
 
 SAMPLE = Path(__file__).resolve().parent.parent / "bags" / "sample_2v2_realistic_30s"

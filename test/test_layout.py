@@ -40,8 +40,8 @@ def test_the_light_packages_load_neither_ros_nor_torch():
 
 @pytest.mark.ros   # its probe process imports the nodes, which load rclpy
 def test_the_trainer_and_the_ros_graph_import_without_ray():
-    probe = ("import sys\nimport dynenv_ros.learning.trainer, dynenv_ros.learning.async_trainer, "
-             "dynenv_ros.learning.runners, dynenv_ros.learning.train_cli, dynenv_ros.nodes.trainer_node, "
+    probe = ("import sys\nimport dynenv_ros.learning.trainer, dynenv_ros.learning.distributed.pool_source, "
+             "dynenv_ros.learning.train_cli, dynenv_ros.nodes.trainer_node, "
              "dynenv_ros.nodes.sim_node\n"
              "print(sorted(m for m in sys.modules if m.split('.')[0] == 'ray'))")
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)

@@ -8,7 +8,7 @@ import pytest
 from dynenv_ros.envs.league import LEAGUE_MEMBERS, League, pfsp_weights
 from dynenv_ros.envs.vector import SoccerVectorEnv
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.runners import make_trainer
+from dynenv_ros.learning.trainer import Trainer
 from dynenv_ros.soccer.scripted import team_policies
 
 
@@ -94,7 +94,7 @@ SMALL = {"algorithm": "ppo", "variant": "baseline", "players_per_team": 1, "num_
 def test_a_run_against_the_league_trains_and_logs_the_members(tmp_path, runner):
     extra = {"backend": "inprocess"} if runner == "sync" else {"runner": "async", "workers": 1}
     cfg = TrainConfig(**{**SMALL, **extra, "total_env_steps": 48})
-    summary = make_trainer(cfg, tmp_path, progress=False).run()
+    summary = Trainer(cfg, tmp_path, progress=False).run()
     assert summary["env_steps"] >= 48
     logged = (tmp_path / "metrics.csv").read_text()
     for member in LEAGUE_MEMBERS:
@@ -103,7 +103,7 @@ def test_a_run_against_the_league_trains_and_logs_the_members(tmp_path, runner):
 
 def test_team_sizes_give_each_worker_its_size_with_one_layout(tmp_path):
     from dynenv_ros.envs.padded_layout import EXTRA_OBJECT_SLOTS
-    from dynenv_ros.learning.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
+    from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
     cfg = TrainConfig(**{**SMALL, "runner": "async", "opponent": "perceiving", "players_per_team": 1,
                          "team_sizes": [1, 3], "workers": 2, "num_envs": 2})
     shapes = []
@@ -134,5 +134,5 @@ def test_team_sizes_need_the_async_runner_a_worker_each_and_players_per_team_amo
 
 def test_a_run_over_two_team_sizes_trains(tmp_path):
     cfg = TrainConfig(**{**SMALL, "runner": "async", "team_sizes": [1, 2], "workers": 2, "total_env_steps": 48})
-    summary = make_trainer(cfg, tmp_path, progress=False).run()
+    summary = Trainer(cfg, tmp_path, progress=False).run()
     assert summary["env_steps"] >= 48 and summary["worker_deaths"] == 0

@@ -7,7 +7,7 @@ docs/benchmarks.md records the GPU run that checks them.)"""
 import pytest
 import torch
 
-from dynenv_ros.learning.algorithms import update
+from dynenv_ros.learning.algo.ppo import update
 from dynenv_ros.learning.config import load_config
 from dynenv_ros.learning.train_cli import preset_path
 from dynenv_ros.learning.trainer import Trainer
@@ -27,15 +27,15 @@ def test_acting_and_an_update_make_no_tensor_on_the_default_device(tmp_path, pre
                                             *overrides])
     trainer = Trainer(cfg, tmp_path / "run", progress=False)
     try:
-        before = [p.detach().clone() for p in trainer.learner.parameters()]
+        before = [p.detach().clone() for p in trainer.networks.parameters()]
         with torch.device("meta"):
-            trainer.learner.eval()
-            rollout = trainer.collector.collect(cfg.rollout_length)
-            trainer.learner.train()
-            stats = update(trainer.learner, trainer.optimizer, rollout.as_tensors(trainer.device),
+            trainer.networks.eval()
+            rollout = trainer.source.collector.collect(cfg.rollout_length)
+            trainer.networks.train()
+            stats = update(trainer.networks, trainer.optimizer, rollout.as_tensors(trainer.device),
                            trainer.settings, trainer.generator)
-        assert all(p.device.type == "cpu" for p in trainer.learner.parameters())
-        changed = sum(not torch.equal(a, p.detach()) for a, p in zip(before, trainer.learner.parameters()))
+        assert all(p.device.type == "cpu" for p in trainer.networks.parameters())
+        changed = sum(not torch.equal(a, p.detach()) for a, p in zip(before, trainer.networks.parameters()))
         assert changed > 0 and all(torch.isfinite(torch.tensor(v)) for v in stats.values())
     finally:
-        trainer.env.close()
+        trainer.close()

@@ -3,7 +3,7 @@ with 0, a truncated end with the value of the episode's final observation."""
 import pytest
 import torch
 
-from dynenv_ros.learning.advantages import generalized_advantages
+from dynenv_ros.learning.algo.advantages import generalized_advantages
 
 
 def _col(values):

@@ -11,11 +11,11 @@ import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import BatchStep, DrivingVectorEnv
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, update
-from dynenv_ros.learning.advantages import generalized_advantages
+from dynenv_ros.learning.algo.ppo import UpdateSettings, minibatch_loss, update
+from dynenv_ros.learning.algo.advantages import generalized_advantages
 from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.networks import TrainingNetworks
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from dynenv_ros.sim.reward_terms import RewardTerm
 
 EMPTY_ROADS = {"pedestrians": {"count_min": 0, "count_max": 0}, "obstacles": {"count_min": 0, "count_max": 0}}
@@ -65,10 +65,10 @@ def _collector(mode="discrete", num_envs=2, n_cars=2, env=None, seed=0):
                                   config={"n_cars": n_cars, "action_mode": mode, **EMPTY_ROADS})
     torch.manual_seed(seed)
     agent = DynEnvAgent(16, scenario="driving", action_mode=mode)
-    learner = Learner(agent, horizon=2)
+    networks = TrainingNetworks(agent, horizon=2)
     collector = RolloutCollector(env, agent, np.arange(env.config.n_cars), None,
                                  torch.Generator().manual_seed(seed), seed=seed)
-    return env, learner, collector
+    return env, networks, collector
 
 
 @pytest.mark.parametrize("mode, width, dtype", [("discrete", 2, np.int64), ("continuous", 3, np.float32)])
@@ -122,7 +122,7 @@ class ScriptedEndings:
 
 
 def test_per_car_termination_terminated_truncated_and_dead_steps():
-    env, learner, collector = _collector(env=ScriptedEndings())
+    env, networks, collector = _collector(env=ScriptedEndings())
     try:
         rollout = collector.collect(8)
     finally:
@@ -152,15 +152,15 @@ def test_per_car_termination_terminated_truncated_and_dead_steps():
     assert [round(r["return"]) for r in collector.finished] == [3, 6]
 
 
-def _loss_and_grads(learner, tensors, settings):
+def _loss_and_grads(networks, tensors, settings):
     rows = torch.arange(tensors["actions"].shape[1])
     adv, ret = generalized_advantages(tensors["rewards"], tensors["values"], tensors["episode_end"],
                                       tensors["truncated"], tensors["final_values"], settings.gamma,
                                       settings.gae_lambda)
-    learner.zero_grad(set_to_none=True)
-    loss, _ = _minibatch_loss(learner, tensors, rows, adv, ret, settings, lambda *a: None)
+    networks.zero_grad(set_to_none=True)
+    loss, _ = minibatch_loss(networks, tensors, rows, adv, ret, settings, lambda *a: None)
     loss.backward()
-    return float(loss.detach()), {n: p.grad.clone() for n, p in learner.named_parameters() if p.grad is not None}
+    return float(loss.detach()), {n: p.grad.clone() for n, p in networks.named_parameters() if p.grad is not None}
 
 
 @pytest.mark.parametrize("mode", ["discrete", "continuous"])
@@ -173,7 +173,7 @@ def test_no_learning_sample_after_a_cars_end(mode):
         env.real = DrivingVectorEnv(1, backend="inprocess", perception="none",
                                     config={"n_cars": 2, "action_mode": mode, **EMPTY_ROADS})
         env.config = env.real.config
-    env, learner, collector = _collector(mode, env=env)
+    env, networks, collector = _collector(mode, env=env)
     try:
         rollout = collector.collect(8)
     finally:
@@ -181,7 +181,7 @@ def test_no_learning_sample_after_a_cars_end(mode):
     settings = UpdateSettings(algorithm="ppo", gae_lambda=0.95, use_forward=True, use_rcm=True, use_inverse=True,
                               use_ltp=True, normalize_advantages=True)
     tensors = rollout.as_tensors()
-    base_loss, base_grads = _loss_and_grads(learner, tensors, settings)
+    base_loss, base_grads = _loss_and_grads(networks, tensors, settings)
     dead = ~tensors["alive"]                       # (T+1, B)
     generator = torch.Generator().manual_seed(1)
     spoiled = dict(tensors)
@@ -193,7 +193,7 @@ def test_no_learning_sample_after_a_cars_end(mode):
     spoiled["log_probs"] = torch.where(step_dead, tensors["log_probs"] - 3.0, tensors["log_probs"])
     spoiled["rewards"] = torch.where(step_dead, tensors["rewards"] + 7.0, tensors["rewards"])
     spoiled["values"] = torch.where(dead, tensors["values"] + 5.0, tensors["values"])
-    loss, grads = _loss_and_grads(learner, spoiled, settings)
+    loss, grads = _loss_and_grads(networks, spoiled, settings)
     assert loss == pytest.approx(base_loss, rel=1e-5, abs=1e-6)
     for name in grads.keys() | base_grads.keys():     # a spoiled row may wake an embedding block: zero gradient
         grad, base = grads.get(name), base_grads.get(name)
@@ -204,7 +204,7 @@ def test_no_learning_sample_after_a_cars_end(mode):
 
 # -- gradients -------------------------------------------------------------------------------------------------------
 LOSSES = {
-    # loss switched on alone → parameters it must reach (prefixes of Learner.named_parameters)
+    # loss switched on alone → parameters it must reach (prefixes of TrainingNetworks.named_parameters)
     "policy": (dict(policy_coef=1.0), ("agent.acceleration_head.", "agent.command_head.", "agent.localization.",
                                        "agent.objects.")),
     "value": (dict(value_coef=1.0), ("agent.critic.", "agent.localization.", "agent.objects.")),
@@ -220,7 +220,7 @@ LOSSES = {
 @pytest.mark.parametrize("mode", ["discrete", "continuous"])
 @pytest.mark.parametrize("name", list(LOSSES))
 def test_each_driving_loss_reaches_its_parameters(mode, name):
-    env, learner, collector = _collector(mode, num_envs=1)
+    env, networks, collector = _collector(mode, num_envs=1)
     try:
         rollout = collector.collect(4)
     finally:
@@ -231,8 +231,8 @@ def test_each_driving_loss_reaches_its_parameters(mode, name):
     settings = UpdateSettings(algorithm="a2c", **{**off, **changes})
     tensors = rollout.as_tensors()
     tensors["rewards"] = torch.randn(tensors["rewards"].shape, generator=torch.Generator().manual_seed(0))
-    _, grads = _loss_and_grads(learner, tensors, settings)
-    names = dict(learner.named_parameters())
+    _, grads = _loss_and_grads(networks, tensors, settings)
+    names = dict(networks.named_parameters())
     for prefix in prefixes:
         owned = [n for n in names if n.startswith(prefix)]
         if not owned:             # the other action mode's head
@@ -260,7 +260,7 @@ def test_trainer_writes_a_driving_run(tmp_path, algorithm, mode, teacher):
     assert json.loads((run / "config.json").read_text())["scenario"] == "driving"
     agent, meta = load_policy(run / "policy.safetensors")
     assert agent.scenario == "driving" and agent.action_mode == mode
-    from dynenv_ros.learning.agents import policy_from_training_checkpoint
+    from dynenv_ros.learning.run.checkpoints import policy_from_training_checkpoint
     again, _ = policy_from_training_checkpoint(run)          # the final checkpoint holds the same policy
     assert again.scenario == "driving" and again.action_mode == mode
     for name, value in agent.state_dict().items():
@@ -301,17 +301,17 @@ def test_ppo_learns_to_drive_towards_the_destination_within_seconds():
                            config={"n_cars": 1, "episode_seconds": 5.0, **EMPTY_ROADS})
     torch.manual_seed(0)
     agent = DynEnvAgent(16, scenario="driving")
-    learner = Learner(agent, horizon=2)
+    networks = TrainingNetworks(agent, horizon=2)
     generator = torch.Generator().manual_seed(0)
     collector = RolloutCollector(env, agent, np.arange(1), None, generator, seed=0,
                                  reward_transform=lambda terms: terms[..., PROGRESS])
-    optimizer = torch.optim.Adam(learner.parameters(), lr=3e-3)
+    optimizer = torch.optim.Adam(networks.parameters(), lr=3e-3)
     settings = UpdateSettings(algorithm="ppo", gamma=0.95, gae_lambda=0.95, epochs=4, minibatches=2,
                               normalize_advantages=True, entropy_coef=0.0, use_forward=False, use_rcm=False,
                               use_inverse=False, use_ltp=False)
     try:
         for _ in range(30):
-            update(learner, optimizer, collector.collect(16).as_tensors(), settings, generator)
+            update(networks, optimizer, collector.collect(16).as_tensors(), settings, generator)
         collector.finished.clear()
         while len(collector.finished) < 16:
             collector.collect(16)
@@ -329,7 +329,7 @@ def test_ppo_learns_to_drive_towards_the_destination_within_seconds():
 def test_rcm_and_pred_train_the_attention_weighted_forward_model(variant, forward, rcm):
     """The RCM rows' forward loss is optimised (it was computed and dropped: use_forward came from the plain ICM
     switch only), in both scenarios."""
-    from dynenv_ros.learning.trainer import update_settings
+    from dynenv_ros.learning.algo.ppo import update_settings
     for scenario in ("robocup", "driving"):
         settings = update_settings(TrainConfig(scenario=scenario, variant=variant))
         assert (settings.use_forward, settings.use_rcm) == (forward, rcm)

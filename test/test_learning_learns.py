@@ -7,9 +7,9 @@ import torch
 
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.vector import SoccerVectorEnv
-from dynenv_ros.learning.algorithms import UpdateSettings, update
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.ppo import UpdateSettings, update
+from dynenv_ros.learning.algo.networks import TrainingNetworks
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from dynenv_ros.sim.reward_terms import RewardTerm
 from dynenv_ros.soccer.actions import Walk
 
@@ -21,20 +21,20 @@ def test_ppo_learns_to_walk_to_the_ball_within_seconds():
     env = SoccerVectorEnv(4, backend="inprocess", config={"players_per_team": 1, "episode_seconds": 5.0},
                           perception="none")
     agent = DynEnvAgent(feature_size=32)
-    learner = Learner(agent, horizon=2)
+    networks = TrainingNetworks(agent, horizon=2)
     generator = torch.Generator().manual_seed(0)
     approach = int(RewardTerm.AUXILIARY)
     collector = RolloutCollector(env, agent, np.arange(2), None, generator, seed=0,
                                  reward_transform=lambda terms: terms[..., approach])
-    optimizer = torch.optim.Adam(learner.parameters(), lr=3e-3)
+    optimizer = torch.optim.Adam(networks.parameters(), lr=3e-3)
     settings = UpdateSettings(algorithm="ppo", gamma=0.9, gae_lambda=0.9, epochs=4, minibatches=1,
                               normalize_advantages=True, entropy_coef=0.0, use_forward=False, use_rcm=False,
                               use_inverse=False, use_ltp=False)
     try:
         before = collector.collect(10)
-        update(learner, optimizer, before.as_tensors(), settings, generator)
+        update(networks, optimizer, before.as_tensors(), settings, generator)
         for _ in range(7):
-            update(learner, optimizer, collector.collect(10).as_tensors(), settings, generator)
+            update(networks, optimizer, collector.collect(10).as_tensors(), settings, generator)
         after = [collector.collect(10) for _ in range(2)]
     finally:
         env.close()

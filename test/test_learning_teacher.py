@@ -10,10 +10,10 @@ import torch
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.envs.teacher import action_indices
 from dynenv_ros.envs.vector import SoccerVectorEnv, _seeds
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss
+from dynenv_ros.learning.algo.ppo import UpdateSettings, minibatch_loss
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import RolloutCollector
+from dynenv_ros.learning.algo.networks import TrainingNetworks
+from dynenv_ros.learning.sampling.collector import RolloutCollector
 from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk, parse_action
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.scripted import act_all, team_policies
@@ -90,15 +90,15 @@ def _teacher_setup(seed, episode_seconds):
                           teacher="chaser")
     agent = DynEnvAgent()
     collector = RolloutCollector(env, agent, np.arange(2), None, torch.Generator().manual_seed(seed), seed=seed)
-    return env, Learner(agent, horizon=3), collector
+    return env, TrainingNetworks(agent, horizon=3), collector
 
 
 @pytest.fixture(scope="module")
 def teacher_rollout():
-    env, learner, collector = _teacher_setup(1, 3.0)
+    env, networks, collector = _teacher_setup(1, 3.0)
     first_labels = env.teacher_actions
     rollout = collector.collect(8)
-    yield learner, rollout, first_labels
+    yield networks, rollout, first_labels
     env.close()
 
 
@@ -110,34 +110,34 @@ def test_the_collector_stores_the_labels_of_each_acting_observation(teacher_roll
 
 
 def test_imitation_loss_reaches_the_actor_and_encoder_not_the_critic(teacher_rollout):
-    learner, rollout, _ = teacher_rollout
+    networks, rollout, _ = teacher_rollout
     tensors = rollout.as_tensors()
-    touched = touched_by_imitation(learner, tensors)
+    touched = touched_by_imitation(networks, tensors)
     assert any(n.startswith("agent.walk") for n in touched), sorted(touched)[:5]
     assert any(n.startswith("agent.objects") for n in touched)
     assert not any(n.startswith("agent.critic") for n in touched)
-    learner.zero_grad(set_to_none=True)
-    assert float(imitation_update_loss(learner, tensors, coef=0.0).detach()) == 0.0   # every other term is off too
+    networks.zero_grad(set_to_none=True)
+    assert float(imitation_update_loss(networks, tensors, coef=0.0).detach()) == 0.0   # every other term is off too
 
 
 def test_imitation_alone_makes_the_policy_agree_with_the_teacher(teacher_rollout):
-    learner, rollout, _ = teacher_rollout
+    networks, rollout, _ = teacher_rollout
     tensors = rollout.as_tensors()
 
     def agreement():
-        loss, agree = imitation_measures(learner, tensors)
+        loss, agree = imitation_measures(networks, tensors)
         assert agree["teacher_agreement"] <= min(agree[f"teacher_agreement_{h}"] for h in ("walk", "turn", "kick", "head"))
         return loss, agree["teacher_agreement"]
 
     loss0, agree0 = agreement()
-    imitate(learner, tensors, 60)
+    imitate(networks, tensors, 60)
     loss1, agree1 = agreement()
     assert agree0 < 0.5 and loss0 > 2.0          # an untrained policy: ~ log(5·3·3·7) ≈ 5.75 nats
     assert agree1 > 0.9 and loss1 < 0.5 * loss0
 
 
 def test_teacher_driven_worlds_execute_the_labels_and_give_the_rl_terms_nothing():
-    env, learner, collector = _teacher_setup(2, 2.0)
+    env, networks, collector = _teacher_setup(2, 2.0)
     with pytest.raises(ValueError, match="worlds must be in 0..2"):
         collector.drive_with_teacher(3)
     collector.drive_with_teacher(1)                 # world 0's two robots follow the teacher, world 1 is the learner's
@@ -156,10 +156,10 @@ def test_teacher_driven_worlds_execute_the_labels_and_give_the_rl_terms_nothing(
     ones = torch.ones(T, B)
     rl_only = UpdateSettings(policy_coef=1.0, value_coef=1.0, entropy_coef=0.1, use_forward=False, use_rcm=False,
                              use_inverse=False, use_ltp=False, imitation_coef=0.0)
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
+    loss, _ = minibatch_loss(networks, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
     assert float(loss.detach()) == 0.0
     tensors["teacher_driven"] = torch.tensor([True, True, False, False])
-    loss, _ = _minibatch_loss(learner, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
+    loss, _ = minibatch_loss(networks, tensors, torch.arange(B), ones, ones * 5.0, rl_only, lambda *a: None)
     assert float(loss.detach()) != 0.0
 
 

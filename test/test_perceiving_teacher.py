@@ -134,12 +134,12 @@ SMALL = {"algorithm": "ppo", "variant": "pred", "players_per_team": 1, "num_envs
     ("async", {"workers": 1, "localization": "estimate", "teacher_driven_worlds": 1}),
 ])
 def test_a_tiny_run_with_the_perceiving_teacher_trains_and_checkpoints(tmp_path, runner, extra):
-    from dynenv_ros.learning.checkpoints import read_checkpoint_meta
-    from dynenv_ros.learning.run_log import CSV_NAME, read_metrics
-    from dynenv_ros.learning.runners import make_trainer
+    from dynenv_ros.learning.run.checkpoints import read_checkpoint_meta
+    from dynenv_ros.learning.run.metrics import CSV_NAME, read_metrics
+    from dynenv_ros.learning.trainer import Trainer
     cfg = TrainConfig(**SMALL, runner=runner, **extra, total_env_steps=16)
     run = tmp_path / "run"
-    summary = make_trainer(cfg, run, progress=False).run()
+    summary = Trainer(cfg, run, progress=False).run()
     assert summary["env_steps"] >= 16 and summary["updates"] >= 2
     assert (run / "policy.safetensors").exists()
     assert read_checkpoint_meta(run)["config"]["teacher"] == "perceiving"

@@ -7,7 +7,7 @@ from dynenv_msgs.srv import LoadPolicy
 from rclpy.parameter import Parameter
 
 from dynenv_ros.nodes.sim_node import SimNode
-from dynenv_ros.agent.checkpoint import save_checkpoint
+from dynenv_ros.agent.checkpoint import save_policy
 from dynenv_ros.agent.network import DynEnvAgent
 from policy_node.policy_node import PolicyNode
 from operator_helpers import operator_params, signed_call
@@ -49,8 +49,8 @@ def test_one_team_per_policy_node_so_two_policies_can_play(make_node, executor):
 
 def test_checkpoints_load_and_bad_ones_are_refused(make_node, executor, tmp_path):
     torch.manual_seed(4)
-    good = tmp_path / "agent.pt"
-    digest = save_checkpoint(DynEnvAgent(), good)
+    good = tmp_path / "agent.safetensors"
+    digest = save_policy(DynEnvAgent(), good)
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"not a checkpoint")
     sim, policy = _graph(make_node, executor, checkpoint=str(good))
@@ -81,8 +81,8 @@ def test_an_exported_onnx_policy_plays_and_can_be_swapped_in(make_node, executor
 
 def test_swapping_in_a_network_of_another_size_keeps_playing(make_node, executor, tmp_path):
     torch.manual_seed(7)
-    smaller = tmp_path / "small.pt"
-    save_checkpoint(DynEnvAgent(feature_size=16), smaller)
+    smaller = tmp_path / "small.safetensors"
+    save_policy(DynEnvAgent(feature_size=16), smaller)
     sim, policy = _graph(make_node, executor)
     assert spin_until(executor, lambda: sim.periods_run >= 2, 30.0)
     assert signed_call(policy, executor, LoadPolicy, "/policy_node/load_policy",

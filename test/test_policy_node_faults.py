@@ -25,7 +25,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy
 from safetensors.torch import save as st_save
 
-from dynenv_ros.agent.checkpoint import (FORMAT, agent_config, safetensors_header, save_checkpoint,
+from dynenv_ros.agent.checkpoint import (FORMAT, agent_config, safetensors_header, save_policy,
                                          tensors_for_saving)
 from dynenv_ros.agent.export import METADATA_KEY, export_onnx
 from dynenv_ros.agent.network import DynEnvAgent
@@ -90,9 +90,9 @@ def files(tmp_path_factory):
     torch.manual_seed(0)
     small = DynEnvAgent(feature_size=16)
     out = {"good": folder / "good.safetensors"}
-    save_checkpoint(small, out["good"])
+    save_policy(small, out["good"])
     out["head_units_0"] = folder / "units0.safetensors"
-    save_checkpoint(DynEnvAgent(feature_size=16, head_units=0), out["head_units_0"])     # the project's own save
+    save_policy(DynEnvAgent(feature_size=16, head_units=0), out["head_units_0"])     # the project's own save
     nan = DynEnvAgent(feature_size=16)
     with torch.no_grad():
         nan.walk_head.bias[0] = float("nan")

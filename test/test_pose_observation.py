@@ -261,8 +261,8 @@ def test_bad_localization_settings_are_refused_naming_the_key(changes, message):
 
 
 def test_the_setting_reads_from_an_override_and_reaches_the_agent_and_the_worlds():
-    from dynenv_ros.learning.agents import make_agent
-    from dynenv_ros.learning.worlds import make_env
+    from dynenv_ros.learning.algo.networks import make_agent
+    from dynenv_ros.learning.sampling.worlds import make_env
     cfg = load_config(None, ["localization=estimate", "players_per_team=1", "perception=none"])
     assert cfg.localization == "estimate" and make_agent(cfg).uses_pose is True
     env, _ = make_env(cfg, 1, "inprocess")
@@ -274,9 +274,18 @@ def test_the_setting_reads_from_an_override_and_reaches_the_agent_and_the_worlds
 
 
 def test_ros_experience_refuses_the_estimate_with_the_reason(tmp_path):
-    from dynenv_ros.learning.sequence_learner import SequenceLearner
+    from dynenv_ros.learning.messages.message_trainer import MessageTrainer
     with pytest.raises(ConfigError, match="carries none yet"):
-        SequenceLearner(TrainConfig(localization="estimate", algorithm="ppo", players_per_team=1), tmp_path / "run")
+        MessageTrainer(TrainConfig(localization="estimate", algorithm="ppo", players_per_team=1), tmp_path / "run")
+
+
+def test_learning_from_bags_refuses_the_estimate_with_the_reason(tmp_path):
+    # a recording holds no pose estimate: an agent that takes one cannot be cloned from it (it was built without one)
+    from dynenv_ros.learning.messages.bags import train_from_bags
+    with pytest.raises(ValueError, match="carries none yet"):
+        train_from_bags(TrainConfig(localization="estimate"), [ROOT / "bags" / "sample_2v2_realistic_30s"],
+                        tmp_path / "run")
+    assert not (tmp_path / "run").exists()
 
 
 SMALL = {"algorithm": "ppo", "variant": "pred", "players_per_team": 1, "num_envs": 2, "perception": "realistic",
@@ -289,13 +298,13 @@ SMALL = {"algorithm": "ppo", "variant": "pred", "players_per_team": 1, "num_envs
 def test_a_tiny_run_with_the_estimate_trains_checkpoints_resumes_and_evaluates(tmp_path, runner):
     from dynenv_ros.agent.export import OnnxPolicy
     from dynenv_ros.evaluation.soccer import evaluate
-    from dynenv_ros.learning.checkpoints import read_checkpoint_meta
+    from dynenv_ros.learning.run.checkpoints import read_checkpoint_meta
     from dynenv_ros.learning.train_cli import main
-    from dynenv_ros.learning.runners import make_trainer
+    from dynenv_ros.learning.trainer import Trainer
     extra = {"runner": "async", "workers": 1} if runner == "async" else {}
     cfg = TrainConfig(**SMALL, **extra, total_env_steps=16)
     run = tmp_path / "run"
-    summary = make_trainer(cfg, run, progress=False).run()
+    summary = Trainer(cfg, run, progress=False).run()
     assert summary["env_steps"] >= 16 and summary["updates"] >= 2
     policy, _ = load_policy(run / "policy.safetensors")
     assert policy.uses_pose is True

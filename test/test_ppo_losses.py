@@ -1,7 +1,7 @@
 """PPO's losses against numbers worked out by hand (issue 26): the clipped surrogate (inside the clip range, clipped
 above 1 + ε and below 1 − ε, the min() keeping the unclipped term), advantage normalisation, the value loss plain
 and clipped, the entropy bonus, and decoupled PPO's proximal clip centre and behaviour weight
-(``learning.algorithms._minibatch_loss``, ``_proximal``, ``_fused_proximal``).
+(``learning.algo.ppo.ppo_loss`` alone and within ``minibatch_loss``, ``_proximal``, ``_fused_proximal``).
 
 A stub network stands in for the agent: one two-way categorical head whose probability of the taken action (action 0)
 is chosen per robot — so each ratio π/π_old is an exact fraction — and chosen critic values. One step (T = 1), 2–4
@@ -16,8 +16,8 @@ from types import SimpleNamespace
 import pytest
 import torch
 
-from dynenv_ros.learning import algorithms
-from dynenv_ros.learning.algorithms import UpdateSettings, _minibatch_loss, _proximal
+from dynenv_ros.learning.algo import ppo as algorithms
+from dynenv_ros.learning.algo.ppo import UpdateSettings, _proximal, minibatch_loss, ppo_loss
 
 TOL = 2e-6            # the literals are rounded to 6 decimals
 
@@ -63,7 +63,7 @@ def _settings(**overrides):
 
 
 def _loss(monkeypatch, settings, out, rollout, adv=None, ret=None):
-    """(loss, logged scalars) of ``_minibatch_loss`` on every robot with the stub network's output ``out``;
+    """(loss, logged scalars) of ``minibatch_loss`` on every robot with the stub network's output ``out``;
     ``adv``/``ret`` per robot (None: decoupled PPO's fused pass computes them)."""
     monkeypatch.setattr(algorithms, "run_sequence", lambda agent, obs, state, starts: out)
     logged = {}
@@ -71,7 +71,7 @@ def _loss(monkeypatch, settings, out, rollout, adv=None, ret=None):
     def as_step(x):
         return None if x is None else torch.tensor([x], dtype=torch.float64)
 
-    loss, _ = _minibatch_loss(LEARNER, rollout, torch.arange(rollout["actions"].shape[1]), as_step(adv),
+    loss, _ = minibatch_loss(LEARNER, rollout, torch.arange(rollout["actions"].shape[1]), as_step(adv),
                               as_step(ret), settings, lambda name, value: logged.__setitem__(name, float(value)))
     return loss, logged
 
@@ -225,3 +225,50 @@ def test_fused_decoupled_ppo_takes_advantages_from_the_current_critic(monkeypatc
     _close(logged["proximal_weight"], 0.75)
     _close(logged["value_loss"], 2.98)
     _close(loss, 2.14)
+
+
+# ``ppo_loss`` alone, on tensors written out: one step (T = 1) of four robots, the taken action's log-probability
+# under the behaviour policy 0 (π_old = 1), so r = exp(log π) is chosen directly: r = 1.5, 0.5, 1.1, 0.9.
+# Advantages 1, 1, −2, 0.5; entropies 1, 2, 3, 10; values 0.5, 1, −1, 2 against returns 1, 1, 0, 0.
+# Robot 4 could not act (out of the policy, entropy, KL and clip-fraction means; in the value mean).
+RATIOS = [1.5, 0.5, 1.1, 0.9]
+
+
+def _terms(algorithm="ppo", clip_value_loss=False, alive=(True, True, True, True), old_value=None):
+    as_row = lambda values, dtype=torch.float64: torch.tensor([values], dtype=dtype)   # noqa: E731
+    settings = UpdateSettings(algorithm=algorithm, clip=0.2, value_coef=0.5, entropy_coef=0.01,
+                              clip_value_loss=clip_value_loss)
+    return ppo_loss(as_row([math.log(r) for r in RATIOS]), as_row([0.0] * 4), as_row([1.0, 1.0, -2.0, 0.5]),
+                    as_row([1.0, 2.0, 3.0, 10.0]), as_row([0.5, 1.0, -1.0, 2.0]), as_row([1.0, 1.0, 0.0, 0.0]),
+                    as_row([True, True, True, False], torch.bool), as_row(list(alive), torch.bool), settings,
+                    None if old_value is None else as_row(old_value))
+
+
+def test_ppo_loss_is_the_clipped_objective_the_value_loss_and_the_entropy_bonus():
+    # clip(r, 0.8, 1.2) = 1.2, 0.8, 1.1, 0.9; min(r·A, clip(r)·A) = min(1.5, 1.2) = 1.2, min(0.5, 0.8) = 0.5,
+    #   min(−2.2, −2.2) = −2.2 (robot 4: 0.45, not acting); policy = −(1.2 + 0.5 − 2.2)/3 = 0.5/3 = 0.166667
+    # value = ((0.5 − 1)² + 0² + (−1 − 0)² + (2 − 0)²)/4 = (0.25 + 0 + 1 + 4)/4 = 1.3125
+    # entropy = (1 + 2 + 3)/3 = 2
+    # total = 0.166667 + 0.5·1.3125 − 0.01·2 = 0.166667 + 0.65625 − 0.02 = 0.802917
+    # approx KL = mean((r − 1) − ln r) = ((0.5 − 0.405465) + (−0.5 + 0.693147) + (0.1 − 0.095310))/3
+    #           = (0.094535 + 0.193147 + 0.004690)/3 = 0.097457
+    # clip fraction: |r − 1| > 0.2 for r = 1.5 and 0.5, not 1.1: 2/3
+    terms = _terms()
+    _close(terms.policy, 0.166667)
+    _close(terms.value, 1.3125)
+    _close(terms.entropy, 2.0)
+    _close(terms.total, 0.802917)
+    _close(terms.approx_kl, 0.097457)
+    _close(terms.clip_fraction, 0.666667)
+
+
+def test_ppo_loss_without_the_clip_is_a2c_and_the_value_term_can_be_clipped_or_masked():
+    # A2C: −mean(log π·A) = −(0.405465·1 + (−0.693147)·1 + 0.095310·(−2))/3 = −(−0.478302)/3 = 0.159434
+    _close(_terms(algorithm="a2c").policy, 0.159434)
+    # clipped value, V_old = 0, 1, 0, 1: V_clipped = V_old + clip(V − V_old, ±0.2) = 0.2, 1, −0.2, 1.2;
+    #   (V_clipped − R)² = 0.64, 0, 0.04, 1.44; the larger of it and (V − R)² = 0.64, 0, 1, 4: mean 5.64/4 = 1.41
+    _close(_terms(clip_value_loss=True, old_value=[0.0, 1.0, 0.0, 1.0]).value, 1.41)
+    # robot 4 not alive: (0.25 + 0 + 1)/3 = 0.416667
+    _close(_terms(alive=(True, True, True, False)).value, 0.416667)
+    with pytest.raises(ValueError, match="old_value"):
+        _terms(clip_value_loss=True)

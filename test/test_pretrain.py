@@ -6,13 +6,15 @@ import pytest
 import torch
 
 from dynenv_ros.agent.checkpoint import load_policy
-from dynenv_ros.learning import pretrain
+from dynenv_ros.learning.algo.networks import make_agent
+from dynenv_ros.learning.config import TrainConfig
+from dynenv_ros.learning.pretrain import data, main, model, train
 
 
 @pytest.fixture(scope="module")
 def data_dir(tmp_path_factory):
     folder = tmp_path_factory.mktemp("pretrain_data")
-    assert pretrain.main(["generate", "--out", str(folder), "--train", "16", "--test", "8", "--seed", "3",
+    assert main(["generate", "--out", str(folder), "--train", "16", "--test", "8", "--seed", "3",
                           "--worlds-per-batch", "8"]) == 0
     return folder
 
@@ -20,18 +22,18 @@ def data_dir(tmp_path_factory):
 @pytest.fixture(scope="module")
 def trained(data_dir, tmp_path_factory):
     out = tmp_path_factory.mktemp("pretrain_run")
-    assert pretrain.main(["train", "--data", str(data_dir), "--out", str(out), "--epochs", "3", "--seed", "0"]) == 0
+    assert main(["train", "--data", str(data_dir), "--out", str(out), "--epochs", "3", "--seed", "0"]) == 0
     return out
 
 
 def test_generation_is_deterministic_and_holds_the_documented_shapes():
     seed = np.random.SeedSequence(7)
-    a = pretrain.generate_split(3, seed, worlds_per_batch=2)
-    b = pretrain.generate_split(3, np.random.SeedSequence(7), worlds_per_batch=2)
-    assert set(a) == set(pretrain.ARRAY_KEYS)
+    a = data.generate_split(3, seed, worlds_per_batch=2)
+    b = data.generate_split(3, np.random.SeedSequence(7), worlds_per_batch=2)
+    assert set(a) == set(data.ARRAY_KEYS)
     for key in a:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
-    S, T, A, R = 3, pretrain.OBSERVATIONS, 4, 3
+    S, T, A, R = 3, data.OBSERVATIONS, 4, 3
     assert T == 7
     assert a["landmarks"].shape[:4] == (S, T, A, 5) and a["landmarks"].shape[-1] == 19
     assert a["landmark_mask"].shape == a["landmarks"].shape[:-1]
@@ -53,7 +55,7 @@ def test_generation_is_deterministic_and_holds_the_documented_shapes():
     np.testing.assert_array_equal(a["ball_known"], np.maximum.accumulate(a["ball_seen"], axis=1))
     assert (np.diff(a["robots_known"], axis=1) >= 0).all()
     # another seed gives other sequences
-    c = pretrain.generate_split(3, np.random.SeedSequence(8), worlds_per_batch=2)
+    c = data.generate_split(3, np.random.SeedSequence(8), worlds_per_batch=2)
     assert not np.array_equal(a["pose"], c["pose"])
 
 
@@ -62,9 +64,9 @@ def test_data_files_load_without_pickle(data_dir):
         with np.load(data_dir / f"{split}.npz", allow_pickle=False) as archive:
             meta = json.loads(str(archive["meta"]))
             assert archive["pose"].shape == (count, 7, 4, 6)
-        assert meta["format"] == pretrain.DATA_FORMAT and meta["sequences"] == count
+        assert meta["format"] == data.DATA_FORMAT and meta["sequences"] == count
         assert meta["head_mode"] == "discrete" and meta["split"] == split
-        loaded = pretrain.load_split(data_dir / f"{split}.npz")
+        loaded = data.load_split(data_dir / f"{split}.npz")
         assert loaded.sequences == count and loaded.robots == 4
 
 
@@ -75,7 +77,7 @@ def test_tiny_pretraining_end_to_end(trained, data_dir, capsys):
     assert history[-1]["train"]["loss"] < history[0]["train"]["loss"]
     assert 1 <= metrics["best_epoch"] <= 3
     agent, meta = load_policy(trained / "pretrained.safetensors")
-    assert meta["kind"] == pretrain.POLICY_KIND and meta["privileged_seeding"] is False
+    assert meta["kind"] == train.POLICY_KIND and meta["privileged_seeding"] is False
     assert "pose_seeder" not in meta
     test = metrics["test"]
     for block in ("all", "last"):
@@ -86,12 +88,12 @@ def test_tiny_pretraining_end_to_end(trained, data_dir, capsys):
     assert len(test["per_step"]) == 7
     assert test["last"]["robot_steps"] == 8 * 4 and test["all"]["robot_steps"] == 8 * 4 * 7
     # the trainer's encoder loading takes the file
-    encoder = {k: v for k, v in agent.state_dict().items() if k.startswith(pretrain.ENCODER_PREFIXES)}
-    fresh = pretrain.make_agent()
+    encoder = {k: v for k, v in agent.state_dict().items() if k.startswith(train.ENCODER_PREFIXES)}
+    fresh = make_agent(TrainConfig())
     assert not fresh.load_state_dict(encoder, strict=False).unexpected_keys
     # evaluate reproduces the test figures of the file
     capsys.readouterr()
-    assert pretrain.main(["evaluate", "--data", str(data_dir), "--policy", str(trained / "pretrained.safetensors"),
+    assert main(["evaluate", "--data", str(data_dir), "--policy", str(trained / "pretrained.safetensors"),
                           "--json", str(trained / "eval.json")]) == 0
     printed = capsys.readouterr().out
     assert "reconstruction AP, mean" in printed and "paper Table 3" in printed
@@ -102,19 +104,19 @@ def test_tiny_pretraining_end_to_end(trained, data_dir, capsys):
 
 def test_privileged_seeding_round_trip(data_dir, tmp_path):
     out = tmp_path / "privileged"
-    assert pretrain.main(["train", "--data", str(data_dir), "--out", str(out), "--epochs", "1",
+    assert main(["train", "--data", str(data_dir), "--out", str(out), "--epochs", "1",
                           "--privileged-seeding", "--validation-fraction", "0"]) == 0
-    agent, seeder, meta = pretrain.load_pretrained(out / "pretrained.safetensors")
+    agent, seeder, meta = train.load_pretrained(out / "pretrained.safetensors")
     assert meta["privileged_seeding"] is True and seeder is not None
     assert meta["validation"].startswith("the test set")
     pose = torch.zeros(5, 6)
-    state = pretrain.initial_state(agent, pose, seeder, None)
+    state = model.initial_state(agent, pose, seeder, None)
     assert torch.equal(state[0], torch.zeros(5, 64)) and torch.equal(state[2], torch.zeros(5, 64))
     assert torch.allclose(state[1], torch.tanh(seeder.linear.bias).expand(5, 64))
 
 
 def _fails(capsys, argv, needle):
-    assert pretrain.main(argv) == 2
+    assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1, err
     assert err.startswith("dynenv-pretrain: error:") and needle in err, err
@@ -139,10 +141,10 @@ def test_bad_arguments_and_files_exit_2(capsys, data_dir, tmp_path):
     np.savez(foreign / "test.npz", pose=np.zeros(3))
     _fails(capsys, ["evaluate", "--data", str(foreign), "--policy", str(tmp_path / "x.safetensors")], "lacks")
     with pytest.raises(SystemExit) as exit_info:
-        pretrain.main(["generate", "--train", "4"])          # --out missing: argparse, one line
+        main(["generate", "--train", "4"])          # --out missing: argparse, one line
     assert exit_info.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--out" in err
     with pytest.raises(SystemExit) as exit_info:
-        pretrain.main(["fly"])
+        main(["fly"])
     assert exit_info.value.code == 2

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from dynenv_ros.learning import reconstruction_metrics as rm
+from dynenv_ros.learning.pretrain import reconstruction_metrics as rm
 
 
 def _one_step(pred, conf, truth, known):

@@ -11,9 +11,9 @@ import pytest
 import torch
 
 from dynenv_ros.agent.checkpoint import save_policy, sha256
-from dynenv_ros.learning.compute import ComputeMeter, cpu_seconds_of_tree, machine
+from dynenv_ros.learning.run.compute import ComputeMeter, cpu_seconds_of_tree, machine
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.runners import make_trainer
+from dynenv_ros.learning.trainer import Trainer
 
 SMALL = {"algorithm": "ppo", "variant": "baseline", "players_per_team": 1, "num_envs": 2, "perception": "none",
          "rollout_length": 4, "ltp_horizon": 2, "feature_size": 16, "ppo_epochs": 1, "ppo_minibatches": 1,
@@ -60,7 +60,7 @@ def test_segments_add_up_and_one_segment_is_an_uninterrupted_run():
 
 def test_a_run_records_its_compute_and_a_resumed_run_keeps_both_segments(tmp_path):
     cfg = TrainConfig(**{**SMALL, "total_env_steps": 16})
-    summary = make_trainer(cfg, tmp_path, progress=False).run()
+    summary = Trainer(cfg, tmp_path, progress=False).run()
     compute = summary["compute"]
     assert compute["uninterrupted"] and compute["env_steps"] == 16
     assert compute["cpu_seconds"] > 0 and compute["wall_seconds"] > 0
@@ -69,7 +69,7 @@ def test_a_run_records_its_compute_and_a_resumed_run_keeps_both_segments(tmp_pat
     assert json.loads((tmp_path / "summary.json").read_text())["compute"]["env_steps"] == 16
 
     more = TrainConfig(**{**SMALL, "total_env_steps": 32})
-    resumed = make_trainer(more, tmp_path, resume=True, progress=False).run()["compute"]
+    resumed = Trainer(more, tmp_path, resume=True, progress=False).run()["compute"]
     assert not resumed["uninterrupted"]
     assert [s["env_steps_from"] for s in resumed["segments"]] == [0, 16]
     assert [s["env_steps_to"] for s in resumed["segments"]] == [16, 32]
@@ -77,33 +77,33 @@ def test_a_run_records_its_compute_and_a_resumed_run_keeps_both_segments(tmp_pat
 
 def test_init_policy_starts_every_network_from_the_file(tmp_path):
     cfg = TrainConfig(**{**SMALL, "seed": 1})
-    source = make_trainer(cfg, tmp_path / "a", progress=False)
+    source = Trainer(cfg, tmp_path / "a", progress=False)
     with torch.no_grad():
-        for p in source.learner.agent.parameters():
+        for p in source.networks.agent.parameters():
             p.add_(0.5)                             # weights no fresh seed-0 run starts with
     path = tmp_path / "start.safetensors"
-    save_policy(source.learner.agent, str(path))
-    source._stop_rollouts()
+    save_policy(source.networks.agent, str(path))
+    source.close()
 
-    started = make_trainer(TrainConfig(**{**SMALL, "init_policy": str(path)}), tmp_path / "b", progress=False)
-    fresh = make_trainer(TrainConfig(**SMALL), tmp_path / "c", progress=False)
-    want = source.learner.agent.state_dict()
-    for key, value in started.learner.agent.state_dict().items():
+    started = Trainer(TrainConfig(**{**SMALL, "init_policy": str(path)}), tmp_path / "b", progress=False)
+    fresh = Trainer(TrainConfig(**SMALL), tmp_path / "c", progress=False)
+    want = source.networks.agent.state_dict()
+    for key, value in started.networks.agent.state_dict().items():
         assert torch.equal(value, want[key]), key
-    assert any(not torch.equal(v, want[k]) for k, v in fresh.learner.agent.state_dict().items())
+    assert any(not torch.equal(v, want[k]) for k, v in fresh.networks.agent.state_dict().items())
     started.cfg = TrainConfig(**{**SMALL, "init_policy": str(path), "total_env_steps": 8})
     summary = started.run()
     assert summary["init_policy_sha256"] == sha256(path)
-    fresh._stop_rollouts()
+    fresh.close()
 
 
 def test_an_init_policy_that_does_not_fit_is_refused_naming_the_key(tmp_path):
-    other = make_trainer(TrainConfig(**{**SMALL, "feature_size": 8}), tmp_path / "a", progress=False)
+    other = Trainer(TrainConfig(**{**SMALL, "feature_size": 8}), tmp_path / "a", progress=False)
     path = tmp_path / "narrow.safetensors"
-    save_policy(other.learner.agent, str(path))
-    other._stop_rollouts()
+    save_policy(other.networks.agent, str(path))
+    other.close()
     with pytest.raises(ValueError, match="does not fit the model: key"):
-        make_trainer(TrainConfig(**{**SMALL, "init_policy": str(path)}), tmp_path / "b", progress=False)
+        Trainer(TrainConfig(**{**SMALL, "init_policy": str(path)}), tmp_path / "b", progress=False)
 
 
 def test_init_policy_with_a_pretrained_encoder_is_refused():

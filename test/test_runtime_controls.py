@@ -64,7 +64,7 @@ def test_with_runtime_controls_off_no_call_changes_the_game_or_the_learning(make
     executor.add_node(trainer)
     sim = _game(make_node, executor, runtime_controls=False, episode_seconds=3600.0)   # no episode ends by itself
     assert spin_until(executor, lambda: sim.periods_run >= 3, 60.0)
-    episode, rate = sim.session.episode_id, trainer.learner.optimizer.param_groups[0]["lr"]
+    episode, rate = sim.session.episode_id, trainer.message_trainer.optimizer.param_groups[0]["lr"]
     seen = _attack(executor, 8.0)
     assert seen["reset"] == "absent" and seen["step"] == "absent", seen
     assert seen["/sim_node"] == [{"name": n, "successful": False, "reason": REFUSED}
@@ -74,7 +74,7 @@ def test_with_runtime_controls_off_no_call_changes_the_game_or_the_learning(make
     periods = sim.periods_run
     assert spin_until(executor, lambda: sim.periods_run >= periods + 3, 60.0)
     assert sim.session.episode_id == episode and sim.session.missing_action == "none" and sim.game.auto_reset
-    assert trainer.learner.optimizer.param_groups[0]["lr"] == rate == 1e-4
+    assert trainer.message_trainer.optimizer.param_groups[0]["lr"] == rate == 1e-4
     assert not trainer.get_parameter("use_sim_time").value and not sim.get_parameter("use_sim_time").value
     assert sim.diagnostics()["runtime_controls"] == "off" and trainer.diagnostics()["runtime_controls"] == "off"
     spin_until(executor, lambda: False, 0.5)

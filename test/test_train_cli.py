@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.train_cli import main
 from dynenv_ros.learning.trainer import Trainer
@@ -83,10 +83,10 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
     try:
         latest = checkpoints.resolve_checkpoint(run_dir)
         model_state, _ = checkpoints.read_safetensors((latest / "model.safetensors").read_bytes())
-        for name, value in trainer.learner.state_dict().items():
+        for name, value in trainer.networks.state_dict().items():
             assert torch.equal(value, model_state[name]), name
-        assert trainer.env_steps == saved_steps and trainer.env_steps % 4 == 0 and trainer.env_steps > 0
-        assert trainer.updates == trainer.env_steps // 4
+        assert trainer.progress.env_steps == saved_steps and trainer.progress.env_steps % 4 == 0 and trainer.progress.env_steps > 0
+        assert trainer.progress.updates == trainer.progress.env_steps // 4
         # the optimizer resumes with exactly the saved state; a parameter whose loss term had no gradient in
         # some update (a class absent from that batch) has a smaller Adam step, which is why steps may differ
         saved_optimizer, _ = checkpoints.read_safetensors((latest / "optimizer.safetensors").read_bytes())
@@ -96,13 +96,13 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
             if kind == "state":
                 assert torch.equal(torch.as_tensor(resumed[int(index)][field]), value), key
         adam_steps = [float(s["step"]) for s in trainer.optimizer.state.values()]
-        assert max(adam_steps) == float(trainer.updates) and min(adam_steps) >= 1.0
+        assert max(adam_steps) == float(trainer.progress.updates) and min(adam_steps) >= 1.0
     finally:
-        trainer.env.close()
+        trainer.close()
 
     # killed before it wrote policy.safetensors, the run can still be evaluated: its latest checkpoint's policy
     from dynenv_ros.evaluation.cli import main as eval_main
-    from dynenv_ros.learning.agents import policy_from_training_checkpoint
+    from dynenv_ros.learning.run.checkpoints import policy_from_training_checkpoint
     assert not (run_dir / "policy.safetensors").exists()
     agent, meta = policy_from_training_checkpoint(run_dir)
     assert meta["checkpoint"]["path"] == str(latest) and not agent.training
@@ -131,7 +131,7 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
 
 
 def test_metrics_csv_survives_a_row_cut_by_a_kill(tmp_path):
-    from dynenv_ros.learning.run_log import RunLogger, read_metrics
+    from dynenv_ros.learning.run.metrics import RunLogger, read_metrics
     (tmp_path / "metrics.csv").write_text("env_steps,update,wall_seconds,name,value\n48,1,0.5,train/loss,1.5\n96,2,1.")
     logger = RunLogger(tmp_path, tensorboard=False)
     logger.log(96, 2, 1.0, {"train/loss": 0.5})
@@ -141,7 +141,7 @@ def test_metrics_csv_survives_a_row_cut_by_a_kill(tmp_path):
 
 
 def test_empty_metrics_file_gets_its_header(tmp_path):
-    from dynenv_ros.learning.run_log import RunLogger
+    from dynenv_ros.learning.run.metrics import RunLogger
     (tmp_path / "metrics.csv").write_text("")          # killed before the header reached the disk
     RunLogger(tmp_path, tensorboard=False).close()
     assert (tmp_path / "metrics.csv").read_text() == "env_steps,update,wall_seconds,name,value\n"

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from dynenv_ros.evaluation.cli import main as eval_main
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.train_cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -116,9 +116,9 @@ def test_disk_full_mid_run_stops_cleanly_and_keeps_the_last_checkpoint(tmp_path,
     trainer = Trainer(TrainConfig.from_dict(json.loads((run_dir / "config.json").read_text())), run_dir,
                       resume=True, progress=False)
     try:
-        assert trainer.env_steps == 0
+        assert trainer.progress.env_steps == 0
     finally:
-        trainer.env.close()
+        trainer.close()
 
 
 def test_sigkill_right_after_the_first_checkpoint_then_resume_continues(tmp_path, capsys):
@@ -207,7 +207,7 @@ def test_the_disk_estimate_covers_what_a_run_writes(tmp_path):
     every head (pred: Adam then holds moments of every parameter; a baseline run's unused heads have none, so its
     estimate errs on the safe side), and the estimate of the whole run is at least what a finished run left."""
     from dynenv_ros.learning.config import load_config
-    from dynenv_ros.learning.disk_budget import LOG_BYTES, run_disk_bytes
+    from dynenv_ros.learning.run.disk_budget import LOG_BYTES, run_disk_bytes
     from dynenv_ros.learning.train_cli import preset_path
     run_dir = tmp_path / "run"
     pred = [*TINY, "--set", "variant=pred"]

@@ -12,7 +12,7 @@ import warnings
 from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
 from dynenv_msgs.srv import AcceptOlderWeights
 
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.nodes.trainer_node import TrainerNode
 from dynenv_ros.ros.qos import action_stream, sim_stream
 from policy_node.policy_node import PolicyNode
@@ -80,16 +80,16 @@ def test_a_killed_simulator_leaves_the_trainer_learning_from_the_other_games(mak
                          namespace="/game_1")
     executor.add_node(policy_1)
     try:
-        assert spin_until(executor, lambda: {s for s, _ in trainer.learner.states} == {"/game_1", "/game_2"},
+        assert spin_until(executor, lambda: {s for s, _ in trainer.message_trainer.states} == {"/game_1", "/game_2"},
                           120.0), trainer.diagnostics()
         sim_1.send_signal(signal.SIGKILL)
         sim_1.wait(10)
-        updates = trainer.learner.updates
-        assert spin_until(executor, lambda: trainer.learner.updates >= updates + 4, 120.0), trainer.diagnostics()
-        learnt = {stream: entry[0] for stream, entry in trainer.learner.states.items()}   # game 1's last ones learnt
-        assert spin_until(executor, lambda: trainer.learner.updates >= updates + 8, 120.0), trainer.diagnostics()
+        updates = trainer.message_trainer.progress.updates
+        assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= updates + 4, 120.0), trainer.diagnostics()
+        learnt = {stream: entry[0] for stream, entry in trainer.message_trainer.states.items()}   # game 1's last ones learnt
+        assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= updates + 8, 120.0), trainer.diagnostics()
         assert not trainer.background.error
-        after = {stream: entry[0] for stream, entry in trainer.learner.states.items()}
+        after = {stream: entry[0] for stream, entry in trainer.message_trainer.states.items()}
         assert all(after[s] > learnt[s] for s in after if s[0] == "/game_2")           # game 2 goes on
         assert all(after[s] == learnt[s] for s in after if s[0] == "/game_1")          # game 1 is gone
     finally:
@@ -121,7 +121,7 @@ def test_hostile_experience_is_dropped_and_counted(make_node, executor, tmp_path
     assert trainer.readers.received["errors"] == 0 and not trainer.background.error
     # and the graph still trains: a real game after the attack
     sim, policy = _game(make_node, executor, seed=5, trusted=tmp_path / "keys")
-    assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
+    assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 2, 120.0), trainer.diagnostics()
 
 
 def test_bad_settings_and_files_at_start_are_refused_with_the_reason(make_node, tmp_path):

@@ -56,11 +56,11 @@ def test_the_trainer_rebuilds_what_the_policy_saw_and_chose(make_node, executor,
     action it rebuilt from the wire must equal the one the policy node sent (up to float precision): observations,
     previous actions, recurrent state and action indices all mean what the policy saw."""
     trainer = _trainer(make_node, executor, tmp_path / "run", learning_rate=1e-7)
-    for group in trainer.learner.optimizer.param_groups:
+    for group in trainer.message_trainer.optimizer.param_groups:
         group["lr"] = 0.0
     sim, policy = _game(make_node, executor, trusted=tmp_path / "keys")
-    assert spin_until(executor, lambda: trainer.learner.updates >= 3, 90.0), str(trainer.diagnostics())
-    stats = trainer.learner.last_stats
+    assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 3, 90.0), str(trainer.diagnostics())
+    stats = trainer.message_trainer.last_stats
     assert stats["behaviour_log_prob_error"] < 1e-3, stats
     counts = trainer.assembler.counts
     assert counts["missing"] == 0 and counts["malformed"] == 0 and counts["late"] == 0, counts
@@ -70,10 +70,10 @@ def test_the_trainer_rebuilds_what_the_policy_saw_and_chose(make_node, executor,
 def test_weights_flow_back_and_the_policy_acts_with_new_versions(make_node, executor, tmp_path):
     trainer = _trainer(make_node, executor, tmp_path / "run", learning_rate=1e-3, max_policy_lag=2)
     sim, policy = _game(make_node, executor, trusted=tmp_path / "keys")
-    assert spin_until(executor, lambda: trainer.learner.updates >= 4, 120.0), trainer.diagnostics()
+    assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 4, 120.0), trainer.diagnostics()
     assert spin_until(executor, lambda: policy.policy_version >= 3, 30.0), (policy.policy_version, policy.counts)
     assert policy.weights_acting[0] == trainer.run_id and policy.counts["weights_refused"] == 0
-    stats = trainer.learner.last_stats
+    stats = trainer.message_trainer.last_stats
     assert stats["lag_versions_max"] <= 2
     values = trainer.diagnostics()
     assert int(values["updates"]) >= 4 and float(values["lag_versions_mean"]) <= 2
@@ -89,9 +89,9 @@ def test_several_games_in_their_namespaces_feed_one_trainer(make_node, executor,
     trainer = _trainer(make_node, executor, tmp_path / "run", batch_sequences=4)
     _game(make_node, executor, "/game_1", seed=3, trusted=tmp_path / "keys")
     _game(make_node, executor, "/game_2", seed=7, trusted=tmp_path / "keys")
-    assert spin_until(executor, lambda: trainer.learner.updates >= 2, 120.0), trainer.diagnostics()
+    assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 2, 120.0), trainer.diagnostics()
     assert trainer.readers.games == {"/game_1", "/game_2"}
-    assert {(g, r) for g, r in trainer.learner.states} == {(g, r) for g in ("/game_1", "/game_2")
+    assert {(g, r) for g, r in trainer.message_trainer.states} == {(g, r) for g in ("/game_1", "/game_2")
                                                            for r in ("team_a_0", "team_b_0")}
     assert trainer.assembler.counts["missing"] == 0
 
@@ -111,9 +111,9 @@ def test_parameters_are_checked_on_set_and_reach_the_learner(make_node, executor
     assert not set_one("max_policy_lag", 1.5).successful                   # wrong type
     assert not set_one("batch_sequences", 3).successful                    # read-only
     assert set_one("learning_rate", 5e-4).successful
-    assert trainer.learner.optimizer.param_groups[0]["lr"] == 5e-4
-    assert set_one("max_policy_lag", 7).successful and trainer.learner.max_policy_lag == 7
-    assert set_one("entropy_coef", 0.05).successful and trainer.learner.settings.entropy_coef == 0.05
+    assert trainer.message_trainer.optimizer.param_groups[0]["lr"] == 5e-4
+    assert set_one("max_policy_lag", 7).successful and trainer.message_trainer.max_policy_lag == 7
+    assert set_one("entropy_coef", 0.05).successful and trainer.message_trainer.settings.entropy_coef == 0.05
     # learning_team "a": both robots are discovered, only team A's experience is learnt (the trainer reads team B's
     # detections not at all, so this game starts with one reader per robot)
     sim = make_node(SimNode, parameter_overrides=_params(players_per_team=1, seed=3, publish_markers=False))

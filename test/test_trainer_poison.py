@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from dynenv_ros.agent.checkpoint import load_policy
-from dynenv_ros.learning import checkpoints
+from dynenv_ros.learning.run import checkpoints
 from ros_harness import spin_until
 from test_trainer_node import _game, _trainer
 
@@ -47,7 +47,7 @@ def test_forged_actions_and_rewards_from_another_process_cannot_kill_learning(ma
         sim, _ = _game(make_node, executor, seed=5, trusted=tmp_path / "keys")
         ran = _executed(sim)
         counts = trainer.assembler.counts
-        assert spin_until(executor, lambda: trainer.learner.updates >= 6 and counts["out_of_range"] >= 20
+        assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 6 and counts["out_of_range"] >= 20
                           and counts["malformed"] >= 10 and counts["rivals_resolved"] >= 5, 150.0), \
             trainer.diagnostics()
     finally:
@@ -69,11 +69,11 @@ def test_forged_actions_and_rewards_from_another_process_cannot_kill_learning(ma
             assert key in ran and sequence.log_probs[t] == np.float32(ran[key]), (key, sequence.log_probs[t])
             checked += 1
     assert checked >= 20, checked
-    for name, tensor in trainer.learner.agent.state_dict().items():
+    for name, tensor in trainer.message_trainer.agent.state_dict().items():
         assert bool(torch.isfinite(tensor).all()), name
-    sequences_ok = [s for s in trainer.learner.last_stats.values() if isinstance(s, float)]
-    assert all(torch.isfinite(torch.tensor(sequences_ok))), trainer.learner.last_stats
-    trainer.learner.save_checkpoint()
+    sequences_ok = [s for s in trainer.message_trainer.last_stats.values() if isinstance(s, float)]
+    assert all(torch.isfinite(torch.tensor(sequences_ok))), trainer.message_trainer.last_stats
+    trainer.message_trainer.save_checkpoint()
     trainer.destroy_node()                       # writes policy.safetensors: loadable, so finite
     load_policy(run / "policy.safetensors")
     assert checkpoints.list_checkpoints(run), output

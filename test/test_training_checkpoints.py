@@ -12,10 +12,10 @@ from safetensors.torch import save_file
 from torch import nn
 
 from dynenv_ros.agent.network import DynEnvAgent
-from dynenv_ros.learning.checkpoints import (FORMAT, CheckpointWarning, capture_rng_state, list_checkpoints,
-                                             load_policy, load_training_checkpoint, read_checkpoint_meta,
-                                             resolve_checkpoint, restore_rng_state, save_policy,
-                                             save_training_checkpoint, sha256)
+from dynenv_ros.learning.run.checkpoints import (FORMAT, CheckpointWarning, capture_rng_state, list_checkpoints,
+                                                 load_policy, load_training_checkpoint, read_checkpoint_meta,
+                                                 resolve_checkpoint, restore_rng_state, save_policy,
+                                                 save_training_checkpoint, sha256)
 from dynenv_ros.learning.config import TrainConfig
 
 

@@ -9,19 +9,19 @@ import numpy as np
 from dynenv_ros.learning.config import load_config
 from dynenv_ros.learning.train_cli import preset_path
 from dynenv_ros.learning.trainer import Trainer
-from dynenv_ros.learning.algorithms import update
+from dynenv_ros.learning.algo.ppo import update
 out = {}
 for dev in ("cpu", "cuda"):
     cfg = load_config(preset_path("paper_a2c"), [f"device={dev}", "backend=inprocess", "num_envs=2",
                                                  "log_every_updates=1000000", "checkpoint_every_minutes=1000000"])
     with tempfile.TemporaryDirectory() as d:
         tr = Trainer(cfg, d, progress=False)
-        tr.learner.eval()
-        r = tr.collector.collect(cfg.rollout_length)
-        tr.learner.train()
-        st = update(tr.learner, tr.optimizer, r.as_tensors(tr.device), tr.settings, tr.generator)
+        tr.networks.eval()
+        r = tr.source.collector.collect(cfg.rollout_length)
+        tr.networks.train()
+        st = update(tr.networks, tr.optimizer, r.as_tensors(tr.device), tr.settings, tr.generator)
         out[dev] = (r.actions.copy(), r.values.copy(), {k: float(v) for k, v in st.items() if "loss" in k})
-        tr.env.close()
+        tr.close()
 a0, v0, l0 = out["cpu"]
 a1, v1, l1 = out["cuda"]
 print(json.dumps({"actions_equal_fraction": float((a0 == a1).mean()), "values_max_abs_diff": float(np.abs(v0 - v1).max()),

@@ -15,7 +15,7 @@ nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader | 
 nproc | tee -a "$OUT/machine.txt"
 lscpu | grep -E "Model name|Thread|Core|Socket" | tee -a "$OUT/machine.txt"
 git rev-parse --short HEAD 2>/dev/null | tee -a "$OUT/machine.txt"
-versions=$(python3 -c "import torch, numpy, pymunk, dynenv_ros.learning.async_trainer
+versions=$(python3 -c "import torch, numpy, pymunk, dynenv_ros.learning.distributed.pool_source
 print(torch.__version__, numpy.__version__, pymunk.version, torch.cuda.get_device_name(0))") || exit 1
 echo "$versions" | tee -a "$OUT/machine.txt"
 

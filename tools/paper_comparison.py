@@ -470,7 +470,7 @@ def plot_training_curves(runs: Sequence[Run], png: Path) -> Path | None:
     import matplotlib
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
-    from dynenv_ros.learning.run_log import read_metrics
+    from dynenv_ros.learning.run.metrics import read_metrics
     data = {}
     for run in runs:
         if (run.path / "metrics.csv").is_file():

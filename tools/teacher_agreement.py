@@ -66,9 +66,10 @@ def collect(policy: str, teacher: str, opponent: str, periods: int, worlds: int,
 
     from dynenv_ros.envs.vector import SoccerVectorEnv
     from dynenv_ros.evaluation.episodes import load_evaluated_policy
-    from dynenv_ros.learning.algorithms import run_sequence
-    from dynenv_ros.learning.opponents import SCRIPTED_TEAM, WorldScriptedOpponent
-    from dynenv_ros.learning.rollout import RolloutCollector, head_outputs
+    from dynenv_ros.learning.algo.policy import run_sequence
+    from dynenv_ros.learning.sampling.opponents import SCRIPTED_TEAM, WorldScriptedOpponent
+    from dynenv_ros.learning.sampling.collector import RolloutCollector
+    from dynenv_ros.learning.algo.policy import head_outputs
 
     torch.set_num_threads(1)
     agent, _ = load_evaluated_policy(policy)

@@ -18,9 +18,9 @@ allowed, makes a 163 MB file), ``feature_size`` 1..``MAX_FEATURE_SIZE`` (1024; t
 then checked against the network the config describes built on torch's ``meta`` device (no memory), so a config
 that the tensors do not match is refused before the real network is allocated.
 
-This module is the single implementation of the format; ``dynenv_ros.learning.checkpoints`` re-exports
+This module is the single implementation of the format; ``dynenv_ros.learning.run.checkpoints`` re-exports
 ``save_policy``/``load_policy`` and uses the helpers here (atomic writes, state-dict fitting) for the training
-checkpoints. ``save_checkpoint``/``load_checkpoint`` are the older names the policy node uses.
+checkpoints (a policy file is not a checkpoint: a training checkpoint also holds the optimiser and the run's state).
 """
 from __future__ import annotations
 
@@ -331,15 +331,3 @@ def policy_from_bytes(data: bytes, source: str = "policy") -> tuple[DynEnvAgent,
     model = DynEnvAgent(**config)
     model.load_state_dict(tensors)
     return model.eval(), meta
-
-
-# -- the older names (policy node, tests) --------------------------------------------------------------------------
-def save_checkpoint(model: DynEnvAgent, path: str | os.PathLike[str], extra: dict[str, Any] | None = None) -> str:
-    """``save_policy`` without the file-name rule (the content is a policy file whatever the name); ``extra`` is
-    the meta. Returns the file's SHA-256."""
-    return _write_policy(model, path, extra)
-
-
-def load_checkpoint(path: str | os.PathLike[str]) -> DynEnvAgent:
-    """``load_policy`` without the meta: the model in eval mode."""
-    return load_policy(path)[0]

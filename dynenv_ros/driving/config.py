@@ -17,11 +17,11 @@ departure from the original and why.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, is_dataclass
+from dataclasses import dataclass
 from dataclasses import field as _default
 from typing import Any, Mapping
 
-from dynenv_ros.core.settings import check_numbers
+from dynenv_ros.core.settings import build_settings, check_numbers
 from dynenv_ros.sim.timing import Rates
 
 MAX_CARS = 10
@@ -318,7 +318,7 @@ class DrivingConfig:
                 values["rates"] = Rates(**dict(values["rates"]))
             except TypeError as exc:
                 raise ValueError(f"rates: {exc}") from None
-        return _build(cls, values, prefix="")
+        return build_settings(cls, values, "driving")
 
 
 def _sequence(name: str, value: Any) -> tuple:
@@ -335,46 +335,6 @@ def _float_tuple(name: str, value: Any, length: int | None = None) -> tuple[floa
         if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
             raise ValueError(f"{name} must hold finite numbers, got {item!r}")
     return tuple(float(v) for v in items)
-
-
-def _build(cls: type, values: dict[str, Any], prefix: str) -> Any:
-    known = {f.name: f for f in fields(cls)}
-    unknown = sorted(set(values) - set(known))
-    if unknown:
-        raise ValueError(f"unknown driving setting(s): {', '.join(prefix + u for u in unknown)}; "
-                         f"known: {', '.join(prefix + k for k in known)}")
-    kwargs: dict[str, Any] = {}
-    defaults = cls()
-    for name, value in values.items():
-        default = getattr(defaults, name)
-        if is_dataclass(default) and isinstance(value, Mapping):
-            kwargs[name] = _build(type(default), dict(value), f"{prefix}{name}.")
-        elif is_dataclass(default) and not is_dataclass(value):
-            raise ValueError(f"{prefix}{name} must be a mapping of settings, got {value!r}")
-        else:
-            kwargs[name] = _coerce(f"{prefix}{name}", value, default)
-    try:
-        return cls(**kwargs)
-    except TypeError as exc:  # a wrong type deep inside a nested dataclass
-        raise ValueError(f"{prefix or 'driving'}: {exc}") from None
-
-
-def _coerce(name: str, value: Any, default: Any) -> Any:
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f"{name} must be true or false, got {value!r}")
-        return value
-    if isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"{name} must be an integer, got {value!r}")
-        return value
-    if isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-        return float(value)
-    if isinstance(default, str) and not isinstance(value, str):
-        raise ValueError(f"{name} must be a string, got {value!r}")
-    return value
 
 
 __all__ = ["DrivingConfig", "MapConfig", "CarConfig", "PedestrianConfig", "ObstacleConfig", "RewardConfig",

@@ -29,7 +29,6 @@ builder, the action width and checks.
 """
 from __future__ import annotations
 
-import math
 import multiprocessing as mp
 import os
 import pickle
@@ -42,6 +41,7 @@ from typing import Any, Callable, Mapping, Union
 
 import numpy as np
 
+from dynenv_ros.core.shared_arrays import SharedArrays
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.envs.league import LEAGUE_MEMBERS, League
 from dynenv_ros.envs.learning_targets import target_shapes
@@ -446,51 +446,6 @@ def validate_actions(actions: Any, config: SoccerConfig, num_envs: int) -> Any:
 
 
 # -- shared memory and workers -----------------------------------------------------------------------------------
-
-def close_blocks(blocks: list[shared_memory.SharedMemory]) -> None:
-    """Unmap blocks this process attached (their owner unlinks them)."""
-    for block in blocks:
-        try:
-            block.close()
-        except BufferError:      # someone still holds a view (copy=False); the mapping goes with the last view
-            pass
-
-
-def _release_blocks(blocks: list[shared_memory.SharedMemory]) -> None:
-    close_blocks(blocks)
-    for block in blocks:
-        try:
-            block.unlink()
-        except FileNotFoundError:
-            pass
-
-
-class SharedArrays:
-    """Named numpy arrays, one shared-memory block each, created (and unlinked) by this process."""
-
-    def __init__(self, spec: dict[str, tuple[tuple[int, ...], np.dtype]]) -> None:
-        self.blocks: dict[str, shared_memory.SharedMemory] = {}
-        created: list[shared_memory.SharedMemory] = []      # the finalizer's list, filled as blocks are made
-        self._finalizer = weakref.finalize(self, _release_blocks, created)
-        try:
-            for key, (shape, dtype) in spec.items():
-                size = max(1, math.prod(shape) * np.dtype(dtype).itemsize)
-                created.append(shared_memory.SharedMemory(create=True, size=size))
-                self.blocks[key] = created[-1]
-        except BaseException:
-            self._finalizer()
-            raise
-        self.spec = spec
-        self.arrays = {key: np.ndarray(shape, dtype, buffer=self.blocks[key].buf)
-                       for key, (shape, dtype) in spec.items()}
-
-    def names(self) -> dict[str, tuple[str, tuple[int, ...], str]]:
-        return {key: (self.blocks[key].name, shape, np.dtype(dtype).str) for key, (shape, dtype) in self.spec.items()}
-
-    def close(self) -> None:
-        self.arrays = {}
-        self._finalizer()
-
 
 STEP = b"s"      # parent -> worker: step with the actions in the shared block; anything else is a pickled command
 OK = b""         # worker -> parent: done; anything else is a pickled exception

@@ -37,15 +37,14 @@ def sample_space(space: Any, rng: np.random.Generator) -> Any:
 # -- the evaluated policy ----------------------------------------------------------------------------------------
 def load_evaluated_policy(spec: str | os.PathLike[str]) -> tuple[Any, str]:
     """A policy file (``policy.safetensors``), or a training checkpoint folder — a ``step_*`` folder, or a run
-    folder (its latest checkpoint) — rebuilt by ``learning.agents.policy_from_training_checkpoint``; and the
+    folder (its latest checkpoint) — rebuilt by ``learning.run.checkpoints.policy_from_training_checkpoint``; and the
     SHA-256 of the weights file it came from (recorded in the result)."""
-    from dynenv_ros.agent.checkpoint import load_checkpoint, sha256
+    from dynenv_ros.agent.checkpoint import load_policy, sha256
     if Path(spec).is_dir():
-        from dynenv_ros.learning.agents import policy_from_training_checkpoint
-        from dynenv_ros.learning.checkpoints import MODEL_FILE
+        from dynenv_ros.learning.run.checkpoints import MODEL_FILE, policy_from_training_checkpoint
         model, meta = policy_from_training_checkpoint(spec)
         return model, sha256(Path(meta["checkpoint"]["path"]) / MODEL_FILE)
-    return load_checkpoint(spec), sha256(spec)
+    return load_policy(spec)[0], sha256(spec)
 
 
 __all__ = ["episode_seeds", "sample_space", "load_evaluated_policy"]

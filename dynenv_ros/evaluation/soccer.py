@@ -10,7 +10,7 @@ side too (baseline rows produced the same way)::
 
 Policies (``make_team_policy``):
 
-- a checkpoint path: ``load_checkpoint(path)``; actions sampled from the policy (``greedy=True``: the most likely
+- a checkpoint path: ``load_policy(path)``; actions sampled from the policy (``greedy=True``: the most likely
   action); one recurrent state per robot, fresh at every episode start.
 - ``"scripted"``: ``keeper_and_chasers`` (``soccer.scripted``: a goalkeeper in slot 0, chasers elsewhere; a team
   of one is a chaser), the default of ``dynenv-play`` and the nearer to a real SPL line-up; ``"chaser"`` and
@@ -242,7 +242,7 @@ def _head_units(model: Any, step: Any) -> int:
 
 def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy:
     """``"random"``, ``"scripted"`` (= ``keeper_and_chasers``), ``"chaser"``, ``"keeper_and_chasers"`` or a
-    checkpoint path (loaded with ``load_checkpoint``; its ValueError passes through). A TeamPolicy is returned
+    checkpoint path (loaded with ``load_policy``; its ValueError passes through). A TeamPolicy is returned
     as is."""
     if isinstance(spec, TeamPolicy):
         return spec

@@ -3,7 +3,7 @@ during training.
 
 The paper reports, per method, the best 10-episode moving average of the training reward — a statistic that can only
 flatter (it is a maximum over a noisy curve, on the episodes the policy was trained on). It stands in
-docs/results.md beside the held-out evaluation, never instead of it. Our run log (``learning.run_log``) holds one
+docs/results.md beside the held-out evaluation, never instead of it. Our run log (``learning.run.metrics``) holds one
 value per logging window: the mean over the car-episodes that finished in it, not each episode. So the moving
 average here runs over ``window`` consecutive logged windows; each window already averages several episodes, so the
 curve is smoother and its maximum lower than the paper's per-episode one would be on the same run (a conservative
@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Sequence
 
-from dynenv_ros.learning.run_log import CSV_NAME, read_metrics, series_by_step
+from dynenv_ros.learning.run.metrics import CSV_NAME, read_metrics, series_by_step
 
 DEFAULT_METRIC = "episode/return"
 DEFAULT_WINDOW = 10

@@ -112,9 +112,9 @@ def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str
                        scratch: str | None = None) -> dict[str, Any]:
     """One run, where the task landed: train in a scratch folder (``scratch``/name, kept and resumed from its last
     checkpoint, or a temporary one), evaluate the policy, return the small files."""
-    from dynenv_ros.learning.checkpoints import list_checkpoints
+    from dynenv_ros.learning.run.checkpoints import list_checkpoints
     from dynenv_ros.learning.config import TrainConfig
-    from dynenv_ros.learning.runners import make_trainer
+    from dynenv_ros.learning.trainer import Trainer
     cfg = TrainConfig.from_dict(cfg_dict)
     started = time.time()
     with tempfile.TemporaryDirectory(prefix=f"dynenv-sweep-{name}-") as temporary:
@@ -122,7 +122,7 @@ def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str
         resume = run_dir.is_dir() and bool(list_checkpoints(run_dir))
         if run_dir.is_dir() and not resume:          # killed before its first checkpoint: nothing to keep
             shutil.rmtree(run_dir)
-        summary = make_trainer(cfg, run_dir, resume=resume, progress=False).run()
+        summary = Trainer(cfg, run_dir, resume=resume, progress=False).run()
         result = _evaluate(cfg, run_dir / "policy.safetensors", evaluation)
         files = {f: (run_dir / f).read_bytes() for f in RUN_FILES if (run_dir / f).is_file()}
     import platform
@@ -219,7 +219,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, ValueError, OSError) as error:
         print(f"{PROG}: {error}".splitlines()[0], file=sys.stderr)
         return 2
-    from dynenv_ros.learning.ray_connection import RayConnectionError, connect
+    from dynenv_ros.learning.distributed.ray_connection import RayConnectionError, connect
     try:
         ray, started = connect(args.ray_address, args.ray_timeout)
     except RayConnectionError as error:
@@ -234,7 +234,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _sweep(ray: Any, args: argparse.Namespace, configs: dict[str, Any], planned: dict[str, Any]) -> int:
     from dynenv_ros.evaluation.results import load_evaluation, merge_runs, write_json
-    from dynenv_ros.learning.ray_connection import cluster_cpus
+    from dynenv_ros.learning.distributed.ray_connection import cluster_cpus
     cpus = cluster_cpus(ray)
     largest = max(c for c, _ in planned.values())
     if largest > cpus:

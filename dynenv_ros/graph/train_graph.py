@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch
-from dynenv_ros.learning.checkpoints import START_POLICY
+from dynenv_ros.learning.run.checkpoints import START_POLICY
 from dynenv_ros.soccer.config import robot_names
 from dynenv_ros.security.action_auth import secret_path, write_game_secrets, write_team_secret
 from dynenv_ros.security.frame_auth import FRAMES

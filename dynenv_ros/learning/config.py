@@ -353,7 +353,7 @@ class TrainConfig:
 
     def _validate_runner(self) -> None:
         """The asynchronous runner's settings (machine-dependent limits are checked where the run starts:
-        ``async_trainer.check_resources``)."""
+        ``resources.check_machine``)."""
         if self.runner == "sync":
             if self.backend == "ray":
                 raise ConfigError("backend", "'ray' runs rollout workers as Ray actors, which needs runner: async")

@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 
 from dynenv_ros.learning.config import ConfigError, TrainConfig
-from dynenv_ros.learning.rollout_worker import resolve_workers, usable_cores
+from dynenv_ros.learning.distributed.rollout_worker import resolve_workers, usable_cores
 
 ACTIVATION_BYTES_PER_ROBOT_STEP = 360_000
 MEMORY_SHARE, SHM_SHARE = 0.8, 0.9
@@ -50,7 +50,7 @@ def shared_memory_free() -> int | None:
 def robot_step_bytes(cfg: TrainConfig) -> int:
     """Bytes a rollout stores per learning robot and period: the padded observation of the run's settings (from a
     one-world env) plus the per-step learning arrays and targets (a fixed allowance)."""
-    from dynenv_ros.learning.worlds import make_env
+    from dynenv_ros.learning.sampling.worlds import make_env
     env, _ = make_env(cfg, 1, "inprocess")
     try:
         observation = sum(math.prod(shape) * 4 for shape in env.layout.shapes().values())
@@ -100,7 +100,7 @@ def check_machine(cfg: TrainConfig) -> None:
         raise ConfigError("num_envs", f"the rollout workers' slots need {shared / GB:.1f} GB of shared memory; "
                                       f"/dev/shm has {free / GB:.1f} GB free")
     if cfg.runner == "async" and cfg.backend == "ray" and cfg.ray_address is not None:
-        from dynenv_ros.learning.ray_connection import RayConnectionError, probe
+        from dynenv_ros.learning.distributed.ray_connection import RayConnectionError, probe
         try:
             probe(cfg.ray_address, cfg.ray_connect_timeout_s)
         except RayConnectionError as error:

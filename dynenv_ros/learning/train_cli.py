@@ -59,7 +59,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (logs still written)")
     parser.add_argument("--from-bag", nargs="+", metavar="BAG", help="learn offline from recorded bags: behaviour "
                         "cloning of the recorded actions and (soccer) the localization/reconstruction heads "
-                        "(learning/from_bag.py); rollout_length sets the sequence length; a driving bag needs a "
+                        "(learning/messages/bags.py); rollout_length sets the sequence length; a driving bag needs a "
                         "driving config (--config driving_quick)")
     parser.add_argument("--epochs", type=int, default=10, help="--from-bag: passes over the sequences")
     parser.add_argument("--batch-sequences", type=int, default=16, help="--from-bag: sequences per update")
@@ -90,22 +90,22 @@ def main(argv: list[str] | None = None) -> int:
         from dynenv_ros.learning.resources import check_machine
         check_machine(cfg)                 # cores, memory, shared memory, the Ray cluster: before anything starts
         from dynenv_ros.core.writable import check_run_dir
-        from dynenv_ros.learning.disk_budget import run_disk_bytes
+        from dynenv_ros.learning.run.disk_budget import run_disk_bytes
         # read-only, full, or too small for the run's checkpoints: refused now, nothing left behind
         check_run_dir(run_dir, *run_disk_bytes(cfg), what="--resume" if args.resume else "--run-dir")
     except (ConfigError, ValueError) as error:
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
-    from dynenv_ros.learning.checkpoints import list_checkpoints
+    from dynenv_ros.learning.run.checkpoints import list_checkpoints
     resume = bool(args.resume)
     if resume and not list_checkpoints(run_dir):     # killed before its first checkpoint (seconds after starting)
         print(f"dynenv-train: --resume {run_dir}: no checkpoint yet (the run stopped before its first); starting "
               f"it again from the beginning", file=sys.stderr)
         resume = False
-    from dynenv_ros.learning.runners import make_trainer
-    from dynenv_ros.learning.worker_pool import WorkerPoolError
+    from dynenv_ros.learning.trainer import Trainer
+    from dynenv_ros.learning.distributed.worker_pool import WorkerPoolError
     try:
-        trainer = make_trainer(cfg, run_dir, resume=resume, progress=not args.no_progress)
+        trainer = Trainer(cfg, run_dir, resume=resume, progress=not args.no_progress)
     except (ValueError, WorkerPoolError) as error:   # a checkpoint that does not fit; workers that cannot start
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
 def _from_bags(args: argparse.Namespace) -> int:
     from dynenv_ros.bags.inspect import BagError
     from dynenv_ros.learning.config import ConfigError, load_config
-    from dynenv_ros.learning.from_bag import train_from_bags
+    from dynenv_ros.learning.messages.bags import train_from_bags
     try:
         if args.resume:
             raise ValueError("--from-bag starts a new run; --resume continues an in-process one")
@@ -138,7 +138,7 @@ def _from_bags(args: argparse.Namespace) -> int:
         if (run_dir / "checkpoints").exists():
             raise ValueError(f"{run_dir} already holds a run; choose another --run-dir")
         from dynenv_ros.core.writable import check_run_dir
-        from dynenv_ros.learning.disk_budget import run_disk_bytes
+        from dynenv_ros.learning.run.disk_budget import run_disk_bytes
         fresh = not run_dir.exists()
         check_run_dir(run_dir, *run_disk_bytes(cfg), what="--run-dir")
         learns = (lambda name: name[5] == args.team) if args.team else None

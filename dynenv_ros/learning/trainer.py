@@ -1,11 +1,13 @@
-"""The in-process trainer: the vectorised soccer batch, the agent, PPO or A2C with the paper's auxiliary losses,
-logging, atomic checkpoints and resumption — no ROS. ``dynenv-train`` (``train_cli``) runs it; the trainer node
-reuses its pieces (``RolloutCollector``, ``update``, ``checkpoints``).
+"""The trainer of ``dynenv-train``: the agent, PPO or A2C with the paper's auxiliary losses (``algo``), experience
+from this process's worlds (``runner: sync``, ``sampling.in_process``) or from rollout workers (``runner: async``,
+``distributed.pool_source``: processes or Ray actors), the one training loop (``algo.loop``), logging, atomic
+checkpoints and resumption — no ROS. The trainer node learns from messages with the same pieces
+(``messages.message_trainer``).
 
 A run directory holds: ``config.json`` (the resolved config), ``metrics.csv`` and ``tensorboard/`` (every scalar),
 ``checkpoints/`` (the last few, safetensors + JSON, see ``checkpoints``), and at the end ``policy.safetensors``,
 ``policy.onnx``, ``curves.png`` and ``summary.json`` (with ``best_policy_window``, also ``best_policy.safetensors``:
-``learning.best_policy``). Resuming (``--resume RUN_DIR``) restores the networks, the
+``learning.run.best_policy``). Resuming (``--resume RUN_DIR``) restores the networks, the
 optimiser, the step counters and the random generators from the latest checkpoint; the worlds restart with fresh
 episodes seeded from (seed, update), since a world's physics state is not checkpointed — an episode cut by a kill
 is simply not counted.
@@ -18,77 +20,56 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import torch
 
-from dynenv_ros.learning import checkpoints, compiled
-from dynenv_ros.learning.agents import make_agent
-from dynenv_ros.learning.algorithms import UpdateSettings, update
-from dynenv_ros.learning.best_policy import BestPolicy
-from dynenv_ros.learning.compute import ComputeMeter
+from dynenv_ros.learning.algo import compiled
+from dynenv_ros.learning.algo.experience import Experience, Progress
+from dynenv_ros.learning.algo.loop import train
+from dynenv_ros.learning.algo.networks import TrainingNetworks, make_agent
+from dynenv_ros.learning.algo.ppo import update, update_settings
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.heads import Learner
-from dynenv_ros.learning.rollout import Rollout
-from dynenv_ros.learning.run_log import RunLogger, as_logged, plot_curves
-from dynenv_ros.learning.worlds import make_worlds, soccer_config, teacher_driven_share
-
-VERSION = "dynenv_ros.learning/1"
-
-
-def update_settings(cfg: TrainConfig) -> UpdateSettings:
-    """The variant's loss switches and the config's numbers, in the form ``update`` takes. ``use_forward`` is on
-    for ICM's plain forward model *and* RCM's attention-weighted one (``use_rcm`` picks the weighting): ``update``
-    adds the forward loss only under ``use_forward``."""
-    losses = cfg.losses()
-    ppo = cfg.algorithm == "ppo"
-    return UpdateSettings(
-        algorithm=cfg.algorithm, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
-        epochs=cfg.ppo_epochs if ppo else 1, minibatches=cfg.ppo_minibatches if ppo else 1, clip=cfg.ppo_clip,
-        clip_value_loss=cfg.clip_value_loss, normalize_advantages=cfg.normalize_advantages,
-        target_kl=cfg.target_kl, value_coef=cfg.value_coef, entropy_coef=cfg.entropy_coef,
-        max_grad_norm=cfg.max_grad_norm, forward_coef=cfg.forward_coef, inverse_coef=cfg.inverse_coef,
-        ltp_coef=cfg.ltp_coef, self_supervised_coef=cfg.self_supervised_coef,
-        use_forward=losses.forward, use_rcm=losses.rcm_attention, use_inverse=losses.inverse, use_ltp=losses.ltp,
-        use_localization=losses.localization, use_reconstruction=losses.reconstruction,
-        intrinsic_reward_coef=cfg.intrinsic_reward_coef, imitation_coef=cfg.imitation_weight(0),
-        proximal=ppo and cfg.runner == "async")
-
-
-@dataclass
-class Experience:
-    """What one update learns from: a rollout (possibly several workers' joined), the env steps in it, the episodes
-    that finished while it was collected, and scalars to log about it (averaged, or the maximum for ``*_max``)."""
-    rollout: Rollout
-    env_steps: int
-    finished: list[dict[str, float]]
-    scalars: dict[str, float] = field(default_factory=dict)
+from dynenv_ros.learning.distributed.pool_source import PoolSource
+from dynenv_ros.learning.distributed.worker_pool import WorkerPoolError
+from dynenv_ros.learning.run import checkpoints
+from dynenv_ros.learning.run.best_policy import BestPolicy
+from dynenv_ros.learning.run.compute import ComputeMeter
+from dynenv_ros.learning.run.metrics import RunLogger, as_logged, plot_curves
+from dynenv_ros.learning.sampling.in_process import InProcessSource
+from dynenv_ros.learning.sampling.worlds import make_env
 
 
 class Trainer:
-    def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True) -> None:
-        self.cfg, self.run_dir, self.progress = cfg, Path(run_dir), progress
+    """One run of ``cfg`` in ``run_dir``: ``run`` trains until ``total_env_steps`` or ``max_minutes`` and finishes
+    (``finish``). ``progress``: a progress bar on stderr; ``log``: where the workers' one-line reports go (async)."""
+
+    def __init__(self, cfg: TrainConfig, run_dir: str | Path, resume: bool = False, progress: bool = True,
+                 log: Callable[[str], None] | None = None) -> None:
+        self.cfg, self.run_dir, self.progress_bar = cfg, Path(run_dir), progress
+        self._log_line = log or (lambda line: print(f"dynenv-train: {line}", file=sys.stderr, flush=True))
         self.run_dir.mkdir(parents=True, exist_ok=True)
         torch.set_num_threads(cfg.torch_threads)
         self.device = torch.device(cfg.device)
         self.settings = update_settings(cfg)
-        self.soccer = soccer_config(cfg)
         seeds = np.random.SeedSequence(cfg.seed).spawn(4)
         self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
         self.rng = np.random.default_rng(seeds[1])
         self.env_seed = int(seeds[2].generate_state(1)[0])
-        agent = make_agent(cfg)
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only; no global RNG use after this
-        self.learner = Learner(agent, cfg.ltp_horizon).to(self.device)
+        agent = make_agent(cfg)
+        self.networks = TrainingNetworks(agent, cfg.ltp_horizon).to(self.device)
         # fused: one kernel over all 200-odd parameter tensors (CPU and CUDA) — 8x cheaper than the per-tensor loop
-        self.optimizer = torch.optim.Adam(self.learner.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps,
+        self.optimizer = torch.optim.Adam(self.networks.parameters(), lr=cfg.learning_rate, eps=cfg.adam_eps,
                                           fused=self.device.type in ("cpu", "cuda"))
-        self.env_steps = self.updates = self.episodes = 0
+        self.progress = Progress()
         self.wall_before = 0.0
+        self.stop_reason = ""
+        self._started = time.perf_counter()
         self._earlier_compute: list[dict[str, Any]] = []
         if cfg.torch_compile:
             compiled.compile_hot_paths()
@@ -98,30 +79,29 @@ class Trainer:
             self._load_encoder(cfg.pretrained_encoder)
         elif cfg.init_policy:
             self._load_init_policy(cfg.init_policy)
-        self.compute = ComputeMeter(self.env_steps, self._earlier_compute)
+        self.compute = ComputeMeter(self.progress.env_steps, self._earlier_compute)
         self.best_policy = None
         if cfg.best_policy_window is not None:
-            self.best_policy = (BestPolicy.resume(self.run_dir, cfg.best_policy_window, self.env_steps) if resume
-                                else BestPolicy(cfg.best_policy_window))
+            self.best_policy = (BestPolicy.resume(self.run_dir, cfg.best_policy_window, self.progress.env_steps)
+                                if resume else BestPolicy(cfg.best_policy_window))
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
-        self._start_rollouts()
+        self.source: InProcessSource | PoolSource
+        if cfg.runner == "async":
+            self.source = PoolSource(cfg, self.networks, self.progress.updates, self.device, self._log_line)
+        else:       # the worlds restart with fresh episodes seeded from (seed, update)
+            self.source = InProcessSource(cfg, self.networks, self.generator, self.rng,
+                                          self.env_seed + self.progress.updates, self.device)
+        self.layout_shapes = self.source.layout_shapes    # async: known once a worker said hello
         self.logger = RunLogger(self.run_dir)
-
-    def _start_rollouts(self) -> None:
-        """The worlds, the opponent and the collector (this process's; the asynchronous runner starts workers)."""
-        worlds = make_worlds(self.cfg, self.learner, self.cfg.num_envs, self.cfg.backend, self.generator, self.rng,
-                             seed=self.env_seed + self.updates)
-        self.env, self.opponent, self.collector = worlds.env, worlds.opponent, worlds.collector
-        self.layout_shapes = {k: list(v) for k, v in self.env.layout.shapes().items()}
 
     # -- checkpoints ------------------------------------------------------------------------------------------
     def _meta(self) -> dict[str, Any]:
-        return {"version": VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
-                "algorithm": self.cfg.algorithm, "env_steps": self.env_steps, "updates": self.updates,
-                "episodes": self.episodes, "wall_seconds": self.wall_before + self._elapsed(),
-                "observation_layout": self.layout_shapes,
+        return {"version": checkpoints.META_VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
+                "algorithm": self.cfg.algorithm, "env_steps": self.progress.env_steps,
+                "updates": self.progress.updates, "episodes": self.progress.episodes,
+                "wall_seconds": self.wall_before + self._elapsed(), "observation_layout": self.layout_shapes,
                 "numpy_rng": self.rng.bit_generator.state, "code_revision": checkpoints.code_revision(),
-                "compute": self.compute.record(self.env_steps)}
+                "compute": self.compute.record(self.progress.env_steps)}
 
     def _policy_meta(self) -> dict[str, Any]:
         """What a policy file carries of the run (the checkpoint's meta less the generator state)."""
@@ -129,13 +109,14 @@ class Trainer:
 
     def save_checkpoint(self) -> Path:
         extra = {"torch_generator": self.generator.get_state()}
-        return checkpoints.save_training_checkpoint(self.run_dir, self.env_steps, self.learner, self.optimizer,
-                                                    self._meta(), extra, keep=self.cfg.keep_checkpoints)
+        return checkpoints.save_training_checkpoint(self.run_dir, self.progress.env_steps, self.networks,
+                                                    self.optimizer, self._meta(), extra,
+                                                    keep=self.cfg.keep_checkpoints)
 
     def _resume(self) -> None:
-        meta, extra = checkpoints.load_training_checkpoint(self.run_dir, self.learner, self.optimizer)
-        self.env_steps, self.updates = int(meta["env_steps"]), int(meta["updates"])
-        self.episodes, self.wall_before = int(meta.get("episodes", 0)), float(meta.get("wall_seconds", 0.0))
+        meta, extra = checkpoints.load_training_checkpoint(self.run_dir, self.networks, self.optimizer)
+        self.progress = Progress(int(meta["env_steps"]), int(meta["updates"]), int(meta.get("episodes", 0)))
+        self.wall_before = float(meta.get("wall_seconds", 0.0))
         self.rng.bit_generator.state = meta["numpy_rng"]
         self._earlier_compute = list(meta.get("compute", {}).get("segments", []))
         if "torch_generator" in extra:
@@ -144,13 +125,13 @@ class Trainer:
     def _load_encoder(self, path: str) -> None:
         """The localization and object streams (and reconstruction head) of a pretrained policy file."""
         pretrained, _ = checkpoints.load_policy(path)
-        if getattr(pretrained, "uses_pose", False) != self.learner.agent.uses_pose:
+        if getattr(pretrained, "uses_pose", False) != self.networks.agent.uses_pose:
             raise ValueError(f"pretrained encoder {path} {'takes' if pretrained.uses_pose else 'does not take'} the "
                              f"pose estimate and this run's agent (localization: {self.cfg.localization}) "
-                             f"{'does' if self.learner.agent.uses_pose else 'does not'}: the streams' inputs differ")
+                             f"{'does' if self.networks.agent.uses_pose else 'does not'}: the streams' inputs differ")
         wanted = ("localization.", "pose_head.", "objects.", "reconstruction.")
         state = {k: v for k, v in pretrained.state_dict().items() if k.startswith(wanted)}
-        missing = self.learner.agent.load_state_dict(state, strict=False)
+        missing = self.networks.agent.load_state_dict(state, strict=False)
         if missing.unexpected_keys:
             raise ValueError(f"pretrained encoder {path} has unexpected keys, e.g. {missing.unexpected_keys[0]}")
 
@@ -158,8 +139,8 @@ class Trainer:
         """Every network from a policy file (``init_policy``); it must fit this run's agent exactly."""
         from dynenv_ros.agent.checkpoint import check_state_dict_fits
         policy, _ = checkpoints.load_policy(path)
-        check_state_dict_fits(self.learner.agent, policy.state_dict(), f"init_policy {path}")
-        self.learner.agent.load_state_dict(policy.state_dict())
+        check_state_dict_fits(self.networks.agent, policy.state_dict(), f"init_policy {path}")
+        self.networks.agent.load_state_dict(policy.state_dict())
 
     # -- the loop ---------------------------------------------------------------------------------------------
     def _elapsed(self) -> float:
@@ -168,106 +149,93 @@ class Trainer:
     def run(self) -> dict[str, Any]:
         """Train until total_env_steps or max_minutes, then ``finish``. A write that fails (a full or read-only disk:
         OSError) stops the run cleanly: ``stop_reason`` in the summary, the last checkpoint left as it was (they are
-        written atomically), nothing more written."""
+        written atomically), nothing more written. Workers that cannot go on (``WorkerPoolError``) stop it with
+        what was learnt kept (checkpoint, policy) and the reason in one line."""
         try:
             return self._run()
         except OSError as error:
             return self._write_failed(error)
+        except WorkerPoolError as error:
+            self._log_line(f"stopping: {error}")
+            self.stop_reason = str(error)
+            return self.finish()
+        finally:
+            self.close()
 
     def _write_failed(self, error: OSError) -> dict[str, Any]:
         from dynenv_ros.core.writable import describe_os_error
         where = f" ({error.filename})" if getattr(error, "filename", None) else ""
         self.stop_reason = f"cannot write to {self.run_dir}: {describe_os_error(error)}{where}; the last " \
                            f"checkpoint is kept (dynenv-train --resume {self.run_dir} once there is room)"
-        for close in (getattr(getattr(self, "logger", None), "close", None), self._stop_rollouts):
+        for close in (getattr(getattr(self, "logger", None), "close", None), self.close):
             try:
                 if close is not None:
                     close()
             except Exception:       # noqa: BLE001 - best effort on the way out; the reason is already known
                 pass
-        summary = self._summary()
-        summary["stop_reason"] = self.stop_reason
-        return summary
+        return self._summary()
 
     def _run(self) -> dict[str, Any]:
         cfg = self.cfg
         self._started = time.perf_counter()
-        deadline = math.inf if cfg.max_minutes is None else cfg.max_minutes * 60.0
+        deadline = math.inf if cfg.max_minutes is None else self._started + cfg.max_minutes * 60.0
         if not checkpoints.list_checkpoints(self.run_dir):
             self.save_checkpoint()      # the first one at once: a kill from now on leaves a run to --resume
-        last_checkpoint = time.perf_counter()
-        window = self._new_window()
-        returns: list[dict[str, float]] = []
-        bar = None
-        if self.progress:
+        self._last_checkpoint = time.perf_counter()
+        self._window = self._new_window()
+        self._returns: list[dict[str, float]] = []
+        self._stats: dict[str, float] = {}
+        self._bar = None
+        if self.progress_bar:
             from tqdm import tqdm
-            bar = tqdm(total=cfg.total_env_steps, initial=self.env_steps, unit="step", dynamic_ncols=True,
-                       desc=f"{cfg.algorithm}/{cfg.variant}")
-        stats: dict[str, float] = {}
+            self._bar = tqdm(total=cfg.total_env_steps, initial=self.progress.env_steps, unit="step",
+                             dynamic_ncols=True, desc=f"{cfg.algorithm}/{cfg.variant}")
         try:
-            while self.env_steps < cfg.total_env_steps and self._elapsed() < deadline:
-                t0 = time.perf_counter()
-                batch = self._experience(deadline)
-                if batch is None:           # (the asynchronous runner: the deadline passed while it waited)
-                    break
-                t1 = time.perf_counter()
-                self.learner.train()
-                self.settings.imitation_coef = cfg.imitation_weight(self.env_steps)
-                stats = update(self.learner, self.optimizer, batch.rollout.as_tensors(self.device), self.settings,
-                               self.generator)
-                if cfg.teacher is not None:
-                    stats["imitation_coef"] = self.settings.imitation_coef
-                t2 = time.perf_counter()
-                self.env_steps += batch.env_steps
-                self.updates += 1
-                self._learned(batch)
-                window["steps"] += batch.env_steps
-                window["updates"] += 1
-                window["rollout"] += t1 - t0
-                window["learn"] += t2 - t1
-                for key, value in batch.scalars.items():
-                    window["extra"].setdefault(key, []).append(value)
-                self.episodes += len(batch.finished)
-                returns.extend(batch.finished)
-                if bar is not None:
-                    bar.update(batch.env_steps)
-                if self.updates % cfg.log_every_updates == 0:
-                    self._log(stats, window, returns, bar)
-                    returns = []
-                    window = self._new_window()
-                if time.perf_counter() - last_checkpoint > cfg.checkpoint_every_minutes * 60.0:
-                    self.save_checkpoint()
-                    last_checkpoint = time.perf_counter()
-            if window["updates"]:           # the updates since the last log line
-                self._log(stats, window, returns, bar)
+            train(self.source, self.learn, self.progress, self._record,
+                  until=lambda progress: progress.env_steps < cfg.total_env_steps, deadline=deadline)
+            if self._window["updates"]:           # the updates since the last log line
+                self._log(self._stats, self._window, self._returns, self._bar)
         finally:
-            if bar is not None:
-                bar.close()
+            if self._bar is not None:
+                self._bar.close()
         return self.finish()
+
+    def learn(self, experience: Experience) -> dict[str, float]:
+        """The algorithm's step: the update, with this run's imitation weight (``teacher``) at this step count."""
+        self.networks.train()
+        self.settings.imitation_coef = self.cfg.imitation_weight(self.progress.env_steps)
+        stats = update(self.networks, self.optimizer, experience.batch, self.settings, self.generator)
+        if self.cfg.teacher is not None:
+            stats["imitation_coef"] = self.settings.imitation_coef
+        return stats
+
+    def _record(self, experience: Experience, stats: dict[str, float], waited: float, learnt: float) -> None:
+        """After each update: the log window (a line every ``log_every_updates``), the progress bar and a checkpoint
+        every ``checkpoint_every_minutes``."""
+        if self.layout_shapes is None:
+            self.layout_shapes = self.source.layout_shapes
+        window = self._window
+        window["steps"] += experience.env_steps
+        window["updates"] += 1
+        window["rollout"] += waited
+        window["learn"] += learnt
+        for key, value in experience.scalars.items():
+            window["extra"].setdefault(key, []).append(value)
+        self._returns.extend(experience.finished)
+        self._stats = stats
+        if self._bar is not None:
+            self._bar.update(experience.env_steps)
+        if self.progress.updates % self.cfg.log_every_updates == 0:
+            self._log(stats, window, self._returns, self._bar)
+            self._returns = []
+            self._window = self._new_window()
+        if time.perf_counter() - self._last_checkpoint > self.cfg.checkpoint_every_minutes * 60.0:
+            self.save_checkpoint()
+            self._last_checkpoint = time.perf_counter()
 
     @staticmethod
     def _new_window() -> dict[str, Any]:
         return {"steps": 0, "updates": 0, "time": time.perf_counter(), "rollout": 0.0, "learn": 0.0, "extra": {}}
-
-    def _experience(self, deadline: float) -> Experience | None:
-        """The next rollout to learn from: collected here, by the current policy."""
-        self.learner.eval()
-        self.collector.drive_with_teacher(self._teacher_driven_worlds())
-        rollout = self.collector.collect(self.cfg.rollout_length)
-        finished, self.collector.finished = self.collector.finished, []
-        return Experience(rollout, self.cfg.num_envs * self.cfg.rollout_length, finished, self.env.league_stats())
-
-    def _learned(self, batch: Experience) -> None:
-        """After each update: a snapshot opponent takes its copy every ``snapshot_every_updates``."""
-        if self.opponent is not None and self.cfg.opponent in ("snapshot", "league") \
-                and self.updates % self.cfg.snapshot_every_updates == 0:
-            self.opponent.refresh(self.learner.agent)
-
-    def _teacher_driven_worlds(self) -> int:
-        return teacher_driven_share(self.cfg, self.env_steps, 0, self.cfg.num_envs)
-
-    # the window's time before each update: collecting (sync) or waiting for the workers (async)
-    wait_scalar = "speed/rollout_seconds_per_update"
 
     def _log(self, stats: dict[str, float], window: dict[str, Any], returns: list[dict[str, float]],
              bar: Any) -> None:
@@ -275,20 +243,20 @@ class Trainer:
         elapsed = max(time.perf_counter() - window["time"], 1e-9)
         scalars = {f"train/{k}": v for k, v in stats.items()}
         scalars["speed/env_steps_per_second"] = window["steps"] / elapsed
-        scalars[self.wait_scalar] = window["rollout"] / updates
+        scalars[self.source.wait_scalar] = window["rollout"] / updates
         scalars["speed/learn_seconds_per_update"] = window["learn"] / updates
         for key, values in window["extra"].items():
             scalars[key] = float(np.max(values)) if key.endswith("_max") else float(np.mean(values))
         if returns:
             for key in returns[0]:
                 scalars[f"episode/{key}"] = float(np.mean([r[key] for r in returns]))
-        self.logger.log(self.env_steps, self.updates, self.wall_before + self._elapsed(), scalars)
+        self.logger.log(self.progress.env_steps, self.progress.updates, self.wall_before + self._elapsed(), scalars)
         self.compute.sample_load()
         if self.best_policy is not None and "episode/return" in scalars:
             # the value as metrics.csv holds it, so the peak is where training-best finds it
             average = self.best_policy.observe(as_logged(scalars["episode/return"]))
             if average is not None:         # the curve's new peak: keep this policy
-                self.best_policy.save(self.run_dir, self.learner.agent, self._policy_meta(), average)
+                self.best_policy.save(self.run_dir, self.networks.agent, self._policy_meta(), average)
         if bar is not None:
             postfix = {"sps": f"{scalars['speed/env_steps_per_second']:.0f}"}
             if returns:
@@ -297,8 +265,12 @@ class Trainer:
 
     def finish(self) -> dict[str, Any]:
         """Final checkpoint, the shipped policy (safetensors + ONNX), curves and a summary."""
+        if self.layout_shapes is None:          # no rollout ever arrived (async): the layout from a one-world env
+            env, _ = make_env(self.cfg, 1, "inprocess")
+            self.layout_shapes = {k: list(v) for k, v in env.layout.shapes().items()}
+            env.close()
         self.save_checkpoint()
-        agent = self.learner.agent
+        agent = self.networks.agent
         checkpoints.save_policy(agent, str(self.run_dir / "policy.safetensors"), self._policy_meta())
         from dynenv_ros.agent.export import export_onnx
         compiled.restore()                  # the exporter traces the eager functions
@@ -308,16 +280,21 @@ class Trainer:
         plot_curves(self.run_dir)
         summary = self._summary()
         (self.run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-        self._stop_rollouts()
+        self.close()
         return summary
 
     def _summary(self) -> dict[str, Any]:
-        summary = {"env_steps": self.env_steps, "updates": self.updates, "episodes": self.episodes,
-                   "wall_seconds": self.wall_before + self._elapsed(), "compute": self.compute.record(self.env_steps)}
+        summary = {"env_steps": self.progress.env_steps, "updates": self.progress.updates,
+                   "episodes": self.progress.episodes, "wall_seconds": self.wall_before + self._elapsed(),
+                   "compute": self.compute.record(self.progress.env_steps)}
         if self.cfg.init_policy:
             summary["init_policy_sha256"] = checkpoints.sha256(self.cfg.init_policy)
+        summary.update(self.source.summary() if hasattr(self, "source") else {})
+        if self.stop_reason:
+            summary["stop_reason"] = self.stop_reason
         return summary
 
-    def _stop_rollouts(self) -> None:
-        self.env.close()
-
+    def close(self) -> None:
+        """Stop the worlds or the workers (again: nothing)."""
+        if hasattr(self, "source"):
+            self.source.close()

@@ -11,11 +11,11 @@ policy node it finds on the ROS graph, and streams new weights back to the polic
   subscribes to the robot's detections, actions (with the behaviour policy's learning fields) and step feedback,
   and to the game's ``world_state`` when the variant learns localization or reconstruction (soccer;
   ``ros/experience_readers.py``).
-  ``learning.experience`` assembles per-robot sequences aligned by episode and motion period, counting what is
+  ``learning.messages.assembly`` assembles per-robot sequences aligned by episode and motion period, counting what is
   late, duplicated, out of order, missing or malformed. Each step is the action the simulator ran (its feedback
   names it by digest); with ``secrets_dir`` only actions carrying their team's MAC and feedback carrying the
   simulator's are read (``security.action_auth``; refusals counted and logged once per diagnostics period).
-- Learning: ``learning.sequence_learner`` in a thread of its own, so no callback waits for a gradient step; PPO
+- Learning: ``learning.messages.message_trainer`` in a thread of its own, so no callback waits for a gradient step; PPO
   against the stored behaviour log-probabilities, sequences older than ``max_policy_lag`` versions dropped
   (docs/decisions.md). Run directory, logs (CSV, TensorBoard) and checkpoints as ``dynenv-train`` writes them,
   plus ``policy_start.safetensors``, the policy a fresh run starts from (what it learnt is measured against it).
@@ -48,12 +48,12 @@ from rclpy.node import Node
 from dynenv_ros.agent.checkpoint import FORMAT, agent_config
 from dynenv_ros.core.writable import NotWritable, check_run_dir
 from dynenv_ros.driving.config import DrivingConfig
-from dynenv_ros.learning.checkpoints import START_POLICY, list_checkpoints
+from dynenv_ros.learning.run.checkpoints import START_POLICY, list_checkpoints
 from dynenv_ros.learning.config import ConfigError
-from dynenv_ros.learning.disk_budget import run_disk_bytes
-from dynenv_ros.learning.experience import REFUSALS, ExperienceAssembler
-from dynenv_ros.learning.experience_scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
-from dynenv_ros.learning.sequence_learner import BackgroundLearner, SequenceLearner
+from dynenv_ros.learning.run.disk_budget import run_disk_bytes
+from dynenv_ros.learning.messages.assembly import REFUSALS, ExperienceAssembler
+from dynenv_ros.learning.messages.scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
+from dynenv_ros.learning.messages.message_trainer import TrainingThread, MessageTrainer
 from dynenv_ros.nodes.trainer_parameters import declare_trainer_parameters
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.authentication import load_secrets
@@ -80,18 +80,19 @@ class TrainerNode(Node):
         except NotWritable as error:
             raise ParameterException(str(error), ["run_dir"]) from None
         try:
-            self.learner = SequenceLearner(self.cfg, self.run_dir, resume=settings.resume,
-                                           batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag,
-                                           reward_weights=settings.reward_weights,
-                                           initial_policy=settings.initial_policy or None,
-                                           max_batch_sequences=settings.max_batch or None)
+            self.message_trainer = MessageTrainer(self.cfg, self.run_dir, resume=settings.resume,
+                                                  batch_sequences=self.batch_sequences, max_policy_lag=self.max_lag,
+                                                  reward_weights=settings.reward_weights,
+                                                  initial_policy=settings.initial_policy or None,
+                                                  max_batch_sequences=settings.max_batch or None)
         except ConfigError as error:            # every refusal names its parameter
             raise ParameterException(str(error), [error.key]) from None
         if not list_checkpoints(self.run_dir):
-            self.learner.save_checkpoint()      # the first one at once: a kill from now on leaves a run to resume
+            self.message_trainer.save_checkpoint()  # the first one at once: a kill from now on leaves a run to resume
             # the policy it starts from, so that what was learnt can be measured against it on held-out episodes
             from dynenv_ros.agent.checkpoint import save_policy
-            save_policy(self.learner.agent, str(self.run_dir / START_POLICY), self.learner.policy_meta())
+            save_policy(self.message_trainer.agent, str(self.run_dir / START_POLICY),
+                        self.message_trainer.policy_meta())
         self.run_id = self.run_dir.resolve().name
         if driving:
             agents: ExperienceScenario = DrivingExperience(DrivingConfig(n_cars=n_cars, action_mode=action_mode))
@@ -114,7 +115,7 @@ class TrainerNode(Node):
         self.episodes: list[dict[str, float]] = []      # finished episodes: the version that ended it, return
         self.weights_published = 0
         self.finished = False
-        self.background = BackgroundLearner(self.learner, on_update=self._on_update)
+        self.background = TrainingThread(self.message_trainer, on_update=self._on_update)
         self._publish_weights()
         self.background.start()
         # The settable parameters change what is learnt: fixed with runtime_controls false (ros/runtime_controls.py).
@@ -134,7 +135,7 @@ class TrainerNode(Node):
         who = (f"{n_cars} cars ({action_mode})" if driving else
                "both teams" if not self.team else "team " + self.team)
         self.get_logger().info(f"learning {settings.variant} (PPO) from {who} into {self.run_dir}, version "
-                               f"{self.learner.version}")
+                               f"{self.message_trainer.version}")
 
     def _learns(self, robot: str) -> bool:
         """Soccer: the robot is of ``learning_team`` (both teams when it is empty)."""
@@ -146,11 +147,12 @@ class TrainerNode(Node):
 
     def _check_budget(self) -> None:
         """Either budget ends the run: updates make a run comparable across machine speeds, minutes cap it."""
-        spent = ("update budget" if self.max_updates and self.learner.updates >= self.max_updates else
+        progress = self.message_trainer.progress
+        spent = ("update budget" if self.max_updates and progress.updates >= self.max_updates else
                  "time budget" if self.deadline is not None and time.monotonic() >= self.deadline else None)
         if spent is not None:
-            self.get_logger().info(f"{spent} spent: version {self.learner.version}, "
-                                   f"{self.learner.updates} updates, {self.learner.env_steps} steps learnt")
+            self.get_logger().info(f"{spent} spent: version {self.message_trainer.version}, "
+                                   f"{progress.updates} updates, {progress.env_steps} steps learnt")
             raise NodeExit(0)
 
     def _learn(self, sequences: list) -> None:
@@ -158,40 +160,40 @@ class TrainerNode(Node):
         self.background.put(sequences)
 
     # -- weights --------------------------------------------------------------------------------------------------
-    def _on_update(self, learner: SequenceLearner, stats: dict[str, float]) -> None:
+    def _on_update(self, trainer: MessageTrainer, stats: dict[str, float]) -> None:
         """In the learner thread, after each update: log, and publish the weights at the cadence asked for."""
         scalars = {f"train/{k}": v for k, v in stats.items()}
-        finished, learner.finished = learner.finished, []
+        finished, trainer.finished = trainer.finished, []
         if finished:
             scalars["episode/return"] = statistics.fmean(e["return"] for e in finished)
             self.episodes.extend(finished)
         scalars["experience/queue_depth"] = float(self.background.depth())
-        learner.log(scalars)
-        if learner.updates % self.publish_every == 0:
+        trainer.log(scalars)
+        if trainer.progress.updates % self.publish_every == 0:
             self._publish_weights()
 
     def _publish_weights(self) -> None:
         try:
-            data = self.learner.weights()
+            data = self.message_trainer.weights()
         except ValueError as error:         # non-finite weights are never published (checkpoint.policy_bytes)
-            self.learner.counts["weights_refused"] += 1
+            self.message_trainer.counts["weights_refused"] += 1
             self.get_logger().error(f"weights not published: {error}")
             return
         # the network's shape, so a policy node checks it before fetching (a policy file's format and config)
-        metadata = {"format": FORMAT, "config": agent_config(self.learner.agent),
-                    "updates": self.learner.policy_meta()["updates"]}
-        self.weights.release(self.learner.version, data, json.dumps(metadata, sort_keys=True))
+        metadata = {"format": FORMAT, "config": agent_config(self.message_trainer.agent),
+                    "updates": self.message_trainer.policy_meta()["updates"]}
+        self.weights.release(self.message_trainer.version, data, json.dumps(metadata, sort_keys=True))
         self.weights_published += 1
 
     # -- parameters, diagnostics, shutdown ---------------------------------------------------------------------
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
         for p in parameters:
             if p.name == "learning_rate":
-                self.learner.set_learning_rate(float(p.value))
+                self.message_trainer.set_learning_rate(float(p.value))
             elif p.name == "entropy_coef":
-                self.learner.settings.entropy_coef = float(p.value)
+                self.message_trainer.settings.entropy_coef = float(p.value)
             elif p.name == "max_policy_lag":
-                self.learner.max_policy_lag = int(p.value)
+                self.message_trainer.max_policy_lag = int(p.value)
             elif p.name == "publish_every_updates":
                 self.publish_every = int(p.value)
         return SetParametersResult(successful=True)
@@ -199,11 +201,11 @@ class TrainerNode(Node):
     def diagnostics(self) -> dict[str, str]:
         now = time.monotonic()
         counts = self.assembler.counts
-        self._steps_window.append((now, counts["steps"], self.learner.updates))
+        self._steps_window.append((now, counts["steps"], self.message_trainer.progress.updates))
         (t0, s0, u0), (t1, s1, u1) = self._steps_window[0], self._steps_window[-1]
         span = max(t1 - t0, 1e-9)
-        stats = self.learner.last_stats
-        values = {"version": str(self.learner.version), "updates": str(self.learner.updates),
+        stats = self.message_trainer.last_stats
+        values = {"version": str(self.message_trainer.version), "updates": str(self.message_trainer.progress.updates),
                   "games": str(len(self.readers.games)), "robots": str(len(self.readers.robots)),
                   "experience_steps_per_s": f"{(s1 - s0) / span:.1f}" if t1 > t0 else "0.0",
                   "updates_per_s": f"{(u1 - u0) / span:.3f}" if t1 > t0 else "0.000",
@@ -227,7 +229,7 @@ class TrainerNode(Node):
         values["frame_authentication"] = "off"
         if self.readers.frame_gate is not None:
             values.update(self.readers.frame_gate.diagnostics())
-        for key, value in list(self.learner.counts.items()) + list(self.background.counts.items()):
+        for key, value in list(self.message_trainer.counts.items()) + list(self.background.counts.items()):
             values[key] = str(value)
         for key, value in self.readers.received.items():
             values[f"received_{key}"] = str(value)
@@ -260,9 +262,10 @@ class TrainerNode(Node):
         by_version: dict[int, list[float]] = {}
         for episode in self.episodes:
             by_version.setdefault(int(episode["version"]), []).append(episode["return"])
-        return {"version": self.learner.version, "updates": self.learner.updates,
-                "env_steps": self.learner.env_steps, "wall_seconds": self.learner.meta()["wall_seconds"],
-                "reward_weights": self.learner.reward_weights.tolist(),
+        return {"version": self.message_trainer.version, "updates": self.message_trainer.progress.updates,
+                "env_steps": self.message_trainer.progress.env_steps,
+                "wall_seconds": self.message_trainer.meta()["wall_seconds"],
+                "reward_weights": self.message_trainer.reward_weights.tolist(),
                 "episodes": [[int(e["version"]), e["return"]] for e in self.episodes],
                 "returns_by_version": {v: {"episodes": len(r), "mean_return": statistics.fmean(r)}
                                        for v, r in sorted(by_version.items())},
@@ -275,13 +278,13 @@ class TrainerNode(Node):
         self.finished = True
         self.background.stop()
         try:
-            self.learner.save_checkpoint()
+            self.message_trainer.save_checkpoint()
             from dynenv_ros.agent.checkpoint import save_policy
-            save_policy(self.learner.agent, str(self.run_dir / "policy.safetensors"),
-                        self.learner.policy_meta())
+            save_policy(self.message_trainer.agent, str(self.run_dir / "policy.safetensors"),
+                        self.message_trainer.policy_meta())
             (self.run_dir / "summary.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
         finally:
-            self.learner.close()
+            self.message_trainer.close()
             super().destroy_node()
 
 

@@ -17,7 +17,7 @@ canonical bytes under a shared secret, and the simulator executes, and the train
 - **Nonce**: (robot_id, episode_id, motion_period) is inside the tagged bytes, so a captured action is valid for its
   own robot and period only; ``ReplayGuard`` refuses a nonce already used (a replay of an accepted action).
 - **Digest** (``action_digest``: SHA-256 of the canonical bytes, first 16 bytes): the simulator names the action it
-  executed in ``StepFeedback.action_digest``; the trainer learns from that action only (``learning.experience``).
+  executed in ``StepFeedback.action_digest``; the trainer learns from that action only (``learning.messages.assembly``).
 
 The secrets are symmetric: whoever verifies a team's actions (the simulator, the trainer) could also forge them.
 Standard library only (hmac, hashlib, secrets); no ROS import: messages are read by attribute.

@@ -6,11 +6,11 @@ converted to SI units; docs/differences.md lists where we depart from it on purp
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, is_dataclass, replace
+from dataclasses import dataclass, replace
 from dataclasses import field as _default
 from typing import Any, Mapping
 
-from dynenv_ros.core.settings import check_numbers
+from dynenv_ros.core.settings import build_settings, check_numbers
 from dynenv_ros.sim.timing import Rates
 from dynenv_ros.soccer.field import FieldGeometry
 
@@ -171,47 +171,7 @@ class SoccerConfig:
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any] | None = None) -> "SoccerConfig":
         """Build from nested plain values (YAML, keyword arguments); unknown keys are refused by name."""
-        return _build(cls, dict(values or {}), prefix="")
-
-
-def _build(cls: type, values: dict[str, Any], prefix: str) -> Any:
-    known = {f.name: f for f in fields(cls)}
-    unknown = sorted(set(values) - set(known))
-    if unknown:
-        raise ValueError(f"unknown soccer setting(s): {', '.join(prefix + u for u in unknown)}; "
-                         f"known: {', '.join(prefix + k for k in known)}")
-    kwargs: dict[str, Any] = {}
-    defaults = cls()
-    for name, value in values.items():
-        default = getattr(defaults, name)
-        if is_dataclass(default) and isinstance(value, Mapping):
-            kwargs[name] = _build(type(default), dict(value), f"{prefix}{name}.")
-        elif is_dataclass(default) and not is_dataclass(value):
-            raise ValueError(f"{prefix}{name} must be a mapping of settings, got {value!r}")
-        else:
-            kwargs[name] = _coerce(f"{prefix}{name}", value, default)
-    try:
-        return cls(**kwargs)
-    except TypeError as exc:  # a wrong type deep inside a nested dataclass
-        raise ValueError(f"{prefix or 'soccer'}: {exc}") from None
-
-
-def _coerce(name: str, value: Any, default: Any) -> Any:
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f"{name} must be true or false, got {value!r}")
-        return value
-    if isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"{name} must be an integer, got {value!r}")
-        return value
-    if isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-        return float(value)
-    if isinstance(default, str) and not isinstance(value, str):
-        raise ValueError(f"{name} must be a string, got {value!r}")
-    return value
+        return build_settings(cls, dict(values or {}), "soccer")
 
 
 __all__ = ["robot_names", "SoccerConfig", "MotionConfig", "KickConfig", "FallConfig", "PenaltyConfig", "BallConfig",
