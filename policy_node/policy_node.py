@@ -100,7 +100,8 @@ from dynenv_ros.security.operator_requests import signature_path, verify_file
 from dynenv_ros.security.weights_signing import Refused
 from dynenv_ros.security.weights_order import ReleaseOrder
 from dynenv_ros.security.weights_signing import Announcement
-from policy_node.partial_periods import FrameInterval, due_ns, fill
+from dynenv_ros.ros.ros_sports_policy import ros_sports_io
+from policy_node.partial_periods import AUTO_DEADLINE, FrameInterval, due_ns, fill, resolve_deadline
 from policy_node.periods import PeriodMemory, close_period, file_frame, period_problem
 
 RUNTIMES = ("torch", "onnxruntime")
@@ -224,10 +225,12 @@ class PolicyNode(Node):
                                        "(WeightsAnnouncement.run_id); empty: any run.", read_only=True)
         self.pose_max_age, self.pose_frame = declare_pose_input(self, "Robocup, a policy that takes the pose "
                                                                 "estimate")
-        deadline = declare_float(self, "decision_deadline", -1.0, -1.0, 60.0, "Seconds (node clock) after a "
-                                 "period's last frame is due by which the node acts on the frames that arrived, "
-                                 "missing ones empty; a newer period's frame closes it too. Negative: wait for "
-                                 "complete periods (stepped games).", read_only=True)
+        deadline = declare_float(self, "decision_deadline", AUTO_DEADLINE, AUTO_DEADLINE, 60.0, "Seconds (node "
+                                 "clock) after a period's last frame is due by which the node acts on the frames "
+                                 "that arrived, missing ones empty; a newer period's frame closes it too. -1: wait "
+                                 "for complete periods; -2 (default): 0.05 on the wall clock, -1 on sim time.",
+                                 read_only=True)
+        deadline = resolve_deadline(deadline, bool(self.get_parameter("use_sim_time").value))
         self.deadline_ns = round(deadline * 1e9) if deadline >= 0 else None
         self.frame_interval = FrameInterval()       # learnt from the stamps (partial_periods)
         everyone = car_names(n_cars) if self.driving else robot_names(players)
@@ -273,9 +276,10 @@ class PolicyNode(Node):
             raise ParameterException(str(error), ["checkpoint"]) from None
         self.action_pubs = {n: self.create_publisher(Action, topics.local(topics.action(n)), action_stream())
                             for n in self.names}
-        self.detection_subs = {n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)),
-                                                           self._receiver(n),
-                                                           detection_qos()) for n in self.names}
+        self.ros_sports = ros_sports_io(self, self.names, self.ids, self._receiver)   # interfaces:=ros_sports
+        self.detection_subs = {} if self.ros_sports else {
+            n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)), self._receiver(n),
+                                        detection_qos()) for n in self.names}
         self.frame_gate = FrameReceiver(self, secret) if secret is not None else None
         if self.frame_gate is not None:
             for sub in self.detection_subs.values():
@@ -667,6 +671,8 @@ class PolicyNode(Node):
                 msg.header.frame_id = base_frame(name)
                 self.tag_action(name, msg, self.action_pubs[name])
                 self.action_pubs[name].publish(msg)
+                if self.ros_sports is not None:        # the walk, kick and head commands beside it (issue 41)
+                    self.ros_sports.command(name, msg, frame)
                 self.actions_sent += 1
                 if same_episode:
                     memory.addressed = target
@@ -779,6 +785,8 @@ class PolicyNode(Node):
         values["frame_authentication"] = "off"
         if self.frame_gate is not None:              # frames verified, waiting for their tag, refused by reason
             values.update(self.frame_gate.diagnostics())
+        if self.ros_sports is not None:
+            values.update(self.ros_sports.diagnostics())
         values["pose_input"] = "yes" if self.pose_wanted else "no"
         values["pose_refusal"] = self.pose_refusal
         values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"

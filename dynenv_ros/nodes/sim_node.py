@@ -56,6 +56,7 @@ from dynenv_ros.security.action_auth import ReplayGuard, action_digest, check_ac
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.pose_estimates import EmulatedOdometry, pose_message, stamp_ns
 from dynenv_ros.ros.ros_sports_conversion import rcgcd15, soccer_vision_messages
+from dynenv_ros.ros.sim_ros_sports import SimRobotIO
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list,
                                        refuse_other_scenario)
 from dynenv_ros.ros.qos import (REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, action_queue, latched,
@@ -256,6 +257,7 @@ class SimNode(Node):
             (MarkingArray, topics.soccer_vision_3d(n, "markings")))) for n in names] if self.ros_sports else []
         self.gc_pubs = [self.create_publisher(RCGCD15, local(topics.gc_data(n)), frame_qos)
                         for n in names] if self.ros_sports else []
+        self.robot_io = SimRobotIO(self, names, self.ros_sports, not driving, self._publish, frame_qos)  # issue 41
         self.odometry = EmulatedOdometry(config.rates.vision_period_ticks * config.rates.tick_seconds)
         # In real time, actions arrive on a participant and thread of their own (ros/action_inbox.py): a flood on
         # one robot's topic cannot drop this node's service requests. Both modes queue a bounded number (qos.py).
@@ -653,6 +655,7 @@ class SimNode(Node):
             if self.frame_tag_pubs:
                 data = detection_rows_bytes(robot.detections, self.detection_pubs[i].topic_name, **fields)
                 self._publish(self.frame_tag_pubs[i + 1], tag_message(self.frames_secret, data))
+        self.robot_io.frame(output, k, frame, stamp)        # joints, fall flags, GameController UDP (issue 41)
         if self.ros_sports:
             self._publish_ros_sports(output, k, frame, stamp)
         self.frames_published += 1
@@ -807,6 +810,8 @@ class SimNode(Node):
         live_view = getattr(self, "live_view", None)
         if live_view is not None:
             live_view.stop()
+        if getattr(self, "robot_io", None) is not None:
+            self.robot_io.close()
         super().destroy_node()
 
     def diagnostics(self) -> dict[str, str]:
@@ -836,6 +841,7 @@ class SimNode(Node):
             values[key] = str(counts.get(key, 0))
         if self.recorder_error:
             values["recorder_error"] = self.recorder_error
+        values.update(self.robot_io.diagnostics())
         return values
 
     def _on_recorder_diagnostics(self, msg: DiagnosticArray) -> None:
