@@ -32,6 +32,7 @@ from std_msgs.msg import Bool
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.authentication import action_tagger
 from dynenv_ros.ros.diagnostics import Heartbeat
+from dynenv_ros.ros.drain import take
 from dynenv_ros.ros.node_runner import run_node
 from dynenv_ros.ros.parameters import declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.qos import action_stream
@@ -83,10 +84,13 @@ class MotionEmulator(Node):
         self.action_pubs = {n: self.create_publisher(Action, topics.local(topics.action(n)), action_stream())
                             for n in self.names}
         feedback_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        self.command_subs: dict[str, list[tuple[Any, Any]]] = {}    # robot -> (walk target, kick) (sub, callback)
         for name in self.names:
             local = topics.local
-            self.create_subscription(Twist, local(topics.walk_target(name)), self._twist(name), command_qos())
-            self.create_subscription(Bool, local(topics.kick_request(name)), self._kick(name), command_qos())
+            self.command_subs[name] = [
+                (self.create_subscription(t, local(topic(name)), callback(name), command_qos()), callback(name))
+                for t, topic, callback in ((Twist, topics.walk_target, self._twist), (Bool, topics.kick_request,
+                                                                                      self._kick))]
             self.create_subscription(JointState, local(topics.head_command(name)), self._head(name), command_qos())
             self.create_subscription(StepFeedback, local(topics.feedback(name)), self._feedback(name), feedback_qos)
         self.create_timer(TICK_S, self._tick, clock=self.steady)
@@ -146,6 +150,9 @@ class MotionEmulator(Node):
             self._send(name)
 
     def _send(self, name: str) -> None:
+        for sub, callback in self.command_subs[name]:    # a kick and twist sent before the head may still wait
+            while (msg := take(sub)) is not None:
+                callback(msg)
         if name not in self.commanded and self.count_publishers(topics.local(topics.walk_target(name))) > 0:
             self.commanded.add(name)
         commander = name in self.commanded

@@ -50,6 +50,7 @@ from dynenv_ros.perception.soccer_vision_3d import (IGNORED_KINDS, KINDS, Messag
                                                     detection_rows)
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.conversions import detections_to_msgs
+from dynenv_ros.ros.drain import take
 from dynenv_ros.ros.frame_grid import ACCEPTED, FrameGrid
 from dynenv_ros.ros.frame_parts import Frame, FrameParts
 from dynenv_ros.ros.parameters import declare_float, declare_int, declare_str, declare_str_list
@@ -308,17 +309,12 @@ class RosSportsIO:
 
 
 def _take(sub: Any, limit: int = QUEUE_DEPTH):
-    """The messages already waiting on ``sub`` (rclpy's executor takes them the same way; rclpy has no public take),
-    none on an rclpy without it."""
+    """The messages already waiting on ``sub`` (at most ``limit``; ``ros.drain``)."""
     for _ in range(limit):
-        try:
-            with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-        except AttributeError:
+        msg = take(sub)
+        if msg is None:
             return
-        if taken is None:
-            return
-        yield taken[0]
+        yield msg
 
 
 __all__ = ["INTERFACES", "RosSportsIO", "ros_sports_io"]

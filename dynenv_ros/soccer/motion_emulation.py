@@ -10,8 +10,9 @@ discrete periods, so ``EngineLatch`` turns them into one action per period:
 - It is sent when a head command answering that frame arrives (stamped no earlier than the frame's stamp less
   ``tolerance_ns``; the policy node sends the head command last, after the kick and the twist), or when
   ``timeout_ns`` has passed without one (the engines keep the newest walk target; the head holds still); the
-  simulator's initial period (period 0) at once with the engines' current commands: its frames repeat one instant,
-  which no camera does, so a team's stack (and the policy node's frame grid) has nothing to answer.
+  simulator's initial period (period 0) at once with the engines' current commands (once anyone commands them): its
+  frames repeat one instant, which no camera does, so a team's stack (and the policy node's frame grid) has nothing
+  to answer.
 - The action: a pending kick request kicks (the walk engine stands for the kick engine), else the walk target
   quantised to the motion layer's steps; the head turns by the head command's rate × period
   (``motion_commands.action_of``).
@@ -74,7 +75,7 @@ class EngineLatch:
             return None
         episode, period, stamp, since = self.waiting
         answered = self.head is not None and self.head[0] >= stamp - self.tolerance_ns
-        if period == 0:
+        if period == 0 and commander:
             why = "initial"
         elif answered:
             why = "answered"
