@@ -140,6 +140,8 @@ class RosSportsIO:
         team_a = declare_int(node, "gc_team_number_a", 1, 1, 254, "ros_sports: team A's SPL team number in gc/data.",
                              **fixed)
         team_b = declare_int(node, "gc_team_number_b", 2, 1, 254, "ros_sports: team B's SPL team number.", **fixed)
+        player = declare_int(node, "gc_player_number", 0, 0, 20, "ros_sports: the robot's player number in gc/data "
+                             "(1 … 20); 0: robot k of its team is player k + 1.", **fixed)
         self.episode_id = declare_int(node, "episode_id", 1, 0, 2**32 - 1, "ros_sports: the episode id of the "
                                       "frames (a team stack has no episodes).", **fixed)
         unknown = [k for k in kinds if k not in KINDS]
@@ -165,7 +167,8 @@ class RosSportsIO:
                            FrameGrid(self.vision_hz, self.frames_per_period, tolerance, epoch if epoch >= 0 else None,
                                      gain, counts=self.counts),
                            RobotState(joint, head_age, state_age, counts=self.counts),
-                           team_a if name.startswith("team_a") else team_b, int(name.rsplit("_", 1)[1]) + 1)
+                           team_a if name.startswith("team_a") else team_b,
+                           player or int(name.rsplit("_", 1)[1]) + 1)
             self.robots[name] = robot
             self._subscribe(name, robot)
         self.node.create_timer(TICK_S, self._tick)
