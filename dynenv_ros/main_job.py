@@ -27,7 +27,7 @@ from typing import Any
 import yaml
 
 from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch, run_graph
-from dynenv_ros.graph.train_graph import summarise_train, train_graph
+from dynenv_ros.graph.train_graph import STEPPED_GAME_DEADLINE, summarise_train, train_graph
 from dynenv_ros.ros.selfcheck import format_report
 from dynenv_ros.driving.config import car_names
 from dynenv_ros.soccer.config import robot_names
@@ -317,7 +317,8 @@ def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path, config: MainJobCon
 # Team A's policy node on the ros-sports route (docs/deploy.md, "The ros-sports route"): the simulator's period 0
 # repeats one instant (no camera does), so its grid starts at the first frame after it, one vision period in, and
 # the grid's periods are the simulator's; its own Action goes to <robot>/policy_action (the motion emulator acts).
-ROS_SPORTS_POLICY = {"interfaces": "ros_sports", "frame_epoch": 0.1}
+# A frame's class messages come in one burst in a stepped game: class_wait only guards against a lost one.
+ROS_SPORTS_POLICY = {"interfaces": "ros_sports", "frame_epoch": 0.1, "class_wait": 0.5}
 
 
 def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
@@ -341,7 +342,8 @@ def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         policies.append(NodeLaunch("policy_team_a", "policy_node.policy_node", {
             "players_per_team": config.players_per_team, "team": "a", "checkpoint": str(path),
             "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch", "seed": config.seed,
-            "greedy": config.greedy, **(ROS_SPORTS_POLICY if ros_sports else {})},
+            "greedy": config.greedy, "decision_deadline": STEPPED_GAME_DEADLINE,
+            **(ROS_SPORTS_POLICY if ros_sports else {})},
             remaps={f"/{n}/action": f"/{n}/policy_action" for n in names[:config.players_per_team]}
             if ros_sports else {}))
     if ros_sports:    # the walk, kick and head engines of team A's robots over the simulator
@@ -381,7 +383,7 @@ def driving_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         drivers.append(NodeLaunch("policy_car_0", "policy_node.policy_node", {
             "scenario": "driving", "n_cars": config.n_cars, "action_mode": config.action_mode, "cars": ["car_0"],
             "checkpoint": str(path), "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch",
-            "seed": config.seed}))
+            "seed": config.seed, "decision_deadline": STEPPED_GAME_DEADLINE}))
         scripted = scripted[1:]
     if scripted:
         drivers.append(NodeLaunch("scripted_driver", "policy_node.scripted_driver",
