@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -210,15 +211,15 @@ class MessageRefused(ValueError):
         self.reason = reason
 
 
-def _items(kind: str, msg: object) -> dict[str, list]:
+def _items(kind: str, msg: Any) -> dict[str, list[Any]]:
     if kind == "balls":
-        return {"balls": list(msg.balls)}            # type: ignore[attr-defined]
+        return {"balls": list(msg.balls)}
     if kind == "robots":
-        return {"robots": list(msg.robots)}          # type: ignore[attr-defined]
+        return {"robots": list(msg.robots)}
     if kind == "goalposts":
-        return {"posts": list(msg.posts)}            # type: ignore[attr-defined]
-    return {"segments": list(msg.segments), "intersections": list(msg.intersections),   # type: ignore[attr-defined]
-            "ellipses": list(msg.ellipses)}          # type: ignore[attr-defined]
+        return {"posts": list(msg.posts)}
+    return {"segments": list(msg.segments), "intersections": list(msg.intersections),
+            "ellipses": list(msg.ellipses)}
 
 
 def _check_finite(what: str, *values: float) -> None:
@@ -226,8 +227,8 @@ def _check_finite(what: str, *values: float) -> None:
         raise MessageRefused("not_finite", f"{what} has a value that is not finite: {values}")
 
 
-def _check_confidence(what: str, item: object) -> float:
-    value = float(item.confidence.confidence)        # type: ignore[attr-defined]
+def _check_confidence(what: str, item: Any) -> float:
+    value = float(item.confidence.confidence)
     if value == CONFIDENCE_UNKNOWN:
         return 1.0       # a detector that rates nothing is taken at its word
     if not (math.isfinite(value) and 0.0 <= value <= 1.0):
@@ -241,17 +242,17 @@ def _check_enum(what: str, value: int, allowed: range) -> int:
     return int(value)
 
 
-def _yaw_of(q: object) -> float:
+def _yaw_of(q: Any) -> float:
     x, y, z, w = (float(getattr(q, a)) for a in "xyzw")
     _check_finite("an orientation", x, y, z, w)
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def _is_identity(q: object) -> bool:
-    return (float(q.x), float(q.y), float(q.z), abs(float(q.w))) == (0.0, 0.0, 0.0, 1.0)   # type: ignore[attr-defined]
+def _is_identity(q: Any) -> bool:
+    return (float(q.x), float(q.y), float(q.z), abs(float(q.w))) == (0.0, 0.0, 0.0, 1.0)
 
 
-def detection_rows(kind: str, msg: object) -> np.ndarray:
+def detection_rows(kind: str, msg: Any) -> np.ndarray:
     """One message's detections as ``DETECTION_DTYPE`` rows, still in the body frame (``camera_rows`` turns them
     into the camera frame once the head's yaw at the frame's stamp is known): the inverse of ``soccer_vision_3d``.
     ``MessageRefused`` with the reason for a message that cannot be read (docs/deploy.md, "Bad input"). Sighting
