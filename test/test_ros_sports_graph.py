@@ -67,6 +67,7 @@ def test_a_game_through_ros_sports_messages_runs_every_action_the_policy_chose(m
             assert action.head_yaw_delta == pytest.approx(mine.head_yaw_delta, abs=1e-6)
     counts = policy.diagnostics()
     assert int(counts["ros_sports_head_yaw_used"]) == int(counts["ros_sports_frames_passed"]) > 0
+    assert int(counts["ros_sports_fallen_used"]) == int(counts["ros_sports_frames_passed"])    # the fall flags came
     assert counts.get("ros_sports_frames_incomplete", "0") == "0"
 
 

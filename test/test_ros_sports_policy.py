@@ -98,3 +98,21 @@ def test_ros_sports_on_a_driving_node_or_with_one_number_for_both_teams_is_refus
     with pytest.raises(ParameterException, match="distinct"):
         make_node(PolicyNode, parameter_overrides=[Parameter("interfaces", value="ros_sports"),
                                                    Parameter("gc_team_number_b", value=1)])
+
+
+def test_the_gamecontroller_input_ages_out_like_the_robots_state(make_node):
+    """An RCGCD older than state_max_age is stale: the frame gets the defaults (free ball, 0 s, not penalized)."""
+    from ros_sports_stack import game
+    node = make_node(PolicyNode, parameter_overrides=[Parameter(k, value=v) for k, v in dict(
+        players_per_team=1, team="a", interfaces="ros_sports", state_max_age=0.5).items()])
+    io = node.ros_sports
+    message = game()
+    message.kicking_team, message.secondary_time = 1, 8            # team 1's kick-off, 8 s left of it
+    io.game("team_a_0", message)
+    robot = io.robots["team_a_0"]
+    now = robot.game[0]
+    assert io._view(robot, now + 400_000_000).ball_owner_seconds == 8.0
+    assert io._view(robot, now + 600_000_000) is None
+    assert (io.counts["gc_used"], io.counts["gc_stale"]) == (1, 1)
+    robot.game = None
+    assert io._view(robot, now) is None and io.counts["gc_missing"] == 1
