@@ -274,9 +274,9 @@ class PolicyNode(Node):
                 self.get_logger().warning("no checkpoint: acting with untrained weights")
         except ValueError as error:
             raise ParameterException(str(error), ["checkpoint"]) from None
+        self.ros_sports = ros_sports_io(self, self.names, self.ids, self._receiver)   # interfaces:=ros_sports
         self.action_pubs = {n: self.create_publisher(Action, topics.local(topics.action(n)), action_stream())
                             for n in self.names}
-        self.ros_sports = ros_sports_io(self, self.names, self.ids, self._receiver)   # interfaces:=ros_sports
         self.detection_subs = {} if self.ros_sports else {
             n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)), self._receiver(n),
                                         detection_qos()) for n in self.names}

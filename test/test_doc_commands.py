@@ -1026,7 +1026,7 @@ def check_launch(filename: str, args: list[str]) -> str:
     if not path.is_file():
         raise DocCommandError(f"launch file {filename} is not in launch/ ({sorted(p.name for p in (REPO / 'launch').glob('*.py'))})")
     source = path.read_text()
-    table = re.search(r"^(COMMON|ARGUMENTS) = (\{.*?\})$", source, re.M)
+    table = re.search(r"^(COMMON|ARGUMENTS) = (\{.*?\})$", source, re.M | re.S)
     if table is None:
         raise DocCommandError(f"launch file {filename}: no COMMON (main-job settings) or ARGUMENTS table")
     if table.group(1) == "ARGUMENTS":       # a node's launch file (ros_sports_policy): its own arguments only

@@ -75,7 +75,11 @@ CLASSES: dict[str, dict[str, dict[str, tuple[str, str]]]] = {
                                        "greedy seed decision_deadline pose_frame pose_max_age weights_topic "
                                        "weights_service weights_run_id trusted_weights_keys max_weights_bytes "
                                        "weights_state_file trusted_operator_keys allow_unsigned_files secrets_dir "
-                                       "authenticated_frames runtime_controls"),
+                                       "authenticated_frames runtime_controls interfaces vision_hz frames_per_period "
+                                       "frame_epoch frame_tolerance frame_phase_gain class_wait frame_classes "
+                                       "detection_frame perception_preset head_yaw_joint head_yaw_max_age "
+                                       "state_max_age gc_team_number_a gc_team_number_b gc_player_number "
+                                       "episode_id"),
                        **_params(READ, "diagnostics_period"), **_RUNTIME_FLAGS}},
     "trainer_node": {
         "services": {"/trainer/fetch_weights": (READ, FETCH), **_standard(ACTS, RUNTIME)},
@@ -143,12 +147,7 @@ CLASSES["policy_node ros_sports"] = {
     "publishes": {**_POLICY["publishes"], "/<robot>/cmd_vel": (ACTS, MOTION), "/<robot>/motion/kick": (ACTS, MOTION),
                   "/<robot>/motion/head": (ACTS, MOTION)},
     "subscribes": _ROS_SPORTS_IN,
-    "parameters": {**_POLICY["parameters"],
-                   **_params(ACTS, "interfaces vision_hz frames_per_period frame_epoch frame_tolerance "
-                                   "frame_phase_gain class_wait frame_classes detection_frame perception_preset "
-                                   "head_yaw_joint head_yaw_max_age state_max_age gc_team_number_a gc_team_number_b "
-                                   "gc_player_number episode_id")}}
-CLASSES["policy_node"]["parameters"]["interfaces"] = (ACTS, START)
+    "parameters": _POLICY["parameters"]}
 CLASSES["motion_emulator"] = {
     "services": _standard(READ, START),
     "publishes": {**_COMMON_TOPICS, "/<robot>/action": (ACTS, ACTION_MAC), "/diagnostics": (READ, NONE)},

@@ -230,6 +230,8 @@ class SimNode(Node):
             frame_qos = feedback_qos = sim_stream()
         else:
             frame_qos, feedback_qos = realtime_stream(REALTIME_FRAME_DEPTH), realtime_stream(REALTIME_FEEDBACK_DEPTH)
+        # Joints, fall flags, GameController UDP (issue 41); its parameters declared before the first publisher.
+        self.robot_io = SimRobotIO(self, names, ros_sports and not driving, not driving, self._publish, frame_qos)
         self.clock_pub = self.create_publisher(ClockMsg, local(topics.CLOCK), frame_qos)
         self.world_pub = self.create_publisher(cv.WorldState, local(topics.WORLD_STATE), frame_qos)
         self.detection_pubs = [self.create_publisher(cv.DetectionArray, local(topics.detections(n)),
@@ -257,7 +259,6 @@ class SimNode(Node):
             (MarkingArray, topics.soccer_vision_3d(n, "markings")))) for n in names] if self.ros_sports else []
         self.gc_pubs = [self.create_publisher(RCGCD15, local(topics.gc_data(n)), frame_qos)
                         for n in names] if self.ros_sports else []
-        self.robot_io = SimRobotIO(self, names, self.ros_sports, not driving, self._publish, frame_qos)  # issue 41
         self.odometry = EmulatedOdometry(config.rates.vision_period_ticks * config.rates.tick_seconds)
         # In real time, actions arrive on a participant and thread of their own (ros/action_inbox.py): a flood on
         # one robot's topic cannot drop this node's service requests. Both modes queue a bounded number (qos.py).

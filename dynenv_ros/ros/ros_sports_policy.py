@@ -75,11 +75,13 @@ def reliable(depth: int = QUEUE_DEPTH) -> QoSProfile:
 
 def ros_sports_io(node: Any, names: list[str], ids: dict[str, int],
                   receiver: Callable[[str], Callable[[DetectionArray], None]]) -> "RosSportsIO | None":
-    """Declare ``interfaces``; the ros-sports inputs and outputs when it is ``ros_sports``, else None."""
+    """Declare ``interfaces`` and the ros-sports parameters (always, before the node's first publisher, so ``--help``
+    lists them); the ros-sports inputs and outputs when ``interfaces`` is ``ros_sports``, else None."""
     interfaces = declare_str(node, "interfaces", "dynenv", "What the node reads and commands: dynenv "
                              "(<robot>/detections in, <robot>/action out) or ros_sports (a team stack's "
                              "soccer_vision_3d_msgs, gc/data, joint_states in; cmd_vel, motion/kick, motion/head out, "
                              "beside <robot>/action; docs/deploy.md).", read_only=True, choices=INTERFACES)
+    settings = _declare(node)
     if interfaces != "ros_sports":
         return None
     if getattr(node, "driving", False):
@@ -87,7 +89,49 @@ def ros_sports_io(node: Any, names: list[str], ids: dict[str, int],
     if node.get_parameter("authenticated_frames").value:
         raise ParameterException("authenticated_frames tags DetectionArrays; a team stack's soccer_vision_3d "
                                  "messages carry no tags", ["interfaces", "authenticated_frames"])
-    return RosSportsIO(node, names, ids, receiver)
+    return RosSportsIO(node, settings, names, ids, receiver)
+
+
+def _declare(node: Any) -> dict[str, Any]:
+    """The ros-sports parameters (read-only), checked."""
+    fixed = dict(read_only=True)
+    values = dict(
+        vision_hz=declare_float(node, "vision_hz", 10.0, 0.1, 1000.0, "ros_sports: camera frame rate.", **fixed),
+        frames_per_period=declare_int(node, "frames_per_period", 5, 1, 64, "ros_sports: vision frames per motion "
+                                      "period.", **fixed),
+        frame_epoch=declare_float(node, "frame_epoch", -1.0, -1.0, 1e10, "ros_sports: the stamp (s) of frame slot "
+                                  "0; negative: the first stamp's phase (as the reverse vision adapter).", **fixed),
+        frame_tolerance=declare_float(node, "frame_tolerance", 0.4, 0.01, 0.5, "ros_sports: a stamp further than "
+                                      "this (frame intervals) from its slot is refused; class messages within it of "
+                                      "a frame's first one belong to that frame.", **fixed),
+        frame_phase_gain=declare_float(node, "frame_phase_gain", 0.05, 0.0, 0.5, "ros_sports: how far each frame "
+                                       "pulls the grid toward its stamp.", **fixed),
+        class_wait=declare_float(node, "class_wait", 0.03, 0.0, 1.0, "ros_sports: seconds (node clock) a frame "
+                                 "waits for its missing class messages after its first one arrived.", **fixed),
+        frame_classes=declare_str_list(node, "frame_classes", list(KINDS), "ros_sports: the soccer_vision_3d arrays "
+                                       "the stack publishes per frame (a frame is complete with these).", **fixed),
+        detection_frame=declare_str(node, "detection_frame", "base_link", "ros_sports: the frame the detections "
+                                    "are in (frame_id, or its last part after '/').", **fixed),
+        perception_preset=declare_str(node, "perception_preset", "realistic", "ros_sports: the error model whose "
+                                      "ranges give the sighting bits.", choices=PRESETS, **fixed),
+        head_yaw_joint=declare_str(node, "head_yaw_joint", "HeadYaw", "ros_sports: the JointState joint that is "
+                                   "the head yaw (read from joint_states, commanded on motion/head).", **fixed),
+        head_yaw_max_age=declare_float(node, "head_yaw_max_age", 0.1, 0.0, 10.0, "ros_sports: a head yaw sample "
+                                       "further than this (s) from the frame's stamp is stale.", **fixed),
+        state_max_age=declare_float(node, "state_max_age", 1.0, 0.0, 60.0, "ros_sports: a fallen flag or "
+                                    "GameController message received longer ago than this (s) is stale.", **fixed),
+        gc_team_number_a=declare_int(node, "gc_team_number_a", 1, 1, 254, "ros_sports: team A's SPL team number "
+                                     "in gc/data.", **fixed),
+        gc_team_number_b=declare_int(node, "gc_team_number_b", 2, 1, 254, "ros_sports: team B's SPL team "
+                                     "number.", **fixed),
+        gc_player_number=declare_int(node, "gc_player_number", 0, 0, 20, "ros_sports: the robot's player number "
+                                     "in gc/data (1 … 20); 0: robot k of its team is player k + 1.", **fixed),
+        episode_id=declare_int(node, "episode_id", 1, 0, 2**32 - 1, "ros_sports: the episode id of the frames (a "
+                               "team stack has no episodes).", **fixed))
+    kinds = values["frame_classes"]
+    if not kinds or any(k not in KINDS for k in kinds):
+        raise ParameterException(f"frame_classes must be some of {list(KINDS)}, got {kinds}", ["frame_classes"])
+    return values
 
 
 class _Robot:
@@ -108,45 +152,16 @@ class _Robot:
 class RosSportsIO:
     """The ros-sports inputs and outputs of a policy node (module docstring)."""
 
-    def __init__(self, node: Any, names: list[str], ids: dict[str, int],
+    def __init__(self, node: Any, settings: dict[str, Any], names: list[str], ids: dict[str, int],
                  receiver: Callable[[str], Callable[[DetectionArray], None]]) -> None:
         self.node, self.ids, self.receiver = node, ids, receiver
-        fixed = dict(read_only=True)
-        self.vision_hz = declare_float(node, "vision_hz", 10.0, 0.1, 1000.0, "ros_sports: camera frame rate.",
-                                       **fixed)
-        self.frames_per_period = declare_int(node, "frames_per_period", 5, 1, 64, "ros_sports: vision frames per "
-                                             "motion period.", **fixed)
-        epoch = declare_float(node, "frame_epoch", -1.0, -1.0, 1e10, "ros_sports: the stamp (s) of frame slot 0; "
-                              "negative: the first stamp's phase (as the reverse vision adapter).", **fixed)
-        tolerance = declare_float(node, "frame_tolerance", 0.4, 0.01, 0.5, "ros_sports: a stamp further than this "
-                                  "(frame intervals) from its slot is refused; class messages within it of a "
-                                  "frame's first one belong to that frame.", **fixed)
-        gain = declare_float(node, "frame_phase_gain", 0.05, 0.0, 0.5, "ros_sports: how far each frame pulls the "
-                             "grid toward its stamp.", **fixed)
-        wait = declare_float(node, "class_wait", 0.03, 0.0, 1.0, "ros_sports: seconds (node clock) a frame waits "
-                             "for its missing class messages after its first one arrived.", **fixed)
-        kinds = declare_str_list(node, "frame_classes", list(KINDS), "ros_sports: the soccer_vision_3d arrays "
-                                 "the stack publishes per frame (a frame is complete with these).", **fixed)
-        self.frame_id = declare_str(node, "detection_frame", "base_link", "ros_sports: the frame the detections "
-                                    "are in (frame_id, or its last part after '/').", **fixed)
-        preset = declare_str(node, "perception_preset", "realistic", "ros_sports: the error model whose ranges "
-                             "give the sighting bits.", choices=PRESETS, **fixed)
-        joint = declare_str(node, "head_yaw_joint", "HeadYaw", "ros_sports: the JointState joint that is the "
-                            "head yaw (read from joint_states, commanded on motion/head).", **fixed)
-        head_age = declare_float(node, "head_yaw_max_age", 0.1, 0.0, 10.0, "ros_sports: a head yaw sample "
-                                 "further than this (s) from the frame's stamp is stale.", **fixed)
-        state_age = declare_float(node, "state_max_age", 1.0, 0.0, 60.0, "ros_sports: a fallen flag or "
-                                  "GameController message received longer ago than this (s) is stale.", **fixed)
-        team_a = declare_int(node, "gc_team_number_a", 1, 1, 254, "ros_sports: team A's SPL team number in gc/data.",
-                             **fixed)
-        team_b = declare_int(node, "gc_team_number_b", 2, 1, 254, "ros_sports: team B's SPL team number.", **fixed)
-        player = declare_int(node, "gc_player_number", 0, 0, 20, "ros_sports: the robot's player number in gc/data "
-                             "(1 … 20); 0: robot k of its team is player k + 1.", **fixed)
-        self.episode_id = declare_int(node, "episode_id", 1, 0, 2**32 - 1, "ros_sports: the episode id of the "
-                                      "frames (a team stack has no episodes).", **fixed)
-        unknown = [k for k in kinds if k not in KINDS]
-        if unknown or not kinds:
-            raise ParameterException(f"frame_classes must be some of {list(KINDS)}, got {kinds}", ["frame_classes"])
+        self.vision_hz, self.frames_per_period = settings["vision_hz"], settings["frames_per_period"]
+        epoch, tolerance, gain = settings["frame_epoch"], settings["frame_tolerance"], settings["frame_phase_gain"]
+        wait, kinds, self.frame_id = settings["class_wait"], settings["frame_classes"], settings["detection_frame"]
+        preset, joint = settings["perception_preset"], settings["head_yaw_joint"]
+        head_age, state_age = settings["head_yaw_max_age"], settings["state_max_age"]
+        team_a, team_b, player = settings["gc_team_number_a"], settings["gc_team_number_b"], settings["gc_player_number"]
+        self.episode_id = settings["episode_id"]
         if team_a == team_b:
             raise ParameterException(f"the teams need distinct numbers, got {team_a} twice",
                                      ["gc_team_number_a", "gc_team_number_b"])
