@@ -42,7 +42,10 @@ waiting, so it always acts on the newest complete period; older ones are dropped
 A real camera drops and delays frames (docs/deploy.md, "A real camera's timing"): with ``decision_deadline`` ≥ 0
 the node does not wait for a complete period forever — it acts on what has arrived once the period's last frame is
 ``decision_deadline`` seconds overdue on its clock, or a newer period's frame arrives, with each missing frame an
-empty one (``partial_periods``); off (−1) by default, as a stepped game always delivers complete periods.
+empty one (``partial_periods``); by default (−2) 0.05 s on the wall clock, off on sim time (a stepped game).
+
+``interfaces:=ros_sports`` (issue 41, ``ros.ros_sports_policy``): a team stack's soccer_vision_3d_msgs, RCGCD15 and
+joint states in instead of DetectionArrays; a walk twist, kick request and head command out beside each Action.
 """
 from __future__ import annotations
 
