@@ -109,6 +109,18 @@ def test_main_job_plays_a_trained_policy_for_team_a(tmp_path, capsys):
     assert f"teams: A {policy} (policy node, greedy actions)" in output and "dynenv-run: OK" in output
 
 
+def test_main_job_plays_the_shipped_policy_through_ros_sports_messages(tmp_path, capsys):
+    """interfaces=ros_sports (issue 41): team A's policy node on soccer_vision_3d_msgs, RCGCD15 and joint states,
+    the motion emulator acting for its robots; every period's actions accepted, none missing, the bag complete."""
+    output = _run_main(tmp_path, capsys, "duration_s=3", "players_per_team=1", "interfaces=ros_sports",
+                       "policy=perceiving", "gif=false")
+    report = json.loads((tmp_path / "sim_report.json").read_text())
+    diagnostics = report["diagnostics"]
+    assert diagnostics["periods_run"] == "6" and diagnostics["missing"] == "0" and diagnostics["accepted"] == "12"
+    assert "through ros-sports messages and the motion emulator" in output
+    assert "every published message recorded" in output and "dynenv-run: OK" in output
+
+
 def test_main_job_plays_the_perceiving_team_on_detections_and_pose_estimates(tmp_path, capsys):
     """policy=perceiving, team_a=scripted: both teams keeper_and_chasers on their own detections and pose estimates
     (perceiving_policy nodes), none reading /world_state; the simulator's localization stays on."""
