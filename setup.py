@@ -20,6 +20,7 @@ NODES = [
     "bag_player = dynenv_ros.nodes.bag_player:main",
     "vision_adapter = dynenv_ros.nodes.vision_adapter:main",
     "trainer_node = dynenv_ros.nodes.trainer_node:main",
+    "motion_emulator = dynenv_ros.nodes.motion_emulator:main",
 ]
 # Runtime Python dependencies, for pip (`pip install .`); ROS packages (rclpy, the message packages) come from ROS
 # (package.xml, rosdep) and are not on PyPI under these names. Lower bounds only where an older major version lacks

@@ -27,7 +27,7 @@ from typing import Any
 import yaml
 
 from dynenv_ros.graph.process_graph import GraphOutcome, NodeLaunch, run_graph
-from dynenv_ros.graph.train_graph import summarise_train, train_graph
+from dynenv_ros.graph.train_graph import STEPPED_GAME_DEADLINE, summarise_train, train_graph
 from dynenv_ros.ros.selfcheck import format_report
 from dynenv_ros.driving.config import car_names
 from dynenv_ros.soccer.config import robot_names
@@ -51,6 +51,7 @@ POLICIES = ("keeper_and_chasers", "chaser", "random", "perceiving")
 # on /world_state: the simulator's self-localization must be on for them.
 PERCEIVING = ("perceiving",)
 SCENARIOS = ("robocup", "driving")
+INTERFACES = ("dynenv", "ros_sports")
 ACTION_MODES = ("discrete", "continuous")
 PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
 SHIPPED_POLICY = "policy_node/pretrained/policy.onnx"     # relative to the repository (see policy_file)
@@ -96,6 +97,8 @@ class MainJobConfig:
     car_0: str = SHIPPED_DRIVING_POLICY   # driving: a policy file of the run's action_mode, or 'scripted'
     action_mode: str = "discrete"    # driving: discrete | continuous
     foxglove_port: int = -1          # soccer graph: the simulator's Foxglove live view port; -1 off, 0 any free port
+    interfaces: str = "dynenv"       # robocup: how team A's policy meets the robots: dynenv (DetectionArray,
+                                     # Action) or ros_sports (soccer_vision_3d, RCGCD, twist, kick, head; issue 41)
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> "MainJobConfig":
@@ -157,6 +160,11 @@ class MainJobConfig:
         if not -1 <= self.foxglove_port <= 65535:
             raise ConfigError(f"foxglove_port must be -1 (off), 0 (any free port) or a port in [1, 65535], got "
                               f"{self.foxglove_port}")
+        if self.interfaces not in INTERFACES:
+            raise ConfigError(f"interfaces must be one of {INTERFACES}, got {self.interfaces!r}")
+        if self.interfaces == "ros_sports" and self.team_a == "scripted" and self.scenario == "robocup":
+            raise ConfigError("interfaces ros_sports runs team A's policy node through the ros-sports messages: "
+                              "team_a must be a policy file, not 'scripted'")
         if self.car_0 == SHIPPED_DRIVING_POLICY and self.action_mode != "discrete" and self.scenario == "driving":
             raise ConfigError("car_0: the shipped driving policy takes discrete actions; with action_mode "
                               "continuous set car_0=scripted or a continuous policy file")
@@ -208,13 +216,17 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
               "one, discrete actions) or 'scripted' (scenario driving; the other cars: scripted drivers)",
               ("soccer",)),
     "action_mode": ("discrete | continuous: the cars' actions (scenario driving)", ("soccer",)),
+    "interfaces": ("dynenv | ros_sports: how team A's policy node meets its robots — dynenv (DetectionArray in, "
+                   "Action out) or ros_sports (the simulator publishes soccer_vision_3d_msgs, RCGCD15 and joint "
+                   "states, the policy node answers with walk twists, kick requests and head commands, and a motion "
+                   "emulator turns them into the robots' actions; docs/deploy.md)", ("soccer",)),
     "foxglove_port": ("live view in the Foxglove app: the simulator streams field, robots (cars), detections, TF and "
                       "score on ws://127.0.0.1:PORT; -1 off, 0 any free port (the simulator's log names it), "
                       "1..65535 that port", ("soccer",)),
 }
 # Settings of the soccer graph that only one scenario uses (a --set for the other scenario is refused).
 SCENARIO_SETTINGS: dict[str, str] = {"players_per_team": "robocup", "policy": "robocup", "team_a": "robocup",
-                                     "localization": "robocup", "greedy": "robocup",
+                                     "localization": "robocup", "greedy": "robocup", "interfaces": "robocup",
                                      "n_cars": "driving", "action_mode": "driving", "car_0": "driving"}
 
 
@@ -302,27 +314,41 @@ def summarise_selfcheck(outcome: GraphOutcome, run_dir: Path, config: MainJobCon
     return bool(report["ok"])
 
 
+# Team A's policy node on the ros-sports route (docs/deploy.md, "The ros-sports route"): the simulator's period 0
+# repeats one instant (no camera does), so its grid starts at the first frame after it, one vision period in, and
+# the grid's periods are the simulator's; its own Action goes to <robot>/policy_action (the motion emulator acts).
+# A frame's class messages come in one burst in a stepped game: class_wait only guards against a lost one.
+ROS_SPORTS_POLICY = {"interfaces": "ros_sports", "frame_epoch": 0.1, "class_wait": 0.5}
+
+
 def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
     if config.scenario == "driving":
         return driving_graph(config, run_dir)
     names = robot_names(config.players_per_team)
     learned = config.team_a != "scripted"
     perceiving = config.policy in PERCEIVING
+    ros_sports = learned and config.interfaces == "ros_sports"
     # readers of /world_state: the recorder and the ground-truth scripted nodes (perceiving ones never read it)
     truth_readers = 1 + (0 if perceiving else len(names) - (config.players_per_team if learned else 0))
     sim = NodeLaunch("sim_node", "dynenv_ros.nodes.sim_node", {
         "players_per_team": config.players_per_team, "seed": config.seed, "perception_preset": config.perception,
         "localization": config.localization, "mode": "stepped", "episode_seconds": config.duration_s, "auto_reset": False, "exit_when_finished": True,
-        "report_path": str(run_dir / "sim_report.json"), "wait_for_subscribers": 2,
+        "report_path": str(run_dir / "sim_report.json"), "wait_for_subscribers": 1 if ros_sports else 2,
         "wait_for_ground_truth_subscribers": truth_readers, "wait_for_recorder": True,
-        "foxglove_port": config.foxglove_port}, ends_run=True)
+        "foxglove_port": config.foxglove_port, **({"ros_sports": True} if ros_sports else {})}, ends_run=True)
     policies = []
     if learned:       # one policy node drives all of team A (onnxruntime for .onnx files)
         path = policy_file(config.team_a)
         policies.append(NodeLaunch("policy_team_a", "policy_node.policy_node", {
             "players_per_team": config.players_per_team, "team": "a", "checkpoint": str(path),
             "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch", "seed": config.seed,
-            "greedy": config.greedy}))
+            "greedy": config.greedy, "decision_deadline": STEPPED_GAME_DEADLINE,
+            **(ROS_SPORTS_POLICY if ros_sports else {})},
+            remaps={f"/{n}/action": f"/{n}/policy_action" for n in names[:config.players_per_team]}
+            if ros_sports else {}))
+    if ros_sports:    # the walk, kick and head engines of team A's robots over the simulator
+        policies.append(NodeLaunch("motion_emulator", "dynenv_ros.nodes.motion_emulator", {
+            "players_per_team": config.players_per_team, "team": "a"}))
     for i, name in enumerate(names):
         if learned and i < config.players_per_team:
             continue
@@ -357,7 +383,7 @@ def driving_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
         drivers.append(NodeLaunch("policy_car_0", "policy_node.policy_node", {
             "scenario": "driving", "n_cars": config.n_cars, "action_mode": config.action_mode, "cars": ["car_0"],
             "checkpoint": str(path), "runtime": "onnxruntime" if path.suffix == ".onnx" else "torch",
-            "seed": config.seed}))
+            "seed": config.seed, "decision_deadline": STEPPED_GAME_DEADLINE}))
         scripted = scripted[1:]
     if scripted:
         drivers.append(NodeLaunch("scripted_driver", "policy_node.scripted_driver",
@@ -458,7 +484,8 @@ def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig
     rejected = sum(int(v) for k, v in diag.items() if k.startswith("rejected_"))
     scores = report["episode_scores"]
     team_a = config.policy if config.team_a == "scripted" else \
-        f"{config.team_a} (policy node, {'greedy' if config.greedy else 'sampled'} actions)"
+        f"{config.team_a} (policy node, {'greedy' if config.greedy else 'sampled'} actions" + (
+            ", through ros-sports messages and the motion emulator)" if config.interfaces == "ros_sports" else ")")
     played = "scripted, on its detections and pose estimates" if config.policy in PERCEIVING else "scripted"
     print(f"  teams: A {team_a}, B {config.policy} ({played})")
     print(f"  game: {diag['sim_time_s']} s of sim time in {diag['periods_run']} periods, "

@@ -6,6 +6,7 @@ cannot drift apart. The run ends when the simulator exits (``ends_run`` in the m
     ros2 launch dynenv_ros dynenv.launch.py
     ros2 launch dynenv_ros dynenv.launch.py scenario:=driving n_cars:=3 run_dir:=/tmp/drive
     ros2 launch dynenv_ros dynenv.launch.py set:="duration_s=30 team_a=scripted policy=perceiving"
+    ros2 launch dynenv_ros dynenv.launch.py set:="interfaces=ros_sports policy=perceiving"
 
 Launch arguments: ``config`` (a main-job YAML, default the package's config/main_job.yaml), ``run_dir`` (where the
 simulator's report and the bag go, default runs/launch-<time>), ``set`` (space-separated KEY=VALUE overrides of the
@@ -28,7 +29,8 @@ COMMON = {"scenario": "robocup", "seed": "0", "duration_s": "60.0", "players_per
 EXECUTABLES = {"dynenv_ros.nodes.sim_node": "sim_node", "dynenv_ros.nodes.recorder": "recorder",
                "policy_node.policy_node": "policy_node", "policy_node.scripted_policy": "scripted_policy",
                "policy_node.perceiving_policy": "perceiving_policy", "policy_node.scripted_driver": "scripted_driver",
-               "dynenv_ros.nodes.trainer_node": "trainer_node", "dynenv_ros.nodes.vision_adapter": "vision_adapter"}
+               "dynenv_ros.nodes.trainer_node": "trainer_node", "dynenv_ros.nodes.vision_adapter": "vision_adapter",
+               "dynenv_ros.nodes.motion_emulator": "motion_emulator"}
 
 
 def _nodes(context, *args, **kwargs) -> list:
@@ -46,6 +48,7 @@ def _nodes(context, *args, **kwargs) -> list:
     for node in soccer_graph(config, run_dir):
         actions.append(Node(package="dynenv_ros", executable=EXECUTABLES[node.module], name=node.name,
                             namespace=node.namespace or None, parameters=[dict(node.parameters)], output="screen",
+                            remappings=list(node.remaps.items()) or None,
                             on_exit=Shutdown() if node.ends_run else None))
     return actions
 

@@ -40,6 +40,8 @@ class NodeDiagnostics:
         values["frame_authentication"] = "off"
         if self.frame_gate is not None:              # frames verified, waiting for their tag, refused by reason
             values.update(self.frame_gate.diagnostics())
+        if self.ros_sports is not None:
+            values.update(self.ros_sports.diagnostics())
         values["pose_input"] = "yes" if self.pose_wanted else "no"
         values["pose_refusal"] = self.pose_refusal
         values["latency_median_ms"] = f"{statistics.median(window):.2f}" if window else "0.00"

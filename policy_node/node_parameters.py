@@ -16,6 +16,7 @@ from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, 
 from dynenv_ros.ros.pose_estimates import declare_pose_input
 from dynenv_ros.ros.runtime_controls import declare_runtime_controls
 from dynenv_ros.soccer.config import robot_names
+from policy_node.partial_periods import AUTO_DEADLINE, resolve_deadline
 from policy_node.policy_files import RUNTIMES
 
 SCENARIOS = ("robocup", "driving")
@@ -100,10 +101,12 @@ def declare_parameters(node: Node) -> PolicyParameters:
     weights_run = declare_str(node, "weights_run_id", "", "Take weights from this trainer run only "
                               "(WeightsAnnouncement.run_id); empty: any run.", read_only=True)
     pose_max_age, pose_frame = declare_pose_input(node, "Robocup, a policy that takes the pose estimate")
-    deadline = declare_float(node, "decision_deadline", -1.0, -1.0, 60.0, "Seconds (node clock) after a "
-                             "period's last frame is due by which the node acts on the frames that arrived, "
-                             "missing ones empty; a newer period's frame closes it too. Negative: wait for "
-                             "complete periods (stepped games).", read_only=True)
+    deadline = declare_float(node, "decision_deadline", AUTO_DEADLINE, AUTO_DEADLINE, 60.0, "Seconds (node "
+                             "clock) after a period's last frame is due by which the node acts on the frames "
+                             "that arrived, missing ones empty; a newer period's frame closes it too. -1: wait "
+                             "for complete periods; -2 (default): 0.05 on the wall clock, -1 on sim time.",
+                             read_only=True)
+    deadline = resolve_deadline(deadline, bool(node.get_parameter("use_sim_time").value))
     return PolicyParameters(
         scenario=scenario, players=players, team=team, n_cars=n_cars, cars=cars, action_mode=action_mode,
         runtime=runtime, checkpoint=checkpoint, seed=seed, greedy=greedy, diagnostics_s=diagnostics_s,

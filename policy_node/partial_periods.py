@@ -24,6 +24,8 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 INTERVAL_SAMPLES = 15        # the median of this many recent Δstamp / Δslot estimates
+AUTO_DEADLINE = -2.0         # decision_deadline's default: a deadline on the wall clock, none on sim time
+WALL_CLOCK_DEADLINE = 0.05   # s: below a 10 Hz camera's interval, so a lost last frame is answered in its period
 MAX_SLOT_GAP = 64            # consecutive frames further apart say nothing reliable about the interval
 
 
@@ -58,6 +60,15 @@ class FrameInterval:
         return round(statistics.median(self.estimates)) if self.estimates else None
 
 
+def resolve_deadline(value: float, use_sim_time: bool) -> float:
+    """The deadline a node acts by (s; negative: none). ``AUTO_DEADLINE`` is safe by default: on a robot (the wall
+    clock) a camera that drops a period's last frame must not stop the robot, so 0.05 s; on sim time a stepped game
+    delivers complete periods and a deadline on a clock that waits for the node could only cut them, so none."""
+    if value == AUTO_DEADLINE:
+        return -1.0 if use_sim_time else WALL_CLOCK_DEADLINE
+    return value
+
+
 def due_ns(arrival_ns: int, frame_index: int, frames_per_period: int, interval_ns: int) -> int:
     """When, on the node's clock, the period's last frame is due, judged from one frame's arrival."""
     return arrival_ns + (frames_per_period - 1 - frame_index) * interval_ns
@@ -84,4 +95,5 @@ def fill(frames: Mapping[int, Any], frames_per_period: int, interval_ns: int | N
     return period, missing
 
 
-__all__ = ["FrameInterval", "due_ns", "fill", "slot_of", "stamp_ns"]
+__all__ = ["AUTO_DEADLINE", "WALL_CLOCK_DEADLINE", "FrameInterval", "due_ns", "fill", "resolve_deadline", "slot_of",
+           "stamp_ns"]

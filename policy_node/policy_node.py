@@ -31,7 +31,10 @@ Real time degrades gracefully (docs/deploy.md, "Slow policies"): before each dec
 already waiting (bounded queues), so it always acts on the newest complete period; older ones are dropped and
 counted. With ``decision_deadline`` ≥ 0 (docs/deploy.md, "A real camera's timing") it acts on what has arrived once
 the period's last frame is that many seconds overdue on its clock, or a newer period's frame arrives, each missing
-frame an empty one (``partial_periods``); off (−1) by default, as a stepped game always delivers complete periods.
+frame an empty one (``partial_periods``); by default (−2) 0.05 s on the wall clock, off on sim time (a stepped game).
+
+``interfaces:=ros_sports`` (issue 41, ``ros.ros_sports_policy``): a team stack's soccer_vision_3d_msgs, RCGCD15 and
+joint states in instead of DetectionArrays; a walk twist, kick request and head command out beside each Action.
 """
 from __future__ import annotations
 
@@ -54,6 +57,7 @@ from dynenv_ros.ros.frame_tags import FrameReceiver, frames_secret
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.pose_estimates import HISTORY_DEPTH, pose_problem
 from dynenv_ros.ros.qos import action_stream
+from dynenv_ros.ros.ros_sports_policy import ros_sports_io
 from dynenv_ros.ros.runtime_controls import lock_when_off
 from dynenv_ros.ros.tf import base_frame
 from dynenv_ros.security.frame_auth import detection_array_bytes
@@ -112,11 +116,12 @@ class PolicyNode(OperatorServices, WeightsFollowing, NodeDiagnostics, Node):
                 self.get_logger().warning("no checkpoint: acting with untrained weights")
         except ValueError as error:
             raise ParameterException(str(error), ["checkpoint"]) from None
+        self.ros_sports = ros_sports_io(self, self.names, self.ids, self._receiver)   # interfaces:=ros_sports
         self.action_pubs = {n: self.create_publisher(Action, topics.local(topics.action(n)), action_stream())
                             for n in self.names}
-        self.detection_subs = {n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)),
-                                                           self._receiver(n),
-                                                           detection_qos()) for n in self.names}
+        self.detection_subs = {} if self.ros_sports else {
+            n: self.create_subscription(DetectionArray, topics.local(topics.detections(n)), self._receiver(n),
+                                        detection_qos()) for n in self.names}
         self.frame_gate = FrameReceiver(self, secret) if secret is not None else None
         if self.frame_gate is not None:
             for sub in self.detection_subs.values():
@@ -280,6 +285,8 @@ class PolicyNode(OperatorServices, WeightsFollowing, NodeDiagnostics, Node):
         msg.header.frame_id = base_frame(out.name)
         self.tag_action(out.name, msg, self.action_pubs[out.name])
         self.action_pubs[out.name].publish(msg)
+        if self.ros_sports is not None:        # the walk, kick and head commands beside it (issue 41)
+            self.ros_sports.command(out.name, msg, frame)
         self.actions_sent += 1
 
 

@@ -1031,7 +1031,16 @@ def check_launch(filename: str, args: list[str]) -> str:
     if not path.is_file():
         raise DocCommandError(f"launch file {filename} is not in launch/ ({sorted(p.name for p in (REPO / 'launch').glob('*.py'))})")
     source = path.read_text()
-    common = ast.literal_eval(re.search(r"^COMMON = (\{.*?\})$", source, re.M).group(1))
+    table = re.search(r"^(COMMON|ARGUMENTS) = (\{.*?\})$", source, re.M | re.S)
+    if table is None:
+        raise DocCommandError(f"launch file {filename}: no COMMON (main-job settings) or ARGUMENTS table")
+    if table.group(1) == "ARGUMENTS":       # a node's launch file (ros_sports_policy): its own arguments only
+        declared = set(ast.literal_eval(table.group(2)))
+        unknown = [a for a in args if a.partition(":=")[0] not in declared or ":=" not in a]
+        if unknown:
+            raise DocCommandError(f"{unknown}: not NAME:=VALUE of a declared argument ({sorted(declared)})")
+        return f"launch file {filename} with {args or 'its defaults'}"
+    common = ast.literal_eval(table.group(2))
     declared = {*common, *re.findall(r'DeclareLaunchArgument\("(\w+)"', source)}
     overrides: dict[str, Any] = {}
     for arg in args:
@@ -2004,8 +2013,10 @@ def _venv_form(argv: list[str]) -> list[str] | None:
         return argv[3:]
     if argv[:2] == ["ros2", "service"] and argv[2:3] == ["call"]:
         return ["python", "tools/ros2_service_call.py", *argv[3:]]
-    if argv[:2] == ["ros2", "launch"]:
+    if argv[:2] == ["ros2", "launch"] and argv[3:4] == ["dynenv.launch.py"]:
         return ["make", "run"]   # any game of the main job
+    if argv[:2] == ["ros2", "launch"]:
+        return ["<node>"]        # a node's launch file: the node, started with the same parameters
     return None
 
 
@@ -2023,8 +2034,8 @@ def _as_venv(command: DocCommand, argv: list[str]) -> list[str] | None:
 def test_every_ros2_command_shows_its_venv_equivalent_beside_it() -> None:
     """"Where a ros2 command has no equivalent in the venv, the docs give the venv command beside it": in the same
     section (`ros2 run dynenv_ros NODE ARGS` -> `.venv/bin/NODE ARGS`, `ros2 service call` ->
-    tools/ros2_service_call.py with the same arguments) or as a `# venv:` comment on its line (`ros2 launch` -> a
-    `make run`)."""
+    tools/ros2_service_call.py with the same arguments) or as a `# venv:` comment on its line (`ros2 launch` of the
+    main job's dynenv.launch.py -> a `make run`; of a node's launch file -> that node's venv command)."""
     missing = []
     for command in DOC_COMMANDS:
         for argv in command.argvs:
@@ -2038,6 +2049,9 @@ def test_every_ros2_command_shows_its_venv_equivalent_beside_it() -> None:
             if wanted == ["make", "run"]:
                 ok = any(c.venv_comment and c.where.split("#")[0] == command.where.split("#")[0]
                          and _normal(c.argvs[0])[:2] == ["make", "run"] for c in DOC_COMMANDS)
+            elif wanted == ["<node>"]:
+                ok = any(c.venv_comment and c.where.split("#")[0] == command.where.split("#")[0]
+                         and _normal(c.argvs[0])[:1] and _normal(c.argvs[0])[0] in NODES for c in DOC_COMMANDS)
             else:
                 ok = wanted in beside
             if not ok:

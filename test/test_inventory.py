@@ -15,6 +15,7 @@ from dynenv_ros.security.frame_auth import FRAMES
 from dynenv_ros.soccer.config import robot_names
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "ros_graph.md"
+SHIPPED = Path(__file__).resolve().parents[1] / "policy_node" / "pretrained" / "policy.onnx"   # takes the pose
 BEGIN, END = "<!-- inventory:begin -->\n", "<!-- inventory:end -->\n"
 
 
@@ -24,6 +25,7 @@ def _params(**values):
 
 def _start(name: str, make_node, tmp_path: Path):
     from weights_helpers import key_pair
+    from dynenv_ros.nodes.motion_emulator import MotionEmulator
     from dynenv_ros.nodes.recorder import Recorder
     from dynenv_ros.nodes.sim_node import SimNode
     from dynenv_ros.nodes.trainer_node import TrainerNode
@@ -38,7 +40,13 @@ def _start(name: str, make_node, tmp_path: Path):
     secure = dict(secrets_dir=str(secrets), authenticated_frames=True)
     starts = {
         "sim_node": (SimNode, _params(players_per_team=1, wait_for_subscribers=0, **secure)),
+        "sim_node ros_sports": (SimNode, _params(players_per_team=1, wait_for_subscribers=0, ros_sports=True,
+                                                 **secure)),
         "policy_node": (PolicyNode, _params(players_per_team=1, trusted_operator_keys=[str(public)], **secure)),
+        "policy_node ros_sports": (PolicyNode, _params(players_per_team=1, trusted_operator_keys=[str(public)],
+                                                       secrets_dir=str(secrets), interfaces="ros_sports",
+                                                       checkpoint=str(SHIPPED))),
+        "motion_emulator": (MotionEmulator, _params(players_per_team=1, secrets_dir=str(secrets))),
         "trainer_node": (TrainerNode, _params(players_per_team=1, run_dir=str(tmp_path / "run"),
                                               signing_key=str(private), feature_size=16, **secure)),
         "scripted_policy": (ScriptedPolicyNode, []), "perceiving_policy": (PerceivingPolicyNode, []),

@@ -33,7 +33,11 @@ class _Configuration:
 
 @pytest.fixture
 def launch_module(monkeypatch):
-    """The launch file imported with stand-ins for launch and launch_ros (whatever of them is installed is hidden)."""
+    return _import_launch(monkeypatch, LAUNCH_FILE)
+
+
+def _import_launch(monkeypatch, path: Path):
+    """A launch file imported with stand-ins for launch and launch_ros (whatever of them is installed is hidden)."""
     stand_ins = {"launch": {"LaunchDescription": _Recorded},
                  "launch.actions": {"DeclareLaunchArgument": _Recorded, "OpaqueFunction": _Recorded,
                                     "Shutdown": _Recorded},
@@ -43,7 +47,7 @@ def launch_module(monkeypatch):
         module = types.ModuleType(name)
         module.__dict__.update(members)
         monkeypatch.setitem(sys.modules, name, module)
-    spec = importlib.util.spec_from_file_location("dynenv_launch", LAUNCH_FILE)
+    spec = importlib.util.spec_from_file_location(path.stem.replace(".", "_"), path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -63,6 +67,7 @@ def _launched(module, tmp_path, **arguments) -> tuple[list, dict]:
     ({"scenario": "driving", "n_cars": "3"}, {"scenario": "driving", "n_cars": 3}),
     ({"set": "team_a=scripted policy=perceiving duration_s=30"},
      {"team_a": "scripted", "policy": "perceiving", "duration_s": 30}),
+    ({"set": "interfaces=ros_sports policy=perceiving"}, {"interfaces": "ros_sports", "policy": "perceiving"}),
 ])
 def test_the_launch_file_starts_the_main_jobs_graph_node_for_node(launch_module, tmp_path, arguments, overrides):
     nodes, declared = _launched(launch_module, tmp_path, **arguments)
@@ -73,6 +78,7 @@ def test_the_launch_file_starts_the_main_jobs_graph_node_for_node(launch_module,
         assert node.kwargs["package"] == "dynenv_ros"
         assert scripts[node.kwargs["executable"]] == node_spec.module      # the same program as the main job's
         assert node.kwargs["parameters"] == [node_spec.parameters]
+        assert (node.kwargs["remappings"] or []) == list(node_spec.remaps.items())    # ros_sports: policy_action
         assert (node.kwargs["on_exit"] is not None) == node_spec.ends_run   # the simulator's exit ends the launch
     assert {"scenario", "seed", "duration_s", "players_per_team", "n_cars", "config", "run_dir", "set"} <= set(declared)
 
@@ -85,3 +91,29 @@ def test_a_bad_setting_is_refused_as_the_main_job_refuses_it(launch_module, tmp_
 
 def test_the_launch_file_is_installed_with_the_package():
     assert 'glob("launch/*.launch.py")' in (REPO / "setup.py").read_text()
+
+
+def test_the_ros_sports_launch_file_starts_a_policy_node_on_a_stacks_topics(monkeypatch, tmp_path, make_node):
+    """launch/ros_sports_policy.launch.py: the executable is the package's policy node, every parameter it sets is
+    one the node declares with interfaces:=ros_sports, and every remapping names a topic the node has."""
+    from rclpy.parameter import Parameter
+
+    from dynenv_ros.graph.inventory import observe
+    from policy_node.policy_node import PolicyNode
+    module = _import_launch(monkeypatch, REPO / "launch" / "ros_sports_policy.launch.py")
+    description = module.generate_launch_description()
+    entities = description.args[0]
+    declared = {e.args[0]: e.kwargs["default_value"] for e in entities if isinstance(e, _Recorded) and e.args}
+    (node,) = entities[-1].kwargs["function"]({**declared, "gc_team_number": "12", "player_number": "3"})
+    scripts = dict(re.findall(r'"(\w+) = ([\w.]+):main"', (REPO / "setup.py").read_text()))
+    assert scripts[node.kwargs["executable"]] == "policy_node.policy_node"
+    (parameters,) = node.kwargs["parameters"]
+    assert (parameters["gc_team_number_a"], parameters["gc_player_number"], parameters["team"]) == (12, 3, "a")
+    assert Path(parameters["checkpoint"]).is_file()
+    policy = make_node(PolicyNode, parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()])
+    seen = observe(policy)
+    topics = seen["publishes"] | seen["subscribes"]
+    for source, target in node.kwargs["remappings"]:
+        assert source.replace("team_a_0", "<robot>") in {t.lstrip("/") for t in topics}, source
+        assert target == source.split("/", 1)[1]
+    assert {"/<robot>/soccer_vision_3d/balls", "/<robot>/gc/data", "/<robot>/cmd_vel"} <= topics

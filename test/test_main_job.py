@@ -109,6 +109,18 @@ def test_main_job_plays_a_trained_policy_for_team_a(tmp_path, capsys):
     assert f"teams: A {policy} (policy node, greedy actions)" in output and "dynenv-run: OK" in output
 
 
+def test_main_job_plays_the_shipped_policy_through_ros_sports_messages(tmp_path, capsys):
+    """interfaces=ros_sports (issue 41): team A's policy node on soccer_vision_3d_msgs, RCGCD15 and joint states,
+    the motion emulator acting for its robots; every period's actions accepted, none missing, the bag complete."""
+    output = _run_main(tmp_path, capsys, "duration_s=3", "players_per_team=1", "interfaces=ros_sports",
+                       "policy=perceiving", "gif=false")
+    report = json.loads((tmp_path / "sim_report.json").read_text())
+    diagnostics = report["diagnostics"]
+    assert diagnostics["periods_run"] == "6" and diagnostics["missing"] == "0" and diagnostics["accepted"] == "12"
+    assert "through ros-sports messages and the motion emulator" in output
+    assert "every published message recorded" in output and "dynenv-run: OK" in output
+
+
 def test_main_job_plays_the_perceiving_team_on_detections_and_pose_estimates(tmp_path, capsys):
     """policy=perceiving, team_a=scripted: both teams keeper_and_chasers on their own detections and pose estimates
     (perceiving_policy nodes), none reading /world_state; the simulator's localization stays on."""
@@ -118,6 +130,32 @@ def test_main_job_plays_the_perceiving_team_on_detections_and_pose_estimates(tmp
     assert report["published"]["pose_estimates_per_robot"] > 0
     assert "teams: A perceiving, B perceiving (scripted, on its detections and pose estimates)" in output
     assert "every published message recorded" in output and "dynenv-run: OK" in output
+
+
+def test_the_ros_sports_graph_puts_the_motion_emulator_between_team_as_policy_and_its_robots():
+    """interfaces=ros_sports (issue 41): the simulator publishes the ros-sports messages, team A's policy node reads
+    them (its grid from the first frame after the simulator's repeated instant) and its own Action goes aside; the
+    motion emulator acts for team A's robots; team B and the rest of the graph are as on the native route."""
+    from pathlib import Path
+    from dynenv_ros.main_job import REPO_CONFIG, soccer_graph
+    native = {n.name: n for n in soccer_graph(load_config(REPO_CONFIG, {"policy": "perceiving"}), Path("/r"))}
+    nodes = {n.name: n for n in soccer_graph(load_config(REPO_CONFIG, {"policy": "perceiving",
+                                                                       "interfaces": "ros_sports"}), Path("/r"))}
+    assert set(nodes) == set(native) | {"motion_emulator"}
+    assert nodes["sim_node"].parameters == {**native["sim_node"].parameters, "ros_sports": True,
+                                            "wait_for_subscribers": 1}
+    policy = nodes["policy_team_a"]
+    assert policy.parameters == {**native["policy_team_a"].parameters, "interfaces": "ros_sports",
+                                 "frame_epoch": 0.1, "class_wait": 0.5}
+    assert policy.parameters["decision_deadline"] == -1.0          # a stepped game: complete periods
+    assert policy.remaps == {"/team_a_0/action": "/team_a_0/policy_action",
+                             "/team_a_1/action": "/team_a_1/policy_action"}
+    assert native["policy_team_a"].remaps == {}
+    assert nodes["motion_emulator"].parameters == {"players_per_team": 2, "team": "a"}
+    assert nodes["policy_team_b_0"].parameters == native["policy_team_b_0"].parameters
+    assert "-r" in policy.command() and "/team_a_0/action:=/team_a_0/policy_action" in policy.command()
+    with pytest.raises(ConfigError, match="interfaces: not used by scenario 'driving'"):
+        load_config(REPO_CONFIG, {"scenario": "driving", "interfaces": "ros_sports"})
 
 
 def test_the_perceiving_graph_and_its_need_for_localization():
@@ -182,6 +220,8 @@ def test_graph_times_out_and_stops_every_process(tmp_path):
     ({"policy": "genius"}, "policy must be one of"),
     ({"team_a": "no/such/policy.onnx"}, "does not exist"),
     ({"team_a": "README.md"}, "team_a must be 'scripted' or a .onnx"),
+    ({"interfaces": "ros2"}, "interfaces must be one of"),
+    ({"interfaces": "ros_sports", "team_a": "scripted"}, "team_a must be a policy file"),
 ])
 def test_bad_settings_are_refused_with_a_reason(settings, message):
     with pytest.raises(ConfigError, match=message):

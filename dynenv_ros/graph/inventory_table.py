@@ -7,8 +7,8 @@ from __future__ import annotations
 KINDS = ("services", "publishes", "subscribes", "parameters")
 ACTS, GAME, READ = "acts", "game", "read"
 LABELS = {ACTS: "changes what a robot does or learns", GAME: "changes the game", READ: "read-only"}
-NODES = ("sim_node", "policy_node", "trainer_node", "scripted_policy", "perceiving_policy", "scripted_driver",
-         "vision_adapter", "recorder")
+NODES = ("sim_node", "sim_node ros_sports", "policy_node", "policy_node ros_sports", "trainer_node", "scripted_policy",
+         "perceiving_policy", "scripted_driver", "vision_adapter", "motion_emulator", "recorder")
 
 # Protections, as the table says them.
 START = "set at start only (read-only, or read once)"
@@ -23,6 +23,9 @@ FETCH = ("named in the signed announcement, with the key id; answers checked aga
          "answer delays this route only (the blob topic delivers)")
 BLOB = ("every sample checked against the signed digests (content-addressed); other writers' samples refused, "
         "counted, never displace the trainer's")
+MOTION = ("none: a walk engine's commands are not authenticated, on a robot either (keep the domain to the robot, "
+          "or SROS2)")
+GC = "none: game_controller_spl relays the GameController's unauthenticated UDP as it comes"
 
 
 def _standard(set_class: str, set_protection: str) -> dict[str, tuple[str, str]]:
@@ -56,7 +59,8 @@ CLASSES: dict[str, dict[str, dict[str, tuple[str, str]]]] = {
                                        "noise_mode noise_magnitude physics_hz vision_period_ticks "
                                        "motion_period_ticks episode_seconds falls_enabled seed localization "
                                        "controlled_robots secrets_dir authenticated_frames runtime_controls "
-                                       "ros_sports gc_team_number_a gc_team_number_b"),
+                                       "ros_sports gc_team_number_a gc_team_number_b gc_udp_port gc_udp_host "
+                                       "gc_return_port gc_struct_version"),
                        **_params(GAME, "real_time_factor missing_action auto_reset", RUNTIME),
                        **_params(READ, "publish_markers marker_robot", RUNTIME),
                        **_params(READ, "diagnostics_period wait_for_subscribers wait_for_ground_truth_subscribers "
@@ -74,7 +78,11 @@ CLASSES: dict[str, dict[str, dict[str, tuple[str, str]]]] = {
                                        "greedy seed decision_deadline pose_frame pose_max_age weights_topic "
                                        "weights_run_id trusted_weights_keys max_weights_bytes "
                                        "weights_state_file trusted_operator_keys allow_unsigned_files secrets_dir "
-                                       "authenticated_frames runtime_controls"),
+                                       "authenticated_frames runtime_controls interfaces vision_hz frames_per_period "
+                                       "frame_epoch frame_tolerance frame_phase_gain class_wait frame_classes "
+                                       "detection_frame perception_preset head_yaw_joint head_yaw_max_age "
+                                       "state_max_age gc_team_number_a gc_team_number_b gc_player_number "
+                                       "episode_id"),
                        **_params(READ, "diagnostics_period"), **_RUNTIME_FLAGS}},
     "trainer_node": {
         "services": {"/trainer/fetch_weights_<key_id>": (READ, FETCH), **_standard(ACTS, RUNTIME)},
@@ -124,3 +132,30 @@ CLASSES: dict[str, dict[str, dict[str, tuple[str, str]]]] = {
         "subscribes": {},
         "parameters": {**_params(READ, "output topics duration"), **_RUNTIME_FLAGS}},
 }
+
+# The nodes' ros-sports options (issue 41), started on: what they add to the entries above.
+_ROS_SPORTS_SIM = {f"/<robot>/soccer_vision_3d/{k}": (ACTS, NONE) for k in ("balls", "robots", "goalposts", "markings")}
+_ROS_SPORTS_SIM.update({"/<robot>/gc/data": (ACTS, GC), "/<robot>/joint_states": (ACTS, NONE),
+                        "/<robot>/fallen": (ACTS, NONE)})
+CLASSES["sim_node ros_sports"] = {**CLASSES["sim_node"],
+                                  "publishes": {**CLASSES["sim_node"]["publishes"], **_ROS_SPORTS_SIM}}
+_ROS_SPORTS_IN = {f"/<robot>/soccer_vision_3d/{k}": (ACTS, NONE) for k in ("balls", "robots", "goalposts", "markings")}
+_ROS_SPORTS_IN.update({"/<robot>/soccer_vision_3d/field_boundary": (READ, "none (read and ignored)"),
+                       "/<robot>/soccer_vision_3d/obstacles": (READ, "none (read and ignored)"),
+                       "/<robot>/gc/data": (ACTS, GC), "/<robot>/joint_states": (ACTS, NONE),
+                       "/<robot>/fallen": (ACTS, NONE), "/<robot>/pose_estimate": (ACTS, NONE),
+                       "/trainer/weights_announcement": (ACTS, WEIGHTS)})
+_POLICY = CLASSES["policy_node"]
+CLASSES["policy_node ros_sports"] = {
+    "services": _POLICY["services"],
+    "publishes": {**_POLICY["publishes"], "/<robot>/cmd_vel": (ACTS, MOTION), "/<robot>/motion/kick": (ACTS, MOTION),
+                  "/<robot>/motion/head": (ACTS, MOTION)},
+    "subscribes": _ROS_SPORTS_IN,
+    "parameters": _POLICY["parameters"]}
+CLASSES["motion_emulator"] = {
+    "services": _standard(READ, START),
+    "publishes": {**_COMMON_TOPICS, "/<robot>/action": (ACTS, ACTION_MAC), "/diagnostics": (READ, NONE)},
+    "subscribes": {"/<robot>/cmd_vel": (ACTS, MOTION), "/<robot>/motion/kick": (ACTS, MOTION),
+                   "/<robot>/motion/head": (ACTS, MOTION), "/<robot>/feedback": (READ, FEEDBACK_MAC)},
+    "parameters": {**_params(ACTS, "players_per_team team robots motion_period command_timeout stamp_tolerance "
+                                   "twist_max_age head_yaw_joint secrets_dir"), **_RUNTIME_FLAGS}}

@@ -25,11 +25,14 @@ class NodeLaunch:
     parameters: dict[str, Any] = field(default_factory=dict)
     ends_run: bool = False  # the run is over when every node with ends_run has exited
     namespace: str = ""     # e.g. "/game_1": the node's topics are the game's (ros/topics.py)
+    remaps: dict[str, str] = field(default_factory=dict)   # topic -> the name the node uses for it instead
 
     def command(self) -> list[str]:
         args = [sys.executable, "-m", self.module, "--ros-args", "-r", f"__node:={self.name}"]
         if self.namespace:
             args += ["-r", f"__ns:={self.namespace}"]
+        for topic, replacement in self.remaps.items():
+            args += ["-r", f"{topic}:={replacement}"]
         for key, value in self.parameters.items():
             args += ["-p", f"{key}:={_parameter_literal(value)}"]
         return args

@@ -70,7 +70,7 @@ def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
         nodes.append(NodeLaunch(f"policy_game_{game}", "policy_node.policy_node", {
             "players_per_team": players, "seed": config.seed + 100 + game,
             "trusted_weights_keys": [str(public_key)], "secrets_dir": secrets,
-            "authenticated_frames": True}, namespace=namespace))
+            "authenticated_frames": True, "decision_deadline": STEPPED_GAME_DEADLINE}, namespace=namespace))
         for team in "ab":
             for slot in range(players):
                 topics += [f"{namespace}/team_{team}_{slot}/action", f"{namespace}/team_{team}_{slot}/feedback"]
@@ -78,6 +78,10 @@ def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
                                                                      "topics": topics})
     return [recorder, trainer, *nodes]
 
+
+# A stepped game delivers complete periods and waits for the answers: no decision deadline (the policy node's
+# default, 0.05 s on the wall clock, is for a robot's camera; a frame whose tag comes late would be cut by it).
+STEPPED_GAME_DEADLINE = -1.0
 
 # The held-out comparison: episodes per policy, their seed (no simulator game of the run uses it), the opponent.
 HELD_OUT_EPISODES, HELD_OUT_SEED, HELD_OUT_OPPONENT = 80, 10_000, "random"

@@ -212,7 +212,9 @@ class SimNode(Node):
         """Achieved rates over the last diagnostics window and action counts, as strings (DiagnosticStatus)."""
         switches = {"action_authentication": self.secrets is not None,
                     "frame_authentication": self.frames_secret is not None, "runtime_controls": self.runtime_controls}
-        return self.game.diagnostics(switches, self.reporting.recorder_error)
+        values = self.game.diagnostics(switches, self.reporting.recorder_error)
+        values.update(self.outlet.robot_io.diagnostics())
+        return values
 
     def _publish_diagnostics(self) -> None:
         self.reporting.publish(self.diagnostics())
@@ -239,6 +241,9 @@ class SimNode(Node):
         live_view = getattr(self, "live_view", None)
         if live_view is not None:
             live_view.stop()
+        outlet = getattr(self, "outlet", None)
+        if outlet is not None:
+            outlet.robot_io.close()
         super().destroy_node()
 
 

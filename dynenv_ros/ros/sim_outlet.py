@@ -29,6 +29,7 @@ from dynenv_ros.ros.frame_tags import tag_message, tag_topic
 from dynenv_ros.ros.pose_estimates import EmulatedOdometry, pose_message, stamp_ns
 from dynenv_ros.ros.qos import REALTIME_FEEDBACK_DEPTH, REALTIME_FRAME_DEPTH, realtime_stream, sim_stream
 from dynenv_ros.ros.sim_parameters import SimSettings
+from dynenv_ros.ros.sim_robot_io import SimRobotIO
 from dynenv_ros.ros.sim_ros_sports import RosSportsOutlet
 from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, static_transforms, tf_message, tf_qos, tf_static_qos
 from dynenv_ros.ros.topics import local
@@ -58,6 +59,9 @@ class SimOutlet:
             frame_qos = feedback_qos = sim_stream()
         else:
             frame_qos, feedback_qos = realtime_stream(REALTIME_FRAME_DEPTH), realtime_stream(REALTIME_FEEDBACK_DEPTH)
+        # Joints, fall flags, GameController UDP (issue 41); its parameters declared before the first publisher.
+        soccer = settings.scenario != "driving"
+        self.robot_io = SimRobotIO(node, self.names, settings.ros_sports and soccer, soccer, self.publish, frame_qos)
         create = node.create_publisher
         self.clock_pub = create(ClockMsg, local(topics.CLOCK), frame_qos)
         self.world_pub = create(cv.WorldState, local(topics.WORLD_STATE), frame_qos)
@@ -147,6 +151,7 @@ class SimOutlet:
             if self.frame_tag_pubs:
                 data = detection_rows_bytes(robot.detections, self.detection_pubs[i].topic_name, **fields)
                 self.publish(self.frame_tag_pubs[i + 1], tag_message(self.frames_secret, data))
+        self.robot_io.frame(output, k, frame, stamp)        # joints, fall flags, GameController UDP (issue 41)
         if self.ros_sports is not None:
             self.ros_sports.frame(k, frame, stamp)
         if self.publish_markers and k == len(output.frames) - 1:

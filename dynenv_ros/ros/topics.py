@@ -80,11 +80,33 @@ def game_state(robot: str) -> str:
     return f"{robot}/game_state"
 
 
+SOCCER_VISION_3D_KINDS = ("balls", "robots", "goalposts", "markings", "field_boundary", "obstacles")
+
+
 def soccer_vision_3d(robot: str, kind: str) -> str:
-    """ros-sports soccer_vision_3d_msgs of one robot: ``kind`` balls, robots, goalposts or markings (issue 41)."""
-    if kind not in ("balls", "robots", "goalposts", "markings"):
+    """ros-sports soccer_vision_3d_msgs of one robot: ``kind`` balls, robots, goalposts or markings (issue 41;
+    the simulator publishes these four), field_boundary or obstacles (a team's stack may; the policy node reads
+    and ignores them)."""
+    if kind not in SOCCER_VISION_3D_KINDS:
         raise ValueError(f"no soccer_vision_3d topic '{kind}'")
     return f"/{robot}/soccer_vision_3d/{kind}"
+
+
+# What a policy node with ``interfaces:=ros_sports`` commands (issue 41; docs/deploy.md): the robot's walk engine,
+# kick engine and head, in the robot's namespace.
+def walk_target(robot: str) -> str:
+    """geometry_msgs/Twist: the walk engine's velocity target (base_link: x forward, y left m/s, z rad/s)."""
+    return f"/{robot}/cmd_vel"
+
+
+def kick_request(robot: str) -> str:
+    """std_msgs/Bool: one kick request, ``data`` = use_left_foot (the request rUNSWift-derived kick engines take)."""
+    return f"/{robot}/motion/kick"
+
+
+def head_command(robot: str) -> str:
+    """sensor_msgs/JointState: the head yaw target (``position``) and rate over the period (``velocity``)."""
+    return f"/{robot}/motion/head"
 
 
 def gc_data(robot: str) -> str:
