@@ -40,8 +40,9 @@ FLOOD_MB = 300                    # the issue's measurement: +1 GB RSS and 3.9 s
 RSS_BOUND_MB = 50
 # Longest feeder → node → feeder round trip allowed during the flood. Before, a 300 MB message cost 3.9 s without
 # actions (inline weights), or 6.1 s (a bounded type without the profiles); with them, on the loaded 2-core machine
-# where the attacker itself takes a core, 0.3 s median and 0.7–1.5 s at most were measured: CPU contention, not a stall.
-STALL_BOUND_S = 2.0
+# where the attacker itself takes a core, 0.3 s median and 0.7–1.5 s at most were measured: CPU contention, not a stall;
+# in a CI run beside a second suite's worker, 2.08 s once. The bound sits between that and the 3.9 s of the stall.
+STALL_BOUND_S = 3.0
 
 
 def _weights(seed: int, feature_size: int = 16) -> tuple[bytes, str]:
