@@ -141,7 +141,7 @@ def test_the_simulator_sends_the_gamecontroller_packet_and_reads_return_packets(
     assert int(counts["gc_return_accepted"]) == 1 and int(counts["gc_packets_sent"]) >= 3
     for reason in ("version", "player_number", "fallen", "not_finite", "length", "header"):
         assert counts[f"gc_return_refused_{reason}"] == "1", reason
-    assert sim.robot_io.link.latest[(12, 1)].pose == pytest.approx((100.0, -200.0, 0.5))
+    assert sim.outlet.robot_io.link.latest[(12, 1)].pose == pytest.approx((100.0, -200.0, 0.5))
     assert spin_until(executor, lambda: len(packets) >= 5 or receive(), 10.0)    # still serving
     sender.close()
     receiver.close()

@@ -58,7 +58,7 @@ def _answered(actions, first_period: int) -> set[int]:
 
 def test_a_stacks_messages_get_a_twist_every_period_and_the_twist_is_the_documented_mapping(make_node, executor):
     node, got, report = _play(make_node, executor, jitter_ms=0.0, drop_every=0, bad=True)
-    assert node.get_parameter("decision_deadline").value == -2.0 and node.deadline_ns == 50_000_000
+    assert node.get_parameter("decision_deadline").value == -2.0 and node.decider.deadline_ns == 50_000_000
     assert report["frames"] == PERIODS * 5
     expected = set(range(report["first_period"], report["first_period"] + PERIODS))
     assert _answered(got["action"], report["first_period"]) == expected, (report, node.diagnostics())

@@ -144,7 +144,7 @@ _ROS_SPORTS_IN.update({"/<robot>/soccer_vision_3d/field_boundary": (READ, "none 
                        "/<robot>/soccer_vision_3d/obstacles": (READ, "none (read and ignored)"),
                        "/<robot>/gc/data": (ACTS, GC), "/<robot>/joint_states": (ACTS, NONE),
                        "/<robot>/fallen": (ACTS, NONE), "/<robot>/pose_estimate": (ACTS, NONE),
-                       "/trainer/weights_announcement": (ACTS, WEIGHTS)})
+                       "/trainer/weights_announcement": (ACTS, WEIGHTS), "/trainer/weights_blob": (ACTS, BLOB)})
 _POLICY = CLASSES["policy_node"]
 CLASSES["policy_node ros_sports"] = {
     "services": _POLICY["services"],
