@@ -20,7 +20,7 @@ lint: bootstrap
 	@$(VENV_PY) tools/lint.py
 
 test: lint
-	@$(VENV_PY) -m pytest -n 2 $(PYTEST_ARGS) test
+	@$(VENV_PY) -m pytest -n 2 --durations=25 $(PYTEST_ARGS) test
 
 # The quick, ROS-free subset while working (docs/setup.md#tests): no lint, no test marked `ros` or `slow`.
 test-fast: bootstrap
