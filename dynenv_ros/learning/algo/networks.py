@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from dynenv_ros.agent import driving_actions
+from dynenv_ros.driving import agent_actions as driving_actions
 from dynenv_ros.agent.losses import (ROBOCUP_HEADS, ForwardModel, InverseModel, LongTermPredictor, RCMAttention,
                                      one_hot_actions)
 from dynenv_ros.agent.network import POSE_SIZE, DynEnvAgent

@@ -24,7 +24,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dynenv_ros.agent.driving_actions import BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem
+from dynenv_ros.driving.agent_actions import BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.learning.algo.policy import can_act
 

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from dynenv_ros.agent.driving_actions import commands as driving_commands
+from dynenv_ros.driving.agent_actions import commands as driving_commands
 from dynenv_ros.agent.network import DynEnvAgent, State
 from dynenv_ros.envs.vector import SoccerVectorEnv
 from dynenv_ros.learning.algo.experience import Rollout
