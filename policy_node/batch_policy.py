@@ -145,6 +145,7 @@ class BatchPolicy:
         detections where there are none yet), with the frame count the graph sends once known; ValueError with the
         reason."""
         try:
+            self.scenario.check_kind(policy, self.settings)
             self.scenario.check_policy(policy, self._trial_inputs(policy, memories, graph_frames), graph_frames,
                                        self.settings)
         except ValueError as error:

@@ -60,8 +60,8 @@ class SimOutlet:
         else:
             frame_qos, feedback_qos = realtime_stream(REALTIME_FRAME_DEPTH), realtime_stream(REALTIME_FEEDBACK_DEPTH)
         # Joints, fall flags, GameController UDP (issue 41); its parameters declared before the first publisher.
-        soccer = settings.scenario != "driving"
-        self.robot_io = SimRobotIO(node, self.names, settings.ros_sports and soccer, soccer, self.publish, frame_qos)
+        self.robot_io = SimRobotIO(node, self.names, settings.ros_sports, settings.game.legged, self.publish,
+                                   frame_qos)
         create = node.create_publisher
         self.clock_pub = create(ClockMsg, local(topics.CLOCK), frame_qos)
         self.world_pub = create(cv.WorldState, local(topics.WORLD_STATE), frame_qos)
@@ -81,7 +81,7 @@ class SimOutlet:
         # TF (ros/tf.py): the robots and their heads per frame; the team frames once, latched.
         self.tf_pub = create(TFMessage, local(TF_TOPIC), tf_qos())
         self.tf_static_pub = create(TFMessage, local(TF_STATIC_TOPIC), tf_static_qos())
-        if not settings.driving:               # the team frames of soccer's localization outputs
+        if settings.game.team_frames:          # the team frames of soccer's localization outputs
             self.tf_static_pub.publish(static_transforms(cv.sim_time(0, self.tick_s)))
         self._last_tf_ns = -1
         self.truth_marker_pub = create(MarkerArray, local(topics.GROUND_TRUTH_MARKERS), QoSProfile(depth=5))

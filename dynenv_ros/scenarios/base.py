@@ -12,6 +12,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import torch
 
+from dynenv_ros.agent.export import check_scenario
 from dynenv_ros.envs.padded_layout import LayoutSpec
 from dynenv_ros.envs.session import ActionSession
 
@@ -30,6 +31,8 @@ class Scenario:
     idle_words: str                # what agents doing ``idle`` do, for logs: 'stand still', 'brake'
     reset_options: tuple[str, ...]  # what /sim/reset's options_yaml may set
     default_frames: int            # vision frames per period of the default settings
+    legged: bool                   # agents with joints and falls (ros/sim_robot_io.py)
+    team_frames: bool              # the team frames its localization outputs are in (ros/tf.py static_transforms)
 
     def __repr__(self) -> str:
         return f"<scenario {self.name}>"
@@ -45,6 +48,10 @@ class Scenario:
 
     def game_settings(self, count: int, action_mode: str) -> Any:
         """A game's settings from a node's parameters: ``count`` agents (per team), driving's ``action_mode``."""
+        raise NotImplementedError
+
+    def describe(self, config: Any) -> str:
+        """The game in a few words, for a start-up log line ('2v2', 'driving, 3 cars (discrete actions)')."""
         raise NotImplementedError
 
     def perception(self, preset: str, **overrides: Any) -> Any:
@@ -98,9 +105,15 @@ class Scenario:
         """(static stream, dynamic stream, previous action, self state) of a new policy's trial decision."""
         raise NotImplementedError
 
+    def check_kind(self, policy: Any, config: Any) -> None:
+        """ValueError unless ``policy`` was built for this scenario and the game's settings ``config``
+        (``agent.export.check_scenario``): checked before its trial inputs are built from its settings."""
+        check_scenario(policy, self.name)
+
     def check_policy(self, policy: Any, trial: tuple[Any, ...], frames: int | None, config: Any) -> None:
-        """ValueError with the first reason ``policy`` must not act in a game of ``config`` (``agent.export``'s
-        checks: built for this scenario, finite weights, a trial decision on ``trial`` giving accepted actions)."""
+        """ValueError with the first reason ``policy`` of the right kind (``check_kind``) must not act in a game of
+        ``config`` (``agent.export``'s checks: finite weights, a trial decision on ``trial`` giving accepted
+        actions)."""
         raise NotImplementedError
 
     def network_problem(self, config: Mapping[str, Any], action_mode: str) -> str:

@@ -33,6 +33,8 @@ class DrivingScenario(Scenario):
     idle_words = "brake"
     reset_options = ()
     default_frames = 1
+    legged = False
+    team_frames = False
 
     def agent_names(self, count: int) -> list[str]:
         return car_names(count)
@@ -43,6 +45,9 @@ class DrivingScenario(Scenario):
     def game_settings(self, count: int, action_mode: str) -> DrivingConfig:
         """A game's settings from a node's parameters."""
         return DrivingConfig(n_cars=count, action_mode=action_mode)
+
+    def describe(self, config: Any) -> str:
+        return f"driving, {config.n_cars} cars ({config.action_mode} actions)"
 
     def perception(self, preset: str, **overrides: Any) -> Any:
         return load_driving_preset(preset, **overrides)
@@ -91,6 +96,9 @@ class DrivingScenario(Scenario):
         """A new policy's trial batch from padded observations."""
         return (*streams_from_padded(observation, spec), *side_inputs(observation, spec=spec))
 
-    def check_policy(self, policy: Any, trial: tuple[Any, ...], frames: int | None, config: Any) -> None:
+    def check_kind(self, policy: Any, config: Any) -> None:
+        """Also of the simulator's action mode (a continuous policy's commands are refused by a discrete one)."""
         check_scenario(policy, self.name, config.action_mode)
+
+    def check_policy(self, policy: Any, trial: tuple[Any, ...], frames: int | None, config: Any) -> None:
         check_driving_policy(policy, trial, config.cars.max_yaw_rate, frames)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import torch
 
-from dynenv_ros.agent.export import check_policy, check_scenario
+from dynenv_ros.agent.export import check_policy
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.envs.padded_layout import SOCCER as SOCCER_LAYOUT
 from dynenv_ros.envs.padded_layout import LayoutSpec
@@ -56,6 +56,8 @@ class SoccerScenario(Scenario):
     idle_words = "stand still"
     reset_options = ("kickoff_team",)
     default_frames = SoccerConfig().rates.frames_per_period
+    legged = True
+    team_frames = True
 
     def agent_names(self, count: int) -> list[str]:
         return robot_names(count)
@@ -66,6 +68,9 @@ class SoccerScenario(Scenario):
     def game_settings(self, count: int, action_mode: str) -> SoccerConfig:
         """A game's settings from a node's parameters (``action_mode`` is driving's)."""
         return SoccerConfig.from_mapping({"players_per_team": count})
+
+    def describe(self, config: Any) -> str:
+        return f"{config.players_per_team}v{config.players_per_team}"
 
     def perception(self, preset: str, **overrides: Any) -> Any:
         return load_preset(preset, **overrides)
@@ -121,5 +126,4 @@ class SoccerScenario(Scenario):
         return (*streams_from_padded(observation), *self._side_inputs(observation, head_max, pose))
 
     def check_policy(self, policy: Any, trial: tuple[Any, ...], frames: int | None, config: Any) -> None:
-        check_scenario(policy, self.name)
         check_policy(policy, trial, HEAD_BOUND, frames)

@@ -10,10 +10,12 @@ index i is ``(i - units) · step`` rad, and a turn maps back to the nearest inde
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
+
+if TYPE_CHECKING:      # torch is imported where a policy's outputs are read: the soccer world loads without it
+    import torch
 
 WALK_CHOICES, TURN_CHOICES, KICK_CHOICES = 5, 3, 3     # Action.msg's soccer choices
 
@@ -35,6 +37,7 @@ def sample_actions(step: Any, head_mode: str, head_units: int | None, head_max: 
     robot's outputs were all finite. A robot with a NaN or infinite output gets zero logits (so it cannot stop the
     others' sampling: ``torch.multinomial`` refuses a batch with one bad row) and is reported, for the caller to
     replace its action. The generator is drawn from in the same order whatever the values."""
+    import torch
     logits = [torch.as_tensor(x) for x in (step.walk, step.turn, step.kick)]
     head = torch.as_tensor(step.head)
     state = [torch.as_tensor(x) for x in step.state]
@@ -66,6 +69,7 @@ def behaviour_log_probs(step: Any, actions: np.ndarray, head_mode: str, head_uni
     over the action heads, as the learner's ``DynEnvAgent.distributions`` scores them (a discrete head's radians
     mapped back to its index; a continuous head's Gaussian at the executed, clipped value). Sent with each action
     (``Action.log_prob``) for the trainer's off-policy correction; NaN where an output was not finite."""
+    import torch
     actions = np.asarray(actions, np.float64)
     total = np.zeros(actions.shape[0])
     for column, values in enumerate((step.walk, step.turn, step.kick)):
