@@ -5,6 +5,6 @@ the fallback and previous actions, sampling and scoring a policy's outputs, the 
 acts). ``get_scenario(name)`` resolves any accepted spelling; docs/decisions.md ("A scenario registry") says why
 the canonical names are ``soccer`` and ``driving`` and where the old spellings are still accepted. ROS-free.
 """
-from dynenv_ros.scenarios.registry import DRIVING, SCENARIOS, SOCCER, Scenario, get_scenario, scenario_names
+from dynenv_ros.scenarios.registry import DRIVING, SCENARIOS, SOCCER, Scenario, get_scenario, scenario_names, scenario_of
 
-__all__ = ["DRIVING", "SCENARIOS", "SOCCER", "Scenario", "get_scenario", "scenario_names"]
+__all__ = ["DRIVING", "SCENARIOS", "SOCCER", "Scenario", "get_scenario", "scenario_names", "scenario_of"]

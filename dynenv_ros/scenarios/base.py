@@ -33,6 +33,12 @@ class Scenario:
     default_frames: int            # vision frames per period of the default settings
     legged: bool                   # agents with joints and falls (ros/sim_robot_io.py)
     team_frames: bool              # the team frames its localization outputs are in (ros/tf.py static_transforms)
+    settings_type: type            # the scenario's settings class (what ``settings`` returns)
+    layout_follows_settings: bool  # the padded layout depends on the game's settings (driving's steering limit): an
+                                   # agent trained in a world reads that world's layout, not the defaults'
+    headline_metric: str           # an evaluation's headline number ('paper_metric', 'total': dynenv_ros.evaluation)
+    sides: int                     # the sides a world's agents form: soccer's two teams; driving's cars, one (all learn)
+    teachers: tuple[str, ...]      # the teachers a training run of this scenario may imitate (TrainConfig.teacher)
 
     def __repr__(self) -> str:
         return f"<scenario {self.name}>"
@@ -44,6 +50,10 @@ class Scenario:
 
     def settings(self, mapping: Mapping[str, Any]) -> Any:
         """The scenario's settings (``SoccerConfig``, ``DrivingConfig``) from a mapping; ValueError if bad."""
+        raise NotImplementedError
+
+    def agent_count(self, config: Any) -> int:
+        """How many agents a game of the settings ``config`` has (both teams' robots, or the cars)."""
         raise NotImplementedError
 
     def game_settings(self, count: int, action_mode: str) -> Any:
@@ -114,6 +124,27 @@ class Scenario:
         """ValueError with the first reason ``policy`` of the right kind (``check_kind``) must not act in a game of
         ``config`` (``agent.export``'s checks: finite weights, a trial decision on ``trial`` giving accepted
         actions)."""
+        raise NotImplementedError
+
+    # -- the experience adapter: what the trainer builds, stores and learns from ------------------------------------
+    def new_agent(self, feature_size: int, head_mode: str, action_mode: str, players_per_team: int,
+                  uses_pose: bool) -> Any:
+        """The untrained ``DynEnvAgent`` of a training run (its width, soccer's head mode and pose input, driving's
+        action mode)."""
+        raise NotImplementedError
+
+    def stored_action(self, action_mode: str) -> tuple[int, Any]:
+        """(columns, dtype) of one action as rollouts store a policy's choices (``action_mode``: driving's)."""
+        raise NotImplementedError
+
+    def curiosity_heads(self, action_mode: str) -> tuple[tuple[int, ...], bool]:
+        """(head sizes, continuous) of the actions as the curiosity models take them: one-hot blocks of these sizes,
+        or (continuous) the action vector itself, of that one size."""
+        raise NotImplementedError
+
+    def categorical_heads(self, action_mode: str) -> tuple[str, ...]:
+        """The policy's categorical action heads, by their output names, in stored-action column order; () when the
+        actions are continuous (no most likely choice to compare with a teacher's)."""
         raise NotImplementedError
 
     def network_problem(self, config: Mapping[str, Any], action_mode: str) -> str:

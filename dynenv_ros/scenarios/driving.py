@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from dynenv_ros.agent.export import check_driving_policy, check_scenario
+from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.driving import agent_actions
 from dynenv_ros.driving.config import SCENARIO_DRIVING, DrivingConfig, car_names
@@ -35,12 +36,20 @@ class DrivingScenario(Scenario):
     default_frames = 1
     legged = False
     team_frames = False
+    settings_type = DrivingConfig
+    layout_follows_settings = True
+    headline_metric = "total"
+    sides = 1
+    teachers = ("scripted",)           # the scripted driver (driving.scripted.ScriptedDriver)
 
     def agent_names(self, count: int) -> list[str]:
         return car_names(count)
 
     def settings(self, mapping: Mapping[str, Any]) -> DrivingConfig:
         return DrivingConfig.from_mapping(mapping)
+
+    def agent_count(self, config: Any) -> int:
+        return int(config.n_cars)
 
     def game_settings(self, count: int, action_mode: str) -> DrivingConfig:
         """A game's settings from a node's parameters."""
@@ -102,3 +111,18 @@ class DrivingScenario(Scenario):
 
     def check_policy(self, policy: Any, trial: tuple[Any, ...], frames: int | None, config: Any) -> None:
         check_driving_policy(policy, trial, config.cars.max_yaw_rate, frames)
+
+    def new_agent(self, feature_size: int, head_mode: str, action_mode: str, players_per_team: int,
+                  uses_pose: bool) -> DynEnvAgent:
+        return DynEnvAgent(feature_size, scenario="driving", action_mode=action_mode)
+
+    def stored_action(self, action_mode: str) -> tuple[int, Any]:
+        return (2, np.int64) if action_mode == "discrete" else (agent_actions.CONTINUOUS_SIZE, np.float32)
+
+    def curiosity_heads(self, action_mode: str) -> tuple[tuple[int, ...], bool]:
+        if action_mode == "continuous":
+            return (agent_actions.CONTINUOUS_SIZE,), True
+        return (agent_actions.ACCELERATION_CHOICES, agent_actions.STEERING_CHOICES), False
+
+    def categorical_heads(self, action_mode: str) -> tuple[str, ...]:
+        return () if action_mode == "continuous" else ("acceleration", "steering")

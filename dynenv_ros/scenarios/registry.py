@@ -32,4 +32,10 @@ def get_scenario(name: str | int | Scenario) -> Scenario:
     raise ValueError(f"unknown scenario {name!r}; choose one of {', '.join(repr(n) for n in scenario_names())}")
 
 
-__all__ = ["DRIVING", "SCENARIOS", "SOCCER", "Scenario", "get_scenario", "scenario_names"]
+def scenario_of(agent: object) -> Scenario:
+    """The scenario a ``DynEnvAgent`` (or a policy wrapping one) was built for: its ``scenario``, soccer where it has
+    none (agents from before driving)."""
+    return get_scenario(getattr(agent, "scenario", "soccer"))
+
+
+__all__ = ["DRIVING", "SCENARIOS", "SOCCER", "Scenario", "get_scenario", "scenario_names", "scenario_of"]

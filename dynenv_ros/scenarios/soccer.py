@@ -10,6 +10,8 @@ import numpy as np
 import torch
 
 from dynenv_ros.agent.export import check_policy
+from dynenv_ros.agent.losses import ROBOCUP_HEADS
+from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.envs.padded_layout import SOCCER as SOCCER_LAYOUT
 from dynenv_ros.envs.padded_layout import LayoutSpec
@@ -58,12 +60,20 @@ class SoccerScenario(Scenario):
     default_frames = SoccerConfig().rates.frames_per_period
     legged = True
     team_frames = True
+    settings_type = SoccerConfig
+    layout_follows_settings = False
+    headline_metric = "paper_metric"
+    sides = 2
+    teachers = ("chaser", "eager_chaser", "perceiving")
 
     def agent_names(self, count: int) -> list[str]:
         return robot_names(count)
 
     def settings(self, mapping: Mapping[str, Any]) -> SoccerConfig:
         return SoccerConfig.from_mapping(mapping)
+
+    def agent_count(self, config: Any) -> int:
+        return int(config.n_robots)
 
     def game_settings(self, count: int, action_mode: str) -> SoccerConfig:
         """A game's settings from a node's parameters (``action_mode`` is driving's)."""
@@ -127,3 +137,17 @@ class SoccerScenario(Scenario):
 
     def check_policy(self, policy: Any, trial: tuple[Any, ...], frames: int | None, config: Any) -> None:
         check_policy(policy, trial, HEAD_BOUND, frames)
+
+    def new_agent(self, feature_size: int, head_mode: str, action_mode: str, players_per_team: int,
+                  uses_pose: bool) -> DynEnvAgent:
+        motion = SoccerConfig.from_mapping({"players_per_team": players_per_team, "head_mode": head_mode}).motion
+        return DynEnvAgent(feature_size, head_mode, motion.head_units, motion.head_max_delta, uses_pose=uses_pose)
+
+    def stored_action(self, action_mode: str) -> tuple[int, Any]:
+        return len(ROBOCUP_HEADS), np.int64
+
+    def curiosity_heads(self, action_mode: str) -> tuple[tuple[int, ...], bool]:
+        return ROBOCUP_HEADS, False
+
+    def categorical_heads(self, action_mode: str) -> tuple[str, ...]:
+        return ("walk", "turn", "kick", "head")
