@@ -37,6 +37,8 @@ class Scenario:
     layout_follows_settings: bool  # the padded layout depends on the game's settings (driving's steering limit): an
                                    # agent trained in a world reads that world's layout, not the defaults'
     headline_metric: str           # an evaluation's headline number ('paper_metric', 'total': dynenv_ros.evaluation)
+    config_hint: str               # how to choose a training config of this scenario (dynenv-train's options)
+    self_supervised: bool          # the worlds write self-supervised targets (true pose, objects) a loss can learn
     sides: int                     # the sides a world's agents form: soccer's two teams; driving's cars, one (all learn)
     teachers: tuple[str, ...]      # the teachers a training run of this scenario may imitate (TrainConfig.teacher)
 

@@ -39,6 +39,8 @@ class DrivingScenario(Scenario):
     settings_type = DrivingConfig
     layout_follows_settings = True
     headline_metric = "total"
+    config_hint = "--config driving_quick or --set scenario=driving"
+    self_supervised = False
     sides = 1
     teachers = ("scripted",)           # the scripted driver (driving.scripted.ScriptedDriver)
 

@@ -63,6 +63,8 @@ class SoccerScenario(Scenario):
     settings_type = SoccerConfig
     layout_follows_settings = False
     headline_metric = "paper_metric"
+    config_hint = "a soccer config (e.g. --config quick)"
+    self_supervised = True
     sides = 2
     teachers = ("chaser", "eager_chaser", "perceiving")
 
