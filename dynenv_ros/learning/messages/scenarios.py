@@ -28,6 +28,7 @@ from dynenv_ros.driving.agent_actions import BOUND_TOLERANCE, BRAKE_COMMAND, che
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.learning.algo.policy import can_act
 from dynenv_ros.scenarios import DRIVING, SOCCER, get_scenario
+from dynenv_ros.soccer.agent_actions import head_index
 
 WALKS, TURNS, KICKS = 5, 3, 3     # Action.msg's soccer choices
 STAND_STILL = (0.0, 0.0, 0.0, 0.0)
@@ -92,7 +93,7 @@ class SoccerExperience:
 
     def action_row(self, msg: Any) -> tuple:
         """[walk, turn, kick, head index]."""
-        index = int(np.clip(round(msg.head_yaw_delta / self.head_step) + self.head_units, 0, 2 * self.head_units))
+        index = int(head_index(msg.head_yaw_delta, self.head_units, self.head_step))   # (finite: checked first)
         return (int(msg.walk), int(msg.turn), int(msg.kick), index)
 
     def previous_row(self, msg: Any) -> tuple:
