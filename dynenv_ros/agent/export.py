@@ -80,7 +80,7 @@ from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, MAX_POLICY_BYTES, _bo
 from dynenv_ros.driving import agent_actions as driving_actions
 from dynenv_ros.agent.inputs import POSE_INPUT, StreamBatch, agent_inputs
 from dynenv_ros.agent.network import DynEnvAgent, State
-from dynenv_ros.envs.padded_layout import FEATURES, MAX_FRAMES, MAX_SLOTS, SOCCER
+from dynenv_ros.envs.padded_layout import FEATURES, MAX_FRAMES, MAX_SLOTS
 from dynenv_ros.soccer.agent_actions import (KICK_CHOICES, TURN_CHOICES, WALK_CHOICES, action_problem,
                                              sample_actions)
 
@@ -101,14 +101,26 @@ POSE_INPUT_NAME = "pose_estimate"            # after proprioception, when the po
 
 def io_names(scenario: str, action_mode: str | None = None, uses_pose: bool = False
              ) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """(input names, output names) of a scenario's exported graph (module docstring)."""
-    if scenario != "driving":
-        if uses_pose:
-            at = INPUT_NAMES.index("proprioception") + 1
-            return INPUT_NAMES[:at] + (POSE_INPUT_NAME,) + INPUT_NAMES[at:], OUTPUT_NAMES
-        return INPUT_NAMES, OUTPUT_NAMES
+    """(input names, output names) of a scenario's exported graph (module docstring): 'soccer' or 'driving'."""
+    if scenario not in _IO_NAMES:
+        raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
+    return _IO_NAMES[scenario](action_mode, uses_pose)
+
+
+def _soccer_io_names(action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    if uses_pose:
+        at = INPUT_NAMES.index("proprioception") + 1
+        return INPUT_NAMES[:at] + (POSE_INPUT_NAME,) + INPUT_NAMES[at:], OUTPUT_NAMES
+    return INPUT_NAMES, OUTPUT_NAMES
+
+
+def _driving_io_names(action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
     heads = (("acceleration_logits", "steering_logits") if action_mode == "discrete" else ("command",))
     return DRIVING_INPUT_NAMES, (*heads, "value", *(name + "_out" for name in STATE_NAMES))
+
+
+# Each scenario's graph names, by its name (the registry, dynenv_ros.scenarios, sits above this layer).
+_IO_NAMES = {"soccer": _soccer_io_names, "driving": _driving_io_names}
 
 
 @dataclass
@@ -184,12 +196,7 @@ def _example_inputs(model: DynEnvAgent, batch: int, frames: int, max_landmarks: 
 def _layout_metadata(scenario: str) -> dict[str, Any]:
     """The layout a graph's inputs come from: stream keys and classes, the proprioception, game and previous-action
     columns (driving's bounds depend on the config and are not part of the network)."""
-    if scenario == "driving":
-        from dynenv_ros.driving.config import DrivingConfig
-        from dynenv_ros.envs.driving_observations import driving_layout_spec
-        spec = driving_layout_spec(DrivingConfig())
-    else:
-        spec = SOCCER
+    spec = agent_inputs(scenario).spec
     return {"streams": [{"key": st.key, "mask": st.mask, "classes": list(st.classes)} for st in spec.streams],
             "proprioception": list(spec.proprioception_columns), "game": list(spec.game_columns),
             "previous_action": list(spec.action_columns),
@@ -240,7 +247,7 @@ def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int
         max_objects = 12 if max_objects is None else max_objects
     if frames < 1 or max_landmarks < 1 or max_objects < 1:
         raise ValueError("frames, max_landmarks and max_objects must be at least 1")
-    input_names, output_names = io_names("driving" if driving else "soccer", getattr(model, "action_mode", None),
+    input_names, output_names = io_names(getattr(model, "scenario", "soccer"), getattr(model, "action_mode", None),
                                          getattr(model, "uses_pose", False))
     target = Path(path)
     if not target.parent.is_dir():
@@ -331,8 +338,8 @@ def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
     file leaves symbolic are not checked here (the robot axis always is); the node's trial decision runs them."""
     F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size  # noqa: E741 - the paper's dimension letters
     input_names, output_names = io_names(policy.scenario, policy.action_mode, policy.uses_pose)
-    static = "lane" if policy.scenario == "driving" else "landmark"
     widths = agent_inputs(policy.scenario)
+    static = widths.static_name
     inputs = {f"{static}_features": ("float", (F, L, FEATURES)), f"{static}_kind": ("int64", (F, L)),
               f"{static}_mask": ("bool", (F, L)), "object_features": ("float", (F, O, FEATURES)),
               "object_kind": ("int64", (F, O)), "object_mask": ("bool", (F, O)),
@@ -470,7 +477,7 @@ class OnnxPolicy:
 
     def __call__(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                  proprioception: torch.Tensor, state: State) -> PolicyStep:
-        static = "lane" if self.scenario == "driving" else "landmark"
+        static = agent_inputs(self.scenario).static_name
         self_state = _numpy(proprioception, np.float32)
         feeds = {**self._stream(static, landmarks, self.max_landmarks),
                  **self._stream("object", objects, self.max_objects),

@@ -35,12 +35,12 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import yaml
 
-from dynenv_ros.scenarios import DRIVING, SOCCER, Scenario, get_scenario
-from dynenv_ros.scenarios import SCENARIOS as ALL_SCENARIOS
+if TYPE_CHECKING:        # the registry is imported where a config's scenario is asked (it loads torch)
+    from dynenv_ros.scenarios import Scenario
 
 ALGORITHMS = ("a2c", "ppo")
 VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
@@ -49,8 +49,6 @@ BACKENDS = ("auto", "inprocess", "subprocess", "ray")
 RUNNERS = ("sync", "async")
 # one shared network has no slot input, so it cannot imitate a keeper in one slot: chasers only ('perceiving': the
 # chaser on the robot's own observation and pose estimate, soccer.perceiving)
-TEACHER_KINDS = SOCCER.teachers
-DRIVING_TEACHER_KINDS = DRIVING.teachers   # the scripted driver (driving.scripted.ScriptedDriver)
 HEAD_MODES = ("discrete", "continuous")
 PERCEPTIONS = ("realistic", "dynenv", "none")        # the presets of dynenv_ros.perception (config/perception/)
 LOCALIZATIONS = ("none", "estimate")                # envs.soccer_observations.LOCALIZATION_OPTIONS
@@ -310,6 +308,7 @@ class TrainConfig:
     @property
     def world(self) -> Scenario:
         """The scenario (``dynenv_ros.scenarios``) a run of this config plays."""
+        from dynenv_ros.scenarios import get_scenario
         return get_scenario(self.scenario)
 
     @property
@@ -424,6 +423,7 @@ class TrainConfig:
         _choice("scenario", self.scenario, SCENARIOS)
         if self.teacher is not None:
             teachers = self.world.teachers
+            from dynenv_ros.scenarios import SCENARIOS as ALL_SCENARIOS
             owner = [s for s in ALL_SCENARIOS if s is not self.world and self.teacher in s.teachers]
             if self.teacher not in teachers and owner:
                 raise ConfigError("teacher", f"{self.teacher!r} is a {owner[0].name} teacher; scenario "
