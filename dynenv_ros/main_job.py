@@ -322,8 +322,11 @@ ROS_SPORTS_POLICY = {"interfaces": "ros_sports", "frame_epoch": 0.1, "class_wait
 
 
 def soccer_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
-    if config.scenario == "driving":
-        return driving_graph(config, run_dir)
+    """The game graph of the chosen scenario (``GAMES``)."""
+    return GAMES[config.scenario].build(config, run_dir)
+
+
+def robocup_graph(config: MainJobConfig, run_dir: Path) -> list[NodeLaunch]:
     names = robot_names(config.players_per_team)
     learned = config.team_a != "scripted"
     perceiving = config.policy in PERCEIVING
@@ -474,9 +477,12 @@ def summarise_driving(outcome: GraphOutcome, run_dir: Path, config: MainJobConfi
 
 
 def summarise_soccer(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
+    """The game graph's summary for the chosen scenario (``GAMES``)."""
+    return GAMES[config.scenario].summarise(outcome, run_dir, config)
+
+
+def summarise_robocup(outcome: GraphOutcome, run_dir: Path, config: MainJobConfig) -> bool:
     from dynenv_ros.bags.inspect import render
-    if config.scenario == "driving":
-        return summarise_driving(outcome, run_dir, config)
     report = read_report(run_dir / "sim_report.json", "simulator")
     if report is None:
         return False
@@ -509,6 +515,11 @@ class Graph:
     build: Callable[[MainJobConfig, Path], list[NodeLaunch]]
     summarise: Callable[[GraphOutcome, Path, MainJobConfig], bool]
 
+
+# The game graph ('soccer') of each scenario, by the spelling MainJobConfig.scenario takes: this launcher keeps the
+# registry (which imports torch) out of its start-up (docs/decisions.md, "A scenario registry").
+GAMES: dict[str, Graph] = {"robocup": Graph(robocup_graph, summarise_robocup),
+                           "driving": Graph(driving_graph, summarise_driving)}
 
 GRAPHS: dict[str, Graph] = {"soccer": Graph(soccer_graph, summarise_soccer),
                             "train": Graph(train_graph, summarise_train),

@@ -15,7 +15,6 @@ what the network is given and what is done with its outputs.
 """
 from __future__ import annotations
 
-import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
@@ -23,23 +22,16 @@ from typing import Any, Protocol
 import numpy as np
 import torch
 
-from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.export import (behaviour_log_probs, check_driving_policy, check_policy, check_scenario,
-                                     sample_actions)
-from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
-from dynenv_ros.driving.config import DrivingConfig
+from dynenv_ros.agent.inputs import streams_from_padded
 from dynenv_ros.envs.detection_messages import pack_messages
-from dynenv_ros.envs.driving_observations import driving_layout_spec
-from dynenv_ros.envs.padded_layout import SOCCER
 from dynenv_ros.envs.pose_features import POSE_KEY
-from dynenv_ros.envs.pose_messages import LOST_ROW, PoseHistory, pose_batch, stamp_ns
-from dynenv_ros.soccer.config import MotionConfig, SoccerConfig
+from dynenv_ros.envs.pose_messages import PoseHistory, pose_batch, stamp_ns
+from dynenv_ros.scenarios import DRIVING, SOCCER, Scenario
+from dynenv_ros.scenarios.soccer import HEAD_BOUND, uses_pose
 
-# The simulator refuses a head turn beyond this per period (docs/ros_graph.md): a policy must stay inside it.
-HEAD_BOUND = MotionConfig().head_max_delta
-DEFAULT_FRAMES = SoccerConfig().rates.frames_per_period      # the trial's frame count before any frame arrived
-STAND_STILL = (0, 0, 0, 0.0)       # the fallback action of a robot whose decision failed or was not finite
-BRAKE = driving_actions.BRAKE_COMMAND  # driving's: [throttle, brake, steering] (also the previous action at reset)
+DEFAULT_FRAMES = SOCCER.default_frames      # the trial's frame count before any frame arrived
+STAND_STILL = SOCCER.idle          # the fallback action of a robot whose decision failed or was not finite
+BRAKE = DRIVING.idle               # driving's: [throttle, brake, steering] (also the previous action at reset)
 
 
 class Log(Protocol):
@@ -48,21 +40,6 @@ class Log(Protocol):
     def error(self, message: str, **options: Any) -> Any: ...
 
     def info(self, message: str, **options: Any) -> Any: ...
-
-
-def uses_pose(policy: Any) -> bool:
-    """Whether a policy takes the ``pose_estimate`` input: its torch model's ``uses_pose`` (absent, so False, in
-    older checkpoints), or an ONNX file's input of that name."""
-    own = getattr(policy, "uses_pose", None)        # TorchPolicy / OnnxPolicy say it themselves
-    if isinstance(own, bool):
-        return own
-    model = getattr(policy, "model", None)
-    if model is not None:
-        return bool(getattr(model, "uses_pose", False))
-    session = getattr(policy, "session", None)
-    if session is not None:
-        return any(i.name == POSE_KEY for i in session.get_inputs())
-    return False
 
 
 def decision_seed(seed: int, episode: int, period: int) -> int:
@@ -78,17 +55,16 @@ def one_line(error: BaseException) -> str:
 
 class BatchPolicy:
     """The acting policy (``policy``, swapped between decisions) and how a batch of periods is put to it (module
-    docstring). ``memories`` are the robots' ``decider.RobotMemory`` in ``names`` order; ``take_estimates`` files
-    the pose estimates already waiting before their rows are read."""
+    docstring), in ``scenario`` with the game's ``settings`` (``Scenario.game_settings``). ``memories`` are the
+    robots' ``decider.RobotMemory`` in ``names`` order; ``take_estimates`` files the pose estimates already waiting
+    before their rows are read."""
 
-    def __init__(self, names: Sequence[str], *, driving: bool, action_mode: str, n_cars: int, seed: int,
+    def __init__(self, names: Sequence[str], *, scenario: Scenario, settings: Any, seed: int,
                  greedy: bool, pose_max_age: float, counts: Counter[str], log: Log,
                  take_estimates: Callable[[], None], empty_period: Callable[[int], list[Any]]) -> None:
-        self.names, self.driving, self.action_mode = list(names), driving, action_mode
-        driving_config = DrivingConfig(n_cars=n_cars, action_mode=action_mode)
-        self.spec = driving_layout_spec(driving_config) if driving else SOCCER
-        self.max_yaw_rate = driving_config.cars.max_yaw_rate
-        self.idle = BRAKE if driving else STAND_STILL
+        self.names, self.scenario, self.settings = list(names), scenario, settings
+        self.spec = scenario.layout_spec(settings)
+        self.idle = scenario.idle
         self.seed, self.greedy, self.counts, self.log = seed, greedy, counts, log
         self.teams = {name: 1 if name.startswith("team_a") else -1 for name in self.names}   # robocup's team signs
         self.pose_histories = {name: PoseHistory() for name in self.names}
@@ -98,11 +74,11 @@ class BatchPolicy:
         self.pose_wanted = False
         self.dropped_detections = 0          # rows beyond the maxima, farthest first
         self.trial_note = ""                 # what the last ``check`` ran its trial decision on
-        self._network_actions: Any = None
+        self._choices: Any = None
 
     def refresh_pose(self) -> bool:
         """Whether the acting policy takes the pose estimate (driving never does)."""
-        self.pose_wanted = not self.driving and uses_pose(self.policy)
+        self.pose_wanted = self.scenario.takes_pose(self.policy)
         return self.pose_wanted
 
     def run(self, memories: Sequence[Any], periods: list[list[Any]]):
@@ -115,24 +91,15 @@ class BatchPolicy:
         try:
             observation = self.padded(memories, periods)
             landmarks, objects = streams_from_padded(observation, self.spec)
-            if self.driving:
-                previous, proprio = side_inputs(observation, spec=self.spec)
-            else:
-                head_max = float(self.policy.head_max)
-                previous, proprio = self._side_inputs(observation, head_max, self.pose_wanted)
+            previous, proprio = self.scenario.side_inputs(observation, self.policy, self.spec, self.pose_wanted)
             states = [m.state or self.policy.initial_state(1) for m in memories]
             state = tuple(torch.cat([s[i] for s in states]) for i in range(4))
             step = self.policy(landmarks, objects, previous, proprio, state)
-            if self.driving:
-                chosen, finite = driving_actions.sample_actions(step, self.policy.action_mode, generator, self.greedy)
-                self._network_actions = chosen
-                actions = driving_actions.commands(chosen, self.policy.action_mode, self.max_yaw_rate)
-            else:
-                actions, finite = sample_actions(step, self.policy.head_mode, self.policy.head_units, head_max,
-                                                 generator, self.greedy)
+            actions, finite, self._choices = self.scenario.choose(step, self.policy, generator, self.greedy,
+                                                                  self.settings)
         except Exception as error:
             self.counts["failed_decisions"] += 1
-            self.log.error(f"decision failed, robots {'brake' if self.driving else 'stand still'}: "
+            self.log.error(f"decision failed, robots {self.scenario.idle_words}: "
                            f"{type(error).__name__}: {one_line(error)}", throttle_duration_sec=5.0)
             return np.zeros((len(memories), len(self.idle))), np.zeros(len(memories), bool), None
         if not finite.all():
@@ -140,23 +107,13 @@ class BatchPolicy:
                            "they stand still", throttle_duration_sec=5.0)
         return actions, finite, step
 
-    @staticmethod
-    def _side_inputs(observation: dict[str, np.ndarray], head_max: float, pose: bool):
-        """Soccer's side inputs; a policy taking the pose gets the batch's ``pose_estimate`` appended
-        (``agent.inputs.side_inputs(..., pose=True)``)."""
-        return side_inputs(observation, head_max, pose=True) if pose else side_inputs(observation, head_max)
-
     def behaviour(self, step: Any, actions: np.ndarray, finite: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each robot's action log-probability and value estimate, for the trainer (NaN where unknown: the
         fallback action was not the policy's choice, and the learning fields stay 0)."""
         n = len(actions)
         if step is None or not finite.any():
             return np.full(n, np.nan), np.full(n, np.nan)
-        if self.driving:
-            log_probs = driving_actions.log_probs(step, self._network_actions, self.policy.action_mode)
-        else:
-            log_probs = behaviour_log_probs(step, actions, self.policy.head_mode, self.policy.head_units,
-                                            float(self.policy.head_max))
+        log_probs = self.scenario.log_probs(step, self.policy, actions, self._choices)
         values = np.asarray(torch.as_tensor(step.value), np.float64).reshape(n)
         ok = finite & np.isfinite(log_probs) & np.isfinite(values)
         finite &= ok
@@ -183,21 +140,19 @@ class BatchPolicy:
                           [stamp_ns(p[-1].header.stamp) for p in periods], [self.teams[n] for n in self.names],
                           round(self.pose_max_age * 1e9), self.counts)
 
-    def check(self, policy: Any, scenario: str, memories: Sequence[Any], graph_frames: int | None) -> None:
-        """``check_policy`` on the last frames each robot acted on (a synthetic period with no detections where
-        there are none yet), with the frame count the graph sends once known; ValueError with the reason."""
+    def check(self, policy: Any, memories: Sequence[Any], graph_frames: int | None) -> None:
+        """The scenario's ``check_policy`` on the last frames each robot acted on (a synthetic period with no
+        detections where there are none yet), with the frame count the graph sends once known; ValueError with the
+        reason."""
         try:
-            check_scenario(policy, scenario, self.action_mode if self.driving else None)
-            if self.driving:
-                check_driving_policy(policy, self._trial_inputs(policy, memories, graph_frames), self.max_yaw_rate,
-                                     graph_frames)
-            else:
-                check_policy(policy, self._trial_inputs(policy, memories, graph_frames), HEAD_BOUND, graph_frames)
+            self.scenario.check_kind(policy, self.settings)
+            self.scenario.check_policy(policy, self._trial_inputs(policy, memories, graph_frames), graph_frames,
+                                       self.settings)
         except ValueError as error:
             raise ValueError(f"policy refused: {one_line(error)}") from None
 
     def _trial_inputs(self, policy: Any, memories: Sequence[Any], graph_frames: int | None):
-        frames = graph_frames or getattr(policy, "frames", None) or (1 if self.driving else DEFAULT_FRAMES)
+        frames = graph_frames or getattr(policy, "frames", None) or self.scenario.default_frames
         periods = [m.last if m.last is not None and len(m.last) == frames else self.empty_period(frames)
                    for m in memories]
         recorded = sum(m.last is not None and len(m.last) == frames for m in memories)
@@ -206,14 +161,7 @@ class BatchPolicy:
         observation, _ = pack_messages(periods, [m.previous for m in memories],
                                        getattr(policy, "max_landmarks", None), getattr(policy, "max_objects", None),
                                        spec=self.spec)
-        if self.driving:
-            return (*streams_from_padded(observation, self.spec), *side_inputs(observation, spec=self.spec))
-        head_max = float(policy.head_max)
-        if not math.isfinite(head_max) or head_max <= 0:
-            head_max = 1.0            # check_policy refuses it with the reason; the trial inputs must stay finite
-        if uses_pose(policy):         # the trial runs as a robot that has lost its pose
-            observation[POSE_KEY] = np.tile(LOST_ROW, (len(periods), 1))
-        return (*streams_from_padded(observation), *self._side_inputs(observation, head_max, uses_pose(policy)))
+        return self.scenario.trial_inputs(observation, policy, self.spec)
 
 
 __all__ = ["BRAKE", "DEFAULT_FRAMES", "HEAD_BOUND", "STAND_STILL", "BatchPolicy", "Log", "decision_seed",

@@ -79,9 +79,9 @@ class Decider:
     def memories(self) -> list[RobotMemory]:
         return [self.memory[n] for n in self.names]
 
-    def check(self, policy: Any, scenario: str) -> None:
+    def check(self, policy: Any) -> None:
         """A new policy's trial decision on the robots' last frames (``BatchPolicy.check``); ValueError if refused."""
-        self.batch.check(policy, scenario, self.memories(), self.graph_frames)
+        self.batch.check(policy, self.memories(), self.graph_frames)
 
     def swap(self, policy: Any) -> None:
         """The recurrent states carry over when they fit the new network; a network of another size starts from
@@ -161,8 +161,7 @@ class Decider:
                               (float(log_probs[b]), float(values[b])) if finite[b] else None))
                 if same_episode:
                     memory.addressed = target
-                    memory.previous = (tuple(float(v) for v in action) if self.batch.driving else
-                                       (int(action[0]), int(action[1]), int(action[2]), float(action[3])))
+                    memory.previous = self.batch.scenario.previous_action(action)
             if same_episode:                                   # (a new episode's first frames reset the robot)
                 memory.state = tuple(s[b:b + 1] for s in step.state) if finite[b] else None
                 memory.last = period

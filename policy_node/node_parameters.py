@@ -10,12 +10,12 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
 from dynenv_ros.agent.checkpoint import MAX_POLICY_BYTES
-from dynenv_ros.driving.config import MAX_CARS, car_names
+from dynenv_ros.driving.config import MAX_CARS
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, declare_str_list
 from dynenv_ros.ros.pose_estimates import declare_pose_input
 from dynenv_ros.ros.runtime_controls import declare_runtime_controls
-from dynenv_ros.soccer.config import robot_names
+from dynenv_ros.scenarios import Scenario, get_scenario
 from policy_node.partial_periods import AUTO_DEADLINE, resolve_deadline
 from policy_node.policy_files import RUNTIMES
 
@@ -48,8 +48,14 @@ class PolicyParameters:
     deadline_ns: int | None          # decision_deadline in ns; None: wait for complete periods
 
     @property
-    def driving(self) -> bool:
-        return self.scenario == "driving"
+    def game(self) -> Scenario:
+        """The scenario ``scenario`` names (its parameter spelling: robocup, driving)."""
+        return get_scenario(self.scenario)
+
+    @property
+    def agent_count(self) -> int:
+        """The game's agents per team (robocup) or cars (driving): the scenario's ``count_key``."""
+        return {"players_per_team": self.players, "n_cars": self.n_cars}[self.game.count_key]
 
 
 def declare_parameters(node: Node) -> PolicyParameters:
@@ -64,7 +70,7 @@ def declare_parameters(node: Node) -> PolicyParameters:
                             "others may be driven by other nodes, e.g. scripted_driver.", read_only=True)
     action_mode = declare_str(node, "action_mode", "discrete", "The simulator's action_mode (driving): the "
                               "policy's must be the same.", choices=("discrete", "continuous"), read_only=True)
-    if scenario == "driving" and team:
+    if team and get_scenario(scenario).picks_agents_with != "team":
         raise ParameterException("team applies to robocup; a driving node picks its cars with cars", ["team"])
     runtime = declare_str(node, "runtime", "", "Inference runtime; empty: the checkpoint's (.onnx: onnxruntime, "
                           "else torch).", choices=("", *RUNTIMES), read_only=True)
@@ -119,10 +125,10 @@ def declare_parameters(node: Node) -> PolicyParameters:
 
 def controlled_robots(params: PolicyParameters) -> tuple[list[str], dict[str, int]]:
     """The robots (cars) the node acts for, in the game's order, and each one's id in the game."""
-    everyone = car_names(params.n_cars) if params.driving else robot_names(params.players)
-    unknown = [c for c in params.cars if c not in everyone] if params.driving else []
-    if params.cars and not params.driving:
+    everyone = params.game.agent_names(params.agent_count)
+    if params.cars and params.game.picks_agents_with != "cars":
         raise ParameterException("cars is a driving parameter (robocup picks robots with team)", ["cars"])
+    unknown = [c for c in params.cars if c not in everyone]
     if unknown:
         raise ParameterException(f"unknown cars {unknown}; cars are {everyone}", ["cars"])
     names = [name for name in everyone if (not params.team or name[5] == params.team)

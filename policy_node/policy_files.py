@@ -11,6 +11,7 @@ from typing import Any
 
 import torch
 
+from dynenv_ros.scenarios import Scenario
 from dynenv_ros.agent.checkpoint import load_policy, policy_from_bytes, sha256
 from dynenv_ros.agent.export import TorchPolicy
 from dynenv_ros.agent.network import DynEnvAgent
@@ -61,10 +62,11 @@ def load(path: str, runtime: str, check: Callable[[Any], None], data: bytes | No
     return policy, digest, version
 
 
-def untrained(driving: bool, action_mode: str, seed: int) -> TorchPolicy:
-    """Untrained weights from ``seed`` (smoke tests only: no checkpoint given)."""
+def untrained(scenario: Scenario, action_mode: str, seed: int) -> TorchPolicy:
+    """Untrained weights of ``scenario``'s network from ``seed`` (smoke tests only: no checkpoint given;
+    ``action_mode``: driving's heads)."""
     torch.manual_seed(seed)
-    return TorchPolicy(DynEnvAgent(scenario="driving", action_mode=action_mode) if driving else DynEnvAgent())
+    return TorchPolicy(DynEnvAgent(scenario=scenario.policy_metadata_name(), action_mode=action_mode))
 
 
 __all__ = ["RUNTIMES", "load", "runtime_of", "untrained", "version_of"]

@@ -78,7 +78,7 @@ class PolicyNode(OperatorServices, WeightsFollowing, NodeDiagnostics, Node):
     def __init__(self, **node_options: Any) -> None:
         super().__init__("policy_node", **node_options)
         params = declare_parameters(self)
-        self.scenario, self.driving, self.action_mode = params.scenario, params.driving, params.action_mode
+        self.scenario, self.action_mode = params.game, params.action_mode
         self.allow_unsigned_files, self.runtime_controls = params.allow_unsigned_files, params.runtime_controls
         self.weights_run, self.pose_frame = params.weights_run, params.pose_frame
         self.names, self.ids = controlled_robots(params)
@@ -88,8 +88,9 @@ class PolicyNode(OperatorServices, WeightsFollowing, NodeDiagnostics, Node):
                                "verifies")
         self.counts: Counter[str] = Counter()
         log = self.get_logger()
-        self.batch = BatchPolicy(self.names, driving=self.driving, action_mode=self.action_mode,
-                                 n_cars=params.n_cars, seed=params.seed, greedy=params.greedy,
+        self.batch = BatchPolicy(self.names, scenario=self.scenario,
+                                 settings=self.scenario.game_settings(params.agent_count, self.action_mode),
+                                 seed=params.seed, greedy=params.greedy,
                                  pose_max_age=params.pose_max_age, counts=self.counts, log=log,
                                  take_estimates=self._take_estimates, empty_period=empty_period)
         self.decider = Decider(self.names, self.batch, self.counts, log, params.deadline_ns,
@@ -110,7 +111,7 @@ class PolicyNode(OperatorServices, WeightsFollowing, NodeDiagnostics, Node):
                 self.batch.policy, self.checkpoint_sha256, self.policy_version = self._load(params.checkpoint,
                                                                                             self.runtime_name)
             else:
-                policy = policy_files.untrained(self.driving, self.action_mode, params.seed)
+                policy = policy_files.untrained(self.scenario, self.action_mode, params.seed)
                 self._validate(policy)
                 self.batch.policy, self.checkpoint_sha256 = policy, ""
                 self.get_logger().warning("no checkpoint: acting with untrained weights")
@@ -167,7 +168,7 @@ class PolicyNode(OperatorServices, WeightsFollowing, NodeDiagnostics, Node):
 
     def _validate(self, policy) -> None:
         """A trial decision on the robots' last frames (``BatchPolicy.check``); ValueError with the reason."""
-        self.decider.check(policy, self.scenario)
+        self.decider.check(policy)
 
     def _swap(self, policy, digest: str, version: int) -> None:
         """Callbacks run one at a time: the swap happens between two decisions (``Decider.swap``)."""
@@ -271,13 +272,8 @@ class PolicyNode(OperatorServices, WeightsFollowing, NodeDiagnostics, Node):
         """One robot's action: stamped with the observation acted on (sim time in the sim), in its base frame,
         with the learning fields (docs/interfaces.md) when the action is the policy's own."""
         frame, action = out.frame, out.action
-        if self.driving:
-            msg = Action(robot_id=self.ids[out.name], episode_id=frame.episode_id, motion_period=out.target,
-                         throttle=float(action[0]), brake=float(action[1]), steering=float(action[2]))
-        else:
-            msg = Action(robot_id=self.ids[out.name], episode_id=frame.episode_id, motion_period=out.target,
-                         walk=int(action[0]), turn=int(action[1]), kick=int(action[2]),
-                         head_yaw_delta=float(action[3]))
+        msg = Action(robot_id=self.ids[out.name], episode_id=frame.episode_id, motion_period=out.target,
+                     **self.scenario.message_fields(action))
         if out.learning is not None:
             msg.policy_version = self.policy_version
             msg.log_prob, msg.value = out.learning

@@ -59,12 +59,9 @@ class WeightsFollowing:
             config = check_agent_config(meta["config"])
         except (ValueError, KeyError, TypeError) as error:
             raise ValueError(f"metadata_json does not describe a network: {_one_line(error)}") from None
-        scenario, mine = config.get("scenario", "soccer"), "driving" if self.driving else "soccer"
-        if scenario != mine:
-            raise ValueError(f"it is a {scenario} policy and this node plays {mine}")
-        if self.driving and config.get("action_mode") != self.action_mode:
-            raise ValueError(f"it is a {config.get('action_mode')} driving policy and the simulator's action_mode "
-                             f"is {self.action_mode}")
+        problem = self.scenario.network_problem(config, self.action_mode)
+        if problem:
+            raise ValueError(problem)
 
     def _install_weights(self, data: bytes, announcement: Announcement) -> str:
         """Swap in fetched weights whose bytes matched the signed SHA-256, after the checks a policy file gets and

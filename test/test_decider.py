@@ -8,6 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
+from dynenv_ros.scenarios import SOCCER
 from policy_node.batch_policy import BatchPolicy
 from policy_node.decider import Decider
 from policy_node.policy_files import untrained
@@ -43,12 +44,13 @@ def _empty_like(like, index: int, stamp_ns: int):
 
 def _decider(clock=lambda: 0, deadline_ns=None, greedy=True):
     counts, said = Counter(), Said()
-    batch = BatchPolicy(ROBOTS, driving=False, action_mode="discrete", n_cars=2, seed=3, greedy=greedy,
+    batch = BatchPolicy(ROBOTS, scenario=SOCCER, settings=SOCCER.game_settings(1, "discrete"), seed=3,
+                        greedy=greedy,
                         pose_max_age=0.5, counts=counts, log=said, take_estimates=lambda: None,
                         empty_period=lambda frames: [_frame(0, 0, k, 0, frames) for k in range(frames)])
     decider = Decider(ROBOTS, batch, counts, said, deadline_ns, clock, _empty_like)
-    policy = untrained(driving=False, action_mode="discrete", seed=3)
-    decider.check(policy, "robocup")             # the trial decision every policy passes before it acts
+    policy = untrained(SOCCER, action_mode="discrete", seed=3)
+    decider.check(policy)             # the trial decision every policy passes before it acts
     batch.policy = policy
     return decider, counts, said
 

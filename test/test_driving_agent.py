@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from dynenv_ros.agent import driving_actions
-from dynenv_ros.agent.driving_actions import ClippedNormal
+from dynenv_ros.driving import agent_actions as driving_actions
+from dynenv_ros.driving.agent_actions import ClippedNormal
 from dynenv_ros.agent.inputs import (CLASS_INDEX, NUM_CLASSES, StreamBatch, agent_inputs, side_inputs,
                                      streams_from_padded)
 from dynenv_ros.agent.network import DynEnvAgent

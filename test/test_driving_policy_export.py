@@ -11,7 +11,7 @@ import torch
 
 pytest.importorskip("onnxruntime")
 
-from dynenv_ros.agent import driving_actions  # noqa: E402
+from dynenv_ros.driving import agent_actions as driving_actions  # noqa: E402
 from dynenv_ros.agent.checkpoint import agent_config, load_policy, save_policy  # noqa: E402
 from dynenv_ros.agent.export import (METADATA_KEY, OnnxPolicy, TorchPolicy, check_driving_policy,  # noqa: E402
                                      check_policy, check_scenario, export_onnx)

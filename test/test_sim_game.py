@@ -11,7 +11,8 @@ import pytest
 from dynenv_msgs.msg import Action
 
 from dynenv_ros.envs.action_gate import ActionGate
-from dynenv_ros.envs.sim_game import SimGame, make_session
+from dynenv_ros.envs.sim_game import SimGame
+from dynenv_ros.scenarios import SOCCER
 from dynenv_ros.perception.params import load_preset
 from dynenv_ros.security.action_auth import GameSecrets, action_digest, tag_action
 from dynenv_ros.soccer.config import SoccerConfig
@@ -49,8 +50,8 @@ class Sent:
 def _game(mode="stepped", episode_seconds=120.0, auto_reset=True, exit_when_finished=False, secrets=None):
     config = SoccerConfig.from_mapping({"players_per_team": 1, "episode_seconds": episode_seconds,
                                         "falls": {"enabled": False}})
-    session = make_session("robocup", config, load_preset("none"), 3, "none", None, False)
-    gate = ActionGate(session, NAMES, TOPICS, [f"/{n}/action" for n in NAMES], secrets, "robocup")
+    session = SOCCER.make_session(config, load_preset("none"), 3, "none", None, False)
+    gate = ActionGate(session, NAMES, TOPICS, [f"/{n}/action" for n in NAMES], secrets, SOCCER.action_fields)
     sent = Sent()
     game = SimGame(session, gate, sent, "robocup", mode, 3, False, auto_reset, exit_when_finished)
     return game, sent

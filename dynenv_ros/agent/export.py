@@ -65,7 +65,6 @@ from __future__ import annotations
 import copy
 import io
 import json
-import math
 import os
 import warnings
 from dataclasses import dataclass
@@ -78,10 +77,12 @@ from torch import nn
 
 from dynenv_ros.agent.checkpoint import (MAX_FEATURE_SIZE, MAX_POLICY_BYTES, _bounded_int, check_file_size,
                                          check_head, non_finite_tensors)
-from dynenv_ros.agent import driving_actions
+from dynenv_ros.driving import agent_actions as driving_actions
 from dynenv_ros.agent.inputs import POSE_INPUT, StreamBatch, agent_inputs
 from dynenv_ros.agent.network import DynEnvAgent, State
-from dynenv_ros.envs.padded_layout import FEATURES, MAX_FRAMES, MAX_SLOTS, SOCCER
+from dynenv_ros.envs.padded_layout import FEATURES, MAX_FRAMES, MAX_SLOTS
+from dynenv_ros.soccer.agent_actions import (KICK_CHOICES, TURN_CHOICES, WALK_CHOICES, action_problem,
+                                             sample_actions)
 
 INPUT_NAMES = ("landmark_features", "landmark_kind", "landmark_mask", "object_features", "object_kind",
                "object_mask", "previous_action", "proprioception", "h_loc", "c_loc", "h_obj", "c_obj")
@@ -89,7 +90,6 @@ OUTPUT_NAMES = ("walk_logits", "turn_logits", "kick_logits", "head", "value", "p
                 "h_loc_out", "c_loc_out", "h_obj_out", "c_obj_out")
 METADATA_KEY = "dynenv.policy"
 FORMAT = "dynenv_policy_onnx/1"
-WALK_CHOICES, TURN_CHOICES, KICK_CHOICES = 5, 3, 3
 STATE_NAMES = ("h_loc", "c_loc", "h_obj", "c_obj")
 DRIVING_INPUT_NAMES = ("lane_features", "lane_kind", "lane_mask", "object_features", "object_kind", "object_mask",
                        "previous_action", "proprioception", *STATE_NAMES)
@@ -101,14 +101,26 @@ POSE_INPUT_NAME = "pose_estimate"            # after proprioception, when the po
 
 def io_names(scenario: str, action_mode: str | None = None, uses_pose: bool = False
              ) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """(input names, output names) of a scenario's exported graph (module docstring)."""
-    if scenario != "driving":
-        if uses_pose:
-            at = INPUT_NAMES.index("proprioception") + 1
-            return INPUT_NAMES[:at] + (POSE_INPUT_NAME,) + INPUT_NAMES[at:], OUTPUT_NAMES
-        return INPUT_NAMES, OUTPUT_NAMES
+    """(input names, output names) of a scenario's exported graph (module docstring): 'soccer' or 'driving'."""
+    if scenario not in _IO_NAMES:
+        raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
+    return _IO_NAMES[scenario](action_mode, uses_pose)
+
+
+def _soccer_io_names(action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    if uses_pose:
+        at = INPUT_NAMES.index("proprioception") + 1
+        return INPUT_NAMES[:at] + (POSE_INPUT_NAME,) + INPUT_NAMES[at:], OUTPUT_NAMES
+    return INPUT_NAMES, OUTPUT_NAMES
+
+
+def _driving_io_names(action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
     heads = (("acceleration_logits", "steering_logits") if action_mode == "discrete" else ("command",))
     return DRIVING_INPUT_NAMES, (*heads, "value", *(name + "_out" for name in STATE_NAMES))
+
+
+# Each scenario's graph names, by its name (the registry, dynenv_ros.scenarios, sits above this layer).
+_IO_NAMES = {"soccer": _soccer_io_names, "driving": _driving_io_names}
 
 
 @dataclass
@@ -184,12 +196,7 @@ def _example_inputs(model: DynEnvAgent, batch: int, frames: int, max_landmarks: 
 def _layout_metadata(scenario: str) -> dict[str, Any]:
     """The layout a graph's inputs come from: stream keys and classes, the proprioception, game and previous-action
     columns (driving's bounds depend on the config and are not part of the network)."""
-    if scenario == "driving":
-        from dynenv_ros.driving.config import DrivingConfig
-        from dynenv_ros.envs.driving_observations import driving_layout_spec
-        spec = driving_layout_spec(DrivingConfig())
-    else:
-        spec = SOCCER
+    spec = agent_inputs(scenario).spec
     return {"streams": [{"key": st.key, "mask": st.mask, "classes": list(st.classes)} for st in spec.streams],
             "proprioception": list(spec.proprioception_columns), "game": list(spec.game_columns),
             "previous_action": list(spec.action_columns),
@@ -240,7 +247,7 @@ def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int
         max_objects = 12 if max_objects is None else max_objects
     if frames < 1 or max_landmarks < 1 or max_objects < 1:
         raise ValueError("frames, max_landmarks and max_objects must be at least 1")
-    input_names, output_names = io_names("driving" if driving else "soccer", getattr(model, "action_mode", None),
+    input_names, output_names = io_names(getattr(model, "scenario", "soccer"), getattr(model, "action_mode", None),
                                          getattr(model, "uses_pose", False))
     target = Path(path)
     if not target.parent.is_dir():
@@ -331,8 +338,8 @@ def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
     file leaves symbolic are not checked here (the robot axis always is); the node's trial decision runs them."""
     F, L, O, D = policy.frames, policy.max_landmarks, policy.max_objects, policy.feature_size  # noqa: E741 - the paper's dimension letters
     input_names, output_names = io_names(policy.scenario, policy.action_mode, policy.uses_pose)
-    static = "lane" if policy.scenario == "driving" else "landmark"
     widths = agent_inputs(policy.scenario)
+    static = widths.static_name
     inputs = {f"{static}_features": ("float", (F, L, FEATURES)), f"{static}_kind": ("int64", (F, L)),
               f"{static}_mask": ("bool", (F, L)), "object_features": ("float", (F, O, FEATURES)),
               "object_kind": ("int64", (F, O)), "object_mask": ("bool", (F, O)),
@@ -470,7 +477,7 @@ class OnnxPolicy:
 
     def __call__(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                  proprioception: torch.Tensor, state: State) -> PolicyStep:
-        static = "lane" if self.scenario == "driving" else "landmark"
+        static = agent_inputs(self.scenario).static_name
         self_state = _numpy(proprioception, np.float32)
         feeds = {**self._stream(static, landmarks, self.max_landmarks),
                  **self._stream("object", objects, self.max_objects),
@@ -521,72 +528,6 @@ class TorchPolicy:
 
 
 # -- from outputs to actions, and the check before a policy may act ---------------------------------------------------
-def sample_actions(step: PolicyStep, head_mode: str, head_units: int | None, head_max: float,
-                   generator: torch.Generator, greedy: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(B, 4) [walk, turn, kick, head_yaw_delta in rad] from either runtime's outputs, and (B,) True where that
-    robot's outputs were all finite. A robot with a NaN or infinite output gets zero logits (so it cannot stop the
-    others' sampling: ``torch.multinomial`` refuses a batch with one bad row) and is reported, for the caller to
-    replace its action. The generator is drawn from in the same order whatever the values."""
-    logits = [torch.as_tensor(x) for x in (step.walk, step.turn, step.kick)]
-    head = torch.as_tensor(step.head)
-    state = [torch.as_tensor(x) for x in step.state]
-    finite = torch.ones(head.shape[0], dtype=torch.bool)
-    for tensor in logits + [head] + state:
-        finite &= torch.isfinite(tensor.reshape(tensor.shape[0], -1)).all(-1)
-    columns = []
-    categorical = logits + ([head] if head_mode == "discrete" else [])
-    for values in categorical:
-        values = torch.where(finite.unsqueeze(-1), values, torch.zeros_like(values))
-        probs = torch.softmax(values, dim=-1)
-        columns.append(probs.argmax(-1) if greedy else torch.multinomial(probs, 1, generator=generator).squeeze(-1))
-    if head_mode == "discrete":
-        units = int(head_units or 0)
-        columns[-1] = (columns[-1].double() - units) * (head_max / units)     # index 0..2u -> (i - u)·max/u rad
-    else:
-        values = torch.where(finite.unsqueeze(-1), head, torch.zeros_like(head))
-        mean, std = values[:, 0], values[:, 1].exp()
-        value = mean if greedy else mean + std * torch.randn(mean.shape, generator=generator)
-        columns.append(value.clamp(-head_max, head_max))
-    actions = torch.stack([c.double() for c in columns], dim=-1).numpy()
-    finite &= torch.from_numpy(np.isfinite(actions).all(-1))
-    return actions, finite.numpy()
-
-
-def behaviour_log_probs(step: PolicyStep, actions: np.ndarray, head_mode: str, head_units: int | None,
-                        head_max: float) -> np.ndarray:
-    """(B,) log-probability of (B, 4) [walk, turn, kick, head rad] actions under either runtime's outputs — the sum
-    over the action heads, as the learner's ``DynEnvAgent.distributions`` scores them (a discrete head's radians
-    mapped back to its index; a continuous head's Gaussian at the executed, clipped value). Sent with each action
-    (``Action.log_prob``) for the trainer's off-policy correction; NaN where an output was not finite."""
-    actions = np.asarray(actions, np.float64)
-    total = np.zeros(actions.shape[0])
-    for column, values in enumerate((step.walk, step.turn, step.kick)):
-        logits = torch.as_tensor(values, dtype=torch.float64)
-        index = torch.as_tensor(actions[:, column]).long().clamp(0, logits.shape[-1] - 1)
-        total += torch.log_softmax(logits, -1).gather(-1, index[:, None])[:, 0].numpy()
-    head = torch.as_tensor(step.head, dtype=torch.float64)
-    if head_mode == "discrete":
-        units = int(head_units or 0)
-        index = torch.as_tensor(np.rint(actions[:, 3] / (head_max / units)) + units).long().clamp(0, 2 * units)
-        total += torch.log_softmax(head, -1).gather(-1, index[:, None])[:, 0].numpy()
-    else:
-        normal = torch.distributions.Normal(head[:, 0], head[:, 1].exp())
-        total += normal.log_prob(torch.as_tensor(actions[:, 3])).numpy()
-    return total
-
-
-def action_problem(action: np.ndarray, head_bound: float) -> str:
-    """Why one [walk, turn, kick, head] action would be refused by the simulator ('' if it would not)."""
-    walk, turn, kick, head = (float(v) for v in action)
-    for name, value, count in (("walk", walk, WALK_CHOICES), ("turn", turn, TURN_CHOICES),
-                               ("kick", kick, KICK_CHOICES)):
-        if not (0 <= value < count and value == int(value)):
-            return f"{name}={value} outside 0..{count - 1}"
-    if not math.isfinite(head) or abs(head) > head_bound + 1e-6:
-        return f"head_yaw_delta={head} rad beyond ±{head_bound:.4f}"
-    return ""
-
-
 def _trial_decision(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tensor, torch.Tensor]
                     ) -> tuple[Any, int]:
     """The policy's decision on ``trial`` and its batch size B, after refusing non-finite weights; a failing

@@ -211,7 +211,8 @@ def driving_self_state(ego: TensorLike, game: TensorLike) -> torch.Tensor:
 class AgentInputs:
     """What a scenario's network takes: its class table (``kind_table`` (256,) class id → embedding index,
     ``num_classes`` embedding blocks per stream, padding's included), the width of its previous-action encoding and
-    of its self state, and its stream keys (static, dynamic)."""
+    of its self state, its stream keys (static, dynamic), the name of its static stream's inputs in an exported
+    graph (``<name>_features``…) and the layout of the scenario's default settings."""
     scenario: str
     class_index: dict[int, int]
     kind_table: torch.Tensor
@@ -219,6 +220,8 @@ class AgentInputs:
     action_encoding: int
     self_state: int
     stream_keys: tuple[str, str]
+    static_name: str
+    spec: LayoutSpec
 
 
 def _driving_spec() -> LayoutSpec:
@@ -235,15 +238,23 @@ def agent_inputs(scenario: str) -> AgentInputs:
     """The ``AgentInputs`` of ``"soccer"`` or ``"driving"`` (driving's classes and widths do not depend on the
     config: its bounds only scale the steering, which ``side_inputs`` reads from the observation's spec)."""
     if scenario not in _AGENT_INPUTS:
-        if scenario == "soccer":
-            _AGENT_INPUTS[scenario] = AgentInputs("soccer", CLASS_INDEX, _KIND, NUM_CLASSES, ACTION_ENCODING,
-                                                  PROPRIOCEPTION, ("landmarks", "objects"))
-        elif scenario == "driving":
-            spec = _driving_spec()
-            index = class_index(spec)
-            _AGENT_INPUTS[scenario] = AgentInputs("driving", index, _kind_table(index), len(index) + 1,
-                                                  DRIVING_ACTION_ENCODING, DRIVING_SELF_STATE,
-                                                  (spec.streams[0].key, spec.streams[1].key))
-        else:
+        if scenario not in _INPUTS_OF:
             raise ValueError(f"scenario must be one of {SCENARIOS}, got {scenario!r}")
+        _AGENT_INPUTS[scenario] = _INPUTS_OF[scenario]()
     return _AGENT_INPUTS[scenario]
+
+
+def _soccer_inputs() -> AgentInputs:
+    return AgentInputs("soccer", CLASS_INDEX, _KIND, NUM_CLASSES, ACTION_ENCODING, PROPRIOCEPTION,
+                       ("landmarks", "objects"), "landmark", SOCCER)
+
+
+def _driving_inputs() -> AgentInputs:
+    spec = _driving_spec()
+    index = class_index(spec)
+    return AgentInputs("driving", index, _kind_table(index), len(index) + 1, DRIVING_ACTION_ENCODING,
+                       DRIVING_SELF_STATE, (spec.streams[0].key, spec.streams[1].key), "lane", spec)
+
+
+# Each scenario's inputs, by its name (the registry, dynenv_ros.scenarios, sits above this layer).
+_INPUTS_OF = {"soccer": _soccer_inputs, "driving": _driving_inputs}

@@ -25,7 +25,7 @@ Two scenarios (``DynEnvAgent(scenario=…)``), one architecture:
   intratemporal self-attention and the pooling only (the paper's nTime = 1: its temporal loop never runs), and the
   network has no temporal-attention weights; a period of more than one frame is refused. Actor heads: two
   categorical heads of 3 (``action_mode='discrete'``, the original's MultiDiscrete([3, 3])) or one clipped 3-d
-  Gaussian over [throttle, brake, steering / limit] (``'continuous'``; ``agent.driving_actions``). **No
+  Gaussian over [throttle, brake, steering / limit] (``'continuous'``; ``driving.agent_actions``). **No
   localization or reconstruction heads**: their targets (the car's map pose; the other road users' positions) are
   not built for driving (``envs/learning_targets.py`` is soccer's), and an untrained pose head feeding the object
   stream (the paper's predictor of 4) would be a fixed random projection; the object stream takes the self state
@@ -48,7 +48,7 @@ import torch
 from torch import nn
 from torch.distributions import Categorical, Normal
 
-from dynenv_ros.agent import driving_actions
+from dynenv_ros.driving import agent_actions as driving_actions
 from dynenv_ros.agent.inputs import (ACTION_ENCODING, NUM_CLASSES, POSE_INPUT, PROPRIOCEPTION, SCENARIOS, StreamBatch,
                                      agent_inputs, encode_pose)
 from dynenv_ros.envs.padded_layout import FEATURES

@@ -80,7 +80,7 @@ def discrete_action(acceleration: int, steering: int, max_yaw_rate: float) -> Dr
 
 def normalised_commands(commands: Any, max_yaw_rate: float) -> np.ndarray:
     """[throttle, brake, steering rad/s] rows as the normalised [throttle, brake, steering / limit] a learner stores
-    a continuous action in (``agent.driving_actions.commands`` turns them back)."""
+    a continuous action in (``driving.agent_actions.commands`` turns them back)."""
     return np.asarray(commands, np.float64) / np.array([1.0, 1.0, max_yaw_rate])
 
 

@@ -13,7 +13,7 @@ flood of bad actions starved the node's services.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from dynenv_ros.envs.session import ActionSession, refusal_key
@@ -29,10 +29,10 @@ class ActionGate:
     topics as a refusal names them."""
 
     def __init__(self, session: ActionSession, names: Sequence[str], topics: Sequence[str], labels: Sequence[str],
-                 secrets: GameSecrets | None, scenario: str) -> None:
+                 secrets: GameSecrets | None, fields: Callable[[Any], tuple[Any, ...]]) -> None:
         self.session, self.names, self.topics, self.secrets = session, list(names), list(topics), secrets
         self.labels = list(labels)
-        self.driving = scenario == "driving"
+        self.fields = fields        # the scenario's fields of an Action (``Scenario.action_fields``)
         self.replay_guard = ReplayGuard()
         self.accepted: dict[int, bytes] = {}                           # robot -> digest, for the period collected
         self.executed: dict[tuple[int, int], dict[int, bytes]] = {}   # (episode, period) run -> digests
@@ -51,12 +51,6 @@ class ActionGate:
                 return refusal_key(problem), f"{self.names[robot]}: {problem}"
         reason = self.session.check(msg.robot_id, msg.episode_id, msg.motion_period, *self.fields(msg))
         return (refusal_key(reason), f"{self.names[robot]}: {reason}") if reason else ("", "")
-
-    def fields(self, msg: Any) -> tuple[Any, ...]:
-        """The scenario's fields of an Action (the other scenario's are ignored, as Action.msg says)."""
-        if self.driving:
-            return float(msg.throttle), float(msg.brake), float(msg.steering)
-        return msg.walk, msg.turn, msg.kick, float(msg.head_yaw_delta)
 
     def _authentication_problem(self, robot: int, msg: Any) -> str:
         """Why ``msg`` is not its robot's team's own, fresh action: "" (it is), ``mac_missing``, ``mac_invalid``

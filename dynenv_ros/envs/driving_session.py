@@ -53,6 +53,13 @@ class DrivingSession(ActionSession):
         self.episodes: list[dict[str, Any]] = []       # a summary of each finished episode (``summary``)
 
     # -- episode -----------------------------------------------------------------------------------------------
+    def report_extra(self) -> dict[str, Any]:
+        """The finished episodes' summaries, then the one running (if any period ran)."""
+        episodes = list(self.episodes)
+        if not self.finished and self.world.period > 0:
+            episodes.append(self.summary())
+        return {"episodes": episodes}
+
     def reset(self, seed: int | None = None) -> int:
         seed = checked_seed(seed)
         self._begin_episode()

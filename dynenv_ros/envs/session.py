@@ -73,6 +73,7 @@ class ActionSession:
     ``_check_fields``, ``_action``, ``idle`` and the periods (``initial``, ``step``)."""
 
     agent_word = "robot"          # how refusals name an agent
+    reset_options: tuple[str, ...] = ()     # what a reset may choose (``new_episode``; /sim/reset's options_yaml)
 
     def __init__(self, n_agents: int, missing_action: str = "none", controlled: Sequence[int] | None = None) -> None:
         if missing_action not in MISSING_ACTION_RULES:
@@ -94,6 +95,19 @@ class ActionSession:
         self.world: Any = None
 
     # -- episode -----------------------------------------------------------------------------------------------
+    def new_episode(self, seed: int | None, kickoff_team: int) -> int:
+        """Start an episode with the reset options a session takes (``kickoff_team``: soccer's)."""
+        episode: int = self.reset(seed=seed)
+        return episode
+
+    def episode_score(self) -> tuple[int, int] | None:
+        """(team A's goals, team B's) of the episode that just ended; None where a game keeps no score."""
+        return None
+
+    def report_extra(self) -> dict[str, Any]:
+        """What a simulator's exit report adds for this game (``SimGame.report``)."""
+        return {}
+
     def _begin_episode(self) -> None:
         """Before the world resets: policies answer an episode's last frames before they see the next episode,
         so remember which answers to expect."""

@@ -12,20 +12,18 @@ from __future__ import annotations
 import json
 import time
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any, Protocol
 
 import yaml
 
 from dynenv_ros.envs.action_gate import ActionGate
-from dynenv_ros.envs.driving_session import DrivingSession
-from dynenv_ros.envs.session import ActionSession, PeriodOutput
-from dynenv_ros.envs.soccer_session import SoccerSession, kickoff_team
+from dynenv_ros.envs.session import PeriodOutput
+from dynenv_ros.envs.soccer_session import kickoff_team
 from dynenv_ros.sim.seeding import checked_seed
 
 MODES_OF_RUNNING = ("stepped", "realtime")
 SCENARIOS = ("robocup", "driving")
-RESET_OPTIONS = ("kickoff_team",)                    # robocup; driving takes none
 MAX_STEP_PERIODS = 100   # /sim/step: at most this many motion periods per call, so services stay answered
 MAX_OPTIONS_CHARS = 4096  # /sim/reset: options_yaml longer than this is refused before parsing
 # What the diagnostics count, in their order: action outcomes, then each refusal's kind.
@@ -59,15 +57,6 @@ class Outlet(Protocol):
 
     def finish(self) -> None:
         """The episode ended, with no new one to come: let every reader have everything, and stop."""
-
-
-def make_session(scenario: str, config: Any, params: Any, seed: int | None, missing_action: str,
-                 controlled: Sequence[int] | None, localization: bool) -> ActionSession:
-    """The scenario's session (``localization``: soccer's emulated self-localization)."""
-    if scenario == "driving":
-        return DrivingSession(config, params, seed=seed, missing_action=missing_action, controlled=controlled)
-    return SoccerSession(config, params, seed=seed, missing_action=missing_action, controlled=controlled,
-                         localization=localization)
 
 
 class SimGame:
@@ -108,10 +97,7 @@ class SimGame:
         """A new episode; its first observation (period 0) goes out. One vision period separates episodes."""
         if self.episodes_started:
             self.tick_offset += self.session.world.tick + self.config.rates.vision_period_ticks
-        if self.scenario == "driving":
-            self.session.reset(seed=seed)
-        else:
-            self.session.reset(seed=seed, kickoff_team=kickoff)
+        self.session.new_episode(seed, kickoff)
         self.episodes_started += 1
         self.outlet.episode_started(self.session.episode_id, self.now_tick())
         self._buffer.clear()
@@ -141,7 +127,7 @@ class SimGame:
         if not isinstance(options, dict):
             raise ValueError(f"options_yaml must be a mapping such as {{kickoff_team: b}}, got "
                              f"{type(options).__name__}")
-        known = RESET_OPTIONS if self.scenario == "robocup" else ()
+        known = self.session.reset_options
         unknown = sorted(set(options) - set(known), key=repr)
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; known: {list(known)}")
@@ -227,8 +213,9 @@ class SimGame:
         self.outlet.feedback(output, self.gate.digests(output.episode_id, output.motion_period),
                              self.absolute_tick(output.frames[-1].tick))
         if output.terminated or output.truncated:
-            if self.scenario == "robocup":
-                self.episode_scores.append((self.session.world.state.score[1], self.session.world.state.score[-1]))
+            score = self.session.episode_score()
+            if score is not None:
+                self.episode_scores.append(score)
             if self.auto_reset and self.mode == "stepped":
                 self.reset(None, 1)
             elif not self.auto_reset and self.exit_when_finished:
@@ -268,10 +255,7 @@ class SimGame:
             # what a lossless recorder must hold on each /<robot>/action (the main job checks it)
             "accepted_actions": {n: self.session.accepted_per_robot[i] for i, n in enumerate(self.names)},
             "robots": self.names, "scenario": self.scenario}
-        if self.scenario == "driving":     # finished episodes, then the one running (if any period ran)
-            report["episodes"] = list(self.session.episodes)
-            if not self.session.finished and self.session.world.period > 0:
-                report["episodes"].append(self.session.summary())
+        report.update(self.session.report_extra())
         return report
 
     def write_report(self, path: str, diagnostics: dict[str, str]) -> None:
@@ -279,5 +263,5 @@ class SimGame:
             json.dump(self.report(diagnostics), handle, indent=2)
 
 
-__all__ = ["SimGame", "Outlet", "make_session", "MODES_OF_RUNNING", "SCENARIOS", "RESET_OPTIONS",
+__all__ = ["SimGame", "Outlet", "MODES_OF_RUNNING", "SCENARIOS",
            "MAX_STEP_PERIODS", "MAX_OPTIONS_CHARS", "COUNTED"]

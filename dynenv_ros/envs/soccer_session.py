@@ -41,6 +41,14 @@ class SoccerSession(ActionSession):
         self.vision = SoccerVision(self.world, perception, localization=localization)
 
     # -- episode -----------------------------------------------------------------------------------------------
+    reset_options = ("kickoff_team",)
+
+    def new_episode(self, seed: int | None, kickoff_team: int) -> int:
+        return self.reset(seed=seed, kickoff_team=kickoff_team)
+
+    def episode_score(self) -> tuple[int, int] | None:
+        return (self.world.state.score[1], self.world.state.score[-1])
+
     def reset(self, seed: int | None = None, kickoff_team: int = TEAM_A) -> int:
         seed = checked_seed(seed)
         if kickoff_team not in (TEAM_A, TEAM_B) or isinstance(kickoff_team, bool):

@@ -287,7 +287,6 @@ def _ledger(args: argparse.Namespace) -> tuple[Path | None, str | None]:
 
 
 def run_eval(args: argparse.Namespace) -> int:
-    from dynenv_ros.evaluation.soccer import evaluate, format_table
     refused = _resolve_seeds(args)
     if refused is not None:
         return _fail(refused)
@@ -303,8 +302,11 @@ def run_eval(args: argparse.Namespace) -> int:
     perception = args.perception if args.noise_magnitude is None else {
         "preset": args.perception, "noise_magnitude": args.noise_magnitude}
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
-    if args.scenario == "driving":
-        return run_driving_eval(args, perception, progress)
+    return _EVALUATIONS[args.scenario](args, perception, progress, ledger)
+
+
+def run_soccer_eval(args: argparse.Namespace, perception: Any, progress: Any, ledger: Any) -> int:
+    from dynenv_ros.evaluation.soccer import evaluate, format_table
     for flag, value in (("--action-mode", args.action_mode), ("--cars", args.cars)):
         if value is not None:
             return _fail(f"{flag} applies to --scenario driving only")
@@ -314,6 +316,12 @@ def run_eval(args: argparse.Namespace) -> int:
         players_per_team=2 if args.players_per_team is None else args.players_per_team, perception=perception,
         sides=args.sides or "alternate", greedy=args.greedy, env_config=env_config, progress=progress,
         torch_threads=args.torch_threads), format_table, ledger)
+
+
+# Each scenario's games, by the spelling --scenario takes (docs/decisions.md, "A scenario registry").
+_EVALUATIONS: dict[str, Callable[[argparse.Namespace, Any, Any, Any], int]] = {
+    "robocup": run_soccer_eval,
+    "driving": lambda args, perception, progress, ledger: run_driving_eval(args, perception, progress)}
 
 
 def run_compare(args: argparse.Namespace) -> int:

@@ -134,17 +134,29 @@ def train_and_evaluate(cfg_dict: dict[str, Any], name: str, evaluation: dict[str
 
 
 def _evaluate(cfg: Any, policy: str | Path, evaluation: dict[str, Any]) -> dict[str, Any]:
+    """``policy`` evaluated in the scenario of the run ``cfg`` (each scenario's games: ``_EVALUATIONS``)."""
+    return _EVALUATIONS[cfg.world.name](cfg, policy, evaluation)
+
+
+def _evaluate_driving(cfg: Any, policy: str | Path, evaluation: dict[str, Any]) -> dict[str, Any]:
+    from dynenv_ros.evaluation.driving import evaluate_driving
     seeds, greedy = evaluation["seeds"], bool(evaluation.get("greedy", False))    # (greedy: policy files only)
-    if cfg.driving:
-        from dynenv_ros.evaluation.driving import evaluate_driving
-        reference = str(policy) in ("random", "scripted")
-        return evaluate_driving(str(policy), episodes=evaluation["episodes"], seeds=seeds, n_cars=cfg.n_cars,
-                                perception=cfg.perception, action_mode=cfg.action_mode if reference else None,
-                                greedy=greedy and not reference)
+    reference = str(policy) in ("random", "scripted")
+    return evaluate_driving(str(policy), episodes=evaluation["episodes"], seeds=seeds, n_cars=cfg.n_cars,
+                            perception=cfg.perception, action_mode=cfg.action_mode if reference else None,
+                            greedy=greedy and not reference)
+
+
+def _evaluate_soccer(cfg: Any, policy: str | Path, evaluation: dict[str, Any]) -> dict[str, Any]:
     from dynenv_ros.evaluation.soccer import evaluate
+    seeds, greedy = evaluation["seeds"], bool(evaluation.get("greedy", False))
     return evaluate(str(policy), evaluation["opponent"], episodes=evaluation["episodes"], seeds=seeds,
                     players_per_team=cfg.players_per_team, perception=cfg.perception, sides="alternate",
                     greedy=greedy)
+
+
+# Each scenario's evaluation, by its name (docs/decisions.md, "A scenario registry": pieces above the registry).
+_EVALUATIONS = {"soccer": _evaluate_soccer, "driving": _evaluate_driving}
 
 
 def run_evaluation(args: argparse.Namespace) -> dict[str, Any]:
@@ -171,7 +183,8 @@ def evaluated_otherwise(result: dict[str, Any], evaluation: dict[str, Any]) -> s
     differ = [f"{key} {settings.get(key)!r}, not {evaluation[key]!r}" for key in ("episodes", "seeds", "greedy")
               if settings.get(key) != evaluation[key]]
     opponent = (result.get("opponent") or {}).get("spec")
-    if result.get("scenario", "robocup") != "driving" and opponent != evaluation["opponent"]:
+    from dynenv_ros.scenarios import get_scenario
+    if get_scenario(result.get("scenario", "robocup")).sides > 1 and opponent != evaluation["opponent"]:
         differ.append(f"opponent {opponent!r}, not {evaluation['opponent']!r}")
     return "; ".join(differ)
 
@@ -188,7 +201,8 @@ def _write_run(out: Path, done: dict[str, Any]) -> None:
 
 
 def metric_of(result: dict[str, Any]) -> str:
-    return "total" if result.get("scenario") == "driving" else "paper_metric"
+    from dynenv_ros.scenarios import get_scenario
+    return get_scenario(result.get("scenario", "robocup")).headline_metric
 
 
 def _table(rows: list[tuple[str, dict[str, Any]]]) -> str:

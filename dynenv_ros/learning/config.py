@@ -35,9 +35,12 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import yaml
+
+if TYPE_CHECKING:        # the registry is imported where a config's scenario is asked (it loads torch)
+    from dynenv_ros.scenarios import Scenario
 
 ALGORITHMS = ("a2c", "ppo")
 VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
@@ -46,13 +49,11 @@ BACKENDS = ("auto", "inprocess", "subprocess", "ray")
 RUNNERS = ("sync", "async")
 # one shared network has no slot input, so it cannot imitate a keeper in one slot: chasers only ('perceiving': the
 # chaser on the robot's own observation and pose estimate, soccer.perceiving)
-TEACHER_KINDS = ("chaser", "eager_chaser", "perceiving")
-DRIVING_TEACHER_KINDS = ("scripted",)   # the scripted driver (driving.scripted.ScriptedDriver)
 HEAD_MODES = ("discrete", "continuous")
 PERCEPTIONS = ("realistic", "dynenv", "none")        # the presets of dynenv_ros.perception (config/perception/)
 LOCALIZATIONS = ("none", "estimate")                # envs.soccer_observations.LOCALIZATION_OPTIONS
 SCENARIOS = ("robocup", "driving")
-ACTION_MODES = ("discrete", "continuous")           # driving's actor heads (agent/driving_actions.py)
+ACTION_MODES = ("discrete", "continuous")           # driving's actor heads (driving/agent_actions.py)
 MAX_CARS = 10
 MAX_PLAYERS_PER_TEAM = 5
 _DEVICE = re.compile(r"^(cpu|cuda(:\d+)?|mps)$")
@@ -305,18 +306,17 @@ class TrainConfig:
             reconstruction=row.reconstruction if self.use_reconstruction is None else self.use_reconstruction)
 
     @property
-    def driving(self) -> bool:
-        return self.scenario == "driving"
+    def world(self) -> Scenario:
+        """The scenario (``dynenv_ros.scenarios``) a run of this config plays."""
+        from dynenv_ros.scenarios import get_scenario
+        return get_scenario(self.scenario)
 
     @property
     def learning_robots(self) -> int:
         """Robot sequences per rollout that are learned from: both teams in self-play, team A otherwise; driving:
         every car."""
-        if self.driving:
-            return self.num_envs * self.n_cars
-        if self.team_sizes:               # the smallest rollout: one size's worlds
-            return self.num_envs * min(self.team_sizes) * (2 if self.opponent == "self" else 1)
-        return self.num_envs * self.players_per_team * (2 if self.opponent == "self" else 1)
+        agents = min(self.team_sizes) if self.team_sizes else getattr(self, self.world.count_key)   # (team_sizes:
+        return self.num_envs * agents * (self.world.sides if self.opponent == "self" else 1)   # the smallest rollout)
 
     @property
     def env_steps_per_update(self) -> int:
@@ -328,6 +328,12 @@ class TrainConfig:
             return self.imitation_coef
         done = min(1.0, env_steps / self.imitation_decay_env_steps)
         return self.imitation_coef + done * (self.imitation_final_coef - self.imitation_coef)
+
+    def _validate_soccer(self) -> None:
+        """Driving-only settings refused for soccer."""
+        for key, default in (("n_cars", 2), ("action_mode", "discrete")):
+            if getattr(self, key) != default:
+                raise ConfigError(key, f"applies to scenario 'driving' only (scenario is {self.scenario!r})")
 
     def _validate_driving(self) -> None:
         """Soccer-only settings refused for driving, each with its key (module docstring)."""
@@ -414,11 +420,15 @@ class TrainConfig:
         _choice("opponent", self.opponent, OPPONENTS)
         _choice("backend", self.backend, BACKENDS)
         _choice("runner", self.runner, RUNNERS)
+        _choice("scenario", self.scenario, SCENARIOS)
         if self.teacher is not None:
-            if self.driving and self.teacher in TEACHER_KINDS:
-                raise ConfigError("teacher", f"{self.teacher!r} is a soccer teacher; scenario 'driving' has "
-                                             f"{', '.join(DRIVING_TEACHER_KINDS)}")
-            _choice("teacher", self.teacher, DRIVING_TEACHER_KINDS if self.driving else TEACHER_KINDS)
+            teachers = self.world.teachers
+            from dynenv_ros.scenarios import SCENARIOS as ALL_SCENARIOS
+            owner = [s for s in ALL_SCENARIOS if s is not self.world and self.teacher in s.teachers]
+            if self.teacher not in teachers and owner:
+                raise ConfigError("teacher", f"{self.teacher!r} is a {owner[0].name} teacher; scenario "
+                                             f"{self.scenario!r} has {', '.join(teachers)}")
+            _choice("teacher", self.teacher, teachers)
         _choice("head_mode", self.head_mode, HEAD_MODES)
         if self.head_mode != "discrete":
             raise ConfigError("head_mode", "only 'discrete' can be trained so far: the rollout stores integer actions "
@@ -426,14 +436,8 @@ class TrainConfig:
                               "in the policy node and the env, not in the trainer yet)")
         _choice("perception", self.perception, PERCEPTIONS)
         _choice("localization", self.localization, LOCALIZATIONS)
-        _choice("scenario", self.scenario, SCENARIOS)
         _choice("action_mode", self.action_mode, ACTION_MODES)
-        if self.driving:
-            self._validate_driving()
-        else:
-            for key, default in (("n_cars", 2), ("action_mode", "discrete")):
-                if getattr(self, key) != default:
-                    raise ConfigError(key, f"applies to scenario 'driving' only (scenario is {self.scenario!r})")
+        getattr(self, f"_validate_{self.world.name}")()
         if not _DEVICE.match(self.device):
             raise ConfigError("device", f"expected 'cpu', 'cuda', 'cuda:N' or 'mps', got {self.device!r}")
         for key in ("total_env_steps", "snapshot_every_updates", "log_every_updates"):
@@ -468,9 +472,9 @@ class TrainConfig:
         if self.algorithm == "ppo" and self.ppo_minibatches > self.learning_robots:
             raise ConfigError("ppo_minibatches", f"{self.ppo_minibatches} minibatches of robot sequences, but a "
                                                  f"rollout has only {self.learning_robots} learning robots "
-                                                 + ("(num_envs x n_cars)" if self.driving else
-                                                    f"(num_envs x players_per_team"
-                                                    f"{' x 2 teams' if self.opponent == 'self' else ''})"))
+                                                 + f"(num_envs x {self.world.count_key}"
+                                                 + (f" x {self.world.sides} teams)" if self.opponent == "self"
+                                                    and self.world.sides > 1 else ")"))
         if self.variant == "recon" and not self.pretrained_encoder:
             raise ConfigError("pretrained_encoder", "variant 'recon' requires the pretrained reconstruction "
                                                     "encoder; to train localization + reconstruction from scratch "
@@ -499,7 +503,7 @@ class TrainConfig:
             raise ConfigError("reward_weights", f"must be finite, got {list(self.reward_weights)}")
         self._validate_runner()
         if self.team_sizes is not None:
-            if self.driving or self.runner != "async":
+            if self.world.sides < 2 or self.runner != "async":
                 raise ConfigError("team_sizes", "applies to soccer on the asynchronous runner (runner: async) only")
             if self.players_per_team not in self.team_sizes:
                 raise ConfigError("team_sizes", f"must hold players_per_team ({self.players_per_team}), got "

@@ -153,7 +153,8 @@ def _from_bags(args: argparse.Namespace) -> int:
         print(f"dynenv-train: {error}", file=sys.stderr)
         return 2
     first, last = summary["first_epoch"], summary["last_epoch"]
-    agents = "car" if summary["scenario"] == "driving" else "robot"
+    from dynenv_ros.scenarios import get_scenario
+    agents = get_scenario(summary["scenario"]).agent
     print(f"dynenv-train: {summary['sequences']} sequences ({summary['robot_periods']} {agents}-periods) from "
           f"{len(args.from_bag)} bag(s), {summary['epochs']} epochs, {summary['updates']} updates -> {run_dir}")
     for key in first:

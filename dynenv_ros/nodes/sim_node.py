@@ -26,7 +26,7 @@ from rclpy.node import Node
 
 from dynenv_ros.envs.action_gate import ActionGate
 from dynenv_ros.envs.session import MISSING_ACTION_RULES
-from dynenv_ros.envs.sim_game import SimGame, make_session
+from dynenv_ros.envs.sim_game import SimGame
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
 from dynenv_ros.ros.action_inbox import ActionInbox
@@ -55,18 +55,20 @@ class SimNode(Node):
                                                              settings.config)
         self.real_time_factor, self.secrets = settings.real_time_factor, settings.secrets
         self.runtime_controls, self.frames_secret = settings.runtime_controls, settings.frames_secret
-        self.session: Any = make_session(settings.scenario, settings.config, settings.perception, settings.seed,
-                                         settings.missing_action, settings.controlled, settings.localization)
+        self.session: Any = settings.game.make_session(settings.config, settings.perception, settings.seed,
+                                                       settings.missing_action, settings.controlled,
+                                                       settings.localization)
         self.session.missed_for = self.names.index(settings.marker_robot) if settings.marker_robot else None
         self.outlet = SimOutlet(self, settings, self.session.counts, self._finish)
-        self.outlet.map = self.session.world.map if settings.driving else None
+        self.outlet.map = getattr(self.session.world, "map", None)     # driving's road map (soccer has a field)
         # In real time, actions arrive on a participant and thread of their own (ros/action_inbox.py): a flood on
         # one robot's topic cannot drop this node's service requests. Both modes queue a bounded number (qos.py).
         realtime = self.mode == "realtime"
         actions = [local(topics.action(n)) for n in self.names]
         # The topics the MACs and digests are bound to (fully qualified: the namespace is part of a robot's identity).
         self.gate = ActionGate(self.session, self.names, [self.resolve_topic_name(a) for a in actions],
-                               [topics.action(n) for n in self.names], self.secrets, self.scenario)
+                               [topics.action(n) for n in self.names], self.secrets,
+                               settings.game.action_fields)
         self.game = SimGame(self.session, self.gate, self.outlet, self.scenario, self.mode, settings.seed,
                             settings.localization, settings.auto_reset, settings.exit_when_finished)
         self.action_inbox = ActionInbox(self, Action, actions, action_queue(realtime), ACTION_HANDOVER_DEPTH,
@@ -118,12 +120,11 @@ class SimNode(Node):
 
     def _log_start(self) -> None:
         settings, config, params = self.settings, self.config, self.settings.perception
-        world = (f"driving, {config.n_cars} cars ({config.action_mode} actions)" if settings.driving
-                 else f"{config.players_per_team}v{config.players_per_team}")
+        world = settings.game.describe(config)
         self.get_logger().info(
             f"{world} {self.mode} ({config.rates.vision_hz:g} Hz vision, {config.rates.motion_hz:g} Hz "
             f"motion), perception '{settings.perception_preset}' mode {params.mode} magnitude "
-            f"{params.noise_magnitude:g}; {'cars' if settings.driving else 'robots'} {', '.join(self.names)}"
+            f"{params.noise_magnitude:g}; {settings.game.agent}s {', '.join(self.names)}"
             f"{'; self-localization emulated' if settings.localization else ''}")
 
     def _start_live_view(self, port: int, host: str) -> Any:
@@ -132,7 +133,7 @@ class SimNode(Node):
         if port < 0:
             return None
         from dynenv_ros.live_view.server import LiveView, LiveViewError
-        geometry = self.outlet.map if self.scenario == "driving" else self.config.field
+        geometry = self.outlet.map if self.outlet.map is not None else self.config.field
         try:
             view = LiveView(geometry, self.names, port=port, host=host, server_name=self.get_fully_qualified_name())
         except LiveViewError as error:

@@ -47,12 +47,11 @@ from rclpy.node import Node
 
 from dynenv_ros.agent.checkpoint import FORMAT, agent_config
 from dynenv_ros.core.writable import NotWritable, check_run_dir
-from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.learning.run.checkpoints import START_POLICY, list_checkpoints
 from dynenv_ros.learning.config import ConfigError
 from dynenv_ros.learning.run.disk_budget import run_disk_bytes
 from dynenv_ros.learning.messages.assembly import REFUSALS, ExperienceAssembler
-from dynenv_ros.learning.messages.scenarios import DrivingExperience, ExperienceScenario, SoccerExperience
+from dynenv_ros.learning.messages.scenarios import ExperienceScenario, experience_scenario
 from dynenv_ros.learning.messages.message_trainer import TrainingThread, MessageTrainer
 from dynenv_ros.nodes.trainer_parameters import declare_trainer_parameters
 from dynenv_ros.ros import topics
@@ -62,7 +61,7 @@ from dynenv_ros.ros.experience_readers import ExperienceReaders
 from dynenv_ros.ros.node_runner import NodeExit, run_node
 from dynenv_ros.ros.runtime_controls import lock_when_off
 from dynenv_ros.ros.weights_release import WeightsRelease
-from dynenv_ros.soccer.config import SoccerConfig
+from dynenv_ros.scenarios import get_scenario
 
 class TrainerNode(Node):
     def __init__(self, **node_options: Any) -> None:
@@ -72,8 +71,8 @@ class TrainerNode(Node):
         self.max_updates, self.batch_sequences = settings.max_updates, settings.batch_sequences
         self.max_lag, self.publish_every = settings.max_lag, settings.publish_every
         self.runtime_controls, self.signing_key = settings.runtime_controls, settings.signing_key
-        driving, players, n_cars, action_mode = (settings.driving, settings.players, settings.n_cars,
-                                                 settings.action_mode)
+        world = get_scenario(settings.scenario)
+        count = getattr(settings.cfg, world.count_key)           # robots per team, or cars
         self.run_dir = Path(settings.run_dir or f"runs/trainer-{time.strftime('%Y%m%d-%H%M%S')}")
         try:        # a read-only disk, or one too small for the run's checkpoints: refused now, nothing written
             check_run_dir(self.run_dir, *run_disk_bytes(self.cfg), what="run_dir")
@@ -94,14 +93,8 @@ class TrainerNode(Node):
             save_policy(self.message_trainer.agent, str(self.run_dir / START_POLICY),
                         self.message_trainer.policy_meta())
         self.run_id = self.run_dir.resolve().name
-        if driving:
-            agents: ExperienceScenario = DrivingExperience(DrivingConfig(n_cars=n_cars, action_mode=action_mode))
-            learns = None
-        else:
-            soccer = SoccerConfig.from_mapping({"players_per_team": players})
-            agents = SoccerExperience(players, soccer.rates.frames_per_period, soccer.motion.head_max_delta,
-                                      soccer.motion.head_units)
-            learns = self._learns
+        agents: ExperienceScenario = experience_scenario(settings.scenario, count, None, settings.action_mode)
+        learns = self._learns if world.sides > 1 else None       # (one side: every agent learns)
         self.secrets = load_secrets(settings.secrets_dir, [n for n in agents.names if learns is None or learns(n)],
                                     True)
         self.assembler = ExperienceAssembler(settings.steps, agents, with_targets=self._needs_targets(),
@@ -132,7 +125,7 @@ class TrainerNode(Node):
         if self.deadline is not None or self.max_updates:
             self.budget_timer = self.create_timer(0.2, self._check_budget, clock=wall)
         self.readers.discover()
-        who = (f"{n_cars} cars ({action_mode})" if driving else
+        who = (f"{count} {world.agent}s ({settings.action_mode})" if world.sides == 1 else
                "both teams" if not self.team else "team " + self.team)
         self.get_logger().info(f"learning {settings.variant} (PPO) from {who} into {self.run_dir}, version "
                                f"{self.message_trainer.version}")

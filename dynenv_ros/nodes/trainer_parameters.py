@@ -18,6 +18,7 @@ from dynenv_ros.ros.authentication import declare_secrets_dir
 from dynenv_ros.ros.frame_tags import frames_secret
 from dynenv_ros.ros.parameters import declare_bool, declare_float, declare_int, declare_str, refuse_other_scenario
 from dynenv_ros.ros.runtime_controls import declare_runtime_controls
+from dynenv_ros.scenarios import get_scenario
 from dynenv_ros.security.keys import PRIVATE_NAME, KeyFileError, default_keys_dir, load_private_key
 
 # The parameters only one scenario uses (a value given for the other scenario is refused).
@@ -52,10 +53,6 @@ class TrainerSettings:
     cfg: TrainConfig
     signing_key: Any                # the Ed25519 private key
 
-    @property
-    def driving(self) -> bool:
-        return self.scenario == "driving"
-
 
 def signing_key(path: str) -> Any:
     """The trainer's Ed25519 private key; without one it refuses to start (a ParameterException, one line):
@@ -78,7 +75,6 @@ def declare_trainer_parameters(node: Node) -> TrainerSettings:
                            "robots) or driving (cars); the simulator's and the policy nodes'.",
                            choices=SCENARIOS, **fixed)
     refuse_other_scenario(node, scenario, SCENARIO_PARAMETERS)
-    driving = scenario == "driving"
     players = declare_int(node, "players_per_team", 2, 1, 5, "Robots per team in the games (robocup).", **fixed)
     n_cars = declare_int(node, "n_cars", 2, 1, MAX_CARS, "Cars in each game, all learning (driving).", **fixed)
     action_mode = declare_str(node, "action_mode", "discrete", "The cars' actions (driving): the simulator's "
@@ -138,8 +134,9 @@ def declare_trainer_parameters(node: Node) -> TrainerSettings:
     key_path = declare_str(node, "signing_key", "", "Ed25519 private key (PEM, mode 0600) that signs every "
                            "weights release; empty: trainer.key in $DYNENV_KEYS_DIR or "
                            "~/.config/dynenv_ros/keys (make one with `dynenv-keys generate`).", **fixed)
-    game = ({"scenario": "driving", "n_cars": n_cars, "action_mode": action_mode} if driving
-            else {"players_per_team": players})
+    count_key = get_scenario(scenario).count_key
+    game = {"scenario": scenario, count_key: {"players_per_team": players, "n_cars": n_cars}[count_key],
+            "action_mode": action_mode}     # (the other scenario's parameters keep their defaults: refused above)
     try:
         cfg = TrainConfig(algorithm="ppo", variant=variant, **game, rollout_length=steps,
                           ltp_horizon=min(6, steps), learning_rate=learning_rate, entropy_coef=entropy,

@@ -33,6 +33,7 @@ from dynenv_ros.ros.sim_robot_io import SimRobotIO
 from dynenv_ros.ros.sim_ros_sports import RosSportsOutlet
 from dynenv_ros.ros.tf import TF_STATIC_TOPIC, TF_TOPIC, static_transforms, tf_message, tf_qos, tf_static_qos
 from dynenv_ros.ros.topics import local
+from dynenv_ros.scenarios import get_scenario
 from dynenv_ros.security.action_auth import tag_feedback
 from dynenv_ros.security.frame_auth import detection_rows_bytes, world_state_bytes
 from dynenv_ros.sim.frames import robot_frames
@@ -60,8 +61,8 @@ class SimOutlet:
         else:
             frame_qos, feedback_qos = realtime_stream(REALTIME_FRAME_DEPTH), realtime_stream(REALTIME_FEEDBACK_DEPTH)
         # Joints, fall flags, GameController UDP (issue 41); its parameters declared before the first publisher.
-        soccer = settings.scenario != "driving"
-        self.robot_io = SimRobotIO(node, self.names, settings.ros_sports and soccer, soccer, self.publish, frame_qos)
+        self.robot_io = SimRobotIO(node, self.names, settings.ros_sports, settings.game.legged, self.publish,
+                                   frame_qos)
         create = node.create_publisher
         self.clock_pub = create(ClockMsg, local(topics.CLOCK), frame_qos)
         self.world_pub = create(cv.WorldState, local(topics.WORLD_STATE), frame_qos)
@@ -81,7 +82,7 @@ class SimOutlet:
         # TF (ros/tf.py): the robots and their heads per frame; the team frames once, latched.
         self.tf_pub = create(TFMessage, local(TF_TOPIC), tf_qos())
         self.tf_static_pub = create(TFMessage, local(TF_STATIC_TOPIC), tf_static_qos())
-        if not settings.driving:               # the team frames of soccer's localization outputs
+        if settings.game.team_frames:          # the team frames of soccer's localization outputs
             self.tf_static_pub.publish(static_transforms(cv.sim_time(0, self.tick_s)))
         self._last_tf_ns = -1
         self.truth_marker_pub = create(MarkerArray, local(topics.GROUND_TRUTH_MARKERS), QoSProfile(depth=5))
@@ -173,24 +174,34 @@ class SimOutlet:
 
     def _markers(self, frame: Any, stamp: Any) -> None:
         """RViz/Foxglove: the ground truth, and what ``marker_robot`` detected and missed."""
-        driving = self.scenario == "driving"
-        if driving:
-            truth = driving_markers.ground_truth_markers(frame.snapshot, self.map, stamp, include_map=True)
-        else:
-            truth = markers.ground_truth_markers(frame.snapshot, self.config.field, stamp, include_field=True)
-        self.truth_marker_pub.publish(truth)
+        getattr(self, f"_{get_scenario(self.scenario).name}_markers")(frame, stamp)
+
+    # Each scenario's markers, by its canonical name (docs/decisions.md, "A scenario registry").
+    def _soccer_markers(self, frame: Any, stamp: Any) -> None:
+        self.truth_marker_pub.publish(markers.ground_truth_markers(frame.snapshot, self.config.field, stamp,
+                                                                   include_field=True))
+        seen = self._marker_robot_seen(frame)
+        if seen is not None:
+            me, detections, missed = seen
+            self.detection_marker_pub.publish(markers.detection_markers(
+                detections, (me.x, me.y, me.yaw + me.head_yaw), stamp, missed=missed, robot_name=self.marker_robot))
+
+    def _driving_markers(self, frame: Any, stamp: Any) -> None:
+        self.truth_marker_pub.publish(driving_markers.ground_truth_markers(frame.snapshot, self.map, stamp,
+                                                                           include_map=True))
+        seen = self._marker_robot_seen(frame)
+        if seen is not None:
+            me, detections, missed = seen
+            self.detection_marker_pub.publish(driving_markers.detection_markers(
+                detections, (me.x, me.y, me.yaw), stamp, missed=missed, car_name=self.marker_robot))
+
+    def _marker_robot_seen(self, frame: Any) -> tuple[Any, Any, list[tuple[Any, ...]]] | None:
+        """(body state, detections, missed objects) of ``marker_robot`` in ``frame``; None without one."""
         if not self.marker_robot:
-            return
+            return None
         i = self.names.index(self.marker_robot)
         me, robot = frame.snapshot.objects[i], frame.robots[i]
-        missed = [] if robot.missed is None else [tuple(p) for p in robot.missed.tolist()]
-        if driving:
-            drawn = driving_markers.detection_markers(robot.detections, (me.x, me.y, me.yaw), stamp, missed=missed,
-                                                      car_name=self.marker_robot)
-        else:
-            drawn = markers.detection_markers(robot.detections, (me.x, me.y, me.yaw + me.head_yaw), stamp,
-                                              missed=missed, robot_name=self.marker_robot)
-        self.detection_marker_pub.publish(drawn)
+        return me, robot.detections, [] if robot.missed is None else [tuple(p) for p in robot.missed.tolist()]
 
     def publish(self, publisher: Any, message: Any) -> None:
         """Publish on a KEEP_ALL topic. In stepped mode nothing is lost: if Fast DDS refuses after its blocking

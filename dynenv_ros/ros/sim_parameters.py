@@ -13,18 +13,16 @@ from typing import Any
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
-from dynenv_ros.driving.config import DrivingConfig, car_names
 from dynenv_ros.envs.session import MISSING_ACTION_RULES
 from dynenv_ros.envs.sim_game import MODES_OF_RUNNING, SCENARIOS
-from dynenv_ros.perception.driving_params import load_driving_preset
-from dynenv_ros.perception.params import MODES, PRESETS, load_preset
+from dynenv_ros.perception.params import MODES, PRESETS
 from dynenv_ros.ros.authentication import secrets_for
 from dynenv_ros.ros.frame_tags import frames_secret
 from dynenv_ros.ros.parameters import (declare_bool, declare_float, declare_int, declare_str, declare_str_list,
                                        refuse_other_scenario)
 from dynenv_ros.ros.runtime_controls import declare_runtime_controls
 from dynenv_ros.security.action_auth import GameSecrets
-from dynenv_ros.soccer.config import SoccerConfig, robot_names
+from dynenv_ros.scenarios import Scenario, get_scenario
 
 # Parameters only one scenario has: giving one to the other scenario is refused (it would change nothing).
 SCENARIO_PARAMETERS = {"robocup": ("players_per_team", "falls_enabled", "localization", "ros_sports",
@@ -68,8 +66,9 @@ class SimSettings:
     frames_secret: bytes | None
 
     @property
-    def driving(self) -> bool:
-        return self.scenario == "driving"
+    def game(self) -> Scenario:
+        """The scenario ``scenario`` names (its parameter spelling: robocup, driving)."""
+        return get_scenario(self.scenario)
 
 
 def declare_sim_parameters(node: Node) -> SimSettings:
@@ -78,7 +77,8 @@ def declare_sim_parameters(node: Node) -> SimSettings:
     fixed = dict(read_only=True)
     scenario = declare_str(node, "scenario", "robocup", "Which world: robocup (soccer) or driving (urban "
                            "driving); read-only.", choices=SCENARIOS, **fixed)
-    driving = scenario == "driving"
+    game = get_scenario(scenario)
+    own = set(SCENARIO_PARAMETERS[scenario])        # a parameter of the other scenario stays off here
     refuse_other_scenario(node, scenario, SCENARIO_PARAMETERS)
     defaults = SCENARIO_DEFAULTS[scenario]
     players = declare_int(node, "players_per_team", 2, 1, 5, "Robots per team (robocup only).", **fixed)
@@ -158,19 +158,15 @@ def declare_sim_parameters(node: Node) -> SimSettings:
         overrides["mode"] = noise_mode
     if magnitude >= 0:
         overrides["noise_magnitude"] = magnitude
+    # the settings of this scenario's own parameters (SCENARIO_PARAMETERS), then those both have
+    own_settings = {"robocup": {"players_per_team": players, "falls": {"enabled": falls}},
+                    "driving": {"n_cars": n_cars, "action_mode": action_mode, "teams": teams}}[scenario]
     try:
-        if driving:
-            config: Any = DrivingConfig.from_mapping({"n_cars": n_cars, "action_mode": action_mode, "teams": teams,
-                                                      "episode_seconds": episode_s, "rates": rates})
-            perception: Any = load_driving_preset(preset, **overrides)
-        else:
-            config = SoccerConfig.from_mapping({
-                "players_per_team": players, "episode_seconds": episode_s, "falls": {"enabled": falls},
-                "rates": rates})
-            perception = load_preset(preset, **overrides)
+        config: Any = game.settings({**own_settings, "episode_seconds": episode_s, "rates": rates})
+        perception: Any = game.perception(preset, **overrides)
     except ValueError as error:
-        raise ParameterException(str(error), ["n_cars" if driving else "players_per_team"]) from None
-    names = car_names(n_cars) if driving else robot_names(players)
+        raise ParameterException(str(error), [game.count_key]) from None
+    names = game.agent_names({"players_per_team": players, "n_cars": n_cars}[game.count_key])
     unknown = [c for c in controlled if c not in names]
     if unknown:
         raise ParameterException(f"unknown robots {unknown}; robots are {names}", ["controlled_robots"])
@@ -186,7 +182,7 @@ def declare_sim_parameters(node: Node) -> SimSettings:
     tags_secret = frames_secret(node, node.get_parameter("secrets_dir").value, "Tag each DetectionArray "
                                 "and WorldState on <topic>_mac")
     # ros-sports (issue 41, docs/interfaces.md): the same frames in the messages a team's stack reads.
-    ros_sports = ros_sports and not driving
+    ros_sports = ros_sports and "ros_sports" in own
     if ros_sports and (len(gc_team_numbers) != 2 or gc_team_numbers[0] == gc_team_numbers[1]):
         raise ParameterException(f"the teams need distinct numbers, got {gc_team_numbers}",
                                  ["gc_team_number_a", "gc_team_number_b"])
@@ -194,7 +190,7 @@ def declare_sim_parameters(node: Node) -> SimSettings:
         scenario=scenario, mode=mode, real_time_factor=real_time_factor, missing_action=missing_action,
         perception_preset=preset, config=config, perception=perception, names=names,
         controlled=[names.index(c) for c in controlled] if controlled else None, seed=None if seed < 0 else seed,
-        localization=localization and not driving, ros_sports=ros_sports,
+        localization=localization and "localization" in own, ros_sports=ros_sports,
         gc_team_numbers=(gc_team_numbers[0], gc_team_numbers[1]) if ros_sports else (1, 2),
         auto_reset=auto_reset, publish_markers=publish_markers, marker_robot=marker_robot,
         diagnostics_period=diag_s, wait_for_subscribers=wait_for_subscribers,

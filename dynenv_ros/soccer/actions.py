@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from dynenv_ros.soccer.agent_actions import head_radians
+
 
 class Walk(IntEnum):
     NONE = 0
@@ -98,7 +100,7 @@ def parse_action(robot: str, raw: Any, *, head_mode: str, head_step: float, head
                              f"got {head!r}")
         if not 0 <= int(head) <= 2 * head_units:
             raise ValueError(f"{robot}: action field 'head'={int(head)} is out of range 0..{2 * head_units}")
-        delta = (int(head) - head_units) * head_step
+        delta = head_radians(int(head), head_units, head_step)
     else:
         delta = float(head)
         if not math.isfinite(delta):

@@ -11,6 +11,7 @@ from torch import Tensor
 
 from dynenv_ros.agent.losses import localization_loss, masked_mean, rcm_forward_loss, reconstruction_loss
 from dynenv_ros.learning.algo.policy import head_outputs, log_prob_entropy
+from dynenv_ros.scenarios import scenario_of
 
 BALL_ANCHOR = ((0.0, 0.0),)
 
@@ -58,15 +59,14 @@ def imitation_loss(agent: Any, out: Any, teacher: Tensor, acting: Tensor) -> tup
     absolute difference between the policy's mean command and the teacher's (normalised units,
     ``teacher_command_error``) — there is no most likely value to agree on."""
     log_prob, _ = log_prob_entropy(agent, out, teacher)
-    driving = getattr(agent, "scenario", "soccer") == "driving"
+    heads = scenario_of(agent).categorical_heads(getattr(agent, "action_mode", None) or "discrete")
     with torch.no_grad():
-        if driving and agent.action_mode == "continuous":
+        if not heads:
             T, B = teacher.shape[:2]
             means = torch.stack([d.mean for d in agent.distributions(head_outputs(out, flat=True))], -1)
             error = (means.reshape(T, B, -1) - teacher).abs().mean(-1)
             agreement = {"teacher_command_error": masked_mean(error, acting)}
         else:
-            heads = ("acceleration", "steering") if driving else ("walk", "turn", "kick", "head")
             same = torch.stack([getattr(out, h).argmax(-1) for h in heads], -1) == teacher
             agreement = {"teacher_agreement": masked_mean(same.all(-1).float(), acting)}
             agreement.update({f"teacher_agreement_{h}": masked_mean(same[..., i].float(), acting)

@@ -13,24 +13,16 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from dynenv_ros.agent import driving_actions
 from dynenv_ros.agent.losses import (ROBOCUP_HEADS, ForwardModel, InverseModel, LongTermPredictor, RCMAttention,
                                      one_hot_actions)
 from dynenv_ros.agent.network import POSE_SIZE, DynEnvAgent
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.soccer.config import SoccerConfig
-
-DRIVING_HEADS: tuple[int, ...] = (driving_actions.ACCELERATION_CHOICES, driving_actions.STEERING_CHOICES)
-
+from dynenv_ros.scenarios import scenario_of
 
 def action_heads(agent: DynEnvAgent) -> tuple[tuple[int, ...], bool]:
     """(head sizes, continuous) of an agent's actions as the curiosity models take them: soccer (5, 3, 3, 7) and
     driving discrete (3, 3) one-hot; driving continuous (3,) the action vector as it is (continuous True)."""
-    if agent.scenario != "driving":
-        return ROBOCUP_HEADS, False
-    if agent.action_mode == "continuous":
-        return (driving_actions.CONTINUOUS_SIZE,), True
-    return DRIVING_HEADS, False
+    return scenario_of(agent).curiosity_heads(agent.action_mode or "discrete")
 
 
 def action_features(actions: Tensor, heads: tuple[int, ...], continuous: bool) -> Tensor:
@@ -81,8 +73,6 @@ class TrainingNetworks(nn.Module):
 def make_agent(cfg: TrainConfig) -> DynEnvAgent:
     """The untrained agent a run of ``cfg`` trains (its scenario, width, head and action mode, and whether it takes
     the pose estimate: ``localization: estimate``)."""
-    if cfg.driving:
-        return DynEnvAgent(cfg.feature_size, scenario="driving", action_mode=cfg.action_mode)
-    motion = SoccerConfig.from_mapping({"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode}).motion
-    return DynEnvAgent(cfg.feature_size, cfg.head_mode, motion.head_units, motion.head_max_delta,
-                       uses_pose=cfg.localization == "estimate")
+    agent: DynEnvAgent = cfg.world.new_agent(cfg.feature_size, cfg.head_mode, cfg.action_mode, cfg.players_per_team,
+                                             cfg.localization == "estimate")
+    return agent

@@ -14,6 +14,7 @@ from torch import Tensor
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded, StreamBatch
 from dynenv_ros.agent.network import DynEnvAgent, State
 from dynenv_ros.envs.padded_layout import PROPRIOCEPTION_COLUMNS, SOCCER, LayoutSpec
+from dynenv_ros.scenarios import scenario_of
 
 FALLEN = PROPRIOCEPTION_COLUMNS.index("fallen")
 PENALIZED = PROPRIOCEPTION_COLUMNS.index("penalized")
@@ -29,7 +30,7 @@ def device_of(module: torch.nn.Module) -> torch.device:
     return next(module.parameters()).device
 
 
-_DRIVING_SPEC: list[LayoutSpec] = []
+_DEFAULT_SPECS: dict[str, LayoutSpec] = {}     # scenario name: its layout of the default settings
 
 def layout_spec(agent: Any) -> LayoutSpec:
     """The padded layout's spec an agent reads: soccer's, or driving's of the default ``DrivingConfig`` (its only
@@ -38,20 +39,15 @@ def layout_spec(agent: Any) -> LayoutSpec:
     spec = getattr(agent, "layout_spec", None)
     if spec is not None:
         return cast(LayoutSpec, spec)
-    if getattr(agent, "scenario", "soccer") != "driving":
-        return SOCCER
-    if not _DRIVING_SPEC:
-        from dynenv_ros.driving.config import DrivingConfig
-        from dynenv_ros.envs.driving_observations import driving_layout_spec
-        _DRIVING_SPEC.append(driving_layout_spec(DrivingConfig()))
-    return _DRIVING_SPEC[0]
+    world = scenario_of(agent)
+    if world.name not in _DEFAULT_SPECS:
+        _DEFAULT_SPECS[world.name] = world.layout_spec()
+    return _DEFAULT_SPECS[world.name]
 
 
 def action_width(agent: Any) -> tuple[int, Any]:
     """(columns, dtype) of one stored action: soccer 4 int64; driving discrete 2 int64, continuous 3 float32."""
-    if getattr(agent, "scenario", "soccer") != "driving":
-        return 4, np.int64
-    return (2, np.int64) if agent.action_mode == "discrete" else (3, np.float32)
+    return scenario_of(agent).stored_action(getattr(agent, "action_mode", None) or "discrete")
 
 
 def head_outputs(step: Any, steps: int | None = None, flat: bool = False) -> SimpleNamespace:

@@ -18,7 +18,7 @@ no effect there, so those samples only add variance). Entropy is per agent (the 
 robot's own policy entropy), not DynEnv's "batch entropy" of the mean policy (§9.4).
 
 Driving (``networks.agent.scenario == 'driving'``): the same update over cars, with driving's heads (two categorical
-or three clipped Gaussians, ``agent.driving_actions``) and inputs (its layout spec); the rollout's ``alive`` mask
+or three clipped Gaussians, ``driving.agent_actions``) and inputs (its layout spec); the rollout's ``alive`` mask
 (T+1, B) removes every step after a car's own episode end from every term — value included; the curiosity models
 take the one-hot [3, 3] actions (discrete) or the continuous action vector, whose inverse model regresses it
 (squared error) instead of classifying. No localization or reconstruction (the config refuses them).

@@ -45,6 +45,7 @@ from dynenv_ros.learning.messages.assembly import ExperienceAssembler, Sequence,
 from dynenv_ros.learning.messages.scenarios import DRIVING_AGENT, SOCCER_AGENT, experience_scenario
 from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.run.metrics import RunLogger
+from dynenv_ros.scenarios import get_scenario
 
 
 def agent_topic(agent_pattern: str) -> re.Pattern[str]:
@@ -176,22 +177,20 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
     if epochs < 1 or batch_sequences < 1:
         raise ValueError(f"epochs and batch_sequences must be >= 1, got {epochs}, {batch_sequences}")
     scenario = bag_scenario(paths)
-    if scenario != cfg.scenario:
-        hint = "--config driving_quick or --set scenario=driving" if scenario == "driving" else \
-            "a soccer config (e.g. --config quick)"
-        raise ValueError(f"the bags record {'driving' if scenario == 'driving' else 'soccer'} games and the config's "
-                         f"scenario is {cfg.scenario!r}: use {hint}")
-    if scenario == "driving" and learns is not None:
-        raise ValueError("--team applies to soccer bags; every car of a driving bag is cloned")
+    world = get_scenario(scenario)
+    if world is not cfg.world:
+        raise ValueError(f"the bags record {world.name} games and the config's scenario is {cfg.scenario!r}: use "
+                         f"{world.config_hint}")
+    if world.sides == 1 and learns is not None:
+        raise ValueError(f"--team applies to soccer bags; every {world.agent} of a {world.name} bag is cloned")
     if cfg.localization != "none":
         raise ValueError("localization: 'estimate' trains on the simulator's pose estimates; a recording carries "
                          "none yet: use localization: none here")
     players, frames = bag_layout(paths, scenario)
     if cfg.head_mode != "discrete":
         raise ValueError("head_mode: learning from bags supports the discrete head only")
-    driving = scenario == "driving"
-    with_targets = with_targets and not driving          # driving has no self-supervised heads
-    cfg = cfg.replace(n_cars=players) if driving else cfg.replace(players_per_team=players)
+    with_targets = with_targets and world.self_supervised      # (driving has no self-supervised heads)
+    cfg = cfg.replace(**{world.count_key: players})
     run = Path(run_dir)
     run.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
@@ -244,7 +243,7 @@ def train_from_bags(cfg: TrainConfig, paths: Seq[str | Path], run_dir: str | Pat
     keys = ("imitation_loss", "teacher_agreement", "teacher_command_error", "localization_loss",
             "reconstruction_loss", "localization_within_50cm")
     summary = {"scenario": scenario, "sequences": len(sequences), "robot_periods": len(sequences) * cfg.rollout_length,
-               "n_cars" if driving else "players_per_team": players, "frames_per_period": frames, "epochs": epochs,
+               world.count_key: players, "frames_per_period": frames, "epochs": epochs,
                "updates": progress.updates,
                "counts": dict(counts), "first_epoch": {k: history[0][k] for k in keys if k in history[0]},
                "last_epoch": {k: history[-1][k] for k in keys if k in history[-1]},

@@ -20,13 +20,15 @@ crashed, or is home with its team's bonus decided; ``StepFeedback.terminated`` s
 from __future__ import annotations
 
 import math
-from typing import Any, Protocol
+from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from dynenv_ros.agent.driving_actions import BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem
+from dynenv_ros.driving.agent_actions import BOUND_TOLERANCE, BRAKE_COMMAND, check_action_mode, command_problem
 from dynenv_ros.envs.padded_layout import PaddedLayout
 from dynenv_ros.learning.algo.policy import can_act
+from dynenv_ros.scenarios import DRIVING, SOCCER, get_scenario
+from dynenv_ros.soccer.agent_actions import head_index
 
 WALKS, TURNS, KICKS = 5, 3, 3     # Action.msg's soccer choices
 STAND_STILL = (0.0, 0.0, 0.0, 0.0)
@@ -91,7 +93,7 @@ class SoccerExperience:
 
     def action_row(self, msg: Any) -> tuple:
         """[walk, turn, kick, head index]."""
-        index = int(np.clip(round(msg.head_yaw_delta / self.head_step) + self.head_units, 0, 2 * self.head_units))
+        index = int(head_index(msg.head_yaw_delta, self.head_units, self.head_step))   # (finite: checked first)
         return (int(msg.walk), int(msg.turn), int(msg.kick), index)
 
     def previous_row(self, msg: Any) -> tuple:
@@ -165,13 +167,23 @@ class DrivingExperience:
 def experience_scenario(scenario: str, agents: int, frames: int | None = None, action_mode: str = "discrete"
                         ) -> SoccerExperience | DrivingExperience:
     """The scenario's side of the assembler with its defaults: ``agents`` robots per team (robocup) or cars
-    (driving); ``frames`` per period (default: the scenario's rates)."""
-    if scenario == "robocup":
-        from dynenv_ros.soccer.config import SoccerConfig
-        soccer = SoccerConfig.from_mapping({"players_per_team": agents})
-        return SoccerExperience(agents, soccer.rates.frames_per_period if frames is None else frames,
-                                soccer.motion.head_max_delta, soccer.motion.head_units)
-    if scenario == "driving":
-        from dynenv_ros.driving.config import DrivingConfig
-        return DrivingExperience(DrivingConfig(n_cars=agents, action_mode=action_mode), frames)
-    raise ValueError(f"scenario must be 'robocup' or 'driving', got {scenario!r}")
+    (driving); ``frames`` per period (default: the scenario's rates). ValueError for an unknown scenario."""
+    return _EXPERIENCES[get_scenario(scenario).name](agents, frames, action_mode)
+
+
+def _soccer_experience(agents: int, frames: int | None, action_mode: str) -> SoccerExperience:
+    from dynenv_ros.soccer.config import SoccerConfig
+    soccer = SoccerConfig.from_mapping({"players_per_team": agents})
+    return SoccerExperience(agents, soccer.rates.frames_per_period if frames is None else frames,
+                            soccer.motion.head_max_delta, soccer.motion.head_units)
+
+
+def _driving_experience(agents: int, frames: int | None, action_mode: str) -> DrivingExperience:
+    from dynenv_ros.driving.config import DrivingConfig
+    return DrivingExperience(DrivingConfig(n_cars=agents, action_mode=action_mode), frames)
+
+
+# Each scenario's experience adapter, by its name: the adapters live here, above the registry (docs/decisions.md,
+# "A scenario registry").
+_EXPERIENCES: dict[str, Callable[[int, int | None, str], SoccerExperience | DrivingExperience]] = {
+    SOCCER.name: _soccer_experience, DRIVING.name: _driving_experience}

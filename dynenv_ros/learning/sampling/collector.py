@@ -10,10 +10,11 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from dynenv_ros.agent.driving_actions import commands as driving_commands
+from dynenv_ros.driving.agent_actions import commands as driving_commands
 from dynenv_ros.agent.network import DynEnvAgent, State
 from dynenv_ros.envs.vector import SoccerVectorEnv
 from dynenv_ros.learning.algo.experience import Rollout
+from dynenv_ros.scenarios import scenario_of
 from dynenv_ros.learning.algo.policy import (action_log_prob, action_width, can_act, device_of, policy_step,
                                              reset_state, sample_actions)
 
@@ -49,14 +50,14 @@ class RolloutCollector:
                  pose_seeder: Callable[[Tensor], State] | None = None, seed_noise: np.ndarray | None = None,
                  rng: np.random.Generator | None = None) -> None:
         self.env, self.agent = env, agent
-        self.driving = getattr(agent, "scenario", "soccer") == "driving"
-        if self.driving != (getattr(env.config, "n_cars", None) is not None):
+        world = scenario_of(agent)
+        if not isinstance(env.config, world.settings_type):
             raise ValueError("the agent's scenario and the env's differ (a driving agent needs DrivingVectorEnv)")
         self.learning_robots = np.asarray(learning_robots, np.int64)
-        n_agents = env.config.n_cars if self.driving else env.config.n_robots
-        self.other_robots = np.setdiff1d(np.arange(n_agents), self.learning_robots)
-        if self.driving and len(self.other_robots):
-            raise ValueError("driving: every car learns (learning_robots must be all cars)")
+        self.other_robots = np.setdiff1d(np.arange(world.agent_count(env.config)), self.learning_robots)
+        if world.sides == 1 and len(self.other_robots):
+            raise ValueError(f"{world.name}: every {world.agent} learns (learning_robots must be all of them)")
+        self._collect_steps = getattr(self, f"_collect_{world.name}")
         if len(self.other_robots) and opponent is None:
             raise ValueError("robots outside learning_robots need an opponent")
         self.opponent = opponent
@@ -112,11 +113,11 @@ class RolloutCollector:
         """The next ``steps`` periods of every world. Acting runs under ``torch.inference_mode`` (cheaper than
         no_grad); the start state the learner re-runs from is copied out of it into an ordinary tensor."""
         with torch.inference_mode():
-            rollout = self._collect_driving(steps) if self.driving else self._collect(steps)
+            rollout = self._collect_steps(steps)
         rollout.initial_state = tuple(s.clone() for s in rollout.initial_state)   # type: ignore[assignment]
         return rollout
 
-    def _collect(self, steps: int) -> Rollout:
+    def _collect_soccer(self, steps: int) -> Rollout:
         E, k = self.env.num_envs, len(self.learning_robots)
         B = E * k
         first = self._learning_obs(self._obs)

@@ -16,6 +16,7 @@ from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.sampling.opponents import (SCRIPTED_TEAM, RandomOpponent, SnapshotOpponent,
                                                     WorldScriptedOpponent)
 from dynenv_ros.learning.sampling.collector import RolloutCollector
+from dynenv_ros.scenarios import DRIVING, SOCCER
 from dynenv_ros.soccer.config import SoccerConfig
 
 # DynEnv's privileged seeding noise: N(0, 0.05²) in its normalised units (1 unit = 5.2 m) on x, y; 0.05 on the
@@ -55,19 +56,31 @@ def padded_objects(cfg: TrainConfig) -> int | None:
 
 def make_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.ndarray]:
     """The vector env of ``cfg``'s scenario (padded observations) and the robots (cars) of each world that learn."""
-    if cfg.driving:
-        driving: dict[str, Any] = {"n_cars": cfg.n_cars, "action_mode": cfg.action_mode}
-        if cfg.episode_seconds is not None:
-            driving["episode_seconds"] = cfg.episode_seconds
-        env: Any = DrivingVectorEnv(num_envs, backend=backend, observation="padded", config=driving,
-                                    perception=cfg.perception, teacher=cfg.teacher)
-        return env, np.arange(cfg.n_cars)
+    return _VECTOR_ENVS[cfg.world.name](cfg, num_envs, backend)
+
+
+def _driving_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.ndarray]:
+    driving: dict[str, Any] = {"n_cars": cfg.n_cars, "action_mode": cfg.action_mode}
+    if cfg.episode_seconds is not None:
+        driving["episode_seconds"] = cfg.episode_seconds
+    env = DrivingVectorEnv(num_envs, backend=backend, observation="padded", config=driving,
+                           perception=cfg.perception, teacher=cfg.teacher)
+    return env, np.arange(cfg.n_cars)
+
+
+def _soccer_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.ndarray]:
     env = SoccerVectorEnv(num_envs, backend=backend, config=soccer_config(cfg), observation="padded",
                           perception=cfg.perception, targets=needs_targets(cfg),
                           scripted_team_b=IN_WORLD_TEAMS.get(cfg.opponent), teacher=cfg.teacher,
                           localization=cfg.localization, max_objects=padded_objects(cfg))
     n = cfg.players_per_team
     return env, (np.arange(2 * n) if cfg.opponent == "self" else np.arange(n))
+
+
+# Each scenario's vector env, by its name: the registry sits below learning/ and cannot build them (docs/decisions.md,
+# "A scenario registry").
+_VECTOR_ENVS: dict[str, Callable[[TrainConfig, int, str], tuple[Any, np.ndarray]]] = {
+    SOCCER.name: _soccer_env, DRIVING.name: _driving_env}
 
 
 # opponents the worlds play themselves (team B's rows of the learner's actions are ignored)
@@ -89,7 +102,7 @@ def make_worlds(cfg: TrainConfig, networks: TrainingNetworks, num_envs: int, bac
     seeding noise, ``seed`` seeds the worlds."""
     agent = networks.agent
     env, learning = make_env(cfg, num_envs, backend)
-    if cfg.driving:
+    if cfg.world.layout_follows_settings:
         agent.layout_spec = env.layout.spec
     opponent: Any = None
     if cfg.opponent == "random":

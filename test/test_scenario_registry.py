@@ -1,0 +1,64 @@
+"""The scenario registry (dynenv_ros/scenarios/, docs/decisions.md "A scenario registry"): every spelling a user,
+a file or a message uses resolves to one scenario, an unknown one is refused with the choices, and the action
+codec round-trips dynenv_msgs/Action's fields."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from dynenv_msgs.msg import Action, WorldState
+
+from dynenv_ros.scenarios import DRIVING, SCENARIOS, SOCCER, get_scenario, scenario_names
+from dynenv_ros.soccer.agent_actions import head_index, head_radians
+
+
+@pytest.mark.parametrize("name, scenario", [("soccer", SOCCER), ("robocup", SOCCER), ("robocup_v0", SOCCER),
+                                            ("driving", DRIVING)])
+def test_every_spelling_resolves_to_its_scenario(name, scenario):
+    assert get_scenario(name) is scenario
+
+
+def test_canonical_names_and_the_spellings_kept_at_the_boundaries():
+    assert [s.name for s in SCENARIOS] == ["soccer", "driving"]
+    assert SOCCER.parameter_value == "robocup" and DRIVING.parameter_value == "driving"   # scenario:=robocup
+    assert scenario_names() == ["soccer", "driving", "robocup", "robocup_v0"]
+
+
+def test_world_state_codes_resolve():
+    assert get_scenario(WorldState.SCENARIO_SOCCER) is SOCCER
+    assert get_scenario(WorldState.SCENARIO_DRIVING) is DRIVING
+    with pytest.raises(ValueError, match=r"unknown scenario code 7; codes are \[0, 1\]"):
+        get_scenario(7)
+
+
+@pytest.mark.parametrize("bad", ["Soccer", "football", "", None, True])
+def test_an_unknown_name_is_refused_listing_the_choices(bad):
+    with pytest.raises(ValueError) as error:
+        get_scenario(bad)
+    assert str(error.value) == (f"unknown scenario {bad!r}; choose one of 'soccer', 'driving', 'robocup', "
+                                "'robocup_v0'")
+
+
+def test_agent_names_of_each_scenario():
+    assert SOCCER.agent_names(2) == ["team_a_0", "team_a_1", "team_b_0", "team_b_1"]
+    assert DRIVING.agent_names(3) == ["car_0", "car_1", "car_2"]
+
+
+def test_the_action_codec_round_trips_an_action_message():
+    soccer = Action(**SOCCER.message_fields((1, 2, 0, -0.25)))
+    assert (soccer.walk, soccer.turn, soccer.kick, soccer.head_yaw_delta) == (1, 2, 0, -0.25)
+    assert SOCCER.action_fields(soccer) == (1, 2, 0, -0.25)
+    driving = Action(**DRIVING.message_fields((0.5, 0.0, -1.5)))
+    assert DRIVING.action_fields(driving) == (0.5, 0.0, -1.5)
+    assert SOCCER.idle == (0, 0, 0, 0.0) and DRIVING.idle == (0.0, 1.0, 0.0)     # stand still; brake
+
+
+def test_head_index_and_radians_invert_each_other():
+    """3 units of 12.5 degrees each way (SoccerConfig's motion defaults): index 0..6 is -37.5..37.5 degrees."""
+    step = math.radians(12.5)
+    radians = head_radians(np.arange(7), 3, step)
+    np.testing.assert_allclose(np.degrees(radians), [-37.5, -25, -12.5, 0, 12.5, 25, 37.5])
+    np.testing.assert_array_equal(head_index(radians, 3, step), np.arange(7))
+    # beyond the bound: clipped to the last index; between two: the nearer
+    np.testing.assert_array_equal(head_index([-1.0, 1.0, 0.4 * step], 3, step), [0, 6, 3])
