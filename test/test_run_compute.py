@@ -49,8 +49,8 @@ def test_segments_add_up_and_one_segment_is_an_uninterrupted_run():
     _spin(0.2)
     first = meter.record(100)
     assert first["uninterrupted"] and len(first["segments"]) == 1
-    assert first["segments"][0]["cpu_seconds"] >= 0.19
-    assert first["wall_seconds"] >= 0.19
+    assert first["segments"][0]["cpu_seconds"] >= 0.19 - 1e-9        # summed in floats: 0.18999999999999773 seen
+    assert first["wall_seconds"] >= 0.19 - 1e-9
     resumed = ComputeMeter(100, first["segments"])
     second = resumed.record(250)
     assert not second["uninterrupted"] and second["env_steps"] == 250

@@ -84,7 +84,7 @@ def ros_sports_io(node: Any, names: list[str], ids: dict[str, int],
     settings = _declare(node)
     if interfaces != "ros_sports":
         return None
-    if getattr(node, "driving", False):
+    if not node.scenario.legged:       # the ros-sports messages are a legged soccer robot's
         raise ParameterException("interfaces ros_sports is robocup's (soccer robots)", ["interfaces", "scenario"])
     if node.get_parameter("authenticated_frames").value:
         raise ParameterException("authenticated_frames tags DetectionArrays; a team stack's soccer_vision_3d "
