@@ -14,6 +14,7 @@ from dynenv_ros.core.object_classes import ObjectClass
 from dynenv_ros.perception import detections as det
 from dynenv_ros.perception.camera import (NAO_BOTTOM, NAO_TOP, CameraModel, ImageConfig, project_points,
                                           render_segmentation)
+from detection_rows import rows
 
 FULL = ImageConfig(640, 480)
 BALL, ROBOT, POST, LINES = 0, 1, 2, 3          # channel inside a camera's block
@@ -21,13 +22,6 @@ TOP, BOTTOM = 0, 4                             # first channel of each camera's 
 F = 543.6                                      # px at 640x480
 CX, CY = 319.5, 239.5
 
-
-def rows(*specs: dict) -> np.ndarray:
-    out = det.empty(len(specs))
-    for row, spec in zip(out, specs):
-        for key, value in spec.items():
-            row[key] = value
-    return out
 
 
 def ball(x: float, y: float, diameter: float = 0.1) -> dict:

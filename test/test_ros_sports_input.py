@@ -16,19 +16,12 @@ from dynenv_ros.core.object_classes import ObjectClass, Subtype
 from dynenv_ros.gamecontroller import packet as gc
 from dynenv_ros.gamecontroller.robot_view import Refused, robot_view
 from dynenv_ros.perception import soccer_vision_3d as sv
-from dynenv_ros.perception.detections import empty
 from dynenv_ros.ros.frame_parts import FrameParts
 from dynenv_ros.ros.ros_sports_conversion import soccer_vision_messages
+from detection_rows import rows
 
 MS = 1_000_000
 
-
-def rows(*entries: dict) -> np.ndarray:
-    out = empty(len(entries))
-    for row, values in zip(out, entries):
-        for key, value in values.items():
-            row[key] = value
-    return out
 
 
 FRAME = rows(

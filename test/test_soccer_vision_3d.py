@@ -5,20 +5,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from dynenv_ros.core.object_classes import ObjectClass, Subtype
 from dynenv_ros.perception import soccer_vision_3d as sv
 from dynenv_ros.perception.detections import empty
+from detection_rows import rows
 
-
-def rows(*entries: dict) -> np.ndarray:
-    out = empty(len(entries))
-    for row, values in zip(out, entries):
-        for key, value in values.items():
-            row[key] = value
-    return out
 
 
 def close(a, b) -> bool:
