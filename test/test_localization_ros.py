@@ -104,9 +104,10 @@ class Probe:
         self.detections = {r: [] for r in ROBOTS}
         self.truth: list[WorldState] = []
         self.tf: list[TFMessage] = []
+        self.pose_subs = {}
         for r in ROBOTS:
-            self.node.create_subscription(PoseWithCovarianceStamped, topics.pose_estimate(r), self.poses[r].append,
-                                          sim_stream())
+            self.pose_subs[r] = self.node.create_subscription(PoseWithCovarianceStamped, topics.pose_estimate(r),
+                                                              self.poses[r].append, sim_stream())
             self.node.create_subscription(DetectionArray, topics.detections(r), self.detections[r].append,
                                           sim_stream())
         self.node.create_subscription(WorldState, topics.WORLD_STATE, self.truth.append, sim_stream())
@@ -266,6 +267,11 @@ def test_a_policy_taking_the_pose_gets_the_simulators_estimate_of_each_periods_l
         return observation
 
     policy.batch.padded = record
+    # The simulator waits for detection readers only (a policy may not read poses): the first estimates must not go
+    # out before the probe's and the policy's pose readers have matched the writers, both ways.
+    assert spin_until(executor, lambda: all(p.get_subscription_count() >= 2 for p in sim.outlet.pose_pubs)
+                      and all(s.get_publisher_count() >= 1 for s in probe.pose_subs.values())
+                      and all(s.get_publisher_count() >= 1 for s in policy.pose_subs.values()), 10.0)
     for node in (sim, policy):
         executor.add_node(node)
     assert spin_until(executor, lambda: sim.periods_run >= 4, 30.0), sim.session.counts
