@@ -51,7 +51,7 @@ def is_ros_package(top_level: str) -> bool:
                for location in locations for sub in ("msg", "srv", "action"))
 
 
-def _local_file(module: str) -> Path | None:
+def local_file(module: str) -> Path | None:
     """The source file of a module of this repository or of test/ (a package's __init__.py), else None."""
     parts = module.split(".")
     if parts[0] in LOCAL_ROOTS:
@@ -66,7 +66,7 @@ def _local_file(module: str) -> Path | None:
     return None
 
 
-def _imported_modules(tree: ast.AST, package: str, module_level_only: bool) -> Iterable[str]:
+def imported_modules(tree: ast.AST, package: str, module_level_only: bool) -> Iterable[str]:
     """Dotted names a module imports (``from a import b`` yields ``a.b`` and ``a``); relative ones resolved."""
     nodes: Iterable[ast.AST]
     if module_level_only:
@@ -97,7 +97,7 @@ def _module_level_statements(tree: ast.AST) -> Iterable[ast.AST]:
         stack.extend(ast.iter_child_nodes(node))
 
 
-def _package_of(path: Path) -> str:
+def package_of(path: Path) -> str:
     """The dotted package a local file belongs to (for its relative imports)."""
     relative = path.relative_to(REPO).with_suffix("")
     parts = list(relative.parts)
@@ -124,14 +124,14 @@ def _local_file_uses_ros(module: str) -> bool:
     """Memoised; a module met again while its own imports are being followed (an import cycle) adds nothing."""
     if module in _LOCAL_VERDICTS:
         return _LOCAL_VERDICTS[module]
-    path = _local_file(module)
+    path = local_file(module)
     if path is None:
         return False
     _LOCAL_VERDICTS[module] = False
     tree = ast.parse(path.read_text(), filename=str(path))
-    package = module if path.name == "__init__.py" else _package_of(path)
+    package = module if path.name == "__init__.py" else package_of(path)
     verdict = any(name != module and module_name_uses_ros(name)
-                  for name in _imported_modules(tree, package, module_level_only=True))
+                  for name in imported_modules(tree, package, module_level_only=True))
     _LOCAL_VERDICTS[module] = verdict
     return verdict
 
@@ -139,7 +139,7 @@ def _local_file_uses_ros(module: str) -> bool:
 def source_uses_ros(source: str, filename: str = "<test module>") -> bool:
     """A test module's source imports ROS anywhere (a test function's own ``import rclpy`` counts)."""
     tree = ast.parse(source, filename=filename)
-    return any(module_name_uses_ros(name) for name in _imported_modules(tree, "", module_level_only=False))
+    return any(module_name_uses_ros(name) for name in imported_modules(tree, "", module_level_only=False))
 
 
 @functools.lru_cache(maxsize=None)

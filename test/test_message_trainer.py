@@ -16,7 +16,7 @@ from dynenv_ros.learning.messages.scenarios import SoccerExperience
 from dynenv_ros.learning.messages.message_trainer import TrainingThread, MessageTrainer
 from experience_game import HEAD_MAX, HEAD_UNITS, play
 from policy_node.policy_files import version_of
-from test_experience import _feed
+from test_messages_assembly import _feed
 
 T = 4
 

@@ -60,7 +60,7 @@ TEST_MODULES: dict[str, tuple[str | None, str]] = {
     "stable_baselines3": ("python3-stable-baselines3-pip", "stable-baselines3"),
     "supersuit": (None, "supersuit"),
     "websockets": ("python3-websockets", "websockets"),
-    "google": ("python3-protobuf", "protobuf"),        # test_foxglove_live decodes the live view's protobuf
+    "google": ("python3-protobuf", "protobuf"),        # test_live_view_server decodes the live view's protobuf
 }
 # Test tools used without an import: key or distribution → the evidence in the repository.
 TEST_TOOLS = {"python3-pytest-xdist": ("Makefile", "pytest -n 2"), "pytest-xdist": ("Makefile", "pytest -n 2"),

@@ -88,7 +88,7 @@ def test_a_driving_bag_is_cloned_into_a_driving_policy(make_node, executor, tmp_
 
 
 def test_a_soccer_bag_with_a_driving_config_is_refused(tmp_path, capsys):
-    from test_from_bag import SAMPLE
+    from test_messages_bags import SAMPLE
     assert train_main(["--from-bag", str(SAMPLE), "--config", "driving_quick", "--run-dir", str(tmp_path / "x")]) == 2
     assert "the bags record soccer games and the config's scenario is 'driving'" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()              # refused before anything was written

@@ -14,7 +14,7 @@ from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.learning.messages.assembly import ExperienceAssembler
 from dynenv_ros.learning.messages.scenarios import DrivingExperience
 from experience_game import W, play_driving, shuffled_in_windows
-from test_experience import _feed
+from test_messages_assembly import _feed
 
 T = 4
 CARS = ("car_0", "car_1")
