@@ -15,6 +15,7 @@ what the network is given and what is done with its outputs.
 """
 from __future__ import annotations
 
+import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
@@ -32,6 +33,8 @@ from dynenv_ros.scenarios.soccer import HEAD_BOUND, uses_pose
 DEFAULT_FRAMES = SOCCER.default_frames      # the trial's frame count before any frame arrived
 STAND_STILL = SOCCER.idle          # the fallback action of a robot whose decision failed or was not finite
 BRAKE = DRIVING.idle               # driving's: [throttle, brake, steering] (also the previous action at reset)
+POSE_WAIT_S = 0.02                 # the longest a decision waits for its frame's pose estimate (wall clock)
+POSE_POLL_S = 0.001
 
 
 class Log(Protocol):
@@ -134,11 +137,46 @@ class BatchPolicy:
         """(B, 7) float32 ``pose_estimate`` of the robots (``self.names`` order) for their periods: each robot's
         newest estimate at or before its period's last frame, in its team's frame; ``LOST_ROW`` (zeros, the
         standard deviations at the bound) without one, or when it is older than ``pose_max_age`` (counted:
-        pose_used, pose_missing, pose_stale). Takes every estimate already waiting first."""
+        pose_used, pose_missing, pose_stale). Takes every estimate already waiting first, and waits for one still
+        on its way (``_await_estimates``)."""
+        stamps = [stamp_ns(p[-1].header.stamp) for p in periods]
         self.take_estimates()
-        return pose_batch([self.pose_histories[n] for n in self.names],
-                          [stamp_ns(p[-1].header.stamp) for p in periods], [self.teams[n] for n in self.names],
+        self._await_estimates(periods, stamps)
+        return pose_batch([self.pose_histories[n] for n in self.names], stamps, [self.teams[n] for n in self.names],
                           round(self.pose_max_age * 1e9), self.counts)
+
+    def _behind(self, periods: list[list[Any]], stamps: Sequence[int]) -> bool:
+        """Some robot's estimator is alive (its newest estimate at most ``pose_max_age`` before the frame) but has
+        not yet delivered the estimates of its period's last frame: one stamped at or after it, or as many stamped
+        at it as the period has frames with that stamp (the simulator's first period repeats one instant in every
+        frame, one estimate each)."""
+        max_age = round(self.pose_max_age * 1e9)
+        for name, period, stamp in zip(self.names, periods, stamps):
+            entries = self.pose_histories[name].entries
+            if not entries or stamp - entries[-1][0] > max_age or entries[-1][0] > stamp:
+                continue
+            needed = sum(stamp_ns(frame.header.stamp) == stamp for frame in period)
+            if sum(entry[0] == stamp for entry in entries) < needed:
+                return True
+        return False
+
+    def _await_estimates(self, periods: list[list[Any]], stamps: Sequence[int]) -> None:
+        """The simulator sends each frame's estimate before its detections, but on another topic, so a loaded
+        machine can deliver the frame first; the decision would then take the frame before's estimate, and a
+        stepped game would depend on delivery order. So while ``_behind``, take what arrives, for at most
+        ``POSE_WAIT_S`` of wall time (a real stack's localization, stamped on its own clock, costs at most that);
+        a wait that ends without the estimate is counted (``pose_late``). No wait where no estimator is alive."""
+        if not self._behind(periods, stamps):
+            return
+        give_up = time.monotonic() + POSE_WAIT_S
+        while True:
+            time.sleep(POSE_POLL_S)
+            self.take_estimates()
+            if not self._behind(periods, stamps):
+                return
+            if time.monotonic() >= give_up:
+                self.counts["pose_late"] += 1
+                return
 
     def check(self, policy: Any, memories: Sequence[Any], graph_frames: int | None) -> None:
         """The scenario's ``check_policy`` on the last frames each robot acted on (a synthetic period with no

@@ -13,7 +13,7 @@ COUNTED = ("decisions", "periods_dropped", "actions_delayed", "actions_supersede
            "frames_stale", "frames_duplicate", "periods_partial", "frames_missing", "frames_malformed",
            "detections_malformed", "values_malformed", "self_missing", "fallback_actions",
            "failed_decisions", "weights_loaded", "weights_refused", "weights_duplicate", "weights_other_run",
-           "pose_used", "pose_missing", "pose_stale", "pose_malformed")
+           "pose_used", "pose_missing", "pose_stale", "pose_late", "pose_malformed")
 WATCHED = ("periods_dropped", "frames_duplicate", "frames_missing", "frames_malformed",
            "detections_malformed", "values_malformed", "fallback_actions", "failed_decisions",
            "weights_refused", "pose_missing", "pose_stale", "pose_malformed")

@@ -126,3 +126,71 @@ def test_sampled_decisions_repeat_for_the_same_seed_and_period():
         assert decider.decide(lambda: None, sent.append)
         actions.append([(o.action, o.learning) for o in sent])
     assert actions[0] == actions[1] and len(actions[0]) == 2
+
+
+# -- the pose estimate a decision waits for (batch_policy.BatchPolicy.pose_rows, docs/deploy.md) ------------------
+def _estimate(x: float, stamp_ns: int):
+    """A PoseWithCovarianceStamped's fields as a plain object: x metres ahead, facing along x, variances 0.01."""
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    covariance = [0.0] * 36
+    covariance[0] = covariance[7] = covariance[35] = 0.01
+    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
+                           pose=SimpleNamespace(pose=SimpleNamespace(position=SimpleNamespace(x=x, y=0.0, z=0.0),
+                                                                     orientation=SimpleNamespace(x=0.0, y=0.0, z=0.0,
+                                                                                                 w=1.0)),
+                                                covariance=covariance))
+
+
+def _pose_batch(arrivals: dict[int, list[tuple[str, object]]]):
+    """A BatchPolicy whose ``take_estimates`` files, at its n-th call, the estimates ``arrivals[n]`` lists (what
+    DDS would have delivered by then); returns it, its counts and the calls made."""
+    counts, calls = Counter(), []
+
+    def take() -> None:
+        calls.append(len(calls))
+        for name, msg in arrivals.get(len(calls) - 1, []):
+            batch.pose_histories[name].add(msg)
+
+    batch = BatchPolicy(ROBOTS, scenario=SOCCER, settings=SOCCER.game_settings(1, "discrete"), seed=3, greedy=True,
+                        pose_max_age=0.5, counts=counts, log=Said(), take_estimates=take,
+                        empty_period=lambda frames: [])
+    return batch, counts, calls
+
+
+def _periods(last_ns: int):
+    """Both robots' periods of five frames 0.1 s apart, the last at ``last_ns``."""
+    return [[_frame(1, 3, k, last_ns - (FRAMES - 1 - k) * 100 * MS) for k in range(FRAMES)] for _ in ROBOTS]
+
+
+def test_an_estimate_still_on_its_way_is_waited_for_and_used():
+    """The frame came before its estimate (another topic): the robots' estimates of the frame before are within
+    pose_max_age, so the decision takes what arrives until the frame's own are in, and uses those (x = 2.0 m, team
+    A's frame; team B's turned by π: x = −2.0)."""
+    before = [(name, _estimate(1.0, 400 * MS)) for name in ROBOTS]
+    batch, counts, calls = _pose_batch({0: before, 3: [(name, _estimate(2.0, 500 * MS)) for name in ROBOTS]})
+    rows = batch.pose_rows(_periods(500 * MS))
+    assert len(calls) == 4 and counts["pose_used"] == 2 and counts["pose_late"] == 0
+    assert rows[:, 0].tolist() == [2.0, -2.0]
+
+
+def test_the_first_period_waits_for_one_estimate_a_frame_of_its_repeated_instant():
+    """The simulator's first period repeats one instant in all five frames, one estimate each: the decision waits
+    for the fifth (x = 5.0 m), not the first of that stamp."""
+    arrivals = {k: [(name, _estimate(float(k + 1), 0)) for name in ROBOTS] for k in range(FRAMES)}
+    batch, counts, calls = _pose_batch(arrivals)
+    rows = batch.pose_rows([[_frame(1, 0, k, 0) for k in range(FRAMES)] for _ in ROBOTS])
+    assert len(calls) == FRAMES and rows[:, 0].tolist() == [5.0, -5.0] and counts["pose_late"] == 0
+
+
+def test_a_wait_ends_without_the_estimate_and_no_estimator_means_no_wait():
+    """An estimate that never comes: the decision gives up (counted pose_late) and uses the one before, still
+    within pose_max_age. No estimate ever, or only a stale one: nothing to wait for (one take), the row is lost."""
+    batch, counts, calls = _pose_batch({0: [(name, _estimate(1.0, 400 * MS)) for name in ROBOTS]})
+    rows = batch.pose_rows(_periods(500 * MS))
+    assert counts["pose_late"] == 1 and counts["pose_used"] == 2 and len(calls) > 1
+    assert rows[:, 0].tolist() == [1.0, -1.0]
+    for arrivals in ({}, {0: [(name, _estimate(1.0, 0)) for name in ROBOTS]}):        # none; 0.5 s + 1 ns old
+        batch, counts, calls = _pose_batch(arrivals)
+        batch.pose_rows(_periods(500 * MS + 1))
+        assert len(calls) == 1 and counts["pose_late"] == 0
+        assert counts["pose_missing"] + counts["pose_stale"] == 2
