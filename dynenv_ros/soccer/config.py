@@ -15,6 +15,7 @@ from dynenv_ros.sim.timing import Rates
 from dynenv_ros.soccer.field import FieldGeometry
 
 MAX_PLAYERS_PER_TEAM = 5
+SCENARIO_SOCCER = 0                        # WorldState.SCENARIO_SOCCER
 
 
 def robot_names(players_per_team: int) -> list[str]:
@@ -175,4 +176,4 @@ class SoccerConfig:
 
 
 __all__ = ["robot_names", "SoccerConfig", "MotionConfig", "KickConfig", "FallConfig", "PenaltyConfig", "BallConfig",
-           "RewardConfig", "MAX_PLAYERS_PER_TEAM", "replace"]
+           "RewardConfig", "MAX_PLAYERS_PER_TEAM", "SCENARIO_SOCCER", "replace"]
