@@ -18,6 +18,12 @@ MAX_PLAYERS_PER_TEAM = 5
 SCENARIO_SOCCER = 0                        # WorldState.SCENARIO_SOCCER
 
 
+def is_soccer_world(code: int) -> bool:
+    """Whether a WorldState's (a snapshot's) ``scenario`` code is soccer's: what reads only soccer's ground truth
+    (the GameController's view of the game) refuses another world's."""
+    return code == SCENARIO_SOCCER
+
+
 def robot_names(players_per_team: int) -> list[str]:
     """Robot names, also PettingZoo agent names and ROS namespaces: team A's slots, then team B's (index = id)."""
     return [f"team_{team}_{slot}" for team in "ab" for slot in range(players_per_team)]
@@ -176,4 +182,4 @@ class SoccerConfig:
 
 
 __all__ = ["robot_names", "SoccerConfig", "MotionConfig", "KickConfig", "FallConfig", "PenaltyConfig", "BallConfig",
-           "RewardConfig", "MAX_PLAYERS_PER_TEAM", "SCENARIO_SOCCER", "replace"]
+           "RewardConfig", "MAX_PLAYERS_PER_TEAM", "SCENARIO_SOCCER", "is_soccer_world", "replace"]
