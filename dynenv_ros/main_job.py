@@ -50,7 +50,9 @@ POLICIES = ("keeper_and_chasers", "chaser", "random", "perceiving")
 # Scripted teams that play on their robots' detections and pose estimates (policy_node/perceiving_policy.py), not
 # on /world_state: the simulator's self-localization must be on for them.
 PERCEIVING = ("perceiving",)
-SCENARIOS = ("robocup", "driving")
+SCENARIOS = ("robocup", "driving")        # each with its game (GAMES)
+# The graph that plays one game of the chosen scenario (GAMES), named for the first one it played.
+GAME_GRAPH = "soccer"
 INTERFACES = ("dynenv", "ros_sports")
 ACTION_MODES = ("discrete", "continuous")
 PERCEPTION_PRESETS = ("realistic", "dynenv", "none")
@@ -74,7 +76,7 @@ def choose_domain(domain_id: int, environ: dict[str, str]) -> tuple[int, bool, s
 
 @dataclass(frozen=True)
 class MainJobConfig:
-    graph: str = "soccer"
+    graph: str = GAME_GRAPH
     scenario: str = "robocup"        # soccer graph: robocup (soccer) or driving
     seed: int = 0
     samples_per_type: int = 5        # selfcheck graph
@@ -146,11 +148,12 @@ class MainJobConfig:
             raise ConfigError(f"episode_seconds must be in [1, 600], got {self.episode_seconds}")
         if self.policy not in POLICIES:
             raise ConfigError(f"policy must be one of {POLICIES}, got {self.policy!r}")
-        if self.policy in PERCEIVING and not self.localization and self.scenario == "robocup":
-            raise ConfigError(f"policy {self.policy} plays on the robots' pose estimates: it needs "
-                              "localization=true (the simulator's self-localization)")
         if self.scenario not in SCENARIOS:
             raise ConfigError(f"scenario must be one of {SCENARIOS}, got {self.scenario!r}")
+        game = GAMES[self.scenario]      # a check of settings only one scenario's game uses is that game's alone
+        if self.policy in PERCEIVING and not self.localization and game.uses("policy"):
+            raise ConfigError(f"policy {self.policy} plays on the robots' pose estimates: it needs "
+                              "localization=true (the simulator's self-localization)")
         if not 1 <= self.n_cars <= 10:
             raise ConfigError(f"n_cars must be in [1, 10], got {self.n_cars}")
         if self.action_mode not in ACTION_MODES:
@@ -162,10 +165,10 @@ class MainJobConfig:
                               f"{self.foxglove_port}")
         if self.interfaces not in INTERFACES:
             raise ConfigError(f"interfaces must be one of {INTERFACES}, got {self.interfaces!r}")
-        if self.interfaces == "ros_sports" and self.team_a == "scripted" and self.scenario == "robocup":
+        if self.interfaces == "ros_sports" and self.team_a == "scripted" and game.uses("interfaces"):
             raise ConfigError("interfaces ros_sports runs team A's policy node through the ros-sports messages: "
                               "team_a must be a policy file, not 'scripted'")
-        if self.car_0 == SHIPPED_DRIVING_POLICY and self.action_mode != "discrete" and self.scenario == "driving":
+        if self.car_0 == SHIPPED_DRIVING_POLICY and self.action_mode != "discrete" and game.uses("car_0"):
             raise ConfigError("car_0: the shipped driving policy takes discrete actions; with action_mode "
                               "continuous set car_0=scripted or a continuous policy file")
 
@@ -224,10 +227,10 @@ SETTINGS_HELP: dict[str, tuple[str, tuple[str, ...]]] = {
                       "score on ws://127.0.0.1:PORT; -1 off, 0 any free port (the simulator's log names it), "
                       "1..65535 that port", ("soccer",)),
 }
-# Settings of the soccer graph that only one scenario uses (a --set for the other scenario is refused).
-SCENARIO_SETTINGS: dict[str, str] = {"players_per_team": "robocup", "policy": "robocup", "team_a": "robocup",
-                                     "localization": "robocup", "greedy": "robocup", "interfaces": "robocup",
-                                     "n_cars": "driving", "action_mode": "driving", "car_0": "driving"}
+# Settings of the soccer graph that only one scenario's game uses (``Game.settings``; a --set for another scenario
+# is refused).
+ROBOCUP_SETTINGS = ("players_per_team", "policy", "team_a", "localization", "greedy", "interfaces")
+DRIVING_SETTINGS = ("n_cars", "action_mode", "car_0")
 
 
 def check_overrides_apply(config: "MainJobConfig", overrides: dict[str, Any]) -> None:
@@ -236,8 +239,9 @@ def check_overrides_apply(config: "MainJobConfig", overrides: dict[str, Any]) ->
     if unused:
         used = sorted(k for k, (_, graphs) in SETTINGS_HELP.items() if config.graph in graphs)
         raise ConfigError(f"--set {', '.join(unused)}: not used by graph '{config.graph}' (it uses {used})")
-    if config.graph == "soccer":
-        other = sorted(k for k in overrides if SCENARIO_SETTINGS.get(k, config.scenario) != config.scenario)
+    if config.graph == GAME_GRAPH:
+        game = GAMES[config.scenario]
+        other = sorted(k for k in overrides if k in SCENARIO_SETTINGS and not game.uses(k))
         if other:
             raise ConfigError(f"--set {', '.join(other)}: not used by scenario '{config.scenario}' (set "
                               f"scenario={SCENARIO_SETTINGS[other[0]]} for it)")
@@ -516,12 +520,26 @@ class Graph:
     summarise: Callable[[GraphOutcome, Path, MainJobConfig], bool]
 
 
-# The game graph ('soccer') of each scenario, by the spelling MainJobConfig.scenario takes: this launcher keeps the
-# registry (which imports torch) out of its start-up (docs/decisions.md, "A scenario registry").
-GAMES: dict[str, Graph] = {"robocup": Graph(robocup_graph, summarise_robocup),
-                           "driving": Graph(driving_graph, summarise_driving)}
+@dataclass(frozen=True)
+class Game(Graph):
+    """One scenario's game on the game graph: its nodes and summary, the settings only it uses, and whether the
+    start-up line names the scenario (the graph's name says soccer already)."""
+    settings: tuple[str, ...]
+    announced: bool
 
-GRAPHS: dict[str, Graph] = {"soccer": Graph(soccer_graph, summarise_soccer),
+    def uses(self, key: str) -> bool:
+        """Whether ``key`` is one of the settings only this game uses (``SCENARIO_SETTINGS``)."""
+        return key in self.settings
+
+
+# The game graph's game of each scenario, by the spelling MainJobConfig.scenario takes: this launcher keeps the
+# registry (which imports torch) out of its start-up (docs/decisions.md, "A scenario registry").
+GAMES: dict[str, Game] = {"robocup": Game(robocup_graph, summarise_robocup, ROBOCUP_SETTINGS, announced=False),
+                          "driving": Game(driving_graph, summarise_driving, DRIVING_SETTINGS, announced=True)}
+# The scenario whose game uses each of those settings (for the error naming it).
+SCENARIO_SETTINGS: dict[str, str] = {key: name for name, game in GAMES.items() for key in game.settings}
+
+GRAPHS: dict[str, Graph] = {GAME_GRAPH: Graph(soccer_graph, summarise_soccer),
                             "train": Graph(train_graph, summarise_train),
                             "selfcheck": Graph(selfcheck_graph, summarise_selfcheck)}
 
@@ -562,9 +580,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"dynenv-run: configuration error: {error}", file=sys.stderr)
         return 2
     graph = GRAPHS[config.graph]
-    played = f" (scenario '{config.scenario}')" if config.graph == "soccer" and config.scenario != "robocup" else ""
+    announced = config.graph == GAME_GRAPH and GAMES[config.scenario].announced
+    played = f" (scenario '{config.scenario}')" if announced else ""
     print(f"dynenv-run: graph '{config.graph}'{played} on ROS domain {domain_id} ({why}); logs in {run_dir}")
-    if config.graph == "soccer" and config.foxglove_port >= 0:
+    if config.graph == GAME_GRAPH and config.foxglove_port >= 0:
         where = (f"ws://127.0.0.1:{config.foxglove_port}" if config.foxglove_port else
                  f"the port the simulator's log ({run_dir}/sim_node.log) names")
         print(f"  live view: open {where} in the Foxglove app (Open connection → Foxglove WebSocket), layout "

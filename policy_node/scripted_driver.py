@@ -20,7 +20,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 
 from dynenv_ros.driving.cars import discrete_action
-from dynenv_ros.driving.config import MAX_CARS, DrivingConfig, car_names
+from dynenv_ros.driving.config import MAX_CARS, DrivingConfig, car_names, is_driving_world
 from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.ros import conversions as cv
 from dynenv_ros.ros import topics
@@ -71,7 +71,7 @@ class ScriptedDriverNode(Node):
         return (episode, stamp.sec, stamp.nanosec)
 
     def _on_truth(self, msg: WorldState) -> None:
-        if msg.scenario != WorldState.SCENARIO_DRIVING:
+        if not is_driving_world(msg.scenario):
             self.get_logger().error("the ground truth is not a driving world: is the simulator's scenario "
                                     "'driving'?", throttle_duration_sec=5.0)
             return

@@ -234,6 +234,15 @@ def test_scripted_driver_refuses_unknown_cars(make_node):
         make_node(ScriptedDriverNode, parameter_overrides=[Parameter("cars", value=["car_5"])])
 
 
+def test_scripted_driver_keeps_only_a_driving_worlds_ground_truth(make_node):
+    from policy_node.scripted_driver import ScriptedDriverNode
+    driver = make_node(ScriptedDriverNode, parameter_overrides=[Parameter("n_cars", value=2)])
+    driver._on_truth(WorldState(scenario=WorldState.SCENARIO_SOCCER, episode_id=1))
+    assert len(driver._truth) == 0               # refused (logged): it is not a driving world's
+    driver._on_truth(WorldState(scenario=WorldState.SCENARIO_DRIVING, episode_id=1))
+    assert list(driver._truth) == [(1, 0, 0)]
+
+
 def test_realtime_driving_publishes_one_frame_a_period_in_sim_time(make_node, executor):
     sim = _sim(make_node, mode="realtime", real_time_factor=10.0, missing_action="hold")
     executor.add_node(sim)

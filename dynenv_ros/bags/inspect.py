@@ -41,7 +41,6 @@ import numpy as np
 from dynenv_ros.bags.messages import detection_rows, json_safe, snapshot_from_msg, stamp_ns, to_plain
 from dynenv_ros.bags.recovery import RecoveryError, bag_mcap, check, reindex, repaired_copy
 from dynenv_ros.bags.typestore import dynenv_typestore
-from dynenv_ros.core.object_classes import ObjectClass
 
 WORLD_STATE_TYPE = "dynenv_msgs/msg/WorldState"
 DETECTION_ARRAY_TYPE = "dynenv_msgs/msg/DetectionArray"
@@ -339,15 +338,11 @@ def _connections_of_type(reader: Any, msgtype: str) -> list[Any]:
     return [c for c in reader.connections if c.msgtype == msgtype]
 
 
-RENDER_DEFAULT_PPM = {"robocup": 40.0, "driving": 4.0}     # the soccer field is 10.4 m wide, the driving map 182 m
-
-
-def _scenario_of(reader: Any, worlds: list[Any]) -> str:
-    """'robocup' or 'driving', from the first WorldState's ``scenario`` field."""
+def _world_code(reader: Any, worlds: list[Any]) -> int | None:
+    """The first WorldState's ``scenario`` code (None if there is none)."""
     for connection, _, raw in reader.messages(connections=worlds):
-        scenario = int(reader.deserialize(raw, connection.msgtype).scenario)
-        return "driving" if scenario == 1 else "robocup"       # WorldState.SCENARIO_DRIVING
-    return "robocup"
+        return int(reader.deserialize(raw, connection.msgtype).scenario)
+    return None
 
 
 def render(path: str | os.PathLike[str], out: str | os.PathLike[str], *, robot: str | None = None,
@@ -356,9 +351,9 @@ def render(path: str | os.PathLike[str], out: str | os.PathLike[str], *, robot: 
     """Replay the bag's WorldState messages as a top-down GIF; with ``robot`` (a namespace such as "team_a_0" or
     "car_0"), overlay the detections that robot reported at the same sim time. Returns the number of frames.
 
-    The scenario is the first WorldState's: soccer is drawn on the default FieldGeometry, driving with
-    ``render/driving.py`` on the default driving map (a bag carries neither). ``pixels_per_metre`` defaults to
-    40 (soccer) or 4 (driving). Frames are kept in memory until the GIF is written; ``stride`` renders every k-th
+    The world is the first WorldState's, drawn by its replay (``render.replay``): soccer on the default
+    FieldGeometry, driving with ``render/driving.py`` on the default driving map (a bag carries neither).
+    ``pixels_per_metre`` defaults to the replay's, 40 (soccer) or 4 (driving). Frames are kept in memory until the GIF is written; ``stride`` renders every k-th
     world state for long bags. The options are bounded (RENDER_* above): the scale, the image's sides and the
     memory all frames take, checked before anything is drawn.
     """
@@ -374,21 +369,11 @@ def render(path: str | os.PathLike[str], out: str | os.PathLike[str], *, robot: 
         worlds = _connections_of_type(reader, WORLD_STATE_TYPE)
         if not worlds:
             raise BagError(f"the bag has no {WORLD_STATE_TYPE} messages to render")
-        scenario = _scenario_of(reader, worlds)
-        ppm = RENDER_DEFAULT_PPM[scenario] if pixels_per_metre is None else pixels_per_metre
-        if scenario == "driving":
-            from dynenv_ros.driving.roads import DrivingMap
-            from dynenv_ros.render.driving import DrivingRecorder, overlay_driving_detections
-            recorder: Any = DrivingRecorder(DrivingMap(), pixels_per_metre=ppm)
-            view = recorder.view
-        else:
-            from dynenv_ros.render.detections import field_view, overlay_detections
-            from dynenv_ros.render.topdown import EpisodeRecorder
-            from dynenv_ros.soccer.field import FieldGeometry
-            geometry = FieldGeometry()
-            view = field_view(geometry, ppm)
-            recorder = EpisodeRecorder(geometry, pixels_per_metre=ppm)
-        width, height = view.size
+        from dynenv_ros.render.replay import replay_of
+        world = replay_of(_world_code(reader, worlds))
+        ppm = world.default_pixels_per_metre if pixels_per_metre is None else pixels_per_metre
+        replay = world(ppm)
+        width, height = replay.view.size
         if max(width, height) > RENDER_MAX_SIDE_PX:
             raise BagError(f"--pixels-per-metre {ppm:g} makes {width}x{height} px frames; at most "
                            f"{RENDER_MAX_SIDE_PX} px a side (lower --pixels-per-metre)")
@@ -416,33 +401,20 @@ def render(path: str | os.PathLike[str], out: str | os.PathLike[str], *, robot: 
             if seen % stride == 0:
                 world_states.append((stamp_ns(message.header.stamp), snapshot_from_msg(message)))
             seen += 1
-    observer_class = ObjectClass.CAR if scenario == "driving" else ObjectClass.ROBOT
     for stamp, snapshot in world_states:
-        if scenario == "driving":
-            frame = recorder.render(snapshot)
-        else:
-            balls = snapshot.of_class(ObjectClass.BALL)
-            recorder.ball_radius = balls[0].size_x / 2 if balls and balls[0].size_x > 0 else 0.05
-            frame = recorder.add(snapshot)
+        frame = replay.draw(snapshot)
         detections = pending_detections.get(stamp)
         if robot is not None and detections is not None:
             observer = next((o for o in snapshot.objects if o.id == detections.robot_id
-                             and o.class_id == observer_class), None)
+                             and o.class_id == replay.observer_class), None)
             if observer is not None:
                 team = -1 if observer.team == -1 else 1
-                rows = detection_rows(detections.detections)
-                if scenario == "driving":
-                    overlay_driving_detections(frame, view, (observer.x, observer.y, observer.yaw), rows,
-                                               observer_team=team)
-                else:
-                    pose = (observer.x, observer.y, observer.yaw + float(detections.head_yaw))
-                    overlay_detections(frame, view, pose, rows, observer_team=team)
-        if scenario == "driving":
-            recorder.add(frame)
+                replay.overlay(frame, observer, detections, detection_rows(detections.detections), team)
+        replay.keep(frame)
     target = Path(out)
     target.parent.mkdir(parents=True, exist_ok=True)
-    recorder.save_gif(target, fps=fps)
-    return len(recorder)
+    replay.save_gif(target, fps=fps)
+    return len(replay)
 
 
 # -------------------------------------------------------------------------------------------------------------- export

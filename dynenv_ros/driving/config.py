@@ -30,6 +30,12 @@ SCENARIO_DRIVING = 1                       # WorldState.SCENARIO_DRIVING
 ACTION_MODES = ("discrete", "continuous")
 
 
+def is_driving_world(code: int) -> bool:
+    """Whether a WorldState's (a snapshot's) ``scenario`` code is driving's: what reads only driving's ground truth
+    (the scripted drivers) refuses another world's."""
+    return code == SCENARIO_DRIVING
+
+
 def car_names(n_cars: int) -> list[str]:
     """Car names, also agent names and ROS namespaces (index = car id)."""
     return [f"car_{i}" for i in range(n_cars)]
@@ -338,4 +344,4 @@ def _float_tuple(name: str, value: Any, length: int | None = None) -> tuple[floa
 
 
 __all__ = ["DrivingConfig", "MapConfig", "CarConfig", "PedestrianConfig", "ObstacleConfig", "RewardConfig",
-           "MAX_CARS", "PX", "SCENARIO_DRIVING", "ACTION_MODES", "car_names"]
+           "MAX_CARS", "PX", "SCENARIO_DRIVING", "ACTION_MODES", "car_names", "is_driving_world"]

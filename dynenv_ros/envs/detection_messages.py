@@ -74,9 +74,14 @@ def pack_messages(periods: list[list[Any]], previous: list[tuple], max_landmarks
         layout = PaddedLayout(layout.frames, min(layout.max_landmarks, MAX_SLOTS), min(layout.max_objects, MAX_SLOTS),
                               spec)
     observation, dropped = pack_frames(layout, frames)
-    if spec.scenario == "driving":
-        _driving_side(observation, frames, periods, previous, stats)
-        return observation, int(dropped.sum())
+    SIDES[spec.scenario](observation, frames, periods, previous, stats)
+    return observation, int(dropped.sum())
+
+
+def _soccer_side(observation: dict[str, np.ndarray], frames: list[list[np.ndarray]], periods: list[list[Any]],
+                 previous: list[tuple], stats: Counter | None) -> None:
+    """Soccer's proprioception (each frame's head yaw, fallen, penalized, kicking), game (the GameController's
+    values at the last frame) and previous action."""
     for b, period in enumerate(periods):
         for k, msg in enumerate(period):
             observation["proprioception"][b, k] = (_finite(msg.head_yaw, stats), msg.self_fallen,
@@ -87,7 +92,6 @@ def pack_messages(periods: list[list[Any]], previous: list[tuple], max_landmarks
                                   _finite(getattr(last, "ball_owner_seconds", 0.0), stats),
                                   _finite(getattr(last, "game_seconds_remaining", 0.0), stats))
         observation["previous_action"][b] = previous[b]
-    return observation, int(dropped.sum())
 
 
 def _driving_side(observation: dict[str, np.ndarray], frames: list[list[np.ndarray]], periods: list[list[Any]],
@@ -104,3 +108,8 @@ def _driving_side(observation: dict[str, np.ndarray], frames: list[list[np.ndarr
                 stats["self_missing"] += 1
         observation["game"][b] = (_finite(getattr(period[-1], "game_seconds_remaining", 0.0), stats),)
         observation["previous_action"][b] = previous[b]
+
+
+# What each layout (``LayoutSpec.scenario``) reads from the messages besides the detection rows: a new layout adds a
+# row (one lookup where there was a branch: docs/decisions.md, "A scenario registry").
+SIDES = {"soccer": _soccer_side, "driving": _driving_side}

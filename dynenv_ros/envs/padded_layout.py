@@ -90,6 +90,7 @@ class LayoutSpec:
     action_columns: tuple[str, ...]
     action_low: tuple[float, ...]
     action_high: tuple[float, ...]
+    pose_estimate: bool = False    # the layout may also carry the self-localization estimate (PaddedLayout.pose)
     # Stream of each class id: 0 the first stream, 1 the second, -1 neither (derived from ``streams``).
     stream_of_class: np.ndarray = field(init=False, repr=False, compare=False, hash=False)
 
@@ -128,7 +129,7 @@ SOCCER = LayoutSpec(
                StreamSpec("objects", "object_mask", tuple(int(c) for c in OBJECT_CLASSES))),
     FEATURE_BOUND, PROPRIOCEPTION_COLUMNS, (-math.pi,) * 4, (math.pi,) * 4,
     GAME_COLUMNS, (-1.0, 0.0, 0.0), (1.0, GAME_BOUND, GAME_BOUND),
-    ACTION_COLUMNS, (0.0, 0.0, 0.0, -math.pi), (4.0, 2.0, 2.0, math.pi))
+    ACTION_COLUMNS, (0.0, 0.0, 0.0, -math.pi), (4.0, 2.0, 2.0, math.pi), pose_estimate=True)
 STREAM_OF_CLASS = SOCCER.stream_of_class     # soccer's: 0 landmarks, 1 objects, -1 neither
 
 
@@ -138,7 +139,8 @@ class PaddedLayout:
     max_landmarks: int = DEFAULT_MAX_LANDMARKS      # the first (static) stream's maximum
     max_objects: int = 2 * 2 + EXTRA_OBJECT_SLOTS   # the second (dynamic) stream's maximum
     spec: LayoutSpec = SOCCER
-    pose: bool = False          # soccer: the ``pose_estimate`` key too (``envs.pose_features``), last in ``keys``
+    pose: bool = False          # the ``pose_estimate`` key too (``envs.pose_features``; a spec with ``pose_estimate``:
+                                # soccer's), last in ``keys``
 
     def __post_init__(self) -> None:
         for name in ("frames", "max_landmarks", "max_objects"):
@@ -149,7 +151,7 @@ class PaddedLayout:
             raise ValueError(f"PaddedLayout.spec must be a LayoutSpec, got {self.spec!r}")
         if not isinstance(self.pose, bool):
             raise ValueError(f"PaddedLayout.pose must be True or False, got {self.pose!r}")
-        if self.pose and self.spec.scenario != "soccer":
+        if self.pose and not self.spec.pose_estimate:
             raise ValueError(f"PaddedLayout.pose: the pose estimate is soccer's, not {self.spec.scenario!r}'s")
 
     @property

@@ -20,7 +20,7 @@ import json
 import sys
 from collections import Counter
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -30,7 +30,7 @@ from dynenv_ros.soccer.scripted import act_all, team_policies
 from dynenv_ros.soccer.world import SoccerWorld
 
 POLICIES = ("keeper_and_chasers", "chaser", "random")
-SCENARIOS = ("robocup", "driving")
+SCENARIOS = ("robocup", "driving")       # --scenario's choices, each with its game (GAMES)
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -56,8 +56,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 
 def play(args: argparse.Namespace) -> dict:
-    if args.scenario == "driving":
-        return play_driving(args)
+    """The game of ``args.scenario`` played to its end (``GAMES``): its summary."""
+    return GAMES[args.scenario].play(args)
+
+
+def play_soccer(args: argparse.Namespace) -> dict:
+    """Both teams scripted until the game ends; score, events and each robot's reward terms."""
     seconds = 120.0 if args.seconds is None else args.seconds
     if args.pixels_per_metre is None:
         args.pixels_per_metre = 40.0
@@ -231,20 +235,38 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     if args.json:
         print(json.dumps(summary))
-    elif args.scenario == "driving":
-        print(f"{summary['home']} of {summary['cars']} cars home, {summary['crashed']} crashed after "
-              f"{summary['seconds']} s")
-        for kind, count in summary["events"].items():
-            print(f"  {kind}: {count}")
-        for term, values in summary["reward_per_car"].items():
-            print(f"  {term:<12} " + " ".join(f"{v:8.2f}" for v in values))
     else:
-        print(f"score {summary['score'][0]}:{summary['score'][1]} after {summary['seconds']} s")
-        for kind, count in summary["events"].items():
-            print(f"  {kind}: {count}")
-        for term, values in summary["reward_per_robot"].items():
-            print(f"  {term:<12} " + " ".join(f"{v:8.2f}" for v in values))
+        GAMES[args.scenario].report(summary)
     return 0
+
+
+def report_soccer(summary: dict) -> None:
+    """A soccer game's summary in lines: the score, the events, each robot's reward terms."""
+    print(f"score {summary['score'][0]}:{summary['score'][1]} after {summary['seconds']} s")
+    for kind, count in summary["events"].items():
+        print(f"  {kind}: {count}")
+    for term, values in summary["reward_per_robot"].items():
+        print(f"  {term:<12} " + " ".join(f"{v:8.2f}" for v in values))
+
+
+def report_driving(summary: dict) -> None:
+    """A drive's summary in lines: cars home and crashed, the events, each car's reward terms."""
+    print(f"{summary['home']} of {summary['cars']} cars home, {summary['crashed']} crashed after "
+          f"{summary['seconds']} s")
+    for kind, count in summary["events"].items():
+        print(f"  {kind}: {count}")
+    for term, values in summary["reward_per_car"].items():
+        print(f"  {term:<12} " + " ".join(f"{v:8.2f}" for v in values))
+
+
+class Game(NamedTuple):
+    """What dynenv-play does for one ``--scenario``: play its game, and print its summary (without ``--json``)."""
+    play: Callable[[argparse.Namespace], dict]
+    report: Callable[[dict], None]
+
+
+# The game of each --scenario choice (SCENARIOS): a new scenario adds a row.
+GAMES = {"robocup": Game(play_soccer, report_soccer), "driving": Game(play_driving, report_driving)}
 
 
 if __name__ == "__main__":

@@ -25,7 +25,8 @@ automatically; the last observation of a finished episode is returned separately
 ``DrivingVectorEnv`` is the same batch over driving worlds (``driving_v0``'s perception and its padded layout, with
 (E, A) axes over cars): the batch machinery (``InProcessBatch``, ``SubprocessBatch``, ``VectorEnv``) reads what is
 scenario-specific from the settings (``_Settings`` soccer, ``_DrivingSettings`` driving): the world, the observation
-builder, the action width and checks.
+builder, the action width and checks, and the batch that steps the worlds in one process (``InProcessBatch``
+soccer's, ``DrivingInProcessBatch`` driving's: its own arrays, first observations, reset and step).
 """
 from __future__ import annotations
 
@@ -139,6 +140,11 @@ class _Settings:
     def validate_actions(self, actions: Any, num_envs: int) -> Any:
         return validate_actions(actions, self.config, num_envs)
 
+    @property
+    def batch_type(self) -> type[InProcessBatch]:
+        """What steps these worlds in one process."""
+        return InProcessBatch
+
 
 @dataclass(frozen=True)
 class _DrivingSettings:
@@ -184,6 +190,10 @@ class _DrivingSettings:
     def validate_actions(self, actions: Any, num_envs: int) -> Any:
         return validate_driving_actions(actions, self.config, num_envs)
 
+    @property
+    def batch_type(self) -> type[InProcessBatch]:
+        return DrivingInProcessBatch
+
 
 def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     """Every array a batch writes, with a leading env axis: observations ``obs/<key>``, final observations
@@ -208,14 +218,14 @@ def _storage(settings: _Settings, num_envs: int) -> dict[str, tuple[tuple[int, .
     spec["terminated"] = ((E,), np.dtype(bool))
     spec["truncated"] = ((E,), np.dtype(bool))
     spec["dropped"] = ((E, A), np.dtype(np.int64))
-    if settings.scenario == "driving":
-        spec["agents_terminated"] = ((E, A), np.dtype(bool))
+    spec.update(settings.batch_type.own_arrays(E, A))
     return spec
 
 
 class InProcessBatch:
     """Worlds stepped one after another in this process, writing into ``arrays`` (see ``_storage``; each with a
-    leading axis of ``num_envs``). A worker process runs one of these over its slice of the shared arrays."""
+    leading axis of ``num_envs``). A worker process runs one of these over its slice of the shared arrays. Soccer's
+    worlds (team B played by the worlds themselves, learning targets); ``DrivingInProcessBatch`` driving's."""
 
     def __init__(self, num_envs: int, settings: _Settings, arrays: dict[str, np.ndarray] | None = None) -> None:
         if num_envs < 1:
@@ -223,7 +233,6 @@ class InProcessBatch:
         self.settings = settings
         self.config = settings.config
         self.padded = settings.observation == "padded"
-        self.driving = settings.scenario == "driving"
         self._scripted: list[Any] = []
         self._scripted_robots = range(0)
         # team B of every world played by the perceiving team: its own policies, since each remembers the ball
@@ -262,22 +271,26 @@ class InProcessBatch:
         self._targets = [{k: arrays["targets/" + k][e] for k in target_keys} or None for e in range(num_envs)]
         self._final_targets = [{k: arrays["final_targets/" + k][e] for k in target_keys} for e in range(num_envs)]
 
+    @staticmethod
+    def own_arrays(num_envs: int, n_agents: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        """The arrays only these worlds write, beyond every batch's (``_storage``)."""
+        return {}
+
     @property
     def num_envs(self) -> int:
         return len(self.worlds)
 
-    def _observe_initial(self, e: int) -> None:
+    def _write_initial(self, e: int) -> None:
+        """World ``e``'s first observation of an episode into its slice (its observer was just reset)."""
         world, obs = self.worlds[e], self.observers[e]
-        obs.reset(world)
-        if self.driving:
-            if self.padded:
-                obs.initial_padded(out=self._obs[e])
-            else:
-                self._obs[e][FULL_KEY][:] = self.settings.full_observations(obs, world)
-        elif self.padded:
+        if self.padded:
             obs.initial_padded(out=self._obs[e], targets=self._targets[e])
         else:
             self._obs[e][FULL_KEY][:] = obs.ground_truth.observations(world)
+
+    def _observe_initial(self, e: int) -> None:
+        self.observers[e].reset(self.worlds[e])
+        self._write_initial(e)
         if self.league is not None:
             self._team_b[e] = self.league.draw()
         for team in (self._perceiving, self._perceiving_chasers):
@@ -302,13 +315,9 @@ class InProcessBatch:
             world.reset(seed=seed)
             self._observe_initial(e)
         self.arrays["dropped"][:] = 0
-        if self.driving:
-            self.arrays["agents_terminated"][:] = False
 
     def step(self, actions: Any) -> None:
         """``actions`` already validated (``validate_actions``): one row of A actions per world."""
-        if self.driving:
-            return self._step_driving(actions)
         terms, dropped = self.arrays["reward_terms"], self.arrays["dropped"]
         terminated, truncated = self.arrays["terminated"], self.arrays["truncated"]
         for e, (world, obs, acts) in enumerate(zip(self.worlds, self.observers, actions)):
@@ -354,9 +363,30 @@ class InProcessBatch:
         """The league's per-member scores and shares ({} unless team B is the league)."""
         return {} if self.league is None else self.league.stats()
 
-    def _step_driving(self, actions: Any) -> None:
-        """Driving worlds: as ``step``, with driving_v0's per-car termination in ``agents_terminated`` (the world
-        itself ignores the actions of finished cars)."""
+    def close(self) -> None:
+        pass
+
+
+class DrivingInProcessBatch(InProcessBatch):
+    """Driving worlds stepped in this process: no team B and no learning targets; driving_v0's per-car termination
+    in ``agents_terminated`` (the world itself ignores the actions of finished cars)."""
+
+    @staticmethod
+    def own_arrays(num_envs: int, n_agents: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        return {"agents_terminated": ((num_envs, n_agents), np.dtype(bool))}
+
+    def _write_initial(self, e: int) -> None:
+        world, obs = self.worlds[e], self.observers[e]
+        if self.padded:
+            obs.initial_padded(out=self._obs[e])
+        else:
+            self._obs[e][FULL_KEY][:] = self.settings.full_observations(obs, world)
+
+    def reset(self, seeds: list[int | None]) -> None:
+        super().reset(seeds)
+        self.arrays["agents_terminated"][:] = False
+
+    def step(self, actions: Any) -> None:
         terms, dropped, ended = self.arrays["reward_terms"], self.arrays["dropped"], self.arrays["agents_terminated"]
         terminated, truncated = self.arrays["terminated"], self.arrays["truncated"]
         discrete = self.config.action_mode == "discrete"
@@ -380,9 +410,6 @@ class InProcessBatch:
                 self._observe_initial(e)
             else:
                 self._label(e)
-
-    def close(self) -> None:
-        pass
 
 
 # -- actions -----------------------------------------------------------------------------------------------------
@@ -460,7 +487,7 @@ def _worker(conn: Connection, blocks: dict[str, tuple[str, tuple[int, ...], str]
         arrays = {key: np.ndarray(shape, np.dtype(dtype), buffer=shm.buf)[start:start + count]
                   for (key, (_, shape, dtype)), shm in zip(blocks.items(), attached)}
         actions = arrays.pop("actions")
-        batch = InProcessBatch(count, settings, arrays)
+        batch = settings.batch_type(count, settings, arrays)
         while True:
             try:
                 message = conn.recv_bytes()
@@ -561,7 +588,7 @@ class SubprocessBatch:
                 self._procs.append(proc)
                 start += self.sizes[s]
             if self.parent_envs:        # built while the workers start
-                self._local = InProcessBatch(self.parent_envs, settings, {
+                self._local = settings.batch_type(self.parent_envs, settings, {
                     key: array[:self.parent_envs] for key, array in self.arrays.items() if key != "actions"})
         except BaseException:
             self._finalizer()
@@ -643,7 +670,7 @@ class VectorEnv:
             backend = "subprocess" if num_envs >= AUTO_SUBPROCESS_MIN_ENVS[settings.observation] \
                 and len(os.sched_getaffinity(0)) > 1 else "inprocess"
         if backend == "inprocess":
-            self._batch: InProcessBatch | SubprocessBatch = InProcessBatch(num_envs, settings)
+            self._batch: InProcessBatch | SubprocessBatch = settings.batch_type(num_envs, settings)
         elif backend == "subprocess":
             self._batch = SubprocessBatch(num_envs, settings, workers, pin_workers, parent_steps)
         else:

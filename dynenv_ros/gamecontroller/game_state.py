@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dynenv_ros.core.object_classes import ObjectClass, ObjectStatus
 from dynenv_ros.gamecontroller import packet as gc
 from dynenv_ros.sim.ground_truth import WorldSnapshot
+from dynenv_ros.soccer.config import is_soccer_world
 from dynenv_ros.soccer.referee import Phase
 
 _STATES = {Phase.INITIAL: (gc.STATE_INITIAL, gc.SET_PLAY_NONE), Phase.KICKOFF: (gc.STATE_PLAYING, gc.SET_PLAY_NONE),
@@ -63,7 +64,7 @@ def game_control_data(snapshot: WorldSnapshot, *, players_per_team: int, team_nu
     ``team_numbers``: (team A's, team B's) SPL team numbers, distinct, 1 … 254 (255 means no team).
     ``penalties``: robot id → SPL penalty code of a penalized robot (``penalty_code`` of its reason); a penalized
     robot missing from it gets ``PENALTY_MANUAL``. ``packet_number`` wraps at 256."""
-    if snapshot.scenario != 0:
+    if not is_soccer_world(snapshot.scenario):
         raise ValueError("the GameController describes soccer only (WorldState.SCENARIO_SOCCER)")
     if not 1 <= players_per_team <= gc.MAX_NUM_PLAYERS:
         raise ValueError(f"players_per_team must be 1 … {gc.MAX_NUM_PLAYERS}, got {players_per_team}")

@@ -107,7 +107,7 @@ def overlay_detections(image: Image.Image, view: FieldView, observer_pose: tuple
             angle = observer_pose[2] + side * fov_half_angle
             draw.line((ox, oy, ox + reach * math.cos(angle), oy - reach * math.sin(angle)), fill=FOV, width=1)
     if legend and view.legend_height >= 2 * LEGEND_ROW:
-        draw_legend(image, (4, view.legend_row(1) - LEGEND_ROW / 2), observer_team=observer_team,
+        draw_legend(image, (4, view.legend_row(1) - LEGEND_ROW / 2), soccer_legend(observer_team),
                     height=LEGEND_ROW)
     for x, y in truth or ():
         _ring(draw, *view.field_to_pixel(x, y), max(MIN_MARKER_PX + 4, view.length_to_pixels(MISSED_RADIUS)),
@@ -161,25 +161,31 @@ def missed_positions(perception_visible: np.ndarray, detections: np.ndarray, obj
     return [(float(x[j]), float(y[j])) for j in missed]
 
 
-def draw_legend(image: Image.Image, origin: tuple[float, float], *, observer_team: int = 1,
-                height: int = 14, scenario: str = "robocup") -> Image.Image:
-    """One row of marker samples with names at ``origin`` (pixels), so a picture explains itself in the docs;
-    ``scenario`` 'robocup' or 'driving' picks the classes named."""
+LegendEntry = tuple[str, str, Colour]      # (marker kind: 'diamond' or 'line', label, colour)
+
+
+def soccer_legend(observer_team: int = 1) -> tuple[LegendEntry, ...]:
+    """The classes a soccer robot's detections are drawn as (``draw_legend``), in ``observer_team``'s colours."""
+    return (("diamond", "ball", BALL), ("diamond", "own", TEAM_COLOURS[observer_team]),
+            ("diamond", "opp.", TEAM_COLOURS[-observer_team]), ("diamond", "post", GOALPOST),
+            ("diamond", "mark", MARK), ("line", "line", LINE_DETECTION))
+
+
+def driving_legend(observer_team: int = 1) -> tuple[LegendEntry, ...]:
+    """The classes a car's detections are drawn as (``draw_legend``, for ``overlay_driving_detections``)."""
+    return (("diamond", "car: own team", TEAM_COLOURS[observer_team]),
+            ("diamond", "other", TEAM_COLOURS[-observer_team]), ("diamond", "pedestrian", PEDESTRIAN),
+            ("diamond", "obstacle", OBSTACLE), ("line", "lane", LINE_DETECTION))
+
+
+def draw_legend(image: Image.Image, origin: tuple[float, float], classes: Sequence[LegendEntry], *,
+                height: int = 14) -> Image.Image:
+    """One row of marker samples with names at ``origin`` (pixels), so a picture explains itself in the docs:
+    the world's ``classes`` (``soccer_legend``, ``driving_legend``), then the error marks."""
     draw = ImageDraw.Draw(image)
     font = ImageFont.load_default(size=max(8, height - 4))
     x, y = origin
     r = height / 2 - 2
-    if scenario == "robocup":
-        classes: Sequence[tuple[str, str, Colour]] = (
-            ("diamond", "ball", BALL), ("diamond", "own", TEAM_COLOURS[observer_team]),
-            ("diamond", "opp.", TEAM_COLOURS[-observer_team]), ("diamond", "post", GOALPOST),
-            ("diamond", "mark", MARK), ("line", "line", LINE_DETECTION))
-    elif scenario == "driving":
-        classes = (("diamond", "car: own team", TEAM_COLOURS[observer_team]),
-                   ("diamond", "other", TEAM_COLOURS[-observer_team]), ("diamond", "pedestrian", PEDESTRIAN),
-                   ("diamond", "obstacle", OBSTACLE), ("line", "lane", LINE_DETECTION))
-    else:
-        raise ValueError(f"scenario must be 'robocup' or 'driving', got {scenario!r}")
     entries = (*classes, ("cross", "false pos.", ERROR), ("ring", "confused", ERROR), ("missed", "missed", MISSED))
     for kind, label, colour in entries:
         cx, cy = x + r + 1, y + height / 2

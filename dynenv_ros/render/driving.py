@@ -290,7 +290,8 @@ def overlay_driving_detections(image: Image.Image, view: MapView, observer_pose:
     white ring ``truth``: visible but missed). ``SELF`` rows (the car's own odometry and destination) are not
     sightings and are skipped. ``view_radius`` (m) draws the 360° view's range as a circle.
     """
-    from dynenv_ros.render.detections import MISSED, draw_legend, overlay_detections   # perception only when used
+    from dynenv_ros.render.detections import (MISSED, draw_legend, driving_legend,  # perception only when used
+                                              overlay_detections)
     if view_radius is not None:
         if not (math.isfinite(view_radius) and view_radius > 0):
             raise ValueError(f"view_radius must be a positive number of metres, got {view_radius!r}")
@@ -303,8 +304,8 @@ def overlay_driving_detections(image: Image.Image, view: MapView, observer_pose:
     overlay_detections(image, view, observer_pose, rows, truth=truth, observer_team=observer_team,
                        fov_half_angle=None, legend=False)
     if legend and view.legend_height >= 2 * LEGEND_ROW:
-        draw_legend(image, (4, view.legend_row(1) - LEGEND_ROW / 2), observer_team=observer_team,
-                    height=LEGEND_ROW, scenario="driving")
+        draw_legend(image, (4, view.legend_row(1) - LEGEND_ROW / 2), driving_legend(observer_team),
+                    height=LEGEND_ROW)
     return image
 
 

@@ -15,6 +15,13 @@ from dynenv_ros.sim.timing import Rates
 from dynenv_ros.soccer.field import FieldGeometry
 
 MAX_PLAYERS_PER_TEAM = 5
+SCENARIO_SOCCER = 0                        # WorldState.SCENARIO_SOCCER
+
+
+def is_soccer_world(code: int) -> bool:
+    """Whether a WorldState's (a snapshot's) ``scenario`` code is soccer's: what reads only soccer's ground truth
+    (the GameController's view of the game) refuses another world's."""
+    return code == SCENARIO_SOCCER
 
 
 def robot_names(players_per_team: int) -> list[str]:
@@ -175,4 +182,4 @@ class SoccerConfig:
 
 
 __all__ = ["robot_names", "SoccerConfig", "MotionConfig", "KickConfig", "FallConfig", "PenaltyConfig", "BallConfig",
-           "RewardConfig", "MAX_PLAYERS_PER_TEAM", "replace"]
+           "RewardConfig", "MAX_PLAYERS_PER_TEAM", "SCENARIO_SOCCER", "is_soccer_world", "replace"]

@@ -18,13 +18,13 @@ from dynenv_ros.sim.physics import PhysicsWorld
 from dynenv_ros.sim.reward_terms import RewardLedger, RewardTerm
 from dynenv_ros.sim.scenario import FrameCallback, GameEvent, PeriodResult
 from dynenv_ros.soccer.actions import IDLE, Kick, SoccerAction, parse_action
+from dynenv_ros.soccer.config import SCENARIO_SOCCER as SCENARIO_SOCCER   # its home is the config's, kept here too
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.placement import free_spot, kickoff_poses, sideline_spots
 from dynenv_ros.soccer.referee import GameState, Phase, decide_out
 from dynenv_ros.soccer.rewards import share_ball_value
 from dynenv_ros.soccer.robot import BODY_RADIUS, Category, CollisionType, Robot
 
-SCENARIO_SOCCER = 0
 TEAM_A, TEAM_B = 1, -1
 _EPS = 1e-9
 
