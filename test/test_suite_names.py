@@ -103,6 +103,7 @@ COVERED_BY = {
     "dynenv_ros/perception/params.py": "test_perception_model.py",
     "dynenv_ros/perception/scene.py": "test_perception_geometry.py",
     "dynenv_ros/perception/soccer_kernels.py": "test_perception_geometry.py",
+    "dynenv_ros/render/replay.py": "test_bags.py",
     "dynenv_ros/ros/action_inbox.py": "test_sim_node_faults.py",
     "dynenv_ros/ros/authentication.py": "test_action_auth_graph.py",
     "dynenv_ros/ros/conversions.py": "test_cdr_fast_path.py",
