@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 from dynenv_msgs.msg import Action, WorldState
 
+from dynenv_ros.agent.export import policy_format
+from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.scenarios import DRIVING, SCENARIOS, SOCCER, get_scenario, scenario_names
 from dynenv_ros.soccer.agent_actions import head_index, head_radians
 
@@ -62,3 +64,24 @@ def test_head_index_and_radians_invert_each_other():
     np.testing.assert_array_equal(head_index(radians, 3, step), np.arange(7))
     # beyond the bound: clipped to the last index; between two: the nearer
     np.testing.assert_array_equal(head_index([-1.0, 1.0, 0.4 * step], 3, step), [0, 6, 3])
+
+
+def test_each_scenario_points_to_its_policy_format():
+    """The agent layer's row of each scenario (agent.export, below the registry) names it as the registry does:
+    the policy files' name and the nodes' parameter spelling."""
+    for scenario in SCENARIOS:
+        assert scenario.policy_format is policy_format(scenario.policy_metadata_name())
+        assert scenario.policy_format.scenario == scenario.name
+        assert scenario.policy_format.node_scenario == scenario.parameter_value
+    with pytest.raises(ValueError, match="scenario must be 'soccer' or 'driving', got 'robocup'"):
+        policy_format("robocup")        # a file's metadata names the canonical scenario only
+
+
+def test_an_evaluation_refuses_an_agent_of_the_other_scenario():
+    soccer, driving = DynEnvAgent(8), DynEnvAgent(8, scenario="driving")
+    assert SOCCER.evaluation_problem(soccer) == "" and DRIVING.evaluation_problem(driving) == ""
+    assert SOCCER.evaluation_problem(object()) == ""          # no scenario: an agent from before driving
+    assert SOCCER.evaluation_problem(driving) == ("is a driving policy; soccer needs a policy trained with scenario: "
+                                                  "robocup (evaluate it with --scenario driving)")
+    assert DRIVING.evaluation_problem(soccer) == ("is a soccer policy; driving needs a policy trained with scenario: "
+                                                  "driving (evaluate it with --scenario robocup)")

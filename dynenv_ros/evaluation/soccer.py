@@ -257,9 +257,10 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
     if spec in SCRIPTED_KINDS:
         return ScriptedTeam(spec)
     model, digest = load_evaluated_policy(spec)
-    if getattr(model, "scenario", "soccer") == "driving":
-        raise ValueError(f"{spec} is a driving policy; evaluate it with --scenario driving "
-                         f"(evaluation/driving.py)")
+    from dynenv_ros.scenarios import SOCCER         # here: torch is loaded with the policy, not with this module
+    problem = SOCCER.evaluation_problem(model)
+    if problem:
+        raise ValueError(f"{spec} {problem}")
     return AgentTeam(model, greedy=greedy, path=str(spec), sha256=digest)
 
 
