@@ -27,7 +27,7 @@ NAMES = r"(driving|robocup|soccer|robocup_v0)"
 BRANCH = re.compile(r"\b(if|elif|while|and|or) (not )?[\w.]*\bdriving\b|\bdriving (if|else)\b"
                     r"|scenario\b[)\]\"']* *[!=]=|[!=]= *[\"']" + NAMES + r"[\"']")
 GOAL = 10
-CEILING = 45
+CEILING = 26
 
 
 def code_lines(source: str) -> dict[int, str]:
