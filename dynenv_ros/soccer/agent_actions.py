@@ -26,7 +26,7 @@ def head_radians(index: Any, units: int, step: float | None = None, *, head_max:
     divides — how dynenv-eval has always turned a checkpoint's index into radians (the two orders differ in the
     last bit for some values)."""
     if (step is None) == (head_max is None):
-        raise ValueError("give the head's step or its head_max, not both")
+        raise ValueError("give one of the head's step and its head_max")
     if head_max is not None:
         return (index - units) * head_max / units
     return (index - units) * step
