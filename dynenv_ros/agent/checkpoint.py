@@ -31,7 +31,8 @@ import os
 import struct
 import tempfile
 from pathlib import Path
-from typing import Any, Mapping, cast
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, cast
 
 import torch
 from safetensors.torch import load as _st_load
@@ -207,15 +208,21 @@ def check_agent_config(config: Mapping[str, Any]) -> dict[str, Any]:
     if "feature_size" in config:
         _bounded_int(config, "feature_size", 1, MAX_FEATURE_SIZE)
     scenario = config.get("scenario", "soccer")
-    if scenario not in ("soccer", "driving"):
+    if not isinstance(scenario, str) or scenario not in _AGENT_CONFIGS:
         raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
-    if scenario == "driving":
-        extra = sorted(set(config) & set(SOCCER_ONLY_KEYS))
-        if extra:
-            raise ValueError(f"a driving agent has no head settings, got {extra}")
-        if config.get("action_mode") not in ("discrete", "continuous"):
-            raise ValueError(f"action_mode must be 'discrete' or 'continuous', got {config.get('action_mode')!r}")
-        return out
+    _AGENT_CONFIGS[scenario].check(config)
+    return out
+
+
+def _check_driving_config(config: Mapping[str, Any]) -> None:
+    extra = sorted(set(config) & set(SOCCER_ONLY_KEYS))
+    if extra:
+        raise ValueError(f"a driving agent has no head settings, got {extra}")
+    if config.get("action_mode") not in ("discrete", "continuous"):
+        raise ValueError(f"action_mode must be 'discrete' or 'continuous', got {config.get('action_mode')!r}")
+
+
+def _check_soccer_config(config: Mapping[str, Any]) -> None:
     if "action_mode" in config:
         raise ValueError("action_mode is a driving setting; a soccer agent's head has head_mode")
     if not isinstance(config.get("uses_pose", False), bool):
@@ -224,7 +231,6 @@ def check_agent_config(config: Mapping[str, Any]) -> dict[str, Any]:
                config.get("head_max", math.radians(37.5)))
     if config.get("head_mode") == "continuous" and "head_units" in config:
         _bounded_int(config, "head_units", 0, MAX_HEAD_UNITS)
-    return out
 
 
 def non_finite_tensors(tensors: Mapping[str, torch.Tensor]) -> list[str]:
@@ -247,8 +253,14 @@ def agent_config(model: DynEnvAgent) -> dict[str, Any]:
     """The ``DynEnvAgent`` constructor arguments that rebuild ``model``'s architecture (soccer: the four keys it
     always had, no ``scenario``, and ``uses_pose: True`` when it takes the pose estimate; driving: feature_size,
     scenario, action_mode)."""
-    if getattr(model, "scenario", "soccer") == "driving":
-        return {"feature_size": int(model.feature_size), "scenario": "driving", "action_mode": str(model.action_mode)}
+    return _AGENT_CONFIGS[getattr(model, "scenario", "soccer")].of(model)
+
+
+def _driving_config(model: DynEnvAgent) -> dict[str, Any]:
+    return {"feature_size": int(model.feature_size), "scenario": "driving", "action_mode": str(model.action_mode)}
+
+
+def _soccer_config(model: DynEnvAgent) -> dict[str, Any]:
     discrete = model.head_mode == "discrete"
     config = {"feature_size": int(model.feature_size), "head_mode": str(model.head_mode),
               "head_units": (model.head_head.out_features - 1) // 2 if discrete else 3,
@@ -256,6 +268,19 @@ def agent_config(model: DynEnvAgent) -> dict[str, Any]:
     if getattr(model, "uses_pose", False):      # only then: a file without the pose stays byte-identical
         config["uses_pose"] = True
     return config
+
+
+@dataclass(frozen=True)
+class AgentConfigRules:
+    """A scenario's part of a policy file's ``config``: ``of`` writes it for a model, ``check`` refuses a bad one
+    (after the keys and the feature size every scenario shares are checked)."""
+    of: Callable[[DynEnvAgent], dict[str, Any]]
+    check: Callable[[Mapping[str, Any]], None]
+
+
+# Each scenario's config, by its name (the registry, dynenv_ros.scenarios, sits above this layer).
+_AGENT_CONFIGS = {"soccer": AgentConfigRules(_soccer_config, _check_soccer_config),
+                  "driving": AgentConfigRules(_driving_config, _check_driving_config)}
 
 
 def policy_bytes(model: DynEnvAgent, meta: Mapping[str, Any] | None = None) -> bytes:

@@ -53,7 +53,9 @@ slots), ``object_*`` (cars, pedestrians, obstacles, UNKNOWN: ``max_objects`` slo
 (continuous), then ``value`` and the four next states — no pose. Both scenarios' metadata name their
 ``scenario`` (a file without it is soccer's), the ``layout`` (stream keys and classes, the proprioception, game and
 previous-action columns) and the ``actions`` (heads and sizes; driving's ``action_mode``), so a policy node can
-refuse a file of the other scenario with the reason before it acts.
+refuse a file of the other scenario with the reason before it acts. What differs between the two is each
+scenario's ``PolicyFormat`` (``SOCCER_FORMAT``, ``DRIVING_FORMAT``; ``policy_format(name)``), which the registry's
+``Scenario.policy_format`` points to.
 
 The graph is the network's own forward pass, traced: it skips work on padded slots (trailing all-padded slots are
 cut, each detection is embedded by its own class's block only) and computes the RTA's single-head attention in its
@@ -102,25 +104,7 @@ POSE_INPUT_NAME = "pose_estimate"            # after proprioception, when the po
 def io_names(scenario: str, action_mode: str | None = None, uses_pose: bool = False
              ) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """(input names, output names) of a scenario's exported graph (module docstring): 'soccer' or 'driving'."""
-    if scenario not in _IO_NAMES:
-        raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
-    return _IO_NAMES[scenario](action_mode, uses_pose)
-
-
-def _soccer_io_names(action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    if uses_pose:
-        at = INPUT_NAMES.index("proprioception") + 1
-        return INPUT_NAMES[:at] + (POSE_INPUT_NAME,) + INPUT_NAMES[at:], OUTPUT_NAMES
-    return INPUT_NAMES, OUTPUT_NAMES
-
-
-def _driving_io_names(action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    heads = (("acceleration_logits", "steering_logits") if action_mode == "discrete" else ("command",))
-    return DRIVING_INPUT_NAMES, (*heads, "value", *(name + "_out" for name in STATE_NAMES))
-
-
-# Each scenario's graph names, by its name (the registry, dynenv_ros.scenarios, sits above this layer).
-_IO_NAMES = {"soccer": _soccer_io_names, "driving": _driving_io_names}
+    return policy_format(scenario).io_names(action_mode, uses_pose)
 
 
 @dataclass
@@ -147,6 +131,179 @@ def _driving_step(outputs: list[torch.Tensor], action_mode: str) -> PolicyStep:
     return PolicyStep(None, None, None, None, rest[0], None, cast(State, tuple(rest[1:5])), **heads)
 
 
+# -- each scenario's format ----------------------------------------------------------------------------------------
+class PolicyFormat:
+    """One scenario's exported graph (module docstring) and what its policies are checked against: the graph's
+    input and output names and sizes, its default and accepted shapes, its metadata, how its outputs become a
+    ``PolicyStep``, the action settings a runtime reads from the metadata and the simulator's settings it must
+    match. ``policy_format(name)`` finds one; the registry's ``Scenario.policy_format`` is its scenario's."""
+    scenario: str            # DynEnvAgent's ``scenario`` and the metadata's
+    node_scenario: str       # how the nodes' ``scenario`` parameter spells it (``Scenario.parameter_value``)
+
+    def __repr__(self) -> str:
+        return f"<policy format {self.scenario}>"
+
+    def io_names(self, action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(input names, output names) of the graph of a policy with ``action_mode`` (driving's) and ``uses_pose``
+        (soccer's)."""
+        raise NotImplementedError
+
+    def shapes(self, frames: int | None, max_landmarks: int | None, max_objects: int | None
+               ) -> tuple[int, int, int]:
+        """(frames, static slots, dynamic slots) of an export: the defaults where None; ValueError for a frame
+        count the network cannot take."""
+        raise NotImplementedError
+
+    def graph_outputs(self, model: DynEnvAgent, step: Any) -> tuple[torch.Tensor, ...]:
+        """The graph's outputs of the model's step, in ``io_names`` order."""
+        raise NotImplementedError
+
+    def metadata(self, model: DynEnvAgent, frames: int, max_landmarks: int, max_objects: int) -> dict[str, Any]:
+        """The ``dynenv.policy`` metadata of the model's graph."""
+        raise NotImplementedError
+
+    def check_metadata(self, config: dict[str, Any]) -> None:
+        """ValueError unless the scenario's part of a file's metadata is within its bounds (``check_onnx_config``
+        checked the shared part)."""
+        raise NotImplementedError
+
+    def output_sizes(self, policy: OnnxPolicy) -> dict[str, tuple[int, ...]]:
+        """Each action output's size after the robot axis (every output the scenario's graphs may declare)."""
+        raise NotImplementedError
+
+    def runtime_heads(self, config: dict[str, Any]) -> tuple[str | None, str | None, int | None, float | None]:
+        """(action_mode, head_mode, head_units, head_max) of an ``OnnxPolicy`` from checked metadata: None where
+        the setting is the other scenario's."""
+        raise NotImplementedError
+
+    def step(self, outputs: list[torch.Tensor], policy: OnnxPolicy) -> PolicyStep:
+        """The graph's outputs (``io_names`` order) as a ``PolicyStep``."""
+        raise NotImplementedError
+
+    def mode_problem(self, policy: Any, action_mode: str | None) -> str:
+        """Why a policy of this scenario must not act under the simulator's ``action_mode`` ('' if it may;
+        ``check_scenario``)."""
+        return ""
+
+
+class SoccerFormat(PolicyFormat):
+    scenario = "soccer"
+    node_scenario = "robocup"
+
+    def io_names(self, action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        if uses_pose:
+            at = INPUT_NAMES.index("proprioception") + 1
+            return INPUT_NAMES[:at] + (POSE_INPUT_NAME,) + INPUT_NAMES[at:], OUTPUT_NAMES
+        return INPUT_NAMES, OUTPUT_NAMES
+
+    def shapes(self, frames: int | None, max_landmarks: int | None, max_objects: int | None
+               ) -> tuple[int, int, int]:
+        frames = 5 if frames is None else frames
+        max_landmarks = 48 if max_landmarks is None else max_landmarks
+        max_objects = 12 if max_objects is None else max_objects
+        return frames, max_landmarks, max_objects
+
+    def graph_outputs(self, model: DynEnvAgent, step: Any) -> tuple[torch.Tensor, ...]:
+        return (step.walk, step.turn, step.kick, step.head, step.value, step.pose, *step.state)
+
+    def metadata(self, model: DynEnvAgent, frames: int, max_landmarks: int, max_objects: int) -> dict[str, Any]:
+        head_units = (model.head_head.out_features - 1) // 2 if model.head_mode == "discrete" else None
+        return {"format": FORMAT, "feature_size": model.feature_size, "head_mode": model.head_mode,
+                "head_units": head_units, "head_max": float(cast(float, model.head_max)), "frames": frames,
+                "max_landmarks": max_landmarks, "max_objects": max_objects, "scenario": "soccer",
+                "uses_pose": bool(getattr(model, "uses_pose", False)), "layout": _layout_metadata("soccer"),
+                "actions": {"heads": {"walk": WALK_CHOICES, "turn": TURN_CHOICES, "kick": KICK_CHOICES,
+                                      "head": 2 * head_units + 1 if head_units else 2}}}
+
+    def check_metadata(self, config: dict[str, Any]) -> None:
+        check_head(config.get("head_mode"), config.get("head_units"), config.get("head_max"))
+        if not isinstance(config.get("uses_pose", False), bool):
+            raise ValueError(f"uses_pose must be true or false, got {config['uses_pose']!r}")
+
+    def output_sizes(self, policy: OnnxPolicy) -> dict[str, tuple[int, ...]]:
+        head = 2 * cast(int, policy.head_units) + 1 if policy.head_mode == "discrete" else 2
+        return {"walk_logits": (WALK_CHOICES,), "turn_logits": (TURN_CHOICES,), "kick_logits": (KICK_CHOICES,),
+                "head": (head,), "pose": (6,)}
+
+    def runtime_heads(self, config: dict[str, Any]) -> tuple[str | None, str | None, int | None, float | None]:
+        head_mode = config["head_mode"]
+        return None, head_mode, config["head_units"] if head_mode == "discrete" else None, float(config["head_max"])
+
+    def step(self, outputs: list[torch.Tensor], policy: OnnxPolicy) -> PolicyStep:
+        walk, turn, kick, head, value, pose = outputs[:6]
+        return PolicyStep(walk, turn, kick, head, value, pose, (outputs[6], outputs[7], outputs[8], outputs[9]))
+
+
+class DrivingFormat(PolicyFormat):
+    scenario = "driving"
+    node_scenario = "driving"
+
+    def io_names(self, action_mode: str | None, uses_pose: bool) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        heads = (("acceleration_logits", "steering_logits") if action_mode == "discrete" else ("command",))
+        return DRIVING_INPUT_NAMES, (*heads, "value", *(name + "_out" for name in STATE_NAMES))
+
+    def shapes(self, frames: int | None, max_landmarks: int | None, max_objects: int | None
+               ) -> tuple[int, int, int]:
+        frames = 1 if frames is None else frames
+        if frames != 1:
+            raise ValueError(f"a driving policy takes one vision frame per period (no temporal attention), not {frames}")
+        max_landmarks = DRIVING_DEFAULT_MAXIMA[0] if max_landmarks is None else max_landmarks
+        max_objects = DRIVING_DEFAULT_MAXIMA[1] if max_objects is None else max_objects
+        return frames, max_landmarks, max_objects
+
+    def graph_outputs(self, model: DynEnvAgent, step: Any) -> tuple[torch.Tensor, ...]:
+        heads = ((step.acceleration, step.steering) if model.action_mode == "discrete" else (step.command,))
+        return (*heads, step.value, *step.state)
+
+    def metadata(self, model: DynEnvAgent, frames: int, max_landmarks: int, max_objects: int) -> dict[str, Any]:
+        heads = ({"acceleration": driving_actions.ACCELERATION_CHOICES, "steering": driving_actions.STEERING_CHOICES}
+                 if model.action_mode == "discrete" else {"command": 2 * driving_actions.CONTINUOUS_SIZE})
+        return {"format": FORMAT, "scenario": "driving", "feature_size": model.feature_size,
+                "action_mode": model.action_mode, "frames": frames, "max_landmarks": max_landmarks,
+                "max_objects": max_objects, "layout": _layout_metadata("driving"),
+                "actions": {"mode": model.action_mode, "heads": heads,
+                            "command": ["throttle", "brake", "steering"],
+                            "continuous_low": list(driving_actions.CONTINUOUS_LOW),
+                            "continuous_high": list(driving_actions.CONTINUOUS_HIGH)}}
+
+    def check_metadata(self, config: dict[str, Any]) -> None:
+        driving_actions.check_action_mode(config.get("action_mode"))
+        if config.get("uses_pose", False) is not False:
+            raise ValueError("uses_pose: the pose estimate is a soccer input; a driving policy has none")
+        if config["frames"] != 1:
+            raise ValueError(f"a driving policy takes 1 frame per period, the metadata says {config['frames']}")
+
+    def output_sizes(self, policy: OnnxPolicy) -> dict[str, tuple[int, ...]]:
+        return {"acceleration_logits": (driving_actions.ACCELERATION_CHOICES,),
+                "steering_logits": (driving_actions.STEERING_CHOICES,),
+                "command": (2 * driving_actions.CONTINUOUS_SIZE,)}
+
+    def runtime_heads(self, config: dict[str, Any]) -> tuple[str | None, str | None, int | None, float | None]:
+        return config["action_mode"], None, None, None
+
+    def step(self, outputs: list[torch.Tensor], policy: OnnxPolicy) -> PolicyStep:
+        return _driving_step(outputs, cast(str, policy.action_mode))
+
+    def mode_problem(self, policy: Any, action_mode: str | None) -> str:
+        if action_mode is not None and policy.action_mode != action_mode:
+            return f"it is a {policy.action_mode} driving policy and the simulator's action_mode is {action_mode}"
+        return ""
+
+
+SOCCER_FORMAT = SoccerFormat()
+DRIVING_FORMAT = DrivingFormat()
+# Each scenario's format, by its name (the registry, dynenv_ros.scenarios, sits above this layer).
+_FORMATS: dict[str, PolicyFormat] = {f.scenario: f for f in (SOCCER_FORMAT, DRIVING_FORMAT)}
+
+
+def policy_format(scenario: Any) -> PolicyFormat:
+    """The format of the scenario a policy (its ``scenario``) or a file's metadata names: 'soccer' or 'driving';
+    ValueError otherwise."""
+    if not isinstance(scenario, str) or scenario not in _FORMATS:
+        raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
+    return _FORMATS[scenario]
+
+
 class _ExportWrapper(nn.Module):
     """Explicit tensors in, a flat tuple out: the exporter cannot take dataclasses or nested tuples. Runs an eval
     copy of the model (the caller's is left as it is); the network's own forward code does everything — under the
@@ -167,11 +324,7 @@ class _ExportWrapper(nn.Module):
         step = self.model(StreamBatch(landmark_features, landmark_kind, landmark_mask),
                           StreamBatch(object_features, object_kind, object_mask),
                           previous_action, proprioception, tuple(rest))
-        if self.model.scenario == "driving":
-            heads = ((step.acceleration, step.steering) if self.model.action_mode == "discrete"
-                     else (step.command,))
-            return (*heads, step.value, *step.state)
-        return (step.walk, step.turn, step.kick, step.head, step.value, step.pose, *step.state)
+        return policy_format(self.model.scenario).graph_outputs(self.model, step)
 
 
 def _example_inputs(model: DynEnvAgent, batch: int, frames: int, max_landmarks: int, max_objects: int
@@ -204,24 +357,7 @@ def _layout_metadata(scenario: str) -> dict[str, Any]:
 
 
 def _config(model: DynEnvAgent, frames: int, max_landmarks: int, max_objects: int) -> dict[str, Any]:
-    scenario = getattr(model, "scenario", "soccer")
-    if scenario == "driving":
-        heads = ({"acceleration": driving_actions.ACCELERATION_CHOICES, "steering": driving_actions.STEERING_CHOICES}
-                 if model.action_mode == "discrete" else {"command": 2 * driving_actions.CONTINUOUS_SIZE})
-        return {"format": FORMAT, "scenario": "driving", "feature_size": model.feature_size,
-                "action_mode": model.action_mode, "frames": frames, "max_landmarks": max_landmarks,
-                "max_objects": max_objects, "layout": _layout_metadata("driving"),
-                "actions": {"mode": model.action_mode, "heads": heads,
-                            "command": ["throttle", "brake", "steering"],
-                            "continuous_low": list(driving_actions.CONTINUOUS_LOW),
-                            "continuous_high": list(driving_actions.CONTINUOUS_HIGH)}}
-    head_units = (model.head_head.out_features - 1) // 2 if model.head_mode == "discrete" else None
-    return {"format": FORMAT, "feature_size": model.feature_size, "head_mode": model.head_mode,
-            "head_units": head_units, "head_max": float(cast(float, model.head_max)), "frames": frames,
-            "max_landmarks": max_landmarks, "max_objects": max_objects, "scenario": "soccer",
-            "uses_pose": bool(getattr(model, "uses_pose", False)), "layout": _layout_metadata("soccer"),
-            "actions": {"heads": {"walk": WALK_CHOICES, "turn": TURN_CHOICES, "kick": KICK_CHOICES,
-                                  "head": 2 * head_units + 1 if head_units else 2}}}
+    return policy_format(getattr(model, "scenario", "soccer")).metadata(model, frames, max_landmarks, max_objects)
 
 
 def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int | None = None,
@@ -234,17 +370,8 @@ def export_onnx(model: DynEnvAgent, path: str | os.PathLike[str], *, frames: int
     default 2-car config: give ``max_objects`` for more cars)."""
     import onnx
 
-    driving = getattr(model, "scenario", "soccer") == "driving"
-    if driving:
-        frames = 1 if frames is None else frames
-        if frames != 1:
-            raise ValueError(f"a driving policy takes one vision frame per period (no temporal attention), not {frames}")
-        max_landmarks = DRIVING_DEFAULT_MAXIMA[0] if max_landmarks is None else max_landmarks
-        max_objects = DRIVING_DEFAULT_MAXIMA[1] if max_objects is None else max_objects
-    else:
-        frames = 5 if frames is None else frames
-        max_landmarks = 48 if max_landmarks is None else max_landmarks
-        max_objects = 12 if max_objects is None else max_objects
+    frames, max_landmarks, max_objects = policy_format(getattr(model, "scenario", "soccer")).shapes(
+        frames, max_landmarks, max_objects)
     if frames < 1 or max_landmarks < 1 or max_objects < 1:
         raise ValueError("frames, max_landmarks and max_objects must be at least 1")
     input_names, output_names = io_names(getattr(model, "scenario", "soccer"), getattr(model, "action_mode", None),
@@ -299,19 +426,7 @@ def check_onnx_config(config: dict[str, Any]) -> None:
     _bounded_int(config, "frames", 1, MAX_FRAMES)
     _bounded_int(config, "max_landmarks", 1, MAX_SLOTS)
     _bounded_int(config, "max_objects", 1, MAX_SLOTS)
-    scenario = config.get("scenario", "soccer")
-    if scenario == "driving":
-        driving_actions.check_action_mode(config.get("action_mode"))
-        if config.get("uses_pose", False) is not False:
-            raise ValueError("uses_pose: the pose estimate is a soccer input; a driving policy has none")
-        if config["frames"] != 1:
-            raise ValueError(f"a driving policy takes 1 frame per period, the metadata says {config['frames']}")
-        return
-    if scenario != "soccer":
-        raise ValueError(f"scenario must be 'soccer' or 'driving', got {scenario!r}")
-    check_head(config.get("head_mode"), config.get("head_units"), config.get("head_max"))
-    if not isinstance(config.get("uses_pose", False), bool):
-        raise ValueError(f"uses_pose must be true or false, got {config['uses_pose']!r}")
+    policy_format(config.get("scenario", "soccer")).check_metadata(config)
 
 
 def _non_finite_initializers(proto: Any) -> list[str]:
@@ -346,15 +461,7 @@ def _signature_problem(session: Any, policy: "OnnxPolicy") -> str:
               "previous_action": ("float", (widths.action_encoding,)),
               "proprioception": ("float", (widths.self_state,)), POSE_INPUT_NAME: ("float", (POSE_INPUT,)),
               **{name: ("float", (D,)) for name in STATE_NAMES}}
-    outputs: dict[str, tuple[int, ...]]
-    if policy.scenario == "driving":
-        outputs = {"acceleration_logits": (driving_actions.ACCELERATION_CHOICES,),
-                   "steering_logits": (driving_actions.STEERING_CHOICES,),
-                   "command": (2 * driving_actions.CONTINUOUS_SIZE,)}
-    else:
-        head = 2 * cast(int, policy.head_units) + 1 if policy.head_mode == "discrete" else 2
-        outputs = {"walk_logits": (WALK_CHOICES,), "turn_logits": (TURN_CHOICES,), "kick_logits": (KICK_CHOICES,),
-                   "head": (head,), "pose": (6,)}
+    outputs = policy.policy_format.output_sizes(policy)
     outputs.update({"value": (), **{name + "_out": (D,) for name in STATE_NAMES}})
     declared_in, declared_out = session.get_inputs(), session.get_outputs()
     if [i.name for i in declared_in] != list(input_names):
@@ -428,19 +535,13 @@ class OnnxPolicy:
         self.config: dict[str, Any] = config
         self.feature_size: int = config["feature_size"]
         self.scenario: str = config.get("scenario", "soccer")
+        self.policy_format = policy_format(self.scenario)
         self.uses_pose: bool = config.get("uses_pose", False)
         self.action_mode: str | None        # driving's; soccer's head below (None in the other scenario)
         self.head_mode: str | None
         self.head_units: int | None
         self.head_max: float | None
-        if self.scenario == "driving":
-            self.action_mode = config["action_mode"]
-            self.head_mode, self.head_units, self.head_max = None, None, None
-        else:
-            self.action_mode = None
-            self.head_mode = config["head_mode"]
-            self.head_units = config["head_units"] if self.head_mode == "discrete" else None
-            self.head_max = float(config["head_max"])
+        self.action_mode, self.head_mode, self.head_units, self.head_max = self.policy_format.runtime_heads(config)
         self.frames: int = config["frames"]
         self.max_landmarks: int = config["max_landmarks"]
         self.max_objects: int = config["max_objects"]
@@ -494,9 +595,7 @@ class OnnxPolicy:
         for name, tensor in zip(STATE_NAMES, state):
             feeds[name] = _numpy(tensor, np.float32)
         out = [torch.from_numpy(array) for array in self.session.run(None, feeds)]
-        if self.scenario == "driving":
-            return _driving_step(out, cast(str, self.action_mode))
-        return PolicyStep(out[0], out[1], out[2], out[3], out[4], out[5], (out[6], out[7], out[8], out[9]))
+        return self.policy_format.step(out, self)
 
 
 class TorchPolicy:
@@ -592,15 +691,17 @@ def check_scenario(policy: Any, scenario: str, action_mode: str | None = None) -
     """ValueError unless ``policy`` was built for ``scenario`` ('soccer' or 'driving'; a policy node's ``robocup``
     is soccer) and, in driving, for the simulator's ``action_mode`` (a continuous policy's commands are refused by a
     discrete simulator; a discrete policy would act but learn about actions it cannot take under the other mode)."""
-    scenario = "soccer" if scenario == "robocup" else scenario
-    have = getattr(policy, "scenario", "soccer")
-    if have != scenario:
-        raise ValueError(f"it is a {have} policy and this node plays {scenario} (its observations, classes and "
-                         f"actions differ); load a {scenario} policy or start the node with scenario "
-                         f"{'robocup' if have == 'soccer' else have}")
-    if scenario == "driving" and action_mode is not None and policy.action_mode != action_mode:
-        raise ValueError(f"it is a {policy.action_mode} driving policy and the simulator's action_mode is "
-                         f"{action_mode}")
+    want = next((f for f in _FORMATS.values() if scenario in (f.scenario, f.node_scenario)), None)
+    if want is None:
+        raise ValueError(f"scenario must be 'soccer' (a node's 'robocup') or 'driving', got {scenario!r}")
+    have = policy_format(getattr(policy, "scenario", "soccer"))
+    if have is not want:
+        raise ValueError(f"it is a {have.scenario} policy and this node plays {want.scenario} (its observations, "
+                         f"classes and actions differ); load a {want.scenario} policy or start the node with "
+                         f"scenario {have.node_scenario}")
+    problem = want.mode_problem(policy, action_mode)
+    if problem:
+        raise ValueError(problem)
 
 
 def check_driving_policy(policy: Any, trial: tuple[StreamBatch, StreamBatch, torch.Tensor, torch.Tensor],

@@ -32,7 +32,7 @@ scenario's network takes (``AgentInputs``):
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 import torch
@@ -115,10 +115,13 @@ def side_inputs(observation: Mapping[str, Any], head_max: float | None = None, s
     self state ends with the observation's ``pose_estimate`` row, unscaled (B, 7 more)."""
     action = _as_tensor(observation["previous_action"])
     proprioception = _as_tensor(observation["proprioception"])[:, -1]
-    if spec.scenario == "driving":
-        if pose:
-            raise ValueError("the pose estimate is a soccer input; driving has none")
-        return encode_driving_action(action, spec), driving_self_state(proprioception, observation["game"])
+    return agent_inputs(spec.scenario).side_inputs(action, proprioception, observation, head_max, spec, pose)
+
+
+def _soccer_side_inputs(action: torch.Tensor, proprioception: torch.Tensor, observation: Mapping[str, Any],
+                        head_max: float | None, spec: LayoutSpec, pose: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    """``side_inputs`` of soccer: the one-hot previous action and the head turn over ``head_max``; the self state,
+    the pose estimate appended when ``pose``."""
     if head_max is None:
         raise ValueError("soccer's side inputs need head_max (the head turn's bound, rad per period)")
     previous = encode_previous_action(action[:, 0], action[:, 1], action[:, 2], action[:, 3], head_max)
@@ -126,6 +129,15 @@ def side_inputs(observation: Mapping[str, Any], head_max: float | None = None, s
     if pose:
         state = torch.cat([state, pose_input(observation)], dim=-1)
     return previous, state
+
+
+def _driving_side_inputs(action: torch.Tensor, proprioception: torch.Tensor, observation: Mapping[str, Any],
+                         head_max: float | None, spec: LayoutSpec, pose: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    """``side_inputs`` of driving: the command with its steering over the spec's bound; the ego values and the
+    seconds remaining. No pose estimate (``head_max`` does not apply)."""
+    if pose:
+        raise ValueError("the pose estimate is a soccer input; driving has none")
+    return encode_driving_action(action, spec), driving_self_state(proprioception, observation["game"])
 
 
 def pose_input(observation: Mapping[str, Any]) -> torch.Tensor:
@@ -207,12 +219,18 @@ def driving_self_state(ego: TensorLike, game: TensorLike) -> torch.Tensor:
     return torch.cat([values * DRIVING_EGO_SCALE.to(values.device), _as_tensor(game) * DRIVING_GAME_SCALE], dim=-1)
 
 
+# (previous action (B, k), last-frame proprioception (B, p), observation, head_max, spec, pose) -> (encoding, state)
+SideInputs = Callable[[torch.Tensor, torch.Tensor, Mapping[str, Any], float | None, LayoutSpec, bool],
+                      tuple[torch.Tensor, torch.Tensor]]
+
+
 @dataclass(frozen=True)
 class AgentInputs:
     """What a scenario's network takes: its class table (``kind_table`` (256,) class id → embedding index,
     ``num_classes`` embedding blocks per stream, padding's included), the width of its previous-action encoding and
     of its self state, its stream keys (static, dynamic), the name of its static stream's inputs in an exported
-    graph (``<name>_features``…) and the layout of the scenario's default settings."""
+    graph (``<name>_features``…), the layout of the scenario's default settings and how ``side_inputs`` encodes
+    its previous action and self state (from the batch's previous actions and last-frame proprioception)."""
     scenario: str
     class_index: dict[int, int]
     kind_table: torch.Tensor
@@ -222,6 +240,7 @@ class AgentInputs:
     stream_keys: tuple[str, str]
     static_name: str
     spec: LayoutSpec
+    side_inputs: SideInputs
 
 
 def _driving_spec() -> LayoutSpec:
@@ -246,14 +265,15 @@ def agent_inputs(scenario: str) -> AgentInputs:
 
 def _soccer_inputs() -> AgentInputs:
     return AgentInputs("soccer", CLASS_INDEX, _KIND, NUM_CLASSES, ACTION_ENCODING, PROPRIOCEPTION,
-                       ("landmarks", "objects"), "landmark", SOCCER)
+                       ("landmarks", "objects"), "landmark", SOCCER, _soccer_side_inputs)
 
 
 def _driving_inputs() -> AgentInputs:
     spec = _driving_spec()
     index = class_index(spec)
     return AgentInputs("driving", index, _kind_table(index), len(index) + 1, DRIVING_ACTION_ENCODING,
-                       DRIVING_SELF_STATE, (spec.streams[0].key, spec.streams[1].key), "lane", spec)
+                       DRIVING_SELF_STATE, (spec.streams[0].key, spec.streams[1].key), "lane", spec,
+                       _driving_side_inputs)
 
 
 # Each scenario's inputs, by its name (the registry, dynenv_ros.scenarios, sits above this layer).

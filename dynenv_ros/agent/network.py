@@ -40,7 +40,7 @@ earlier checkpoint) is the network above, parameter for parameter.
 from __future__ import annotations
 
 import math
-from typing import Any, cast
+from typing import Any, Callable, cast
 from dataclasses import dataclass
 
 import numpy as np
@@ -520,11 +520,11 @@ class DynEnvAgent(nn.Module):
             raise ValueError(f"uses_pose must be True or False, got {uses_pose!r}")
         self.scenario = scenario
         self.uses_pose = uses_pose
-        if scenario == "driving":
-            if uses_pose:
-                raise ValueError("uses_pose: the pose estimate is a soccer input; a driving agent has none")
-            self._build_driving(feature_size, driving_actions.check_action_mode(action_mode))
-            return
+        _NETWORKS[scenario].build(self, feature_size, head_mode, head_units, head_max, action_mode, uses_pose)
+
+    def _build_soccer(self, feature_size: int, head_mode: str, head_units: int, head_max: float, action_mode: str,
+                      uses_pose: bool) -> None:
+        """The soccer network's layers (``action_mode`` is driving's)."""
         self.action_mode = None
         if head_mode not in ("discrete", "continuous"):
             raise ValueError(f"head_mode must be 'discrete' or 'continuous', got {head_mode!r}")
@@ -545,7 +545,12 @@ class DynEnvAgent(nn.Module):
         self.critic = nn.Sequential(nn.Linear(2 * D, D), nn.LeakyReLU(0.1), nn.LayerNorm(D), nn.Linear(D, 1))
         self.reconstruction = ReconstructionHead(D)
 
-    def _build_driving(self, feature_size: int, action_mode: str) -> None:
+    def _build_driving(self, feature_size: int, head_mode: str, head_units: int, head_max: float, action_mode: str,
+                       uses_pose: bool) -> None:
+        """The driving network's layers (the head settings are soccer's; a pose input is refused)."""
+        if uses_pose:
+            raise ValueError("uses_pose: the pose estimate is a soccer input; a driving agent has none")
+        action_mode = driving_actions.check_action_mode(action_mode)
         inputs = agent_inputs("driving")
         D = feature_size
         self.feature_size, self.action_mode = D, action_mode
@@ -607,8 +612,13 @@ class DynEnvAgent(nn.Module):
     def _periods(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
                  proprioception: torch.Tensor, state: State, resets: torch.Tensor | None) -> AgentStep:
         """T·B periods, period-major (T = 1 when resets is None), as one flat batch; the LSTMs step through T."""
-        if self.scenario == "driving":
-            return self._driving_periods(landmarks, objects, previous_action, proprioception, state, resets)
+        return _NETWORKS[self.scenario].periods(self, landmarks, objects, previous_action, proprioception, state,
+                                                resets)
+
+    def _soccer_periods(self, landmarks: StreamBatch, objects: StreamBatch, previous_action: torch.Tensor,
+                        proprioception: torch.Tensor, state: State, resets: torch.Tensor | None) -> AgentStep:
+        """``_periods`` of the soccer network: the pose between the streams, soccer's actor heads and the
+        reconstruction."""
         if not _tracing() and proprioception.shape[-1] != self.self_state_size:
             raise ValueError(
                 f"self state of width {proprioception.shape[-1]}, this agent takes {self.self_state_size}: "
@@ -662,9 +672,9 @@ class DynEnvAgent(nn.Module):
     def distributions(self, step: AgentStep) -> list[Any]:
         """One distribution per action dimension: soccer's categorical walk, turn, kick and the head categorical or
         Gaussian; driving's (``driving_actions.distributions``) two categorical heads or three clipped Gaussians."""
-        if self.scenario == "driving":
-            return driving_actions.distributions(cast(str, self.action_mode), step.acceleration, step.steering,
-                                                 step.command)
+        return _NETWORKS[self.scenario].distributions(self, step)
+
+    def _soccer_distributions(self, step: AgentStep) -> list[Any]:
         heads: list[Categorical | Normal] = [Categorical(logits=step.walk), Categorical(logits=step.turn),
                                              Categorical(logits=step.kick)]
         if self.head_mode == "discrete":
@@ -673,6 +683,10 @@ class DynEnvAgent(nn.Module):
             head = cast(torch.Tensor, step.head)
             heads.append(Normal(head[..., 0], head[..., 1].exp()))
         return heads
+
+    def _driving_distributions(self, step: AgentStep) -> list[Any]:
+        return driving_actions.distributions(cast(str, self.action_mode), step.acceleration, step.steering,
+                                             step.command)
 
     def act(self, step: AgentStep, generator: torch.Generator | None = None, greedy: bool = False
             ) -> torch.Tensor:
@@ -697,6 +711,23 @@ class DynEnvAgent(nn.Module):
                 limit = cast(float, self.head_max)
                 columns.append(sample.clamp(-limit, limit))
         return torch.stack(columns, dim=-1).detach()
+
+
+@dataclass(frozen=True)
+class ScenarioNetwork:
+    """What differs between the scenarios' networks (module docstring): the ``DynEnvAgent`` methods that build its
+    layers, run its periods and turn a step's outputs into distributions."""
+    build: Callable[[DynEnvAgent, int, str, int, float, str, bool], None]
+    periods: Callable[[DynEnvAgent, StreamBatch, StreamBatch, torch.Tensor, torch.Tensor, State,
+                       torch.Tensor | None], AgentStep]
+    distributions: Callable[[DynEnvAgent, AgentStep], list[Any]]
+
+
+# Each scenario's network, by its name (the registry, dynenv_ros.scenarios, sits above this layer).
+_NETWORKS = {"soccer": ScenarioNetwork(DynEnvAgent._build_soccer, DynEnvAgent._soccer_periods,
+                                       DynEnvAgent._soccer_distributions),
+             "driving": ScenarioNetwork(DynEnvAgent._build_driving, DynEnvAgent._driving_periods,
+                                        DynEnvAgent._driving_distributions)}
 
 
 def parameter_count(model: nn.Module) -> int:

@@ -33,6 +33,7 @@ from dynenv_ros.driving.cars import normalised_commands
 from dynenv_ros.driving.config import DrivingConfig
 from dynenv_ros.driving.scripted import ScriptedDriver
 from dynenv_ros.soccer.actions import SoccerAction
+from dynenv_ros.soccer.agent_actions import head_index
 from dynenv_ros.soccer.config import SoccerConfig
 from dynenv_ros.soccer.perceiving import perceiving_team
 from dynenv_ros.soccer.scripted import act_all, team_policies
@@ -45,8 +46,9 @@ DRIVING_TEACHERS = ("scripted",)
 
 
 def action_indices(action: SoccerAction, head_step: float, head_units: int) -> tuple[int, int, int, int]:
-    """A SoccerAction as the discrete action row the agent emits (the head turn rounded to a step index)."""
-    head = int(np.clip(np.rint(action.head_yaw_delta / head_step), -head_units, head_units)) + head_units
+    """A SoccerAction as the discrete action row the agent emits (the head turn rounded to a step index, divided in
+    its own type)."""
+    head = int(head_index(action.head_yaw_delta, head_units, head_step, dtype=None))
     return int(action.walk), int(action.turn), int(action.kick), head
 
 

@@ -83,9 +83,10 @@ class AgentDrivers(Driver):
     kind = "checkpoint"
 
     def __init__(self, model: Any, greedy: bool = False, path: str | None = None, sha256: str | None = None) -> None:
-        if getattr(model, "scenario", "soccer") != "driving":
-            raise ValueError(f"{path or 'the policy'} is a soccer policy; driving needs a policy trained with "
-                             f"scenario: driving")
+        from dynenv_ros.scenarios import DRIVING       # here: torch is loaded with the policy, not with this module
+        problem = DRIVING.evaluation_problem(model)
+        if problem:
+            raise ValueError(f"{path or 'the policy'} {problem}")
         self.model, self.greedy, self.path, self.sha256 = model.eval(), bool(greedy), path, sha256
         self.action_mode = model.action_mode
 

@@ -44,6 +44,7 @@ import numpy as np
 from dynenv_ros.evaluation.episodes import episode_seeds, load_evaluated_policy, sample_space
 from dynenv_ros.evaluation.results import FORMAT, TERMS, float_mean, summarize
 from dynenv_ros.sim.reward_terms import RewardTerm
+from dynenv_ros.soccer.agent_actions import head_radians
 from dynenv_ros.soccer.scripted import DEFAULT_SCRIPTED, SCRIPTED_KINDS, team_policies
 
 OBSERVATION = RewardTerm.OBSERVATION.name.lower()
@@ -224,7 +225,7 @@ class AgentTeam(TeamPolicy):
         result = []
         for walk, turn, kick, head in actions:
             # The checkpoint's own head discretisation: index 0..2u ↦ (index − u)·head_max/u rad per period.
-            delta = (int(head) - units) * head_max / units if units else float(head)
+            delta = head_radians(int(head), units, head_max=head_max) if units else float(head)
             delta = max(-self.env_head_max, min(self.env_head_max, delta))
             result.append(SoccerAction(Walk(int(walk)), Turn(int(turn)), Kick(int(kick)), delta))
         return result
@@ -257,9 +258,10 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
     if spec in SCRIPTED_KINDS:
         return ScriptedTeam(spec)
     model, digest = load_evaluated_policy(spec)
-    if getattr(model, "scenario", "soccer") == "driving":
-        raise ValueError(f"{spec} is a driving policy; evaluate it with --scenario driving "
-                         f"(evaluation/driving.py)")
+    from dynenv_ros.scenarios import SOCCER         # here: torch is loaded with the policy, not with this module
+    problem = SOCCER.evaluation_problem(model)
+    if problem:
+        raise ValueError(f"{spec} {problem}")
     return AgentTeam(model, greedy=greedy, path=str(spec), sha256=digest)
 
 

@@ -12,7 +12,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import torch
 
-from dynenv_ros.agent.export import check_scenario
+from dynenv_ros.agent.export import PolicyFormat, check_scenario, policy_format
 from dynenv_ros.envs.padded_layout import LayoutSpec
 from dynenv_ros.envs.session import ActionSession
 
@@ -41,6 +41,18 @@ class Scenario:
     self_supervised: bool          # the worlds write self-supervised targets (true pose, objects) a loss can learn
     sides: int                     # the sides a world's agents form: soccer's two teams; driving's cars, one (all learn)
     teachers: tuple[str, ...]      # the teachers a training run of this scenario may imitate (TrainConfig.teacher)
+
+    # -- the agent's and evaluation's questions (issue 40)
+    policy_format: PolicyFormat    # its exported graph and policy kind (agent.export): the agent layer's row of it
+
+    def evaluation_problem(self, model: Any) -> str:
+        """Why dynenv-eval's games of this scenario cannot evaluate the agent ``model`` ('' if they can): it was
+        built for another scenario (its ``scenario``; soccer where it has none)."""
+        have = policy_format(getattr(model, "scenario", "soccer"))
+        if have is self.policy_format:
+            return ""
+        return (f"is a {have.scenario} policy; {self.name} needs a policy trained with scenario: "
+                f"{self.parameter_value} (evaluate it with --scenario {have.node_scenario})")
 
     def __repr__(self) -> str:
         return f"<scenario {self.name}>"

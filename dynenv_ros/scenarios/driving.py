@@ -8,7 +8,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import torch
 
-from dynenv_ros.agent.export import check_driving_policy, check_scenario
+from dynenv_ros.agent.export import DRIVING_FORMAT, check_driving_policy, check_scenario
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
 from dynenv_ros.driving import agent_actions
@@ -43,6 +43,9 @@ class DrivingScenario(Scenario):
     self_supervised = False
     sides = 1
     teachers = ("scripted",)           # the scripted driver (driving.scripted.ScriptedDriver)
+
+    # -- the agent's and evaluation's questions (issue 40)
+    policy_format = DRIVING_FORMAT
 
     def agent_names(self, count: int) -> list[str]:
         return car_names(count)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import torch
 
-from dynenv_ros.agent.export import check_policy
+from dynenv_ros.agent.export import SOCCER_FORMAT, check_policy
 from dynenv_ros.agent.losses import ROBOCUP_HEADS
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
@@ -67,6 +67,9 @@ class SoccerScenario(Scenario):
     self_supervised = True
     sides = 2
     teachers = ("chaser", "eager_chaser", "perceiving")
+
+    # -- the agent's and evaluation's questions (issue 40)
+    policy_format = SOCCER_FORMAT
 
     def agent_names(self, count: int) -> list[str]:
         return robot_names(count)

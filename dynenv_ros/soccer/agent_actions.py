@@ -20,15 +20,25 @@ if TYPE_CHECKING:      # torch is imported where a policy's outputs are read: th
 WALK_CHOICES, TURN_CHOICES, KICK_CHOICES = 5, 3, 3     # Action.msg's soccer choices
 
 
-def head_radians(index: Any, units: int, step: float) -> Any:
-    """Head turn (rad) of a discrete head's index 0..2·units (a number, numpy array or tensor)."""
+def head_radians(index: Any, units: int, step: float | None = None, *, head_max: float | None = None) -> Any:
+    """Head turn (rad) of a discrete head's index 0..2·units (a number, numpy array or tensor): ``(index - units)
+    · step``. Given ``head_max`` instead of the step: ``(index - units) · head_max / units``, multiplied before it
+    divides — how dynenv-eval has always turned a checkpoint's index into radians (the two orders differ in the
+    last bit for some values)."""
+    if (step is None) == (head_max is None):
+        raise ValueError("give one of the head's step and its head_max")
+    if head_max is not None:
+        return (index - units) * head_max / units
     return (index - units) * step
 
 
-def head_index(radians: Any, units: int, step: float) -> Any:
+def head_index(radians: Any, units: int, step: float, dtype: Any = np.float64) -> Any:
     """The discrete head's index nearest to a head turn (rad), clipped to 0..2·units, as float64 (rounding half to
-    even; NaN stays NaN, for the caller to convert as it needs)."""
-    return np.clip(np.rint(np.asarray(radians, np.float64) / step) + units, 0, 2 * units)
+    even; NaN stays NaN, for the caller to convert as it needs). ``dtype`` None: the turn divided in its own type
+    (a NumPy float32 scalar in float32, a Python float in float64), the index then of that type — how the teachers
+    have always rounded a scripted player's turn (``envs.teacher``)."""
+    turn = radians if dtype is None else np.asarray(radians, dtype)
+    return np.clip(np.rint(turn / step) + units, 0, 2 * units)
 
 
 def sample_actions(step: Any, head_mode: str, head_units: int | None, head_max: float,
