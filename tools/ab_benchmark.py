@@ -249,7 +249,11 @@ def git(cwd: Path, *args: str) -> str:
 
 
 def resolve(ref: str) -> str:
-    return git(ROOT, "rev-parse", "--verify", "--quiet", f"{ref}^{{commit}}")
+    done = subprocess.run(["git", "rev-parse", "--verify", "--quiet", f"{ref}^{{commit}}"], cwd=ROOT,
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{ref!r} is not a commit of {ROOT}")
+    return done.stdout.strip()
 
 
 def worktree(trees: Path, commit: str) -> Path:
