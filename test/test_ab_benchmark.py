@@ -233,8 +233,8 @@ def test_a_failing_suite_is_recorded_and_the_exit_status_says_so(tool, tmp_path,
                       "--worktrees", str(tmp_path / "trees"), "--python", sys.executable])
     assert code == 1
     lines = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
-    assert [(r["side"], r["returncode"], r["error"]) for r in lines] == [
-        ("base", 1, "exit status 1: no such suite here: policy"), ("head", 1, "exit status 1: no such suite here: policy")]
+    refused = "exit status 1: no such suite here: policy"
+    assert [(r["side"], r["returncode"], r["error"]) for r in lines] == [("base", 1, refused), ("head", 1, refused)]
     assert "2 run(s) failed" in capsys.readouterr().out
     assert not (tmp_path / "trees" / head[:12]).exists()    # an A/A run makes one tree
 

@@ -9,25 +9,26 @@ Each commit gets a detached git worktree under ``--worktrees`` (``<dir>/<first 1
 already there, clean and at that commit), and every benchmark runs that tree's code, as ``dynenv-bench`` would
 (setup.py maps it to ``benchmarks.__main__:main``): ``cd TREE && PYTHONPATH=TREE PYTHON -m benchmarks SUITE ARGS``,
 PYTHON being this tool's interpreter (the project's venv) unless ``--python`` says otherwise. PYTHONPATH puts the
-tree before the venv's editable install of the main checkout; each tree's imports are checked to come from it before
-anything is timed. Commits are measured as committed: uncommitted changes of the checkout are not in the trees.
+tree before the venv's editable install of the main checkout; before anything is timed each tree's imports are
+checked to come from it and its packages are byte-compiled (a fresh tree's first run would otherwise pay for that). Commits are measured as committed: uncommitted changes of the checkout are not in the trees.
 
 The suites and their options (the same for both commits: ``3cd871e`` and the restructured code accept the same
 options of these three suites, so nothing had to be left out):
 
 - ``sim``: ``sim --players-per-team 2 --observation partial --steps 2000 --repeat 3 --cores 1 --json``, the step
   training runs for one world (realistic perception), pinned to one core; figures ``env_steps_per_s`` and
-  ``env_steps_per_cpu_s`` (the suite's median of its 3 repetitions). About 8 s a run on the idle 2-core machine.
+  ``env_steps_per_cpu_s`` (the suite's median of its 3 repetitions).
 - ``train``: ``train --config async --baseline none --updates 15 --warmup 3 --repeat 1 --json``, the asynchronous
   runner (one worker process, the learner on the other core); figures ``env_steps_per_s`` and
-  ``env_steps_per_cpu_s`` (learnt env steps; learner and worker CPU time). About 35 s a run (≈ 15 s of start-up).
+  ``env_steps_per_cpu_s`` (learnt env steps; learner and worker CPU time).
 - ``policy``: ``policy --robots 10 --decisions 300 --warmup 50 --repeat 3 --threads 1 --cores 1 --json``, a
   10-robot decision with torch and with onnxruntime, one thread on one core; figures ``decisions_per_s`` and
-  ``decisions_per_cpu_s`` of each runtime (the suite's median of its 3 repetitions). About 25 s a run.
+  ``decisions_per_cpu_s`` of each runtime (the suite's median of its 3 repetitions).
 
 ``--sim-steps``, ``--train-updates`` and ``--policy-decisions`` change those lengths (a smoke run: ``--rounds 1
---suites sim --sim-steps 50``). One round of the three suites, both commits, is about 2.5 minutes on the idle
-machine.
+--suites sim --sim-steps 50``: 21 s on the busy 2-core machine, nearly all of it start-up). One round of the three
+suites, both commits, should take about 2.5 minutes on the idle machine (sim about 15 s a run, train about 35 s with
+its 15 s of start-up, policy about 25 s: estimated from docs/benchmarks.md's figures, not measured yet).
 
 Interleaving: round r runs every suite on both commits back to back, the base first in odd rounds and the head
 first in even ones, so a machine that drifts (warming, another job starting) weighs on both sides alike.
@@ -42,8 +43,8 @@ medians head / base, and a verdict. Every figure is a rate (per wall or CPU seco
 
 The verdict rule: **within spread** when the head's median lies inside the base's [min, max] or the two ranges
 [min, max] overlap (the first implies the second; both are stated because either is what a reader checks first);
-otherwise **head faster** or **head slower (outside spread)**. A side with fewer than 2 runs has no spread: the
-verdict then says so instead of judging.
+otherwise **head faster (outside spread)** or **head slower (outside spread)**. A side with fewer than 2 runs has
+no spread: the verdict then says so instead of judging.
 """
 from __future__ import annotations
 
@@ -280,8 +281,12 @@ def tree_environment(tree: Path) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(tree)}
 
 
-def check_imports(python: str, tree: Path) -> None:
-    """The tree's benchmarks and dynenv_ros are what its runs import (not the venv's editable install)."""
+def prepare(python: str, tree: Path) -> None:
+    """The tree's benchmarks and dynenv_ros are what its runs import (not the venv's editable install), and its
+    packages are byte-compiled, so that a fresh tree's first run does not pay for it in its wall seconds."""
+    packages = [str(tree / name) for name in ("benchmarks", "dynenv_ros", "policy_node") if (tree / name).is_dir()]
+    subprocess.run([python, "-m", "compileall", "-q", *packages], cwd=tree, env=tree_environment(tree),
+                   capture_output=True)
     probe = "import benchmarks, dynenv_ros; print(benchmarks.__file__); print(dynenv_ros.__file__)"
     done = subprocess.run([python, "-c", probe], cwd=tree, env=tree_environment(tree), capture_output=True, text=True)
     if done.returncode != 0:
@@ -331,7 +336,7 @@ def measure(args: argparse.Namespace, out: Path) -> list[dict[str, Any]]:
     for side, commit in commits.items():
         same = side == "head" and commit == commits["base"]     # an A/A run: the base's tree twice
         trees[side] = trees["base"] if same else worktree(args.worktrees, commit)
-        check_imports(args.python, trees[side])
+        prepare(args.python, trees[side])
         print(f"{side}: {refs[side]} = {commit[:12]} in {trees[side]}", flush=True)
     (out / RAW_DIR).mkdir(parents=True, exist_ok=True)
     records = []
