@@ -154,7 +154,7 @@ def test_a_measurement_needs_a_base_and_a_new_out(tool, tmp_path, capsys) -> Non
 
 # ----------------------------------------------------------------------------------------- a whole run, for real
 # Each commit's benchmarks/__main__.py prints its sim figures after a line of other output, in the shape of the real
-# suite's --json; the head's sim is 10 % faster. Any other suite fails as a broken suite would.
+# suite's --json; the head's sim is 10 % faster. policy passes its warm-up (--warmup 0) and then fails; train fails.
 FAKE_MAIN = '''
 import json, sys
 suite, rate = sys.argv[1], {rate}
@@ -162,6 +162,11 @@ print("a line before the JSON")
 if suite == "sim":
     print(json.dumps({{"env_steps_per_s": {{"median": rate, "min": rate - 1, "max": rate + 1}},
                       "env_steps_per_cpu_s": rate / 2, "argv": sys.argv[1:]}}))
+elif suite == "policy" and sys.argv[sys.argv.index("--warmup") + 1] == "0":
+    print(json.dumps({{"cases": [{{"robots": 10, "runtime": "torch", "decisions_per_s": rate,
+                                  "decisions_per_cpu_s": rate}}]}}))
+elif suite == "policy":
+    sys.exit("policy broke after its warm-up")
 else:
     sys.exit("no such suite here: " + suite)
 '''
@@ -210,6 +215,12 @@ def test_a_run_measures_each_commit_in_its_worktree_interleaved(tool, tmp_path, 
                                     "--steps", "50", "--repeat", "3", "--cores", "1", "--json"]
         raw = (out / r["raw"]).read_text()
         assert f"PYTHONPATH={trees / r['commit'][:12]}" in raw and "a line before the JSON" in raw
+    for side in ("base", "head"):    # each tree warmed up once, at the smallest sim, before round 1
+        warm = (out / "raw" / f"warmup_sim_{side}.txt").read_text()
+        assert "sim --players-per-team 2 --observation partial --steps 10 --repeat 1" in warm
+    assert sorted(p.name for p in (out / "raw").iterdir()) == [
+        "r1_sim_base.txt", "r1_sim_head.txt", "r2_sim_base.txt", "r2_sim_head.txt", "warmup_sim_base.txt",
+        "warmup_sim_head.txt"]
     assert git(trees / base[:12], "rev-parse", "HEAD") == base
     assert git(trees / head[:12], "rev-parse", "HEAD") == head
     printed = capsys.readouterr().out
@@ -233,10 +244,24 @@ def test_a_failing_suite_is_recorded_and_the_exit_status_says_so(tool, tmp_path,
                       "--worktrees", str(tmp_path / "trees"), "--python", sys.executable])
     assert code == 1
     lines = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
-    refused = "exit status 1: no such suite here: policy"
+    refused = "exit status 1: policy broke after its warm-up"
     assert [(r["side"], r["returncode"], r["error"]) for r in lines] == [("base", 1, refused), ("head", 1, refused)]
     assert "2 run(s) failed" in capsys.readouterr().out
-    assert not (tmp_path / "trees" / head[:12]).exists()    # an A/A run makes one tree
+    assert not (tmp_path / "trees" / head[:12]).exists()    # an A/A run makes one tree, warmed up once
+    assert sorted(p.name for p in (out / "raw").iterdir()) == [
+        "r1_policy_base.txt", "r1_policy_head.txt", "warmup_policy_base.txt"]
+
+
+def test_a_suite_failing_its_warm_up_stops_the_run_before_anything_is_measured(tool, tmp_path, monkeypatch) -> None:
+    repo, base, head = fake_repository(tmp_path)
+    monkeypatch.setattr(tool, "ROOT", repo)
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit, match=f"the warm-up run of train at base {base[:12]} failed, nothing was "
+                                         "measured: exit status 1: no such suite here: train"):
+        tool.main(["--base", base, "--head", head, "--suites", "sim", "train", "--out", str(out),
+                   "--worktrees", str(tmp_path / "trees"), "--python", sys.executable])
+    assert not (out / "runs.jsonl").exists()
+    assert "--updates 1 --warmup 0" in (out / "raw" / "warmup_train_base.txt").read_text()
 
 
 def test_a_tree_that_is_not_a_worktree_of_the_commit_is_refused(tool, tmp_path, monkeypatch) -> None:

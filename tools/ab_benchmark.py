@@ -30,6 +30,11 @@ options of these three suites, so nothing had to be left out):
 suites, both commits, should take about 2.5 minutes on the idle machine (sim about 15 s a run, train about 35 s with
 its 15 s of start-up, policy about 25 s: estimated from docs/benchmarks.md's figures, not measured yet).
 
+Warm-up: before round 1 each suite runs once in each tree at its smallest (sim 10 steps, train one update of 2
+worlds, policy 200 decisions; about 50 s in all by the doc test's figures), kept in raw/ but not in the table: numba
+compiles the perception kernels into a fresh tree's __pycache__ on their first call, which a reused tree has already
+done, and a suite that fails stops the run there, before minutes of measuring.
+
 Interleaving: round r runs every suite on both commits back to back, the base first in odd rounds and the head
 first in even ones, so a machine that drifts (warming, another job starting) weighs on both sides alike.
 
@@ -132,17 +137,24 @@ class Suite:
     name: str
     arguments: Callable[[argparse.Namespace], list[str]]    # after `python -m benchmarks`
     figures: Callable[[Mapping[str, Any]], dict[str, float]]
+    warmup: list[str]      # the same code paths at their smallest, run once per tree before round 1, not recorded
 
 
 SUITES: dict[str, Suite] = {
     "sim": Suite("sim", lambda a: ["sim", "--players-per-team", "2", "--observation", "partial", "--steps",
-                                   str(a.sim_steps), "--repeat", "3", "--cores", "1", "--json"], sim_figures),
+                                   str(a.sim_steps), "--repeat", "3", "--cores", "1", "--json"], sim_figures,
+                 ["sim", "--players-per-team", "2", "--observation", "partial", "--steps", "10", "--repeat", "1",
+                  "--cores", "1", "--json"]),
     "train": Suite("train", lambda a: ["train", "--config", "async", "--baseline", "none", "--updates",
                                        str(a.train_updates), "--warmup", "3", "--repeat", "1", "--json"],
-                   train_figures),
+                   train_figures,
+                   ["train", "--config", "async", "--baseline", "none", "--updates", "1", "--warmup", "0", "--repeat",
+                    "1", "--set", "num_envs=2", "--set", "workers=1", "--json"]),
     "policy": Suite("policy", lambda a: ["policy", "--robots", "10", "--decisions", str(a.policy_decisions),
                                          "--warmup", "50", "--repeat", "3", "--threads", "1", "--cores", "1",
-                                         "--json"], policy_figures),
+                                         "--json"], policy_figures,
+                    ["policy", "--robots", "10", "--decisions", "200", "--warmup", "0", "--repeat", "1", "--threads",
+                     "1", "--cores", "1", "--json"]),
 }
 
 
@@ -296,9 +308,11 @@ def prepare(python: str, tree: Path) -> None:
         raise SystemExit(f"{python} in {tree} imports {', '.join(foreign)}: not the tree's code")
 
 
-def run_one(python: str, tree: Path, suite: Suite, args: argparse.Namespace, raw: Path) -> dict[str, Any]:
-    """One benchmark run in ``tree``: its command, time, load, exit status and figures (or the error)."""
-    command = [python, "-m", "benchmarks", *suite.arguments(args)]
+def run_one(python: str, tree: Path, suite: Suite, args: argparse.Namespace, raw: Path,
+            arguments: list[str] | None = None) -> dict[str, Any]:
+    """One benchmark run in ``tree`` (``arguments``: instead of the suite's measured ones): its command, time,
+    load, exit status and figures (or the error)."""
+    command = [python, "-m", "benchmarks", *(suite.arguments(args) if arguments is None else arguments)]
     started = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     load_before = os.getloadavg()
     clock = time.monotonic()
@@ -329,6 +343,24 @@ def _text(value: bytes | str | None) -> str:
     return value.decode(errors="replace") if isinstance(value, bytes) else value or ""
 
 
+def warm_up(args: argparse.Namespace, trees: dict[str, Path], commits: dict[str, str], out: Path) -> None:
+    """Each suite once in each tree, at its smallest, before anything is timed: numba compiles the perception
+    kernels into a fresh tree's __pycache__ on their first call (a reused tree has them), and a suite that fails
+    stops the run here rather than after minutes of measuring."""
+    warmed: set[Path] = set()
+    for side, tree in trees.items():
+        if tree in warmed:          # an A/A run: one tree
+            continue
+        warmed.add(tree)
+        for name in args.suites:
+            raw = out / RAW_DIR / f"warmup_{name}_{side}.txt"
+            record = run_one(args.python, tree, SUITES[name], args, raw, SUITES[name].warmup)
+            print(f"warm-up {name} {side}: {record.get('error') or 'ok'} ({record['wall_s']:.0f} s)", flush=True)
+            if record.get("error"):
+                raise SystemExit(f"the warm-up run of {name} at {side} {commits[side][:12]} failed, nothing was "
+                                 f"measured: {record['error']} (its output: {raw})")
+
+
 def measure(args: argparse.Namespace, out: Path) -> list[dict[str, Any]]:
     refs = {"base": args.base, "head": args.head}
     commits = {side: resolve(ref) for side, ref in refs.items()}
@@ -339,6 +371,7 @@ def measure(args: argparse.Namespace, out: Path) -> list[dict[str, Any]]:
         prepare(args.python, trees[side])
         print(f"{side}: {refs[side]} = {commit[:12]} in {trees[side]}", flush=True)
     (out / RAW_DIR).mkdir(parents=True, exist_ok=True)
+    warm_up(args, trees, commits, out)
     records = []
     with open(out / RUNS_FILE, "a") as log:
         for round_ in range(1, args.rounds + 1):
