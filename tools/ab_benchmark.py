@@ -10,7 +10,8 @@ already there, clean and at that commit), and every benchmark runs that tree's c
 (setup.py maps it to ``benchmarks.__main__:main``): ``cd TREE && PYTHONPATH=TREE PYTHON -m benchmarks SUITE ARGS``,
 PYTHON being this tool's interpreter (the project's venv) unless ``--python`` says otherwise. PYTHONPATH puts the
 tree before the venv's editable install of the main checkout; before anything is timed each tree's imports are
-checked to come from it and its packages are byte-compiled (a fresh tree's first run would otherwise pay for that). Commits are measured as committed: uncommitted changes of the checkout are not in the trees.
+checked to come from it and its packages are byte-compiled. Commits are measured as committed: uncommitted changes
+of the checkout are not in the trees.
 
 The suites and their options (the same for both commits: ``3cd871e`` and the restructured code accept the same
 options of these three suites, so nothing had to be left out):
@@ -26,9 +27,9 @@ options of these three suites, so nothing had to be left out):
   ``decisions_per_cpu_s`` of each runtime (the suite's median of its 3 repetitions).
 
 ``--sim-steps``, ``--train-updates`` and ``--policy-decisions`` change those lengths (a smoke run: ``--rounds 1
---suites sim --sim-steps 50``: 21 s on the busy 2-core machine, nearly all of it start-up). One round of the three
-suites, both commits, should take about 2.5 minutes on the idle machine (sim about 15 s a run, train about 35 s with
-its 15 s of start-up, policy about 25 s: estimated from docs/benchmarks.md's figures, not measured yet).
+--suites sim --sim-steps 50``: 12 s on the busy 2-core machine, one tree checked out and one reused). One round of
+the three suites, both commits, should take about 2.5 minutes on the idle machine (sim about 15 s a run, train about
+35 s with its 15 s of start-up, policy about 25 s: estimated from docs/benchmarks.md's figures, not measured yet).
 
 Warm-up: before round 1 each suite runs once in each tree at its smallest (sim 10 steps, train one update of 2
 worlds, policy 200 decisions; about 50 s in all by the doc test's figures), kept in raw/ but not in the table: numba
@@ -222,8 +223,8 @@ def markdown_table(records: list[dict[str, Any]]) -> str:
                         for side, c in commits.items()) + f" · {len(rounds)} round(s)"]
     if loads:
         lines.append(f"load average (1 min) before each run: {min(loads):.2f}–{max(loads):.2f}")
-    lines += ["", "| suite | figure | base: median [min–max] | head: median [min–max] | head / base | runs (base, head) "
-              "| verdict |", "|---|---|---|---|---|---|---|"]
+    lines += ["", "| suite | figure | base: median [min–max] | head: median [min–max] | head / base "
+              "| runs (base, head) | verdict |", "|---|---|---|---|---|---|---|"]
     for suite, name, base, head, judged in summary_rows(records):
         ratio = f"{head.median / base.median:.3f}" if base and head and base.median else "–"
         lines.append(f"| {suite} | {name} | {_cell(base) if base else '–'} | {_cell(head) if head else '–'} | "
