@@ -1102,6 +1102,13 @@ PARSE_ONLY: list[tuple[str, str]] = [
     (r"^python tools/paper_comparison\.py ", "evaluates every run and runs BEST on every pair: 157 s even at one "
                                              "2-s episode and 100 draws; the evaluations and comparisons it makes "
                                              "are the commands of 'Every evaluation, as a command', which run"),
+    (r"^python tools/ab_benchmark\.py ", "checks out a git worktree per commit through the repository's own .git "
+                                        "(the scratch view links it: the checkouts would stay registered there) and "
+                                        "needs 3cd871e in the clone's history; its smallest run (--rounds 1 --suites "
+                                        "sim --sim-steps 50) took 12 s with one of its two trees already checked out "
+                                        "(2 busy cores, load 5.6); --summary-only reads the runs.jsonl that run "
+                                        "writes. test/test_ab_benchmark.py runs a whole A/B run over a throw-away "
+                                        "repository"),
     (r"^python tools/driving_perception_statistics\.py( --maxima)?$", "no option shortens it: 41 s (all figures), "
                                                                      "over 90 s (--maxima); its --timing part runs"),
 ]
