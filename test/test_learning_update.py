@@ -127,7 +127,7 @@ def test_final_value_is_the_critic_at_the_final_observation():
     original_step = env.step
 
     def spy(actions):
-        states.append(tuple(s.clone() for s in collector.state))
+        states.append(tuple(s.clone() for s in collector.acting.state))
         result = original_step(actions)
         finals.append(result.final_observations)
         return result

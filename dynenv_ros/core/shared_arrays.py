@@ -1,6 +1,7 @@
 """Numpy arrays in shared memory between the processes of one machine: the vector env's worlds and its worker
 processes (``envs.vector``), the learner and its rollout workers (``learning.distributed``: rollout slots, the
-weights block)."""
+weights block, the inference server's requests and answers). ``SharedArrays`` creates them (and unlinks them);
+``AttachedArrays`` is another process's view of them, by their names."""
 from __future__ import annotations
 
 import math
@@ -57,3 +58,25 @@ class SharedArrays:
     def close(self) -> None:
         self.arrays = {}
         self._finalizer()
+
+
+class AttachedArrays:
+    """The arrays of another process's ``SharedArrays``, attached by its ``names()``: the same memory. ``close``
+    unmaps them here; their creator unlinks them."""
+
+    def __init__(self, names: Mapping[str, tuple[str, tuple[int, ...], str]]) -> None:
+        self._blocks: list[shared_memory.SharedMemory] = []
+        self.arrays: dict[str, np.ndarray] = {}
+        try:
+            for key, (name, shape, dtype) in names.items():
+                block = shared_memory.SharedMemory(name=name)
+                self._blocks.append(block)
+                self.arrays[key] = np.ndarray(shape, np.dtype(dtype), buffer=block.buf)
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        self.arrays = {}
+        close_blocks(self._blocks)
+        self._blocks = []

@@ -11,13 +11,12 @@ carried exactly when the run makes it, with no second description of the rollout
 from __future__ import annotations
 
 import math
-from multiprocessing import shared_memory
 from typing import Mapping
 
 import numpy as np
 import torch
 
-from dynenv_ros.core.shared_arrays import SharedArrays, close_blocks
+from dynenv_ros.core.shared_arrays import AttachedArrays, SharedArrays
 from dynenv_ros.learning.algo.experience import STEP_ARRAYS, Rollout
 
 Spec = dict[str, tuple[tuple[int, ...], str]]
@@ -108,26 +107,20 @@ class AttachedSlots:
     """A worker's side of its ``RolloutSlots``: the same blocks, attached by name."""
 
     def __init__(self, names: list[dict[str, tuple[str, tuple[int, ...], str]]]) -> None:
-        self._blocks: list[shared_memory.SharedMemory] = []
-        self._arrays: list[dict[str, np.ndarray]] = []
+        self._slots: list[AttachedArrays] = []
         try:
             for slot in names:
-                arrays = {}
-                for key, (name, shape, dtype) in slot.items():
-                    block = shared_memory.SharedMemory(name=name)
-                    self._blocks.append(block)
-                    arrays[key] = np.ndarray(shape, np.dtype(dtype), buffer=block.buf)
-                self._arrays.append(arrays)
+                self._slots.append(AttachedArrays(slot))
         except BaseException:
             self.close()
             raise
 
     def __len__(self) -> int:
-        return len(self._arrays)
+        return len(self._slots)
 
     def write(self, index: int, arrays: Mapping[str, np.ndarray]) -> None:
         """Copy a flattened rollout into slot ``index``; its names and shapes must be the slot's."""
-        slot = self._arrays[index]
+        slot = self._slots[index].arrays
         if set(arrays) != set(slot):
             raise ValueError(f"rollout arrays differ from the slot's: {sorted(set(arrays) ^ set(slot))}")
         for key, value in arrays.items():
@@ -136,6 +129,6 @@ class AttachedSlots:
             np.copyto(slot[key], value, casting="same_kind")
 
     def close(self) -> None:
-        self._arrays = []
-        close_blocks(self._blocks)
-        self._blocks = []
+        for slot in self._slots:
+            slot.close()
+        self._slots = []

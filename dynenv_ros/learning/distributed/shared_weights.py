@@ -14,12 +14,11 @@ seeder. Versions count the learner's updates; -1 means nothing was published yet
 from __future__ import annotations
 
 import time
-from multiprocessing import shared_memory
 
 import numpy as np
 import torch
 
-from dynenv_ros.core.shared_arrays import SharedArrays, close_blocks
+from dynenv_ros.core.shared_arrays import AttachedArrays, SharedArrays
 
 _SEQUENCE, _VERSION = 0, 1
 
@@ -99,9 +98,8 @@ class AttachedWeights:
 
     def __init__(self, names: dict[str, tuple[str, tuple[int, ...], str]], module: torch.nn.Module) -> None:
         self.layout = _layout(module)
-        self._blocks = [shared_memory.SharedMemory(name=names[key][0]) for key in ("header", "weights")]
-        self.header = np.ndarray(names["header"][1], np.dtype(names["header"][2]), buffer=self._blocks[0].buf)
-        self.flat = np.ndarray(names["weights"][1], np.dtype(names["weights"][2]), buffer=self._blocks[1].buf)
+        self._attached = AttachedArrays({key: names[key] for key in ("header", "weights")})
+        self.header, self.flat = self._attached.arrays["header"], self._attached.arrays["weights"]
         expected = sum(size for *_, size in self.layout)
         if self.flat.size != expected:
             held = self.flat.size
@@ -136,5 +134,4 @@ class AttachedWeights:
 
     def close(self) -> None:
         self.header = self.flat = None
-        close_blocks(self._blocks)
-        self._blocks = []
+        self._attached.close()

@@ -1,10 +1,11 @@
 """The in-process rollouts: ``RolloutCollector`` steps the vectorised batch (``SoccerVectorEnv`` or
 ``DrivingVectorEnv``) with the current policy, T periods at a time, into a ``Rollout`` (``algo.experience``: what
-its arrays hold, soccer and driving).
+its arrays hold, soccer and driving). The learning robots act through an ``Acting`` (``sampling.acting``): in this
+process, or on the asynchronous runner's inference server.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, cast
 
 import numpy as np
 import torch
@@ -14,9 +15,9 @@ from dynenv_ros.driving.agent_actions import commands as driving_commands
 from dynenv_ros.agent.network import DynEnvAgent, State
 from dynenv_ros.envs.vector import SoccerVectorEnv
 from dynenv_ros.learning.algo.experience import Rollout
+from dynenv_ros.learning.sampling.acting import Acting, LocalActing
 from dynenv_ros.scenarios import scenario_of
-from dynenv_ros.learning.algo.policy import (action_log_prob, action_width, can_act, device_of, policy_step,
-                                             reset_state, sample_actions)
+from dynenv_ros.learning.algo.policy import action_width, can_act
 
 TARGET_KEYS = ("pose", "ball", "robots", "ball_seen", "robots_seen")
 
@@ -40,15 +41,21 @@ class Opponent:
         raise NotImplementedError
 
 
+# builds the acting of a collector from its learning robots' first observations (B, ...) and whether the worlds have
+# a teacher (requests carry its actions) or privileged seeding (they carry seed poses)
+ActingFactory = Callable[[Mapping[str, np.ndarray], bool, bool], Acting]
+
+
 class RolloutCollector:
     """Steps ``env`` with ``agent`` (and ``opponent`` for the robots not in ``learning_robots``), T periods at a
-    time, carrying episode state (recurrent state, seen-so-far memory) across rollouts."""
+    time, carrying episode state (recurrent state, seen-so-far memory) across rollouts. The learning robots act
+    through ``acting`` (default: ``LocalActing`` with ``agent`` and ``generator``)."""
 
     def __init__(self, env: SoccerVectorEnv, agent: DynEnvAgent, learning_robots: np.ndarray,
                  opponent: Opponent | None, generator: torch.Generator, seed: int,
                  reward_transform: Callable[[np.ndarray], np.ndarray] | None = None,
                  pose_seeder: Callable[[Tensor], State] | None = None, seed_noise: np.ndarray | None = None,
-                 rng: np.random.Generator | None = None) -> None:
+                 rng: np.random.Generator | None = None, acting: ActingFactory | None = None) -> None:
         self.env, self.agent = env, agent
         world = scenario_of(agent)
         if not isinstance(env.config, world.settings_type):
@@ -61,7 +68,6 @@ class RolloutCollector:
         if len(self.other_robots) and opponent is None:
             raise ValueError("robots outside learning_robots need an opponent")
         self.opponent = opponent
-        self.generator = generator
         self.with_targets = bool(getattr(env, "with_targets", False))
         self.reward_transform = reward_transform
         # DynEnv's privileged re-initialisation (docs/original.md §9.6, §12.18), off unless a seeder is given: at every
@@ -75,7 +81,10 @@ class RolloutCollector:
         self._teacher = env.teacher_actions if self.with_teacher else None
         self.teacher_driven = np.zeros(env.num_envs * len(self.learning_robots), bool)
         batch = env.num_envs * len(self.learning_robots)
-        self.state: State = tuple(s.to(device_of(agent)) for s in agent.initial_state(batch))  # type: ignore
+        if acting is None:
+            self.acting: Acting = LocalActing(agent, generator, batch, pose_seeder)
+        else:
+            self.acting = acting(self._learning_obs(self._obs), self.with_teacher, pose_seeder is not None)
         self._starts = np.ones(batch, bool)
         self._other_starts = np.ones((env.num_envs, len(self.other_robots)), bool)
         self._known: dict[str, np.ndarray] = {}
@@ -117,6 +126,9 @@ class RolloutCollector:
         rollout.initial_state = tuple(s.clone() for s in rollout.initial_state)   # type: ignore[assignment]
         return rollout
 
+    def close(self) -> None:
+        self.acting.close()
+
     def _collect_soccer(self, steps: int) -> Rollout:
         E, k = self.env.num_envs, len(self.learning_robots)
         B = E * k
@@ -134,9 +146,9 @@ class RolloutCollector:
         if self.pose_seeder is not None:
             true_pose = flatten_robots(self._targets["pose"], self.learning_robots)
             seed_pose = (true_pose + self.rng.normal(size=true_pose.shape) * self.seed_noise).astype(np.float32)
-            self.state = self.pose_seeder(torch.from_numpy(seed_pose).to(device_of(self.agent)))
+            self.acting.seed(seed_pose)
             self._starts = np.zeros_like(self._starts)       # the seeded state is this rollout's start
-        initial_state = tuple(s.clone() for s in reset_state(self.state, torch.from_numpy(self._starts)))
+        initial_state: State | None = None
         current = first
         for t in range(steps + 1):
             for key, v in current.items():
@@ -150,21 +162,18 @@ class RolloutCollector:
                     targets = {k: np.empty((steps + 1, *v.shape), np.float32) for k, v in values_now.items()}
                 for key, value in values_now.items():
                     targets[key][t] = value
-            state = reset_state(self.state, torch.from_numpy(self._starts))
-            step = policy_step(self.agent, current, state)
-            values[t] = step.value.cpu().numpy()
-            if t == steps:          # the bootstrap value only; the next rollout acts on this observation
-                break
-            sampled, log_prob = sample_actions(self.agent, step, self.generator)
-            actions[t], log_probs[t] = sampled.numpy().astype(np.int64), log_prob.numpy()
-            if teacher is not None:
+            if teacher is not None and t < steps:
                 teacher[t] = flatten_robots(self._teacher, self.learning_robots)
-                driven = self.teacher_driven
-                if driven.any():
-                    actions[t, driven] = teacher[t, driven]
-                    log_probs[t, driven] = action_log_prob(self.agent, step, torch.from_numpy(teacher[t]))[
-                        torch.from_numpy(driven)].numpy()
-            self.state = step.state
+            # the bootstrap period (t == steps) gives the value only; the next rollout acts on this observation
+            acted = self.acting.step(current, self._starts, last=t == steps, want_state=t == 0,
+                                     teacher=None if teacher is None or t == steps else teacher[t],
+                                     driven=self.teacher_driven if teacher is not None else None)
+            values[t] = acted.values
+            if t == 0:
+                initial_state = acted.start_state
+            if t == steps:
+                break
+            actions[t], log_probs[t] = acted.actions, acted.log_probs
             full = np.zeros((E, self.env.config.n_robots, 4), np.int64)
             full[:, self.learning_robots] = actions[t].reshape(E, k, 4)
             if len(self.other_robots):
@@ -189,7 +198,7 @@ class RolloutCollector:
             self._other_starts = np.repeat(ended[:, None], len(self.other_robots), axis=1)
             current = self._learning_obs(self._obs)
         return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
-                       starts, acting, initial_state, targets, seed_pose, teacher,
+                       starts, acting, cast(State, initial_state), targets, seed_pose, teacher,
                        self.teacher_driven.copy() if self.with_teacher else None)
 
     def _collect_driving(self, steps: int) -> Rollout:
@@ -206,22 +215,21 @@ class RolloutCollector:
         final_values = np.zeros((steps, B), np.float32)
         starts, alive = np.zeros((steps + 1, B), bool), np.zeros((steps + 1, B), bool)
         teacher = np.zeros((steps, B, width), dtype) if self.with_teacher else None
-        initial_state = tuple(s.clone() for s in reset_state(self.state, torch.from_numpy(self._starts)))
+        initial_state: State | None = None
         current = first
         for t in range(steps + 1):
             for key, v in current.items():
                 obs[key][t] = v
             starts[t], alive[t] = self._starts, ~self._done
-            state = reset_state(self.state, torch.from_numpy(self._starts))
-            step = policy_step(self.agent, current, state)
-            values[t] = step.value.cpu().numpy()
+            acted = self.acting.step(current, self._starts, last=t == steps, want_state=t == 0)
+            values[t] = acted.values
+            if t == 0:
+                initial_state = acted.start_state
             if t == steps:
                 break
-            sampled, log_prob = sample_actions(self.agent, step, self.generator)
-            actions[t], log_probs[t] = sampled.numpy().astype(dtype), log_prob.numpy()
+            actions[t], log_probs[t] = acted.actions, acted.log_probs
             if teacher is not None:
                 teacher[t] = flatten_robots(self._teacher, self.learning_robots)
-            self.state = step.state
             sent = actions[t].reshape(E, k, width)
             result = self.env.step(sent if dtype == np.int64 else     # normalised steering → rad/s
                                    driving_commands(sent, "continuous", self.env.config.cars.max_yaw_rate))
@@ -245,7 +253,7 @@ class RolloutCollector:
             self._starts = world_end.copy()          # the recurrent state restarts with the world's next episode
             current = self._learning_obs(self._obs)
         return Rollout(obs, actions, log_probs, values, rewards, terms, episode_end, truncated, final_values,
-                       starts, alive.copy(), initial_state, teacher_actions=teacher, alive=alive)
+                       starts, alive.copy(), cast(State, initial_state), teacher_actions=teacher, alive=alive)
 
     def _account_driving(self, terms: np.ndarray, ended: np.ndarray, world_end: np.ndarray, result: Any) -> None:
         """Per-car episode sums; a finished car's record with ``home`` (finished, not crashed) and ``crashed``,
@@ -273,8 +281,7 @@ class RolloutCollector:
         k = len(self.learning_robots)
         final = {key: np.stack([result.final_observations[int(r // k)][key][self.learning_robots[r % k]]
                                 for r in rows]) for key in self._obs}
-        state = tuple(s[torch.from_numpy(rows).to(s.device)] for s in self.state)
-        out[rows] = policy_step(self.agent, final, state).value.cpu().numpy()
+        out[rows] = self.acting.final_values(final, rows)
         return out
 
     def _account(self, terms: np.ndarray, ended: np.ndarray) -> None:

@@ -15,7 +15,7 @@ from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.sampling.opponents import (SCRIPTED_TEAM, RandomOpponent, SnapshotOpponent,
                                                     WorldScriptedOpponent)
-from dynenv_ros.learning.sampling.collector import RolloutCollector
+from dynenv_ros.learning.sampling.collector import ActingFactory, RolloutCollector
 from dynenv_ros.scenarios import DRIVING, SOCCER
 from dynenv_ros.soccer.config import SoccerConfig
 
@@ -96,10 +96,11 @@ class Worlds:
 
 
 def make_worlds(cfg: TrainConfig, networks: TrainingNetworks, num_envs: int, backend: str, generator: torch.Generator,
-                rng: np.random.Generator, seed: int) -> Worlds:
+                rng: np.random.Generator, seed: int, acting: ActingFactory | None = None) -> Worlds:
     """``num_envs`` worlds of ``cfg``'s scenario stepped by ``networks.agent`` (``backend``: the vector env's), the
-    opponent the config names and the collector; ``generator`` samples actions, ``rng`` draws random opponents and
-    seeding noise, ``seed`` seeds the worlds."""
+    opponent the config names and the collector; ``generator`` samples actions (and a snapshot opponent's), ``rng``
+    draws random opponents and seeding noise, ``seed`` seeds the worlds; ``acting``: how the learning robots act
+    (default: here, with ``networks``; a rollout worker of ``inference: server`` passes the server's)."""
     agent = networks.agent
     env, learning = make_env(cfg, num_envs, backend)
     if cfg.world.layout_follows_settings:
@@ -116,7 +117,7 @@ def make_worlds(cfg: TrainConfig, networks: TrainingNetworks, num_envs: int, bac
         seeding = {"pose_seeder": networks.seeded_state, "seed_noise": SEED_NOISE, "rng": rng}
     try:
         collector = RolloutCollector(env, agent, learning, opponent, generator, seed=seed,
-                                     reward_transform=reward_transform(cfg), **seeding)
+                                     reward_transform=reward_transform(cfg), acting=acting, **seeding)
     except BaseException:
         env.close()
         raise
