@@ -47,6 +47,7 @@ VARIANTS = ("baseline", "icm", "rcm", "pred", "recon")
 OPPONENTS = ("self", "snapshot", "scripted", "perceiving", "league", "random")
 BACKENDS = ("auto", "inprocess", "subprocess", "ray")
 RUNNERS = ("sync", "async")
+INFERENCES = ("worker", "server")                   # runner async: where the acting forward runs
 # one shared network has no slot input, so it cannot imitate a keeper in one slot: chasers only ('perceiving': the
 # chaser on the robot's own observation and pose estimate, soccer.perceiving)
 HEAD_MODES = ("discrete", "continuous")
@@ -260,11 +261,20 @@ class TrainConfig:
                              "memory (backend 'ray': the workers are Ray actors).")
     workers: int | None = _f(None, "runner async: rollout workers (processes or Ray actors), each stepping its "
                                    "share of num_envs; null = one per CPU core this process may use, minus one "
-                                   "for a CPU learner (at least 1).")
+                                   "for a CPU learner and one for the inference server (inference: server) (at "
+                                   "least 1).")
     max_policy_lag: int = _f(4, "runner async: a rollout whose behaviour policy is more than this many updates "
                                 "older than the learner's is dropped (counted); PPO's ratio against the "
                                 "behaviour log-probabilities corrects the lag within it.")
     rollouts_per_update: int = _f(1, "runner async: worker rollouts joined (along the robot axis) into one update.")
+    inference: str = _f("worker", "runner async, worker processes (backend auto): where the learning robots' "
+                                  "acting forward runs. 'worker': each rollout worker acts for its own worlds on its "
+                                  "own core; 'server': the workers only step their worlds and one inference server "
+                                  "process batches every worker's robots into one forward on device (a GPU with "
+                                  "device cuda), keeps their recurrent states and draws their actions from each "
+                                  "worker's seeded generator, the same actions a worker would draw "
+                                  "(docs/training.md, 'The asynchronous runner'). It pays with many workers and a "
+                                  "GPU; on a machine of few cores and no GPU it is not expected to.")
     worker_restarts: int = _f(3, "runner async: a worker (or node) that dies is replaced at most this many times "
                                  "in a run; after that the run continues on the workers left, or stops cleanly "
                                  "with its reason when none is left.")
@@ -363,7 +373,13 @@ class TrainConfig:
         if self.runner == "sync":
             if self.backend == "ray":
                 raise ConfigError("backend", "'ray' runs rollout workers as Ray actors, which needs runner: async")
+            if self.inference != "worker":
+                raise ConfigError("inference", f"{self.inference!r} serves rollout workers, which needs runner: "
+                                               f"async (runner sync acts in this process)")
             return
+        if self.inference == "server" and self.backend == "ray":
+            raise ConfigError("inference", "'server' serves the worker processes of backend 'auto' (Ray actors act "
+                                           "for themselves, maybe on other machines)")
         if self.backend not in ("auto", "ray"):
             raise ConfigError("backend", f"{self.backend!r} does not apply to runner async (each rollout worker "
                                          f"steps its worlds itself); use 'auto' (worker processes) or 'ray'")
@@ -420,6 +436,7 @@ class TrainConfig:
         _choice("opponent", self.opponent, OPPONENTS)
         _choice("backend", self.backend, BACKENDS)
         _choice("runner", self.runner, RUNNERS)
+        _choice("inference", self.inference, INFERENCES)
         _choice("scenario", self.scenario, SCENARIOS)
         if self.teacher is not None:
             teachers = self.world.teachers

@@ -25,7 +25,8 @@ from dynenv_ros.learning.distributed.ray_connection import RayConnectionError, c
 from dynenv_ros.learning.distributed.rollout_transfer import unflatten
 from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, resolve_workers, shard_sizes
 from dynenv_ros.learning.distributed.shared_weights import pack, unpack
-from dynenv_ros.learning.distributed.worker_pool import Delivery, WorkerPoolError, one_line, replace_or_go_on
+from dynenv_ros.learning.distributed.child_process import one_line
+from dynenv_ros.learning.distributed.worker_pool import Delivery, WorkerPoolError, replace_or_go_on
 
 QUEUED_CALLS = 2             # collect calls per actor: one running, one waiting
 

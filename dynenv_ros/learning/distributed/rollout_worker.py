@@ -6,13 +6,18 @@ Seeds: a worker's worlds, action sampling and random draws come from ``SeedSeque
 first update])``, so a worker that replaces a dead one, or starts after a resume, plays fresh episodes. A run of
 this runner is not bit-reproducible (which weights a rollout acts with depends on timing); its seeds still make
 every world's episodes independent and every worker's draws its own.
+
+With ``inference: server`` the worker acts through the inference server (``server``: its pipe to it), which draws
+the learning robots' actions from a generator of the seed the worker's own acting would use; the worker's own
+generator, which a snapshot opponent draws from, then takes a fifth child seed, so that the two never share draws.
 """
 from __future__ import annotations
 
 import dataclasses
 import os
 import time
-from typing import Any
+from multiprocessing.connection import Connection
+from typing import Any, Mapping
 
 import numpy as np
 import torch
@@ -20,6 +25,7 @@ import torch
 from dynenv_ros.learning.algo.networks import make_agent
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.algo.networks import TrainingNetworks
+from dynenv_ros.learning.distributed.inference_server import ServerActing
 from dynenv_ros.learning.distributed.rollout_transfer import flatten
 from dynenv_ros.learning.sampling.worlds import Worlds, make_worlds, teacher_driven_share
 
@@ -29,12 +35,13 @@ def usable_cores() -> int:
 
 
 def resolve_workers(cfg: TrainConfig, cores: int | None = None) -> int:
-    """``cfg.workers``, or one per core this process may use, less one for a CPU learner; at most ``num_envs``;
-    at least one per team size (``team_sizes``: each worker plays one size)."""
+    """``cfg.workers``, or one per core this process may use, less one for a CPU learner and one for the inference
+    server (``inference: server``); at most ``num_envs``; at least one per team size (``team_sizes``: each worker
+    plays one size)."""
     if cfg.workers is not None:
         return cfg.workers
     cores = usable_cores() if cores is None else cores
-    wanted = cores if cfg.device != "cpu" else cores - 1
+    wanted = cores - (cfg.device == "cpu") - (cfg.inference == "server")
     return max(1, len(cfg.team_sizes or ()), min(cfg.num_envs, wanted))
 
 
@@ -57,12 +64,15 @@ class RolloutWorker:
     """Builds its worlds once it holds the learner's weights (a snapshot opponent starts as a copy of them)."""
 
     def __init__(self, cfg: TrainConfig, index: int, first_world: int, num_envs: int, incarnation: int = 0,
-                 first_update: int = 0) -> None:
+                 first_update: int = 0, server: Connection | None = None) -> None:
         cfg = worker_config(cfg, index)
         self.cfg, self.index, self.first_world, self.num_envs = cfg, index, first_world, num_envs
         torch.set_num_threads(1)                # one core per worker: intra-op threads would fight the others
-        seeds = np.random.SeedSequence([cfg.seed, index, incarnation, first_update]).spawn(4)
-        self.generator = torch.Generator().manual_seed(int(seeds[0].generate_state(1)[0]))
+        seeds = np.random.SeedSequence([cfg.seed, index, incarnation, first_update]).spawn(5)
+        self.acting_seed = int(seeds[0].generate_state(1)[0])       # the learning robots' draws, here or served
+        self.server = server
+        own = self.acting_seed if server is None else int(seeds[4].generate_state(1)[0])
+        self.generator = torch.Generator().manual_seed(own)
         self.rng = np.random.default_rng(seeds[1])
         self.world_seed = int(seeds[2].generate_state(1)[0])
         torch.manual_seed(int(seeds[3].generate_state(1)[0]))   # parameter init only, overwritten by the weights
@@ -101,7 +111,12 @@ class RolloutWorker:
                 raise RuntimeError("a rollout worker needs the learner's weights before its first rollout")
             self._snapshots = self.version // self.cfg.snapshot_every_updates
             self.worlds = make_worlds(self.cfg, self.networks, self.num_envs, "inprocess", self.generator, self.rng,
-                                      seed=self.world_seed)
+                                      seed=self.world_seed, acting=self._served if self.server is not None else None)
+
+    def _served(self, obs: Mapping[str, np.ndarray], with_teacher: bool, seeding: bool) -> ServerActing:
+        """The collector's acting on the inference server (registered with this worker's first observations)."""
+        assert self.server is not None
+        return ServerActing(self.server, self.acting_seed, self.networks.agent, obs, with_teacher, seeding)
 
     def collect(self, env_steps: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """The next rollout (``flatten``'s arrays) and what the learner logs of it; ``env_steps``: the learner's count,
@@ -110,9 +125,14 @@ class RolloutWorker:
         collector = self.worlds.collector
         collector.drive_with_teacher(teacher_driven_share(self.cfg, env_steps, self.first_world, self.num_envs))
         started = time.perf_counter()
+        served = collector.acting if isinstance(collector.acting, ServerActing) else None
+        if served is not None:
+            served.oldest = None
         rollout = collector.collect(self.cfg.rollout_length)
         finished, collector.finished = collector.finished, []
-        info = {"version": self.version, "worker": self.index, "env_steps": self.num_envs * self.cfg.rollout_length,
+        # acted with: the weights loaded here, or the oldest the server answered with during the rollout
+        version = self.version if served is None or served.oldest is None else served.oldest
+        info = {"version": version, "worker": self.index, "env_steps": self.num_envs * self.cfg.rollout_length,
                 "finished": finished, "collect_seconds": time.perf_counter() - started,
                 "cpu_seconds": time.process_time() - self._cpu_started, "pid": os.getpid(),
                 "league": self.worlds.env.league_stats() if self.cfg.opponent == "league" else {}}
@@ -120,5 +140,9 @@ class RolloutWorker:
 
     def close(self) -> None:
         if self.worlds is not None:
+            self.worlds.collector.close()
             self.worlds.env.close()
             self.worlds = None
+        if self.server is not None:
+            self.server.close()
+            self.server = None

@@ -11,6 +11,10 @@ The pipe of each worker carries only small messages (a slot's number, episode st
                        ("free", slot, env steps)                     the learner is done with the slot
                        ("stop",)
 
+With ``inference: server`` the pool also starts the inference server (``inference_server``) before the workers and
+gives each worker (and each replacement) a pipe of its own to it; a server that fails or dies stops the run with
+its reason, whatever the workers then report.
+
 Why per-worker pipes and slots, not shared queues: a worker killed while it holds a queue's lock leaves the lock
 held for everyone; a dead worker here breaks only its own pipe, which the learner sees as end-of-file. Its slots
 stay allocated, and the worker that replaces it (``worker_restarts``) takes them over. Workers die with the
@@ -19,10 +23,8 @@ learner created every block and unlinks it on ``close``; after a SIGKILL, multip
 """
 from __future__ import annotations
 
-import ctypes
 import math
 import multiprocessing as mp
-import signal
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -33,6 +35,8 @@ import torch
 
 from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.algo.experience import Rollout
+from dynenv_ros.learning.distributed.child_process import die_with_parent, one_line
+from dynenv_ros.learning.distributed.inference_server import InferenceServer, InferenceServerError
 from dynenv_ros.learning.distributed.rollout_transfer import AttachedSlots, RolloutSlots, spec_of
 from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker, shard_sizes
 from dynenv_ros.learning.distributed.shared_weights import AttachedWeights, SharedWeights
@@ -51,11 +55,6 @@ class Delivery:
     slot: int | None
     rollout: Rollout
     info: dict[str, Any]
-
-
-def one_line(error: BaseException) -> str:
-    text = " ".join(str(error).split()) or type(error).__name__
-    return f"{type(error).__name__}: {text}"
 
 
 def replace_or_go_on(pool: Any, label: str, why: str, replace: Callable[[], None], room: bool = True) -> None:
@@ -77,25 +76,16 @@ def replace_or_go_on(pool: Any, label: str, why: str, replace: Callable[[], None
     pool.log(f"{label} died: {why}; {reason}, going on with {pool.alive} of {pool.workers}")
 
 
-def _die_with_parent() -> None:
-    """SIGKILL this process when the process that started it dies (Linux; elsewhere the pipe's end-of-file stops
-    the worker after its current rollout)."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL)          # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
-
-
 def worker_main(conn: Connection, cfg_dict: dict[str, Any], index: int, first_world: int, num_envs: int,
-                incarnation: int, first_update: int, weights_names: dict[str, Any]) -> None:
-    """A worker process: its first rollout, the handshake, then rollouts into free slots until told to stop."""
-    _die_with_parent()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+                incarnation: int, first_update: int, weights_names: dict[str, Any],
+                server: Connection | None = None) -> None:
+    """A worker process: its first rollout, the handshake, then rollouts into free slots until told to stop
+    (``server``: its pipe to the inference server, with ``inference: server``)."""
+    die_with_parent()
     worker = slots = weights = None
     try:
         cfg = TrainConfig.from_dict(cfg_dict)
-        worker = RolloutWorker(cfg, index, first_world, num_envs, incarnation, first_update)
+        worker = RolloutWorker(cfg, index, first_world, num_envs, incarnation, first_update, server)
         weights = AttachedWeights(weights_names, worker.networks)
         worker.adopt(weights.load_into(worker.networks, -1))
         env_steps = 0
@@ -163,7 +153,10 @@ class ProcessPool:
         self._weights = SharedWeights(networks)
         self._weights.publish(networks, first_update)
         self._handles = [_Handle(i, a, n) for i, (a, n) in enumerate(shard_sizes(cfg.num_envs, workers))]
+        self.server: InferenceServer | None = None
         try:
+            if cfg.inference == "server":
+                self.server = InferenceServer(cfg, self._weights.names(), self._context)
             for handle in self._handles:
                 self._start(handle)
         except BaseException:
@@ -172,13 +165,21 @@ class ProcessPool:
 
     # -- workers ----------------------------------------------------------------------------------------------
     def _start(self, handle: _Handle) -> None:
+        served = None
+        if self.server is not None:
+            try:
+                served = self.server.connect(handle.index)
+            except InferenceServerError as error:
+                raise WorkerPoolError(str(error)) from None
         parent, child = self._context.Pipe()
         process = self._context.Process(
             target=worker_main, name=f"dynenv-rollout-{handle.index}", daemon=True,
             args=(child, self.cfg.to_dict(), handle.index, handle.first_world, handle.num_envs, handle.incarnation,
-                  self.first_update, self._weights.names()))
+                  self.first_update, self._weights.names(), served))
         process.start()
         child.close()
+        if served is not None:
+            served.close()                     # the worker's now: the server's death must reach it as end of file
         handle.process, handle.conn, handle.started = process, parent, time.monotonic()
         handle.ready, handle.alive = False, True
 
@@ -191,7 +192,16 @@ class ProcessPool:
         return sum(h.alive for h in self._handles)
 
     def pids(self) -> list[int]:
-        return [h.process.pid for h in self._handles if h.alive]
+        """The live workers' processes and the inference server's (their CPU time is the rollouts')."""
+        return [h.process.pid for h in self._handles if h.alive] + ([self.server.pid] if self.server else [])
+
+    def _check_server(self, wait_s: float = 0.0) -> None:
+        """WorkerPoolError with the server's reason once it failed or died (``inference: server``)."""
+        if self.server is not None:
+            try:
+                self.server.check(wait_s)
+            except InferenceServerError as error:
+                raise WorkerPoolError(str(error)) from None
 
     def _died(self, handle: _Handle, why: str) -> None:
         """Count a dead worker and replace it while restarts are left; stop the run when none is left alive."""
@@ -226,15 +236,21 @@ class ProcessPool:
         the way; WorkerPoolError when a worker fails or none is left."""
         deadline = time.monotonic() + timeout
         while True:
+            self._check_server()
             conns = {h.conn: h for h in self._handles if h.alive and h.conn is not None}
             if not conns:
                 raise WorkerPoolError("no rollout worker is running")
             left = deadline - time.monotonic()
-            for conn in wait(list(conns), timeout=max(0.0, left)):
+            watched = list(conns) + ([self.server.control] if self.server is not None else [])
+            for conn in wait(watched, timeout=max(0.0, left)):
+                if conn not in conns:            # the server said something: it failed, or its pipe closed
+                    self._check_server(wait_s=1.0)
+                    continue
                 handle = conns[conn]
                 try:
                     message = conn.recv()
                 except (EOFError, OSError):
+                    self._check_server(wait_s=0.2)
                     self._died(handle, "its pipe closed")
                     continue
                 kind = message[0]
@@ -245,9 +261,11 @@ class ProcessPool:
                 if kind == "hello":
                     self._hello(handle, *message[1:])
                 elif kind == "error":
+                    self._check_server(wait_s=2.0 if InferenceServerError.__name__ in message[1] else 0.0)
                     raise WorkerPoolError(f"rollout worker {handle.index} failed: {message[1]}")
             for handle in self._handles:         # a worker that never said hello, or died without closing its pipe
                 if handle.alive and not handle.process.is_alive():
+                    self._check_server(wait_s=0.2)
                     self._died(handle, "its process ended")
                 elif handle.alive and not handle.ready and time.monotonic() - handle.started > HELLO_TIMEOUT_S:
                     raise WorkerPoolError(f"rollout worker {handle.index} made no rollout within "
@@ -285,6 +303,9 @@ class ProcessPool:
             if handle.slots is not None:
                 handle.slots.close()
                 handle.slots = None
+        if self.server is not None:
+            self.server.close()
+            self.server = None
         if self._weights is not None:
             self._weights.close()
             self._weights = None
