@@ -13,7 +13,9 @@ CPU time included).
 """
 from __future__ import annotations
 
+import argparse
 import json
+import os
 import platform
 import resource
 import sys
@@ -210,6 +212,30 @@ def run(args: Any) -> int:
         print("vectorised batches (--envs > 1) observe 'padded' (perception; the default) or 'full' (ground truth)",
               file=sys.stderr)
         return 2
+    figures = measure_soccer(args)
+    return _report(args, figures, f"dynenv-bench sim: {args.scenario} {figures['players_per_team']}v"
+                                  f"{figures['players_per_team']}")
+
+
+def one_world_padded(steps: int, seed: int = 0) -> dict[str, Any]:
+    """The figures of ``dynenv-bench sim --observation padded --steps STEPS --repeat 1`` (one 2v2 world, realistic
+    perception, the layout training packs, pinned to one core): the one-world simulation rate another suite reports
+    beside its own (``train --config async``). The calling thread's CPU affinity is given back afterwards."""
+    from benchmarks.sim_options import add_arguments
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--observation", "padded", "--steps", str(steps), "--seed", str(seed)])
+    args.repeat = 1
+    _resolve_observation(args)
+    allowed = os.sched_getaffinity(0)
+    try:
+        return measure_soccer(args)
+    finally:
+        os.sched_setaffinity(0, allowed)
+
+
+def measure_soccer(args: Any) -> dict[str, Any]:
+    """The soccer figures of checked ``args`` (``run``'s), this process pinned to ``--cores``."""
     cores = pin_cores(args.cores)
     from dynenv_ros.soccer.config import SoccerConfig
     config = SoccerConfig(players_per_team=args.players_per_team)
@@ -244,4 +270,4 @@ def run(args: Any) -> int:
     if perceives:
         figures["robot_frames_per_s"] = scaled(figures["env_steps_per_s"],
                                                config.rates.frames_per_period * config.n_robots, 0)
-    return _report(args, figures, f"dynenv-bench sim: {args.scenario} {size}")
+    return figures
