@@ -1203,7 +1203,7 @@ BENCH_SHORT: dict[str, list[tuple[str, list[str]]]] = {   # suite -> (option, va
     "sim": [("--steps", ["10"]), ("--repeat", ["1"])],
     "vector": [("--steps", ["4"]), ("--chunk", ["2"]), ("--repeat", ["1"])],
     "policy": [("--decisions", ["200"]), ("--warmup", ["0"]), ("--repeat", ["1"]), ("--robots", ["4"])],
-    "train": [("--updates", ["1"]), ("--warmup", ["0"]), ("--repeat", ["1"])],
+    "train": [("--updates", ["1"]), ("--warmup", ["0"]), ("--repeat", ["1"]), ("--sim-steps", ["10"])],
     "learner": [("--repeat", ["1"]), ("--gemm", ["64"])],
     "cores": [("--seconds", ["0.2"]), ("--repeat", ["1"]), ("--workloads", ["interpreter"])],
     "msgs": [("--repeat", ["1"])], "setup": [("--repeat", ["1"])], "auth": [("--repeat", ["1"])],
