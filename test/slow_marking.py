@@ -53,6 +53,7 @@ MEASURED: dict[str, float] = {
     "test_frame_auth_graph.py::test_no_forged_frame_reaches_the_policys_decisions_or_the_trainers_experience": 202,
     "test_inference_server.py::test_a_dead_worker_is_replaced_and_served_and_a_dead_server_stops_the_run_in_one_line": 17,
     "test_inference_server.py::test_a_run_with_the_server_trains_checkpoints_and_resumes": 18,
+    "test_inference_server.py::test_every_kind_of_run_trains_with_the_server": 10,
     "test_inference_server.py::test_worker_processes_served_by_the_server_make_the_rollouts_they_make_acting_themselves": 18,
     "test_layout.py::test_the_trainer_and_the_ros_graph_import_without_ray": 50,
     "test_league.py::test_a_run_against_the_league_trains_and_logs_the_members": 88,

@@ -14,6 +14,7 @@ opponent the server's draws are still the worker's own, but a worker acting itse
 opponent, which interleaves their draws; the equivalence is tested with opponents that draw nothing from it."""
 from __future__ import annotations
 
+import csv
 import json
 import os
 import signal
@@ -32,6 +33,7 @@ from dynenv_ros.learning.distributed.rollout_worker import resolve_workers
 from dynenv_ros.learning.distributed.worker_pool import ProcessPool, WorkerPoolError
 from dynenv_ros.learning.sampling.worlds import make_worlds
 from dynenv_ros.learning.train_cli import main
+from dynenv_ros.learning.trainer import Trainer
 
 # 1v1, 2 worlds a worker, ground-truth perception, 1-second episodes (a truncation in every other rollout or so)
 SMALL = {"algorithm": "ppo", "variant": "baseline", "players_per_team": 1, "num_envs": 4, "perception": "none",
@@ -217,3 +219,20 @@ def test_a_run_with_the_server_trains_checkpoints_and_resumes(tmp_path):
     resumed = json.loads((run_dir / "summary.json").read_text())
     assert resumed["updates"] > first["updates"] and resumed["env_steps"] >= first["env_steps"] + 16
     assert (Path(run_dir) / "policy.safetensors").is_file()
+
+
+@pytest.mark.parametrize("changes", [
+    {"opponent": "snapshot", "snapshot_every_updates": 1},                           # the worker's own weights
+    {"teacher": "chaser", "imitation_coef": 1.0, "teacher_driven_worlds": 1},        # teacher rows in the requests
+    {"variant": "pred", "privileged_pose_seeding": True, "use_localization": True},  # seeding on the server
+    {"scenario": "driving", "players_per_team": 2, "action_mode": "continuous"},     # float actions
+], ids=["snapshot", "teacher_driven", "pose_seeding", "driving_continuous"])
+def test_every_kind_of_run_trains_with_the_server(tmp_path, changes):
+    """What the requests and answers carry besides observations, through the processes: each run learns finite
+    losses with nobody dying."""
+    cfg = small(workers=1, num_envs=2, total_env_steps=16, inference="server", **changes)
+    summary = Trainer(cfg, tmp_path / "run", progress=False).run()
+    assert summary["env_steps"] >= 16 and summary["worker_deaths"] == 0 and "stop_reason" not in summary
+    with open(tmp_path / "run" / "metrics.csv", newline="") as handle:
+        losses = [float(row["value"]) for row in csv.DictReader(handle) if row["name"] == "train/loss"]
+    assert losses and all(np.isfinite(losses))
