@@ -48,6 +48,7 @@ import torch
 from torch import nn
 from torch.distributions import Categorical, Normal
 
+from dynenv_ros.core.action_draws import Gaussian, draw_actions
 from dynenv_ros.driving import agent_actions as driving_actions
 from dynenv_ros.agent.inputs import (ACTION_ENCODING, NUM_CLASSES, POSE_INPUT, PROPRIOCEPTION, SCENARIOS, StreamBatch,
                                      agent_inputs, encode_pose)
@@ -692,24 +693,20 @@ class DynEnvAgent(nn.Module):
             ) -> torch.Tensor:
         """(B, 4) actions [walk, turn, kick, head] — head an index (discrete) or rad per period (continuous,
         clipped to the head's limit). Driving: (B, 2) [acceleration, steering] indices, or (B, 3) the normalised
-        command clipped to its bounds (``driving_actions``). Samples carry no gradient (score-function estimators
-        need them fixed)."""
-        columns = []
+        command clipped to its bounds (``driving_actions``). Drawn by ``core.action_draws`` from each categorical's
+        ``probs`` and each Gaussian's parameters. Samples carry no gradient (score-function estimators need them
+        fixed)."""
+        heads: list[torch.Tensor | Gaussian] = []
         for dist in self.distributions(step):
             if isinstance(dist, driving_actions.ClippedNormal):
-                noise = torch.randn(dist.loc.shape, generator=generator, device=dist.loc.device)
-                sample = dist.loc if greedy else dist.loc + dist.scale * noise
-                columns.append(sample.clamp(dist.low, dist.high))
+                heads.append(Gaussian(dist.loc, dist.scale, dist.low, dist.high))
             elif isinstance(dist, Categorical):
-                if greedy:
-                    columns.append(dist.probs.argmax(-1).float())
-                else:
-                    columns.append(torch.multinomial(dist.probs, 1, generator=generator).squeeze(-1).float())
+                heads.append(dist.probs)
             else:
-                noise = torch.randn(dist.mean.shape, generator=generator, device=dist.mean.device)
-                sample = dist.mean if greedy else dist.mean + dist.stddev * noise
                 limit = cast(float, self.head_max)
-                columns.append(sample.clamp(-limit, limit))
+                heads.append(Gaussian(dist.mean, dist.stddev, -limit, limit))
+        drawn = draw_actions(heads, generator, greedy)
+        columns = [c if isinstance(head, Gaussian) else c.float() for head, c in zip(heads, drawn)]
         return torch.stack(columns, dim=-1).detach()
 
 
