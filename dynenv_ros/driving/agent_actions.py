@@ -26,6 +26,8 @@ import numpy as np
 import torch
 from torch.distributions import Categorical, Normal
 
+from dynenv_ros.core.action_draws import Gaussian, draw_actions
+
 ACTION_MODES = ("discrete", "continuous")
 ACCELERATION_CHOICES, STEERING_CHOICES = 3, 3
 CONTINUOUS_LOW = (-1.0, 0.0, -1.0)             # normalised [throttle, brake, steering / limit]
@@ -103,26 +105,25 @@ def sample_actions(step: Any, action_mode: str, generator: torch.Generator, gree
     """The network's actions from either runtime's outputs — (B, 2) acceleration and steering indices, or (B, 3)
     the clipped normalised command — and (B,) True where that car's outputs (recurrent state included) were all
     finite; a car with a non-finite output is sampled from zeros (so it cannot stop the others' sampling) and
-    reported, for the caller to brake it. The generator is drawn from in the same order whatever the values."""
+    reported, for the caller to brake it. The generator is drawn from in the same order whatever the values
+    (``core.action_draws``; the continuous head's noise in float64, all three dimensions at once)."""
     state = [torch.as_tensor(s) for s in step.state]
+    heads: list[torch.Tensor | Gaussian] = []
     if action_mode == "discrete":
         logits = [torch.as_tensor(step.acceleration), torch.as_tensor(step.steering)]
         finite = _finite_rows(*logits, *state)
-        columns = []
         for values in logits:
-            probs = torch.softmax(torch.where(finite.unsqueeze(-1), values, torch.zeros_like(values)), dim=-1)
-            columns.append(probs.argmax(-1) if greedy
-                           else torch.multinomial(probs, 1, generator=generator).squeeze(-1))
-        actions = torch.stack([c.double() for c in columns], dim=-1)
+            heads.append(torch.softmax(torch.where(finite.unsqueeze(-1), values, torch.zeros_like(values)), dim=-1))
     else:
         command = torch.as_tensor(step.command).double()
         finite = _finite_rows(command, *state)
         command = torch.where(finite.unsqueeze(-1), command, torch.zeros_like(command))
-        mean, std = command[:, :CONTINUOUS_SIZE], command[:, CONTINUOUS_SIZE:].exp()
-        noise = torch.randn(mean.shape, generator=generator, dtype=torch.float64)
-        value = mean if greedy else mean + std * noise
-        actions = torch.maximum(torch.minimum(value, torch.tensor(CONTINUOUS_HIGH, dtype=torch.float64)),
-                                torch.tensor(CONTINUOUS_LOW, dtype=torch.float64))
+        heads.append(Gaussian(command[:, :CONTINUOUS_SIZE], command[:, CONTINUOUS_SIZE:].exp(),
+                              torch.tensor(CONTINUOUS_LOW, dtype=torch.float64),
+                              torch.tensor(CONTINUOUS_HIGH, dtype=torch.float64), noise_dtype=torch.float64))
+    columns = draw_actions(heads, generator, greedy)
+    # discrete: one index per head; continuous: the one Gaussian's (B, 3) draw
+    actions = torch.stack([c.double() for c in columns], dim=-1) if action_mode == "discrete" else columns[0]
     chosen = actions.numpy()
     usable = finite.numpy() & np.isfinite(chosen).all(-1)
     return chosen, usable

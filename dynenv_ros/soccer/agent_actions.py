@@ -17,6 +17,8 @@ import numpy as np
 if TYPE_CHECKING:      # torch is imported where a policy's outputs are read: the soccer world loads without it
     import torch
 
+    from dynenv_ros.core.action_draws import Gaussian
+
 WALK_CHOICES, TURN_CHOICES, KICK_CHOICES = 5, 3, 3     # Action.msg's soccer choices
 
 
@@ -46,28 +48,29 @@ def sample_actions(step: Any, head_mode: str, head_units: int | None, head_max: 
     """(B, 4) [walk, turn, kick, head_yaw_delta in rad] from either runtime's outputs, and (B,) True where that
     robot's outputs were all finite. A robot with a NaN or infinite output gets zero logits (so it cannot stop the
     others' sampling: ``torch.multinomial`` refuses a batch with one bad row) and is reported, for the caller to
-    replace its action. The generator is drawn from in the same order whatever the values."""
+    replace its action. The generator is drawn from in the same order whatever the values
+    (``core.action_draws``)."""
     import torch
+
+    from dynenv_ros.core.action_draws import Gaussian, draw_actions
     logits = [torch.as_tensor(x) for x in (step.walk, step.turn, step.kick)]
     head = torch.as_tensor(step.head)
     state = [torch.as_tensor(x) for x in step.state]
     finite = torch.ones(head.shape[0], dtype=torch.bool)
     for tensor in logits + [head] + state:
         finite &= torch.isfinite(tensor.reshape(tensor.shape[0], -1)).all(-1)
-    columns = []
+    heads: list[torch.Tensor | Gaussian] = []
     categorical = logits + ([head] if head_mode == "discrete" else [])
     for values in categorical:
         values = torch.where(finite.unsqueeze(-1), values, torch.zeros_like(values))
-        probs = torch.softmax(values, dim=-1)
-        columns.append(probs.argmax(-1) if greedy else torch.multinomial(probs, 1, generator=generator).squeeze(-1))
+        heads.append(torch.softmax(values, dim=-1))
+    if head_mode != "discrete":
+        values = torch.where(finite.unsqueeze(-1), head, torch.zeros_like(head))
+        heads.append(Gaussian(values[:, 0], values[:, 1].exp(), -head_max, head_max))
+    columns = draw_actions(heads, generator, greedy)
     if head_mode == "discrete":
         units = int(head_units or 0)
         columns[-1] = head_radians(columns[-1].double(), units, head_max / units)
-    else:
-        values = torch.where(finite.unsqueeze(-1), head, torch.zeros_like(head))
-        mean, std = values[:, 0], values[:, 1].exp()
-        value = mean if greedy else mean + std * torch.randn(mean.shape, generator=generator)
-        columns.append(value.clamp(-head_max, head_max))
     actions = torch.stack([c.double() for c in columns], dim=-1).numpy()
     finite &= torch.from_numpy(np.isfinite(actions).all(-1))
     return actions, finite.numpy()
