@@ -8,15 +8,17 @@ head's probabilities are computed (the learner's ``Categorical.probs``, the node
 outputs), the noise's dtype and shape (a driving node draws its three dimensions at once in float64, the learner one
 draw per dimension in torch's default float32), the bounds, and what the drawn columns become (docs/decisions.md,
 "One head conversion, one sampler per scenario"). Here because ``core`` is the lowest layer the agent and both
-worlds may import (.importlinter). It imports torch: soccer's sampler imports it inside the function, so the soccer
-world still loads without torch.
+worlds may import (.importlinter); like soccer's sampler, it imports torch only when it draws, so core and the soccer
+world still load without torch.
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import torch
+if TYPE_CHECKING:      # imported where actions are drawn: core's modules load without torch (test_layout)
+    import torch
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,7 @@ def draw_actions(heads: Sequence[torch.Tensor | Gaussian], generator: torch.Gene
     ``greedy``, which draws nothing —; a ``Gaussian`` becomes its clipped draw, the mean when ``greedy``. A Gaussian
     draws its noise from the generator even when greedy (the learner always has: a generator shared across calls
     gives the same numbers afterwards whichever way the previous call went)."""
+    import torch
     columns = []
     for head in heads:
         if isinstance(head, Gaussian):

@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from dynenv_ros.core.action_draws import Gaussian, draw_actions
+
 if TYPE_CHECKING:      # torch is imported where a policy's outputs are read: the soccer world loads without it
     import torch
-
-    from dynenv_ros.core.action_draws import Gaussian
 
 WALK_CHOICES, TURN_CHOICES, KICK_CHOICES = 5, 3, 3     # Action.msg's soccer choices
 
@@ -51,8 +51,6 @@ def sample_actions(step: Any, head_mode: str, head_units: int | None, head_max: 
     replace its action. The generator is drawn from in the same order whatever the values
     (``core.action_draws``)."""
     import torch
-
-    from dynenv_ros.core.action_draws import Gaussian, draw_actions
     logits = [torch.as_tensor(x) for x in (step.walk, step.turn, step.kick)]
     head = torch.as_tensor(step.head)
     state = [torch.as_tensor(x) for x in step.state]
