@@ -33,6 +33,16 @@ EGO_CRASHED, EGO_FINISHED = 6, 7
 
 
 
+
+def _record(acted: Any, t: int, steps: int, values: np.ndarray, actions: np.ndarray, log_probs: np.ndarray) -> bool:
+    """Period ``t``'s acting into the rollout's arrays: the value always, the action and its log-probability except
+    at the bootstrap period (``t == steps``, which gives the value only: True then, the rollout ends)."""
+    values[t] = acted.values
+    if t == steps:
+        return True
+    actions[t], log_probs[t] = acted.actions, acted.log_probs
+    return False
+
 class Opponent:
     """Who plays the robots the learner does not control. ``act`` gets their observations (E, k, ...) and the
     robots starting an episode (E, k); returns (E, k, 4) integer actions."""
@@ -168,12 +178,10 @@ class RolloutCollector:
             acted = self.acting.step(current, self._starts, last=t == steps, want_state=t == 0,
                                      teacher=None if teacher is None or t == steps else teacher[t],
                                      driven=self.teacher_driven if teacher is not None else None)
-            values[t] = acted.values
             if t == 0:
                 initial_state = acted.start_state
-            if t == steps:
+            if _record(acted, t, steps, values, actions, log_probs):
                 break
-            actions[t], log_probs[t] = acted.actions, acted.log_probs
             full = np.zeros((E, self.env.config.n_robots, 4), np.int64)
             full[:, self.learning_robots] = actions[t].reshape(E, k, 4)
             if len(self.other_robots):
@@ -222,12 +230,10 @@ class RolloutCollector:
                 obs[key][t] = v
             starts[t], alive[t] = self._starts, ~self._done
             acted = self.acting.step(current, self._starts, last=t == steps, want_state=t == 0)
-            values[t] = acted.values
             if t == 0:
                 initial_state = acted.start_state
-            if t == steps:
+            if _record(acted, t, steps, values, actions, log_probs):
                 break
-            actions[t], log_probs[t] = acted.actions, acted.log_probs
             if teacher is not None:
                 teacher[t] = flatten_robots(self._teacher, self.learning_robots)
             sent = actions[t].reshape(E, k, width)
