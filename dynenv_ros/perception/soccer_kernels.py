@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from dynenv_ros.perception.detections import DETECTION_DTYPE as _DETECTION
-from dynenv_ros.perception.row_kernels import sort_by_view
+from dynenv_ros.perception.row_kernels import clamped_features, sort_by_view
 
 _EPS = 1e-9
 _R = TypeVar("_R", float, np.floating[Any])     # a Python or a numpy float (for mypy; numba types each call)
@@ -244,6 +244,38 @@ def rim_count(angle: np.ndarray, in_range: np.ndarray, half: float, samples: int
     return out
 
 
+@numba.njit(cache=True)
+def observation_rewards(seen: np.ndarray, lines_seen: np.ndarray, n: int, landmark_index: np.ndarray,
+                        robot_cap: int, landmark_cap: float, ball_cap: int, robot_weight: float,
+                        landmark_weight: float, ball_weight: float) -> np.ndarray:
+    """``SoccerVision.observation_rewards`` in one pass: views v = frame·n + observer of ``seen`` (V, N) and
+    ``lines_seen`` (V,); the counts are integers (exact in any order), the float terms those of the numpy code, in
+    its order."""
+    V, N = seen.shape
+    frames = V // n
+    counts = np.zeros((n, N), np.int64)
+    lines = np.zeros(n, np.int64)
+    for v in range(V):
+        i = v % n
+        lines[i] += lines_seen[v]
+        for j in range(N):
+            if seen[v, j]:
+                counts[i, j] += 1
+    out = np.empty(n)
+    for i in range(n):
+        robots = 0
+        for r in range(n):
+            if r != i:
+                robots += min(robot_cap, counts[i, r])
+        landmarks = lines[i]
+        for j in landmark_index:
+            landmarks += counts[i, j]
+        landmark_term = _minimum(landmark_cap, landmarks / frames)
+        ball = min(ball_cap, counts[i, n])
+        out[i] = robot_weight * robots + landmark_weight * landmark_term + ball_weight * ball
+    return out
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel once, on tiny inputs."""
     z, zi = np.zeros(2), np.zeros(2, np.int64)
@@ -265,9 +297,11 @@ def warm_up() -> None:
                band, 0.2)
     px, py, in_range = rim_points(z, z, zi, zi, z, z, zi, z + 1, z, 1.0)
     rim_count(px, in_range, 0.5, 2)
+    clamped_features(rows, 50.0)
+    observation_rewards(np.zeros((2, 3), np.bool_), zi, 1, zi[:1], 2, 3.0, 3, 0.1, 0.1, 0.1)
 
 
-__all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_by_view", "sighting_inputs", "sighting_bits",
+__all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_by_view", "clamped_features", "observation_rewards", "sighting_inputs", "sighting_bits",
            "confidence_exponents", "hidden", "rim_points", "rim_count", "warm_up"]
 
 
