@@ -34,6 +34,7 @@ _DISTANT, _PARTIAL, _NEARBY = int(Sighting.DISTANT), int(Sighting.PARTIAL), int(
 CIRCLE_SAMPLES = 36
 MIN_LINE_LENGTH = 0.1        # m of a line that must be in view to detect it
 _EPS = 1e-9
+_IDENTITY = np.arange(256, dtype=np.uint8)      # a confusion target table that confuses nothing
 _Part = tuple[np.ndarray, np.ndarray]      # detection rows and each row's view
 
 
@@ -169,22 +170,16 @@ class Perceiver:
         V, N = len(lay.observer_source), self._n
         fx, fy = frames.x.ravel(), frames.y.ravel()
         src, pv = lay.pair_source, lay.pair_view
-        dx = fx[src] - fx[lay.observer_of_pair]                            # world offsets from the observer
-        dy = fy[src] - fy[lay.observer_of_pair]
+        kern = self._kernels
         heading = frames.yaw.ravel()[lay.observer_source] + views.head_yaw  # camera heading (V,)
         ch, sh = np.cos(heading), np.sin(heading)
-        c, s = ch[pv], sh[pv]
-        cx = c * dx + s * dy                                               # camera frame
-        cy = c * dy - s * dx                                               # (= −s·dx + c·dy, exactly)
+        cx, cy = kern.camera_offsets(fx, fy, src, lay.observer_of_pair, pv, ch, sh)    # camera frame
         d = np.hypot(cx, cy)
         bearing = np.arctan2(cy, cx)
-        off_axis = np.abs(bearing)
         half = p.field_of_view / 2
         # (the radius over the distance is never negative: no lower clamp)
-        reach = np.arcsin(np.minimum(lay.visibility_radius / np.maximum(d, _EPS), 1.0))
-        in_view = (off_axis <= half + reach) & (d <= lay.max_range)
-        partial = off_axis > half - reach
-        in_view[lay.own_pair] = False
+        reach = np.arcsin(kern.reach_ratio(lay.visibility_radius, d))
+        in_view, partial = kern.in_view_partial(bearing, reach, d, lay.max_range, half, lay.own_pair)
         if self.circle_index is not None:                  # the circle: seen when enough of its rim is in view
             circle = lay.circle_pair
             rim_count = self._circle_rim_in_view(lay, fx, fy, ch, sh)
@@ -195,21 +190,14 @@ class Perceiver:
         j = lay.pair_object[at]
         if p.occlusion.enabled and len(self.occluder_index):
             hidden = self._hidden(lay, at, j, cx, cy, d, bearing, in_view)
-            if self.circle_index is not None:              # painted on the floor: never hidden
-                hidden &= j != self.circle_index
-            shown = (~hidden).nonzero()[0]
-            at, j = at[shown], j[shown]
-        v = pv[at]
-        visible = np.zeros(V * N, bool)
-        visible[at] = True
+        else:
+            hidden = np.zeros(len(at), bool)
+        # The visible pairs (the circle is painted on the floor: never hidden), their distance, class, the class's
+        # near range, DISTANT, the sighting bits the report gets from geometry (PARTIAL, DISTANT), camera position.
+        circle_index = -1 if self.circle_index is None else self.circle_index
+        at, j, v, dk, ck, near, distant_k, bits, xk, yk, visible = kern.visible_pairs(
+            at, j, hidden, circle_index, pv, d, partial, cx, cy, self.objects.class_id, self.near, V * N, 1, _PARTIAL)
         K = len(at)
-        dk, ck = d[at], self.objects.class_id[j]
-        near = self.near[j]
-        distant_k = dk > near
-        partial_k = partial[at]
-        bits = partial_k * _PARTIAL                         # the sighting bits the report gets from geometry
-        bits += distant_k
-        xk, yk = cx[at], cy[at]
         reported = ck
         extra = []
         if p.mode == "none" or p.noise_magnitude <= 0.0:
@@ -217,32 +205,41 @@ class Perceiver:
             size_factor, yaw_noise = np.ones(K), np.zeros(K)
         else:
             m, rho = p.noise_magnitude, p.rho
-            if p.mode == "realistic":
-                nearby_k = self._nearby(frames, lay, at)
-                if self.circle_index is not None:          # painted on the floor: never crowded
-                    nearby_k &= j != self.circle_index
-                factor = self._sighting_factor[bits + nearby_k * _NEARBY]   # partial, else distant, else nearby
-                mult = (p.miss.range_offset + p.miss.range_slope * (dk / near) ** 2) * factor
+            realistic = p.mode == "realistic"
+            if realistic and (self._confusion_rate is not None or not self.confusions):
+                # Rules 1–3 in one compiled pass (the code below, for the realistic mode with table confusions).
+                u = rng.random((4, K))
+                confusion_rate = self._confusion_rate if self._confusion_rate is not None else np.zeros(512)
+                mult, keep, reported, confused = kern.realistic_misses(
+                    fx, fy, lay.close_first, lay.close_second, lay.close_self, len(frames.x), len(self.dynamic_index),
+                    N, src, lay.observer_closeness, at, j, bits, dk, near, ck, distant_k, circle_index,
+                    self._sighting_factor, _NEARBY, p.miss.range_offset, p.miss.range_slope,
+                    p.miss.nearby_distance ** 2, self.miss_scale, rho, u, self._confusion_rate is not None,
+                    confusion_rate, self._confusion_target if self._confusion_rate is not None else _IDENTITY)
             else:
-                mult = np.ones(K)
-            u = rng.random((4, K))
-            p_miss = np.minimum(1.0, rho * self.miss_scale[j] * mult)
-            keep = u[0] >= p_miss
-            if p.mode == "realistic" and self.confusions:
-                reported, confused = self._confuse(ck, distant_k, keep, mult, u[1])
-            else:
-                confused = np.zeros(K, bool)
+                if realistic:
+                    nearby_k = self._nearby(frames, lay, at)
+                    if self.circle_index is not None:          # painted on the floor: never crowded
+                        nearby_k &= j != self.circle_index
+                    factor = self._sighting_factor[bits + nearby_k * _NEARBY]   # partial, else distant, else nearby
+                    mult = (p.miss.range_offset + p.miss.range_slope * (dk / near) ** 2) * factor
+                else:
+                    mult = np.ones(K)
+                u = rng.random((4, K))
+                p_miss = np.minimum(1.0, rho * self.miss_scale[j] * mult)
+                keep = u[0] >= p_miss
+                if realistic and self.confusions:
+                    reported, confused = self._confuse(ck, distant_k, keep, mult, u[1])
+                else:
+                    confused = np.zeros(K, bool)
             xk, yk, g = self._position_noise(xk, yk, dk, mult, rng)
-            size_factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
-            yaw_noise = m * p.position.yaw_std * g[1]
-            if p.mode == "realistic":
-                fp = p.false_positives
-                feet = ((ck == _ROBOT) & (reported == _ROBOT) & keep & (dk < fp.at_feet_range) & (bits == 0)
-                        & (u[2] < fp.at_feet_probability * m))
-                at_feet = feet.nonzero()[0]
-                if len(at_feet):
-                    extra.append(self._feet_balls(v[at_feet], xk[at_feet], yk[at_feet], rng))
-                    keep &= ~(feet & (u[3] < fp.at_feet_robot_dropped * m))
+            fp = p.false_positives
+            size_factor, yaw_noise, at_feet, kept_now = kern.feet_and_errors(
+                ck, reported, keep, dk, bits, u, g, m, p.position.size_std, p.position.yaw_std, realistic,
+                fp.at_feet_range, fp.at_feet_probability, fp.at_feet_robot_dropped, _ROBOT)
+            if len(at_feet):
+                extra.append(self._feet_balls(v[at_feet], xk[at_feet], yk[at_feet], rng))
+                keep = kept_now
         seen = np.zeros(V * N, bool)
         seen[at[keep & ~confused]] = True
         context = _ViewContext(lay.frame, lay.observer, heading, frames, observer_team, N)
@@ -528,9 +525,11 @@ class Perceiver:
         p, m = self.params.position, self.params.noise_magnitude
         if self.params.mode == "random":
             return xy + g * m * p.random_std
-        r = np.maximum(0.0, d + g[0] * m * (p.radial_base + p.radial_per_m2 * d * d))
-        b = np.arctan2(xy[1], xy[0]) + g[1] * m * p.bearing_std
-        return np.array((r * np.cos(b), r * np.sin(b)))
+        # r = max(0, d + g₀·m·(base + per_m²·d·d)), b = atan2(y, x) + g₁·m·std; numpy's arctan2, cos and sin.
+        r, b = self._kernels.polar_radius_bearing(d, g, np.arctan2(xy[1], xy[0]), m, p.radial_base, p.radial_per_m2,
+                                                  p.bearing_std)
+        points: np.ndarray = self._kernels.polar_points(r, np.cos(b), np.sin(b))
+        return points
 
     def _circle_rim_in_view(self, lay: "_Layout", fx: np.ndarray, fy: np.ndarray, c: np.ndarray,
                             s: np.ndarray) -> np.ndarray:
