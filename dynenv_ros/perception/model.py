@@ -240,22 +240,21 @@ class Perceiver:
             if len(at_feet):
                 extra.append(self._feet_balls(v[at_feet], xk[at_feet], yk[at_feet], rng))
                 keep = kept_now
-        seen = np.zeros(V * N, bool)
-        seen[at[keep & ~confused]] = True
         context = _ViewContext(lay.frame, lay.observer, heading, frames, observer_team, N)
-        kept = keep.nonzero()[0]
-        point_rows = self._point_rows(v[kept], j[kept], src[at[kept]], reported[kept], xk[kept], yk[kept], context,
-                                      size_factor[kept], yaw_noise[kept])
-        # The circle keeps the bits of its rim test (every other point report gets them from the report itself).
-        point_rows[0]["sighting"] = bits[kept]
+        # The kept reports' rows (``soccer_kernels.point_rows``, one compiled pass), with the geometric sighting bits: the circle
+        # keeps those of its rim test (every other point report gets them from the report itself, in _assemble).
+        obj = self.objects
+        real, real_views, confused_rows, confused_views, seen = kern.point_rows(
+            keep, confused, at, v, j, src, reported, xk, yk, size_factor, yaw_noise, bits, frames.yaw.ravel(),
+            heading, observer_team, frames.fallen.ravel(), frames.penalized.ravel(), obj.size_x, obj.size_y,
+            obj.team, obj.subtype, obj.object_id, obj.class_id, _ROBOT, V * N)
+        point_rows = (real, real_views)
         line_rows, lines_seen = self._line_rows(lay, fx[lay.observer_source], fy[lay.observer_source], ch, sh, rng)
         rows = [line_rows]
         if p.mode != "none" and p.noise_magnitude > 0.0:
             # Reports no object of their class stands behind: confusions, balls at feet, uniform false positives.
-            confused_kept = confused[kept]
-            made_up = [_take(point_rows, confused_kept.nonzero()[0])] + extra
+            made_up = [(confused_rows, confused_views)] + extra
             made_up.append(self._false_positives(lay, rng))
-            point_rows = _take(point_rows, (~confused_kept).nonzero()[0])
             rows.append(self._made_up_rows(_concatenate(made_up), context, rng))
         rows.append(point_rows)
         return self._assemble(rows, lay, seen.reshape(V, N), lines_seen, visible.reshape(V, N), rng)
@@ -330,27 +329,6 @@ class Perceiver:
         g = rng.standard_normal((4,) + x.shape)
         noisy = self._polar_point_noise(np.array((x, y)), g[:2], d)
         return noisy[0], noisy[1], g[2:]
-
-    def _point_rows(self, v: np.ndarray, j: np.ndarray, src: np.ndarray, cls: np.ndarray, x: np.ndarray,
-                    y: np.ndarray, context: "_ViewContext", size_factor: np.ndarray, yaw_noise: np.ndarray) -> _Part:
-        """Rows of the detected point objects with their own attributes (confused ones are re-dressed later);
-        ``src`` is each pair's index in the frames' flattened arrays."""
-        obj, frames = self.objects, context.frames
-        rows = np.zeros(len(v), DETECTION_DTYPE)
-        rows["class_id"] = cls
-        rows["x"], rows["y"] = x, y
-        rows["size_x"] = obj.size_x[j] * size_factor
-        rows["size_y"] = obj.size_y[j] * size_factor
-        is_robot = cls == _ROBOT
-        yaw = _wrap(frames.yaw.ravel()[src] - context.heading[v] + yaw_noise)
-        rows["yaw"] = np.where(is_robot, yaw, np.nan)
-        rows["team"] = np.where(is_robot, obj.team[j] * context.observer_team[v], 0)
-        rows["fallen"] = is_robot & frames.fallen.ravel()[src]
-        rows["penalized"] = is_robot & frames.penalized.ravel()[src]
-        rows["subtype"] = obj.subtype[j]
-        rows["true_id"] = obj.object_id[j]
-        rows["true_class"] = obj.class_id[j]
-        return rows, v
 
     def _made_up_rows(self, part: _Part, context: "_ViewContext", rng: np.random.Generator) -> _Part:
         """Give reports that no object of their class stands behind (false positives, confusions) the attributes
@@ -548,12 +526,6 @@ _FIELDS = cast(dict[str, tuple[Any, int]], DETECTION_DTYPE.fields)     # (dtype,
 _ROW_RUNS = np.dtype({"names": ["position", "line"], "formats": [("<f4", (2,)), ("<f4", (4,))],
                       "offsets": [_FIELDS["x"][1], _FIELDS["line_start_x"][1]],
                       "itemsize": DETECTION_DTYPE.itemsize})
-
-
-def _take(part: tuple[np.ndarray, np.ndarray], index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows ``index`` of a (rows, views) part. As raw records: a structured gather copies field by field."""
-    rows, views = part
-    return rows.view(_RAW)[index].view(DETECTION_DTYPE), views[index]
 
 
 def _concatenate(parts: list[_Part]) -> _Part:

@@ -467,6 +467,69 @@ def feet_and_errors(ck: np.ndarray, reported: np.ndarray, keep: np.ndarray, dk: 
     return size_factor, yaw_noise, at_feet, kept
 
 
+@numba.njit(cache=True)
+def point_rows(keep: np.ndarray, confused: np.ndarray, at: np.ndarray, v: np.ndarray, j: np.ndarray,
+               pair_source: np.ndarray, reported: np.ndarray, x: np.ndarray, y: np.ndarray, size_factor: np.ndarray,
+               yaw_noise: np.ndarray, bits: np.ndarray, yaw: np.ndarray, heading: np.ndarray,
+               observer_team: np.ndarray, fallen: np.ndarray, penalized: np.ndarray, size_x: np.ndarray,
+               size_y: np.ndarray, team: np.ndarray, subtype: np.ndarray, object_id: np.ndarray,
+               class_id: np.ndarray, robot: int, pairs: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The kept visible pairs' detection rows with their own object's attributes and
+    the geometric sighting bits, split into the unconfused ones and the confused ones (re-dressed later, as made-up
+    reports), each with its rows' views; and ``seen`` (V·N,): pairs truly detected as their own class."""
+    K = len(at)
+    n_kept = 0
+    n_confused = 0
+    seen = np.zeros(pairs, np.bool_)
+    for q in range(K):
+        if keep[q]:
+            n_kept += 1
+            if confused[q]:
+                n_confused += 1
+            else:
+                seen[at[q]] = True
+    rows = np.zeros(n_kept - n_confused, _DETECTION)
+    views = np.empty(n_kept - n_confused, np.int64)
+    confused_rows = np.zeros(n_confused, _DETECTION)
+    confused_views = np.empty(n_confused, np.int64)
+    r = 0
+    c = 0
+    for q in range(K):
+        if not keep[q]:
+            continue
+        if confused[q]:
+            row = confused_rows[c:c + 1]
+            confused_views[c] = v[q]
+            c += 1
+        else:
+            row = rows[r:r + 1]
+            views[r] = v[q]
+            r += 1
+        jj, src = j[q], pair_source[at[q]]
+        is_robot = reported[q] == robot
+        row[0].class_id = reported[q]
+        row[0].x = x[q]
+        row[0].y = y[q]
+        row[0].size_x = size_x[jj] * size_factor[q]
+        row[0].size_y = size_y[jj] * size_factor[q]
+        if is_robot:
+            row[0].yaw = (yaw[src] - heading[v[q]] + yaw_noise[q] + math.pi) % (2 * math.pi) - math.pi
+            row[0].team = team[jj] * observer_team[v[q]]
+            row[0].fallen = fallen[src]
+            row[0].penalized = penalized[src]
+        else:
+            row[0].yaw = np.nan
+            row[0].team = 0
+            row[0].fallen = False
+            row[0].penalized = False
+        row[0].subtype = subtype[jj]
+        row[0].true_id = object_id[jj]
+        row[0].true_class = class_id[jj]
+        row[0].sighting = bits[q]
+    return rows, views, confused_rows, confused_views, seen
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel once, on tiny inputs."""
     z, zi = np.zeros(2), np.zeros(2, np.int64)
@@ -500,12 +563,14 @@ def warm_up() -> None:
     r, b = polar_radius_bearing(z, u, z, 1.0, 0.1, 0.1, 0.1)
     polar_points(r, b, b)
     feet_and_errors(ck, ck, nb, z, bits, u, u, 1.0, 0.1, 0.1, True, 1.0, 0.1, 0.1, 2)
+    i8, u8, i32 = np.zeros(2, np.int8), np.zeros(2, np.uint8), np.zeros(2, np.int32)
+    point_rows(nb, nb, at, vv, jj, zi, ck, xk, yk, z, z, bits, z, z, i8, nb, nb, z, z, i8, u8, i32, u8, 2, 2)
     observation_rewards(np.zeros((2, 3), np.bool_), zi, 1, zi[:1], 2, 3.0, 3, 0.1, 0.1, 0.1)
 
 
 __all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_by_view", "clamped_features", "observation_rewards",
            "camera_offsets", "reach_ratio", "in_view_partial", "visible_pairs", "realistic_misses",
-           "polar_radius_bearing", "polar_points", "feet_and_errors", "sighting_inputs", "sighting_bits",
+           "polar_radius_bearing", "polar_points", "feet_and_errors", "point_rows", "sighting_inputs", "sighting_bits",
            "confidence_exponents", "hidden", "rim_points", "rim_count", "warm_up"]
 
 
