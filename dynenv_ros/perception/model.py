@@ -15,7 +15,6 @@ from typing import Any, cast
 
 import numpy as np
 
-from dynenv_ros.core.arrays import clamp
 from dynenv_ros.core.object_classes import ObjectClass, Sighting
 from dynenv_ros.perception.detections import DETECTION_DTYPE
 from dynenv_ros.perception.params import PerceptionParams
@@ -343,17 +342,27 @@ class Perceiver:
         cls = rows["class_id"]
         g = rng.standard_normal((2, n))
         m = p.noise_magnitude
+        robot = (cls == _ROBOT).nonzero()[0]
+        others = self.robot_index
+        if len(others) > 1:                              # another robot for every observer: one compiled pass
+            picks = rng.random(len(robot)) if len(robot) else np.zeros(0)
+            frames = context.frames
+            self._kernels.dress_made_up(rows, v, g, m, p.position.size_std, p.position.yaw_std, self.class_size,
+                                        self._class_subtype, _ROBOT, robot, picks, context.observer, context.frame,
+                                        context.heading, context.observer_team, self.is_robot, self._robots_before,
+                                        others, frames.yaw.ravel(), frames.fallen.ravel(), frames.penalized.ravel(),
+                                        self.objects.team, context.objects)
+            self._varied_subtype_draws(rows, cls, rng)
+            return rows, v
         factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
         rows["size_x"] = rows["size_y"] = self.class_size[cls] * factor
         rows["yaw"] = np.nan
         rows["team"] = 0
         rows["fallen"] = rows["penalized"] = False
         rows["subtype"] = self._class_subtype[cls]
-        robot = (cls == _ROBOT).nonzero()[0]
         if len(robot):
             view = v[robot]
             observer = context.observer[view]
-            others = self.robot_index
             observer_is_robot = self.is_robot[observer]
             choices = len(others) - observer_is_robot
             if len(others) > 1 or len(others) and (choices > 0).all():   # (two robots: always another one)
@@ -370,11 +379,15 @@ class Perceiver:
             else:                                        # no other robot to resemble: a plausible stranger
                 rows["yaw"][robot] = (rng.random(len(robot)) * 2 - 1) * math.pi
                 rows["team"][robot] = np.where(rng.random(len(robot)) < 0.5, -1, 1)
+        self._varied_subtype_draws(rows, cls, rng)
+        return rows, v
+
+    def _varied_subtype_draws(self, rows: np.ndarray, cls: np.ndarray, rng: np.random.Generator) -> None:
+        """Made-up reports of a class whose objects differ in subtype (crossings: L, T, X) get a random real one's."""
         for c, subtypes in self._varied_subtypes.items():
             at = (cls == c).nonzero()[0]
             if len(at):
                 rows["subtype"][at] = subtypes[(rng.random(len(at)) * len(subtypes)).astype(np.intp)]
-        return rows, v
 
     def _feet_balls(self, v: np.ndarray, rx: np.ndarray, ry: np.ndarray, rng: np.random.Generator) -> _Part:
         """Rule 4: a ball seen at the feet of a nearby robot (DynEnv: 10ρ per robot within 2.5 m)."""
@@ -395,23 +408,18 @@ class Perceiver:
         uniform in distance up to ``max_distance`` (and the class's range), uniform in bearing across the view
         widened by the class's reach asin(radius / max(distance, 2·radius)), as partially seen real objects are."""
         counts = rng.binomial(self.params.false_positives.trials, self._fp_probability, size=len(lay.views))
-        v = np.repeat(lay.views, counts)
-        if not len(v):
+        chances = int(counts.sum())
+        if not chances:
             return np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.int64)
-        u = rng.random((3, len(v)))                                       # every draw at once
-        classes = self._fp_classes[(u[0] * len(self._fp_classes)).astype(np.intp)]
-        if self._fp_none:                                                 # "none" drawn: no report
-            real = (classes != _UNKNOWN).nonzero()[0]
-            v, classes, u = v[real], classes[real], u.take(real, axis=1)
-        rows = np.zeros(len(v), DETECTION_DTYPE)
-        r = u[1] * self._fp_range[classes]
-        radius = self.class_reach_radius[classes]          # (at most 30°: nothing stands closer than its size)
-        reach = np.arcsin(clamp(radius / np.maximum(r, self._fp_floor[classes]), 0.0, 1.0))
-        b = (u[2] * 2 - 1) * (self.params.field_of_view / 2 + reach)
-        rows["class_id"] = classes
-        rows["x"], rows["y"] = r * np.cos(b), r * np.sin(b)
-        rows["true_id"] = -1
-        return rows, v
+        u = rng.random((3, chances))                                      # every draw at once
+        kern = self._kernels
+        # Per chance its class ("none" drawn: no report); per report its view, class, distance u₁·range and the
+        # sine of its reach, radius / max(distance, floor) within [0, 1] (at most 30°: nothing stands closer than
+        # its size); numpy's arcsin, cos and sin between the compiled passes.
+        v, classes, r, ratio, u2 = kern.false_positive_draws(counts, u, self._fp_classes, self._fp_none, _UNKNOWN,
+                                                             self._fp_range, self.class_reach_radius, self._fp_floor)
+        b = kern.false_positive_bearings(u2, np.arcsin(ratio), self.params.field_of_view / 2)
+        return kern.false_positive_rows(classes, r, np.cos(b), np.sin(b)), v
 
     def _assemble(self, parts: list[_Part], lay: "_Layout", seen: np.ndarray, lines_seen: np.ndarray,
                   visible: np.ndarray, rng: np.random.Generator) -> Perception:

@@ -530,6 +530,98 @@ def point_rows(keep: np.ndarray, confused: np.ndarray, at: np.ndarray, v: np.nda
     return rows, views, confused_rows, confused_views, seen
 
 
+@numba.njit(cache=True)
+def false_positive_draws(counts: np.ndarray, u: np.ndarray, fp_classes: np.ndarray, drop_unknown: bool,
+                         unknown: int, fp_range: np.ndarray, reach_radius: np.ndarray, fp_floor: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rule 4's uniform false positives from the draws ``u`` (3, M) of the M = Σ ``counts`` chances (view v has
+    ``counts[v]``): each chance's class (``drop_unknown``: a drawn ``unknown`` is no report), and per report its
+    view, class, distance ``u₁·range``, the sine ``clamp(radius / max(r, floor), 0, 1)`` of its reach and ``u₂``."""
+    M = u.shape[1]
+    n_classes = len(fp_classes)
+    classes_all = np.empty(M, np.uint8)
+    n = 0
+    for i in range(M):
+        classes_all[i] = fp_classes[np.intp(u[0, i] * n_classes)]
+        if not (drop_unknown and classes_all[i] == unknown):
+            n += 1
+    views = np.empty(n, np.int64)
+    classes = np.empty(n, np.uint8)
+    r = np.empty(n)
+    ratio = np.empty(n)
+    u2 = np.empty(n)
+    i = 0
+    q = 0
+    for view in range(len(counts)):
+        for _ in range(counts[view]):
+            c = classes_all[i]
+            if not (drop_unknown and c == unknown):
+                views[q], classes[q] = view, c
+                r[q] = u[1, i] * fp_range[c]
+                ratio[q] = _minimum(_maximum(reach_radius[c] / _maximum(r[q], fp_floor[c]), 0.0), 1.0)
+                u2[q] = u[2, i]
+                q += 1
+            i += 1
+    return views, classes, r, ratio, u2
+
+
+@numba.njit(cache=True)
+def false_positive_bearings(u2: np.ndarray, reach: np.ndarray, half: float) -> np.ndarray:
+    """``(u₂·2 − 1)·(half + reach)``: uniform across the view widened by the class's reach."""
+    out = np.empty(len(u2))
+    for i in range(len(u2)):
+        out[i] = (u2[i] * 2 - 1) * (half + reach[i])
+    return out
+
+
+@numba.njit(cache=True)
+def false_positive_rows(classes: np.ndarray, r: np.ndarray, cos_b: np.ndarray, sin_b: np.ndarray) -> np.ndarray:
+    """The false positives' rows: class, position ``r·(cos b, sin b)``, no source (``true_id`` −1)."""
+    rows = np.zeros(len(classes), _DETECTION)
+    for i in range(len(classes)):
+        rows[i].class_id = classes[i]
+        rows[i].x = r[i] * cos_b[i]
+        rows[i].y = r[i] * sin_b[i]
+        rows[i].true_id = -1
+    return rows
+
+
+@numba.njit(cache=True)
+def dress_made_up(rows: np.ndarray, views: np.ndarray, g: np.ndarray, m: float, size_std: float, yaw_std: float,
+                  class_size: np.ndarray, class_subtype: np.ndarray, robot: int, robot_rows: np.ndarray,
+                  pick_draws: np.ndarray, view_observer: np.ndarray, view_frame: np.ndarray, heading: np.ndarray,
+                  observer_team: np.ndarray, is_robot: np.ndarray, robots_before: np.ndarray, others: np.ndarray,
+                  yaw: np.ndarray, fallen: np.ndarray, penalized: np.ndarray, team: np.ndarray, objects: int) -> None:
+    """``Perceiver._made_up_rows`` for a game with another robot for every observer: each report its class's
+    size with a size error, no yaw, team or flags, its class's subtype; each robot report (``robot_rows``) the
+    heading, team and state of another robot, drawn by ``pick_draws``."""
+    for i in range(len(rows)):
+        factor = _maximum(0.2, 1.0 + m * size_std * g[0, i])
+        size = class_size[rows[i].class_id] * factor
+        rows[i].size_x = size
+        rows[i].size_y = size
+        rows[i].yaw = np.nan
+        rows[i].team = 0
+        rows[i].fallen = False
+        rows[i].penalized = False
+        rows[i].subtype = class_subtype[rows[i].class_id]
+    for q in range(len(robot_rows)):
+        i = robot_rows[q]
+        view = views[i]
+        observer = view_observer[view]
+        observer_is_robot = is_robot[observer]
+        choices = len(others) - (1 if observer_is_robot else 0)
+        pick = np.intp(pick_draws[q] * choices)
+        if observer_is_robot and pick >= robots_before[observer]:
+            pick += 1
+        other = others[pick]
+        src = view_frame[view] * objects + other
+        rows[i].yaw = (yaw[src] - heading[view] + m * yaw_std * g[1, i] + math.pi) % (2 * math.pi) - math.pi
+        rows[i].team = team[other] * observer_team[view]
+        rows[i].fallen = fallen[src]
+        rows[i].penalized = penalized[src]
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel once, on tiny inputs."""
     z, zi = np.zeros(2), np.zeros(2, np.int64)
@@ -565,12 +657,17 @@ def warm_up() -> None:
     feet_and_errors(ck, ck, nb, z, bits, u, u, 1.0, 0.1, 0.1, True, 1.0, 0.1, 0.1, 2)
     i8, u8, i32 = np.zeros(2, np.int8), np.zeros(2, np.uint8), np.zeros(2, np.int32)
     point_rows(nb, nb, at, vv, jj, zi, ck, xk, yk, z, z, bits, z, z, i8, nb, nb, z, z, i8, u8, i32, u8, 2, 2)
+    fv, fc, fr, fratio, fu2 = false_positive_draws(zi, np.zeros((3, 0)), u8, True, 0, z, z, z)
+    rows = false_positive_rows(fc, fr, fr, false_positive_bearings(fu2, fratio, 0.5))
+    dress_made_up(rows, fv, np.zeros((2, 0)), 1.0, 0.1, 0.1, z, u8, 2, zi[:0], z[:0], zi, zi, z, i8, nb, zi, zi, z, nb,
+                  nb, i8, 2)
     observation_rewards(np.zeros((2, 3), np.bool_), zi, 1, zi[:1], 2, 3.0, 3, 0.1, 0.1, 0.1)
 
 
 __all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_by_view", "clamped_features", "observation_rewards",
            "camera_offsets", "reach_ratio", "in_view_partial", "visible_pairs", "realistic_misses",
-           "polar_radius_bearing", "polar_points", "feet_and_errors", "point_rows", "sighting_inputs", "sighting_bits",
+           "polar_radius_bearing", "polar_points", "feet_and_errors", "point_rows",
+           "false_positive_draws", "false_positive_bearings", "false_positive_rows", "dress_made_up", "sighting_inputs", "sighting_bits",
            "confidence_exponents", "hidden", "rim_points", "rim_count", "warm_up"]
 
 
