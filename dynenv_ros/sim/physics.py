@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 
 import pymunk
-from pymunk._chipmunk import lib as _chipmunk
+from pymunk._chipmunk import lib as _chipmunk  # type: ignore[import-not-found]  # cffi, no stubs
 
 # ``PhysicsWorld.step`` calls chipmunk's step itself and does ``Space.step``'s bookkeeping only on the ticks that
 # need it (≈ 0.5 µs of Python saved per tick, 50 ticks a soccer period). That bookkeeping is pymunk's, read from
