@@ -160,7 +160,7 @@ def main(argv: list | None = None) -> int:
     m.add_argument("--seed", type=int, default=0)
     m.add_argument("--noise-magnitude", type=float, default=1.0)
     i = sub.add_parser("interleave", parents=[common], help="ours and the original, round by round")
-    i.add_argument("--original-python", required=True, help="the original's venv interpreter (Python 3.8)")
+    i.add_argument("--original-python", help="the original's venv interpreter (Python 3.8)")
     i.add_argument("--tree", default=str(Path(__file__).resolve().parent.parent), help="our checkout")
     i.add_argument("--steps", type=int, default=2000, help="our steps per run")
     i.add_argument("--original-steps", type=int, default=200, help="the original's steps per run")
@@ -176,8 +176,8 @@ def main(argv: list | None = None) -> int:
     if args.summary_only:
         print(summary([json.loads(line) for line in Path(args.out).read_text().splitlines() if line.strip()]))
         return 0
-    if not args.dynenv:
-        parser.error("interleave needs --dynenv")
+    if not args.dynenv or not args.original_python:
+        parser.error("interleave needs --dynenv and --original-python (or --summary-only)")
     return interleave(args)
 
 
