@@ -38,7 +38,6 @@ COVERED_BY = {
     "dynenv_ros/bags/recording.py": "test_recorder_faults.py",
     "dynenv_ros/bags/typestore.py": "test_interfaces_cdr.py",
     "dynenv_ros/bags/writer.py": "test_bags.py",
-    "dynenv_ros/core/arrays.py": "test_perception_model.py",
     "dynenv_ros/core/revision.py": "test_run_checkpoints.py",
     "dynenv_ros/core/shared_arrays.py": "test_core_settings.py",
     "dynenv_ros/core/writable.py": "test_train_disk.py",

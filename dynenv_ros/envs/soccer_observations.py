@@ -30,12 +30,12 @@ import numpy as np
 from gymnasium import spaces
 
 from dynenv_ros.envs.padded_layout import (ACTION_COLUMNS, FEATURE_BOUND, GAME_COLUMNS, PROPRIOCEPTION_COLUMNS,
-                                           PaddedLayout, clamp_features)
+                                           PaddedLayout)
 from dynenv_ros.envs.learning_targets import LearningTargets
 from dynenv_ros.envs.padded_layout import pose_space
 from dynenv_ros.envs.pose_features import POSE_KEY, pose_features
 from dynenv_ros.envs.soccer_spaces import GroundTruthEncoder
-from dynenv_ros.perception.detections import FEATURE_COLUMNS, as_features
+from dynenv_ros.perception.detections import FEATURE_COLUMNS
 from dynenv_ros.perception.params import PerceptionParams, load_preset, resolve_setting
 from dynenv_ros.soccer.actions import SoccerAction
 from dynenv_ros.soccer.config import SoccerConfig
@@ -119,6 +119,9 @@ class SoccerObservations:
         if self.mode != "full":
             if self.vision is None:
                 self.vision = SoccerVision(world, self.params, localization=self.localization)
+                # The compiled feature rows (numba is imported with the perception, never on the ground-truth path).
+                from dynenv_ros.perception.row_kernels import clamped_features
+                self._clamped_features = clamped_features
             else:
                 self.vision.world = world
                 self.vision.reset()
@@ -167,8 +170,7 @@ class SoccerObservations:
         if frames not in self._views:
             views = np.arange(frames * n)
             self._views[frames] = (views % n, views // n)
-        features = as_features(perception.detections)
-        np.minimum(np.maximum(features, -FEATURE_BOUND, out=features), FEATURE_BOUND, out=features)   # clamp_features
+        features = self._clamped_features(perception.detections, FEATURE_BOUND)    # clamp_features(as_features(…))
         self.dropped_rows = self.layout.pack_rows(features, perception.offsets, *self._views[frames], arrays,
                                                   clear=out is not None).reshape(frames, n).sum(axis=0)
         arrays["proprioception"][:, :frames] = self.vision.proprioception.transpose(1, 0, 2)
@@ -197,7 +199,7 @@ class SoccerObservations:
         game = self.vision.game_controller[-1]                              # (n, 3) at the last frame
         frames = len(perception) // n
         if self.mode == "partial":
-            features = clamp_features(as_features(perception.detections))
+            features = self._clamped_features(perception.detections, FEATURE_BOUND)   # clamp_features(as_features(…))
             off = perception.offsets
             out = [{"detections": tuple(features[off[k * n + i]:off[k * n + i + 1]] for k in range(frames)),
                     "proprioception": proprio[:, i], "game": game[i]} for i in range(n)]

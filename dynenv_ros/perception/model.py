@@ -15,7 +15,6 @@ from typing import Any, cast
 
 import numpy as np
 
-from dynenv_ros.core.arrays import clamp
 from dynenv_ros.core.object_classes import ObjectClass, Sighting
 from dynenv_ros.perception.detections import DETECTION_DTYPE
 from dynenv_ros.perception.params import PerceptionParams
@@ -34,6 +33,7 @@ _DISTANT, _PARTIAL, _NEARBY = int(Sighting.DISTANT), int(Sighting.PARTIAL), int(
 CIRCLE_SAMPLES = 36
 MIN_LINE_LENGTH = 0.1        # m of a line that must be in view to detect it
 _EPS = 1e-9
+_IDENTITY = np.arange(256, dtype=np.uint8)      # a confusion target table that confuses nothing
 _Part = tuple[np.ndarray, np.ndarray]      # detection rows and each row's view
 
 
@@ -169,22 +169,16 @@ class Perceiver:
         V, N = len(lay.observer_source), self._n
         fx, fy = frames.x.ravel(), frames.y.ravel()
         src, pv = lay.pair_source, lay.pair_view
-        dx = fx[src] - fx[lay.observer_of_pair]                            # world offsets from the observer
-        dy = fy[src] - fy[lay.observer_of_pair]
+        kern = self._kernels
         heading = frames.yaw.ravel()[lay.observer_source] + views.head_yaw  # camera heading (V,)
         ch, sh = np.cos(heading), np.sin(heading)
-        c, s = ch[pv], sh[pv]
-        cx = c * dx + s * dy                                               # camera frame
-        cy = c * dy - s * dx                                               # (= −s·dx + c·dy, exactly)
+        cx, cy = kern.camera_offsets(fx, fy, src, lay.observer_of_pair, pv, ch, sh)    # camera frame
         d = np.hypot(cx, cy)
         bearing = np.arctan2(cy, cx)
-        off_axis = np.abs(bearing)
         half = p.field_of_view / 2
         # (the radius over the distance is never negative: no lower clamp)
-        reach = np.arcsin(np.minimum(lay.visibility_radius / np.maximum(d, _EPS), 1.0))
-        in_view = (off_axis <= half + reach) & (d <= lay.max_range)
-        partial = off_axis > half - reach
-        in_view[lay.own_pair] = False
+        reach = np.arcsin(kern.reach_ratio(lay.visibility_radius, d))
+        in_view, partial = kern.in_view_partial(bearing, reach, d, lay.max_range, half, lay.own_pair)
         if self.circle_index is not None:                  # the circle: seen when enough of its rim is in view
             circle = lay.circle_pair
             rim_count = self._circle_rim_in_view(lay, fx, fy, ch, sh)
@@ -195,21 +189,14 @@ class Perceiver:
         j = lay.pair_object[at]
         if p.occlusion.enabled and len(self.occluder_index):
             hidden = self._hidden(lay, at, j, cx, cy, d, bearing, in_view)
-            if self.circle_index is not None:              # painted on the floor: never hidden
-                hidden &= j != self.circle_index
-            shown = (~hidden).nonzero()[0]
-            at, j = at[shown], j[shown]
-        v = pv[at]
-        visible = np.zeros(V * N, bool)
-        visible[at] = True
+        else:
+            hidden = np.zeros(len(at), bool)
+        # The visible pairs (the circle is painted on the floor: never hidden), their distance, class, the class's
+        # near range, DISTANT, the sighting bits the report gets from geometry (PARTIAL, DISTANT), camera position.
+        circle_index = -1 if self.circle_index is None else self.circle_index
+        at, j, v, dk, ck, near, distant_k, bits, xk, yk, visible = kern.visible_pairs(
+            at, j, hidden, circle_index, pv, d, partial, cx, cy, self.objects.class_id, self.near, V * N, 1, _PARTIAL)
         K = len(at)
-        dk, ck = d[at], self.objects.class_id[j]
-        near = self.near[j]
-        distant_k = dk > near
-        partial_k = partial[at]
-        bits = partial_k * _PARTIAL                         # the sighting bits the report gets from geometry
-        bits += distant_k
-        xk, yk = cx[at], cy[at]
         reported = ck
         extra = []
         if p.mode == "none" or p.noise_magnitude <= 0.0:
@@ -217,48 +204,56 @@ class Perceiver:
             size_factor, yaw_noise = np.ones(K), np.zeros(K)
         else:
             m, rho = p.noise_magnitude, p.rho
-            if p.mode == "realistic":
-                nearby_k = self._nearby(frames, lay, at)
-                if self.circle_index is not None:          # painted on the floor: never crowded
-                    nearby_k &= j != self.circle_index
-                factor = self._sighting_factor[bits + nearby_k * _NEARBY]   # partial, else distant, else nearby
-                mult = (p.miss.range_offset + p.miss.range_slope * (dk / near) ** 2) * factor
+            realistic = p.mode == "realistic"
+            if realistic and (self._confusion_rate is not None or not self.confusions):
+                # Rules 1–3 in one compiled pass (the code below, for the realistic mode with table confusions).
+                u = rng.random((4, K))
+                confusion_rate = self._confusion_rate if self._confusion_rate is not None else np.zeros(512)
+                mult, keep, reported, confused = kern.realistic_misses(
+                    fx, fy, lay.close_first, lay.close_second, lay.close_self, len(frames.x), len(self.dynamic_index),
+                    N, src, lay.observer_closeness, at, j, bits, dk, near, ck, distant_k, circle_index,
+                    self._sighting_factor, _NEARBY, p.miss.range_offset, p.miss.range_slope,
+                    p.miss.nearby_distance ** 2, self.miss_scale, rho, u, self._confusion_rate is not None,
+                    confusion_rate, self._confusion_target if self._confusion_rate is not None else _IDENTITY)
             else:
-                mult = np.ones(K)
-            u = rng.random((4, K))
-            p_miss = np.minimum(1.0, rho * self.miss_scale[j] * mult)
-            keep = u[0] >= p_miss
-            if p.mode == "realistic" and self.confusions:
-                reported, confused = self._confuse(ck, distant_k, keep, mult, u[1])
-            else:
-                confused = np.zeros(K, bool)
+                if realistic:
+                    nearby_k = self._nearby(frames, lay, at)
+                    if self.circle_index is not None:          # painted on the floor: never crowded
+                        nearby_k &= j != self.circle_index
+                    factor = self._sighting_factor[bits + nearby_k * _NEARBY]   # partial, else distant, else nearby
+                    mult = (p.miss.range_offset + p.miss.range_slope * (dk / near) ** 2) * factor
+                else:
+                    mult = np.ones(K)
+                u = rng.random((4, K))
+                p_miss = np.minimum(1.0, rho * self.miss_scale[j] * mult)
+                keep = u[0] >= p_miss
+                if realistic and self.confusions:
+                    reported, confused = self._confuse(ck, distant_k, keep, mult, u[1])
+                else:
+                    confused = np.zeros(K, bool)
             xk, yk, g = self._position_noise(xk, yk, dk, mult, rng)
-            size_factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
-            yaw_noise = m * p.position.yaw_std * g[1]
-            if p.mode == "realistic":
-                fp = p.false_positives
-                feet = ((ck == _ROBOT) & (reported == _ROBOT) & keep & (dk < fp.at_feet_range) & (bits == 0)
-                        & (u[2] < fp.at_feet_probability * m))
-                at_feet = feet.nonzero()[0]
-                if len(at_feet):
-                    extra.append(self._feet_balls(v[at_feet], xk[at_feet], yk[at_feet], rng))
-                    keep &= ~(feet & (u[3] < fp.at_feet_robot_dropped * m))
-        seen = np.zeros(V * N, bool)
-        seen[at[keep & ~confused]] = True
+            fp = p.false_positives
+            size_factor, yaw_noise, at_feet, kept_now = kern.feet_and_errors(
+                ck, reported, keep, dk, bits, u, g, m, p.position.size_std, p.position.yaw_std, realistic,
+                fp.at_feet_range, fp.at_feet_probability, fp.at_feet_robot_dropped, _ROBOT)
+            if len(at_feet):
+                extra.append(self._feet_balls(v[at_feet], xk[at_feet], yk[at_feet], rng))
+                keep = kept_now
         context = _ViewContext(lay.frame, lay.observer, heading, frames, observer_team, N)
-        kept = keep.nonzero()[0]
-        point_rows = self._point_rows(v[kept], j[kept], src[at[kept]], reported[kept], xk[kept], yk[kept], context,
-                                      size_factor[kept], yaw_noise[kept])
-        # The circle keeps the bits of its rim test (every other point report gets them from the report itself).
-        point_rows[0]["sighting"] = bits[kept]
+        # The kept reports' rows (``soccer_kernels.point_rows``, one compiled pass), with the geometric sighting bits: the circle
+        # keeps those of its rim test (every other point report gets them from the report itself, in _assemble).
+        obj = self.objects
+        real, real_views, confused_rows, confused_views, seen = kern.point_rows(
+            keep, confused, at, v, j, src, reported, xk, yk, size_factor, yaw_noise, bits, frames.yaw.ravel(),
+            heading, observer_team, frames.fallen.ravel(), frames.penalized.ravel(), obj.size_x, obj.size_y,
+            obj.team, obj.subtype, obj.object_id, obj.class_id, _ROBOT, V * N)
+        point_rows = (real, real_views)
         line_rows, lines_seen = self._line_rows(lay, fx[lay.observer_source], fy[lay.observer_source], ch, sh, rng)
         rows = [line_rows]
         if p.mode != "none" and p.noise_magnitude > 0.0:
             # Reports no object of their class stands behind: confusions, balls at feet, uniform false positives.
-            confused_kept = confused[kept]
-            made_up = [_take(point_rows, confused_kept.nonzero()[0])] + extra
+            made_up = [(confused_rows, confused_views)] + extra
             made_up.append(self._false_positives(lay, rng))
-            point_rows = _take(point_rows, (~confused_kept).nonzero()[0])
             rows.append(self._made_up_rows(_concatenate(made_up), context, rng))
         rows.append(point_rows)
         return self._assemble(rows, lay, seen.reshape(V, N), lines_seen, visible.reshape(V, N), rng)
@@ -334,27 +329,6 @@ class Perceiver:
         noisy = self._polar_point_noise(np.array((x, y)), g[:2], d)
         return noisy[0], noisy[1], g[2:]
 
-    def _point_rows(self, v: np.ndarray, j: np.ndarray, src: np.ndarray, cls: np.ndarray, x: np.ndarray,
-                    y: np.ndarray, context: "_ViewContext", size_factor: np.ndarray, yaw_noise: np.ndarray) -> _Part:
-        """Rows of the detected point objects with their own attributes (confused ones are re-dressed later);
-        ``src`` is each pair's index in the frames' flattened arrays."""
-        obj, frames = self.objects, context.frames
-        rows = np.zeros(len(v), DETECTION_DTYPE)
-        rows["class_id"] = cls
-        rows["x"], rows["y"] = x, y
-        rows["size_x"] = obj.size_x[j] * size_factor
-        rows["size_y"] = obj.size_y[j] * size_factor
-        is_robot = cls == _ROBOT
-        yaw = _wrap(frames.yaw.ravel()[src] - context.heading[v] + yaw_noise)
-        rows["yaw"] = np.where(is_robot, yaw, np.nan)
-        rows["team"] = np.where(is_robot, obj.team[j] * context.observer_team[v], 0)
-        rows["fallen"] = is_robot & frames.fallen.ravel()[src]
-        rows["penalized"] = is_robot & frames.penalized.ravel()[src]
-        rows["subtype"] = obj.subtype[j]
-        rows["true_id"] = obj.object_id[j]
-        rows["true_class"] = obj.class_id[j]
-        return rows, v
-
     def _made_up_rows(self, part: _Part, context: "_ViewContext", rng: np.random.Generator) -> _Part:
         """Give reports that no object of their class stands behind (false positives, confusions) the attributes
         a real detection of that class has: its class's size with the same size error, and for robots the heading,
@@ -368,17 +342,27 @@ class Perceiver:
         cls = rows["class_id"]
         g = rng.standard_normal((2, n))
         m = p.noise_magnitude
+        robot = (cls == _ROBOT).nonzero()[0]
+        others = self.robot_index
+        if len(others) > 1:                              # another robot for every observer: one compiled pass
+            picks = rng.random(len(robot)) if len(robot) else np.zeros(0)
+            frames = context.frames
+            self._kernels.dress_made_up(rows, v, g, m, p.position.size_std, p.position.yaw_std, self.class_size,
+                                        self._class_subtype, _ROBOT, robot, picks, context.observer, context.frame,
+                                        context.heading, context.observer_team, self.is_robot, self._robots_before,
+                                        others, frames.yaw.ravel(), frames.fallen.ravel(), frames.penalized.ravel(),
+                                        self.objects.team, context.objects)
+            self._varied_subtype_draws(rows, cls, rng)
+            return rows, v
         factor = np.maximum(0.2, 1.0 + m * p.position.size_std * g[0])
         rows["size_x"] = rows["size_y"] = self.class_size[cls] * factor
         rows["yaw"] = np.nan
         rows["team"] = 0
         rows["fallen"] = rows["penalized"] = False
         rows["subtype"] = self._class_subtype[cls]
-        robot = (cls == _ROBOT).nonzero()[0]
         if len(robot):
             view = v[robot]
             observer = context.observer[view]
-            others = self.robot_index
             observer_is_robot = self.is_robot[observer]
             choices = len(others) - observer_is_robot
             if len(others) > 1 or len(others) and (choices > 0).all():   # (two robots: always another one)
@@ -395,11 +379,15 @@ class Perceiver:
             else:                                        # no other robot to resemble: a plausible stranger
                 rows["yaw"][robot] = (rng.random(len(robot)) * 2 - 1) * math.pi
                 rows["team"][robot] = np.where(rng.random(len(robot)) < 0.5, -1, 1)
+        self._varied_subtype_draws(rows, cls, rng)
+        return rows, v
+
+    def _varied_subtype_draws(self, rows: np.ndarray, cls: np.ndarray, rng: np.random.Generator) -> None:
+        """Made-up reports of a class whose objects differ in subtype (crossings: L, T, X) get a random real one's."""
         for c, subtypes in self._varied_subtypes.items():
             at = (cls == c).nonzero()[0]
             if len(at):
                 rows["subtype"][at] = subtypes[(rng.random(len(at)) * len(subtypes)).astype(np.intp)]
-        return rows, v
 
     def _feet_balls(self, v: np.ndarray, rx: np.ndarray, ry: np.ndarray, rng: np.random.Generator) -> _Part:
         """Rule 4: a ball seen at the feet of a nearby robot (DynEnv: 10ρ per robot within 2.5 m)."""
@@ -420,23 +408,18 @@ class Perceiver:
         uniform in distance up to ``max_distance`` (and the class's range), uniform in bearing across the view
         widened by the class's reach asin(radius / max(distance, 2·radius)), as partially seen real objects are."""
         counts = rng.binomial(self.params.false_positives.trials, self._fp_probability, size=len(lay.views))
-        v = np.repeat(lay.views, counts)
-        if not len(v):
+        chances = int(counts.sum())
+        if not chances:
             return np.zeros(0, DETECTION_DTYPE), np.zeros(0, np.int64)
-        u = rng.random((3, len(v)))                                       # every draw at once
-        classes = self._fp_classes[(u[0] * len(self._fp_classes)).astype(np.intp)]
-        if self._fp_none:                                                 # "none" drawn: no report
-            real = (classes != _UNKNOWN).nonzero()[0]
-            v, classes, u = v[real], classes[real], u.take(real, axis=1)
-        rows = np.zeros(len(v), DETECTION_DTYPE)
-        r = u[1] * self._fp_range[classes]
-        radius = self.class_reach_radius[classes]          # (at most 30°: nothing stands closer than its size)
-        reach = np.arcsin(clamp(radius / np.maximum(r, self._fp_floor[classes]), 0.0, 1.0))
-        b = (u[2] * 2 - 1) * (self.params.field_of_view / 2 + reach)
-        rows["class_id"] = classes
-        rows["x"], rows["y"] = r * np.cos(b), r * np.sin(b)
-        rows["true_id"] = -1
-        return rows, v
+        u = rng.random((3, chances))                                      # every draw at once
+        kern = self._kernels
+        # Per chance its class ("none" drawn: no report); per report its view, class, distance u₁·range and the
+        # sine of its reach, radius / max(distance, floor) within [0, 1] (at most 30°: nothing stands closer than
+        # its size); numpy's arcsin, cos and sin between the compiled passes.
+        v, classes, r, ratio, u2 = kern.false_positive_draws(counts, u, self._fp_classes, self._fp_none, _UNKNOWN,
+                                                             self._fp_range, self.class_reach_radius, self._fp_floor)
+        b = kern.false_positive_bearings(u2, np.arcsin(ratio), self.params.field_of_view / 2)
+        return kern.false_positive_rows(classes, r, np.cos(b), np.sin(b)), v
 
     def _assemble(self, parts: list[_Part], lay: "_Layout", seen: np.ndarray, lines_seen: np.ndarray,
                   visible: np.ndarray, rng: np.random.Generator) -> Perception:
@@ -528,9 +511,11 @@ class Perceiver:
         p, m = self.params.position, self.params.noise_magnitude
         if self.params.mode == "random":
             return xy + g * m * p.random_std
-        r = np.maximum(0.0, d + g[0] * m * (p.radial_base + p.radial_per_m2 * d * d))
-        b = np.arctan2(xy[1], xy[0]) + g[1] * m * p.bearing_std
-        return np.array((r * np.cos(b), r * np.sin(b)))
+        # r = max(0, d + g₀·m·(base + per_m²·d·d)), b = atan2(y, x) + g₁·m·std; numpy's arctan2, cos and sin.
+        r, b = self._kernels.polar_radius_bearing(d, g, np.arctan2(xy[1], xy[0]), m, p.radial_base, p.radial_per_m2,
+                                                  p.bearing_std)
+        points: np.ndarray = self._kernels.polar_points(r, np.cos(b), np.sin(b))
+        return points
 
     def _circle_rim_in_view(self, lay: "_Layout", fx: np.ndarray, fy: np.ndarray, c: np.ndarray,
                             s: np.ndarray) -> np.ndarray:
@@ -549,12 +534,6 @@ _FIELDS = cast(dict[str, tuple[Any, int]], DETECTION_DTYPE.fields)     # (dtype,
 _ROW_RUNS = np.dtype({"names": ["position", "line"], "formats": [("<f4", (2,)), ("<f4", (4,))],
                       "offsets": [_FIELDS["x"][1], _FIELDS["line_start_x"][1]],
                       "itemsize": DETECTION_DTYPE.itemsize})
-
-
-def _take(part: tuple[np.ndarray, np.ndarray], index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows ``index`` of a (rows, views) part. As raw records: a structured gather copies field by field."""
-    rows, views = part
-    return rows.view(_RAW)[index].view(DETECTION_DTYPE), views[index]
 
 
 def _concatenate(parts: list[_Part]) -> _Part:

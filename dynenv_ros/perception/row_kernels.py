@@ -60,3 +60,38 @@ def clipped_features(rows: np.ndarray, bound: float) -> np.ndarray:
         for k in range(19):
             out[i, k] = min(max(out[i, k], -bound), bound)
     return out
+
+
+@numba.njit(cache=True)
+def _clamped_feature_rows(rows: np.ndarray, cos_yaw: np.ndarray, sin_yaw: np.ndarray, bound: np.float32) -> np.ndarray:
+    """The body of ``clamped_features``: every column but the yaw's cos/sin (given, numpy's) from the rows."""
+    out = np.empty((len(rows), 19), np.float32)
+    for i in range(len(rows)):
+        r = rows[i]
+        out[i, 0] = r.class_id
+        out[i, 1], out[i, 2] = r.x, r.y
+        if np.isfinite(r.yaw):
+            out[i, 3], out[i, 4] = cos_yaw[i], sin_yaw[i]
+        else:
+            out[i, 3], out[i, 4] = 0.0, 0.0
+        out[i, 5], out[i, 6], out[i, 7] = r.size_x, r.size_y, r.confidence
+        out[i, 8], out[i, 9] = r.team, r.subtype
+        out[i, 10], out[i, 11] = r.fallen, r.penalized
+        out[i, 12], out[i, 13], out[i, 14], out[i, 15] = r.line_start_x, r.line_start_y, r.line_end_x, r.line_end_y
+        bits = r.sighting
+        out[i, 16], out[i, 17], out[i, 18] = bits & 1, (bits >> 1) & 1, (bits >> 2) & 1
+        for k in range(19):
+            value = out[i, k]                       # np.clip's float32 maximum then minimum, NaN kept
+            value = value if (value > -bound or value != value) else -bound
+            out[i, k] = value if (value < bound or value != value) else bound
+    return out
+
+
+def clamped_features(rows: np.ndarray, bound: float) -> np.ndarray:
+    """``np.clip(detections.as_features(rows), -bound, bound)`` to the bit, in one compiled pass and numpy's float32
+    cos/sin of the yaws (so, unlike ``clipped_features``, no ulp apart): the soccer observation's feature rows."""
+    yaw = rows["yaw"]
+    bound32 = np.float32(bound)
+    if float(bound32) != bound:
+        raise ValueError(f"bound {bound!r} is not a float32: np.clip would compare in float64")
+    return _clamped_feature_rows(rows, np.cos(yaw), np.sin(yaw), bound32)

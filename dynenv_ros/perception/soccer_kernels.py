@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from dynenv_ros.perception.detections import DETECTION_DTYPE as _DETECTION
-from dynenv_ros.perception.row_kernels import sort_by_view
+from dynenv_ros.perception.row_kernels import clamped_features, sort_by_view
 
 _EPS = 1e-9
 _R = TypeVar("_R", float, np.floating[Any])     # a Python or a numpy float (for mypy; numba types each call)
@@ -244,6 +244,384 @@ def rim_count(angle: np.ndarray, in_range: np.ndarray, half: float, samples: int
     return out
 
 
+@numba.njit(cache=True)
+def observation_rewards(seen: np.ndarray, lines_seen: np.ndarray, n: int, landmark_index: np.ndarray,
+                        robot_cap: int, landmark_cap: float, ball_cap: int, robot_weight: float,
+                        landmark_weight: float, ball_weight: float) -> np.ndarray:
+    """``SoccerVision.observation_rewards`` in one pass: views v = frame·n + observer of ``seen`` (V, N) and
+    ``lines_seen`` (V,); the counts are integers (exact in any order), the float terms those of the numpy code, in
+    its order."""
+    V, N = seen.shape
+    frames = V // n
+    counts = np.zeros((n, N), np.int64)
+    lines = np.zeros(n, np.int64)
+    for v in range(V):
+        i = v % n
+        lines[i] += lines_seen[v]
+        for j in range(N):
+            if seen[v, j]:
+                counts[i, j] += 1
+    out = np.empty(n)
+    for i in range(n):
+        robots = 0
+        for r in range(n):
+            if r != i:
+                robots += min(robot_cap, counts[i, r])
+        landmarks = lines[i]
+        for j in landmark_index:
+            landmarks += counts[i, j]
+        landmark_term = _minimum(landmark_cap, landmarks / frames)
+        ball = min(ball_cap, counts[i, n])
+        out[i] = robot_weight * robots + landmark_weight * landmark_term + ball_weight * ball
+    return out
+
+
+@numba.njit(cache=True)
+def camera_offsets(fx: np.ndarray, fy: np.ndarray, pair_source: np.ndarray, observer_of_pair: np.ndarray,
+                   pair_view: np.ndarray, ch: np.ndarray, sh: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every (view, object) pair's offset from the observer in the camera frame (x along the gaze, y left):
+    ``c·dx + s·dy`` and ``c·dy − s·dx`` of the world offsets, with the view's heading cosine and sine."""
+    P = len(pair_source)
+    cx = np.empty(P)
+    cy = np.empty(P)
+    for i in range(P):
+        dx = fx[pair_source[i]] - fx[observer_of_pair[i]]
+        dy = fy[pair_source[i]] - fy[observer_of_pair[i]]
+        c, s = ch[pair_view[i]], sh[pair_view[i]]
+        cx[i] = c * dx + s * dy
+        cy[i] = c * dy - s * dx
+    return cx, cy
+
+
+@numba.njit(cache=True)
+def reach_ratio(radius: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``min(radius / max(d, ε), 1)`` per pair: the sine of the angle an object's reach adds to the view."""
+    out = np.empty(len(d))
+    for i in range(len(d)):
+        out[i] = _minimum(radius[i] / _maximum(d[i], _EPS), 1.0)
+    return out
+
+
+@numba.njit(cache=True)
+def in_view_partial(bearing: np.ndarray, reach: np.ndarray, d: np.ndarray, max_range: np.ndarray, half: float,
+                    own_pair: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pair: in the view (within the half angle widened by the reach, and in range; never one's own pair),
+    and partial (within the reach of the view's edge)."""
+    P = len(d)
+    in_view = np.empty(P, np.bool_)
+    partial = np.empty(P, np.bool_)
+    for i in range(P):
+        off_axis = abs(bearing[i])
+        in_view[i] = (off_axis <= half + reach[i]) and (d[i] <= max_range[i])
+        partial[i] = off_axis > half - reach[i]
+    for v in range(len(own_pair)):
+        in_view[own_pair[v]] = False
+    return in_view, partial
+
+
+@numba.njit(cache=True)
+def visible_pairs(at: np.ndarray, j: np.ndarray, hidden: np.ndarray, circle: int, pair_view: np.ndarray,
+                  d: np.ndarray, partial: np.ndarray, cx: np.ndarray, cy: np.ndarray, class_id: np.ndarray,
+                  near: np.ndarray, pairs: int, distant_bit: int, partial_bit: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                             np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The candidates ``at`` (objects ``j``) not ``hidden`` (the circle never is; ``circle`` −1: none), and per
+    visible pair its view, distance, class, the class's near range, DISTANT, the geometric sighting bits, camera
+    position; and the (V·N,) visible flags."""
+    K = 0
+    for q in range(len(at)):
+        if not hidden[q] or j[q] == circle:
+            K += 1
+    out_at = np.empty(K, np.int64)
+    out_j = np.empty(K, np.int64)
+    v = np.empty(K, np.int64)
+    dk = np.empty(K)
+    ck = np.empty(K, np.uint8)
+    near_k = np.empty(K)
+    distant = np.empty(K, np.bool_)
+    bits = np.empty(K, np.int64)
+    xk = np.empty(K)
+    yk = np.empty(K)
+    visible = np.zeros(pairs, np.bool_)
+    r = 0
+    for q in range(len(at)):
+        if hidden[q] and j[q] != circle:
+            continue
+        a, jj = at[q], j[q]
+        out_at[r], out_j[r], v[r] = a, jj, pair_view[a]
+        dk[r], ck[r], near_k[r] = d[a], class_id[jj], near[jj]
+        distant[r] = d[a] > near[jj]
+        bits[r] = (partial_bit if partial[a] else 0) + (distant_bit if distant[r] else 0)
+        xk[r], yk[r] = cx[a], cy[a]
+        visible[a] = True
+        r += 1
+    return out_at, out_j, v, dk, ck, near_k, distant, bits, xk, yk, visible
+
+
+@numba.njit(cache=True)
+def realistic_misses(fx: np.ndarray, fy: np.ndarray, close_first: np.ndarray, close_second: np.ndarray,
+                     close_self: np.ndarray, frames: int, dynamic: int, objects: int, pair_source: np.ndarray,
+                     observer_closeness: np.ndarray, at: np.ndarray, j: np.ndarray, bits: np.ndarray,
+                     dk: np.ndarray, near: np.ndarray, ck: np.ndarray, distant: np.ndarray, circle: int,
+                     sighting_factor: np.ndarray, nearby_bit: int, range_offset: float, range_slope: float,
+                     nearby_distance2: float, miss_scale: np.ndarray, rho: float, u: np.ndarray, confusions: bool,
+                     confusion_rate: np.ndarray, confusion_target: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The realistic mode's rules 1–3 for the visible pairs, as ``model.py``'s numpy code did them: NEARBY (another
+    moving object, not the observer, within the nearby distance: ``Perceiver._nearby``), the miss multiplier, the
+    miss draw ``u[0]`` and (``confusions``: the rules as one table, ``Perceiver._confuse``) the confusion draw
+    ``u[1]``. Returns (multiplier, kept, reported class, confused)."""
+    F, D, N = frames, dynamic, objects
+    close = np.zeros(F * (D + 1) * N, np.bool_)              # (frame, dynamic + a row of none, object)
+    for f in range(F):
+        for k in range(D):
+            for jj in range(N):
+                e = (f * D + k) * N + jj
+                ddx = fx[close_first[e]] - fx[close_second[e]]
+                ddy = fy[close_first[e]] - fy[close_second[e]]
+                close[(f * (D + 1) + k) * N + jj] = ddx * ddx + ddy * ddy < nearby_distance2
+    for e in range(len(close_self)):
+        close[close_self[e]] = False                         # an object is not its own neighbour
+    count = np.zeros(F * N, np.int64)
+    for f in range(F):
+        for k in range(D + 1):
+            for jj in range(N):
+                if close[(f * (D + 1) + k) * N + jj]:
+                    count[f * N + jj] += 1
+    K = len(at)
+    mult = np.empty(K)
+    keep = np.empty(K, np.bool_)
+    reported = ck.copy()
+    confused = np.zeros(K, np.bool_)
+    for q in range(K):
+        a = at[q]
+        nearby = count[pair_source[a]] > close[observer_closeness[a]] and j[q] != circle
+        factor = sighting_factor[bits[q] + (nearby_bit if nearby else 0)]
+        ratio = dk[q] / near[q]
+        mult[q] = (range_offset + range_slope * (ratio * ratio)) * factor
+        p_miss = _minimum(1.0, rho * miss_scale[j[q]] * mult[q])
+        keep[q] = u[0, q] >= p_miss
+        if confusions:
+            c = ck[q]
+            hit = keep[q] and u[1, q] < confusion_rate[c + (256 if distant[q] else 0)] * mult[q]
+            confused[q] = hit
+            if hit:
+                reported[q] = confusion_target[c]
+    return mult, keep, reported, confused
+
+
+@numba.njit(cache=True)
+def polar_radius_bearing(d: np.ndarray, g: np.ndarray, bearing: np.ndarray, m: float, radial_base: float,
+                         radial_per_m2: float, bearing_std: float) -> tuple[np.ndarray, np.ndarray]:
+    """The polar error model's noisy radius ``max(0, d + g₀·m·(base + per_m²·d·d))`` and bearing
+    ``bearing + g₁·m·std`` (``Perceiver._polar_point_noise``)."""
+    n = len(d)
+    r = np.empty(n)
+    b = np.empty(n)
+    for i in range(n):
+        r[i] = _maximum(0.0, d[i] + g[0, i] * m * (radial_base + radial_per_m2 * d[i] * d[i]))
+        b[i] = bearing[i] + g[1, i] * m * bearing_std
+    return r, b
+
+
+@numba.njit(cache=True)
+def polar_points(r: np.ndarray, cos_b: np.ndarray, sin_b: np.ndarray) -> np.ndarray:
+    """(2, n): ``r·cos b`` and ``r·sin b``."""
+    out = np.empty((2, len(r)))
+    for i in range(len(r)):
+        out[0, i] = r[i] * cos_b[i]
+        out[1, i] = r[i] * sin_b[i]
+    return out
+
+
+@numba.njit(cache=True)
+def feet_and_errors(ck: np.ndarray, reported: np.ndarray, keep: np.ndarray, dk: np.ndarray, bits: np.ndarray,
+                    u: np.ndarray, g: np.ndarray, m: float, size_std: float, yaw_std: float, realistic: bool,
+                    feet_range: float, feet_probability: float, feet_dropped: float, robot: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Size factor ``max(0.2, 1 + m·std·g₀)``, yaw error ``m·std·g₁``; realistic mode: the robots that get a ball
+    at their feet (rule 4, draw ``u[2]``), and ``keep`` without those whose robot report that ball replaces
+    (draw ``u[3]``). Returns (size factor, yaw error, feet pairs, kept)."""
+    K = len(dk)
+    size_factor = np.empty(K)
+    yaw_noise = np.empty(K)
+    feet = np.zeros(K, np.bool_)
+    n_feet = 0
+    for q in range(K):
+        size_factor[q] = _maximum(0.2, 1.0 + m * size_std * g[0, q])
+        yaw_noise[q] = m * yaw_std * g[1, q]
+        if realistic:
+            feet[q] = (ck[q] == robot and reported[q] == robot and keep[q] and dk[q] < feet_range and bits[q] == 0
+                       and u[2, q] < feet_probability * m)
+            if feet[q]:
+                n_feet += 1
+    at_feet = np.empty(n_feet, np.int64)
+    kept = keep.copy()
+    r = 0
+    for q in range(K):
+        if feet[q]:
+            at_feet[r] = q
+            r += 1
+            if u[3, q] < feet_dropped * m:
+                kept[q] = False
+    return size_factor, yaw_noise, at_feet, kept
+
+
+@numba.njit(cache=True)
+def point_rows(keep: np.ndarray, confused: np.ndarray, at: np.ndarray, v: np.ndarray, j: np.ndarray,
+               pair_source: np.ndarray, reported: np.ndarray, x: np.ndarray, y: np.ndarray, size_factor: np.ndarray,
+               yaw_noise: np.ndarray, bits: np.ndarray, yaw: np.ndarray, heading: np.ndarray,
+               observer_team: np.ndarray, fallen: np.ndarray, penalized: np.ndarray, size_x: np.ndarray,
+               size_y: np.ndarray, team: np.ndarray, subtype: np.ndarray, object_id: np.ndarray,
+               class_id: np.ndarray, robot: int, pairs: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The kept visible pairs' detection rows with their own object's attributes and
+    the geometric sighting bits, split into the unconfused ones and the confused ones (re-dressed later, as made-up
+    reports), each with its rows' views; and ``seen`` (V·N,): pairs truly detected as their own class."""
+    K = len(at)
+    n_kept = 0
+    n_confused = 0
+    seen = np.zeros(pairs, np.bool_)
+    for q in range(K):
+        if keep[q]:
+            n_kept += 1
+            if confused[q]:
+                n_confused += 1
+            else:
+                seen[at[q]] = True
+    rows = np.zeros(n_kept - n_confused, _DETECTION)
+    views = np.empty(n_kept - n_confused, np.int64)
+    confused_rows = np.zeros(n_confused, _DETECTION)
+    confused_views = np.empty(n_confused, np.int64)
+    r = 0
+    c = 0
+    for q in range(K):
+        if not keep[q]:
+            continue
+        if confused[q]:
+            row = confused_rows[c:c + 1]
+            confused_views[c] = v[q]
+            c += 1
+        else:
+            row = rows[r:r + 1]
+            views[r] = v[q]
+            r += 1
+        jj, src = j[q], pair_source[at[q]]
+        is_robot = reported[q] == robot
+        row[0].class_id = reported[q]
+        row[0].x = x[q]
+        row[0].y = y[q]
+        row[0].size_x = size_x[jj] * size_factor[q]
+        row[0].size_y = size_y[jj] * size_factor[q]
+        if is_robot:
+            row[0].yaw = (yaw[src] - heading[v[q]] + yaw_noise[q] + math.pi) % (2 * math.pi) - math.pi
+            row[0].team = team[jj] * observer_team[v[q]]
+            row[0].fallen = fallen[src]
+            row[0].penalized = penalized[src]
+        else:
+            row[0].yaw = np.nan
+            row[0].team = 0
+            row[0].fallen = False
+            row[0].penalized = False
+        row[0].subtype = subtype[jj]
+        row[0].true_id = object_id[jj]
+        row[0].true_class = class_id[jj]
+        row[0].sighting = bits[q]
+    return rows, views, confused_rows, confused_views, seen
+
+
+@numba.njit(cache=True)
+def false_positive_draws(counts: np.ndarray, u: np.ndarray, fp_classes: np.ndarray, drop_unknown: bool,
+                         unknown: int, fp_range: np.ndarray, reach_radius: np.ndarray, fp_floor: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rule 4's uniform false positives from the draws ``u`` (3, M) of the M = Σ ``counts`` chances (view v has
+    ``counts[v]``): each chance's class (``drop_unknown``: a drawn ``unknown`` is no report), and per report its
+    view, class, distance ``u₁·range``, the sine ``clamp(radius / max(r, floor), 0, 1)`` of its reach and ``u₂``."""
+    M = u.shape[1]
+    n_classes = len(fp_classes)
+    classes_all = np.empty(M, np.uint8)
+    n = 0
+    for i in range(M):
+        classes_all[i] = fp_classes[np.intp(u[0, i] * n_classes)]
+        if not (drop_unknown and classes_all[i] == unknown):
+            n += 1
+    views = np.empty(n, np.int64)
+    classes = np.empty(n, np.uint8)
+    r = np.empty(n)
+    ratio = np.empty(n)
+    u2 = np.empty(n)
+    i = 0
+    q = 0
+    for view in range(len(counts)):
+        for _ in range(counts[view]):
+            c = classes_all[i]
+            if not (drop_unknown and c == unknown):
+                views[q], classes[q] = view, c
+                r[q] = u[1, i] * fp_range[c]
+                ratio[q] = _minimum(_maximum(reach_radius[c] / _maximum(r[q], fp_floor[c]), 0.0), 1.0)
+                u2[q] = u[2, i]
+                q += 1
+            i += 1
+    return views, classes, r, ratio, u2
+
+
+@numba.njit(cache=True)
+def false_positive_bearings(u2: np.ndarray, reach: np.ndarray, half: float) -> np.ndarray:
+    """``(u₂·2 − 1)·(half + reach)``: uniform across the view widened by the class's reach."""
+    out = np.empty(len(u2))
+    for i in range(len(u2)):
+        out[i] = (u2[i] * 2 - 1) * (half + reach[i])
+    return out
+
+
+@numba.njit(cache=True)
+def false_positive_rows(classes: np.ndarray, r: np.ndarray, cos_b: np.ndarray, sin_b: np.ndarray) -> np.ndarray:
+    """The false positives' rows: class, position ``r·(cos b, sin b)``, no source (``true_id`` −1)."""
+    rows = np.zeros(len(classes), _DETECTION)
+    for i in range(len(classes)):
+        rows[i].class_id = classes[i]
+        rows[i].x = r[i] * cos_b[i]
+        rows[i].y = r[i] * sin_b[i]
+        rows[i].true_id = -1
+    return rows
+
+
+@numba.njit(cache=True)
+def dress_made_up(rows: np.ndarray, views: np.ndarray, g: np.ndarray, m: float, size_std: float, yaw_std: float,
+                  class_size: np.ndarray, class_subtype: np.ndarray, robot: int, robot_rows: np.ndarray,
+                  pick_draws: np.ndarray, view_observer: np.ndarray, view_frame: np.ndarray, heading: np.ndarray,
+                  observer_team: np.ndarray, is_robot: np.ndarray, robots_before: np.ndarray, others: np.ndarray,
+                  yaw: np.ndarray, fallen: np.ndarray, penalized: np.ndarray, team: np.ndarray, objects: int) -> None:
+    """``Perceiver._made_up_rows`` for a game with another robot for every observer: each report its class's
+    size with a size error, no yaw, team or flags, its class's subtype; each robot report (``robot_rows``) the
+    heading, team and state of another robot, drawn by ``pick_draws``."""
+    for i in range(len(rows)):
+        factor = _maximum(0.2, 1.0 + m * size_std * g[0, i])
+        size = class_size[rows[i].class_id] * factor
+        rows[i].size_x = size
+        rows[i].size_y = size
+        rows[i].yaw = np.nan
+        rows[i].team = 0
+        rows[i].fallen = False
+        rows[i].penalized = False
+        rows[i].subtype = class_subtype[rows[i].class_id]
+    for q in range(len(robot_rows)):
+        i = robot_rows[q]
+        view = views[i]
+        observer = view_observer[view]
+        observer_is_robot = is_robot[observer]
+        choices = len(others) - (1 if observer_is_robot else 0)
+        pick = np.intp(pick_draws[q] * choices)
+        if observer_is_robot and pick >= robots_before[observer]:
+            pick += 1
+        other = others[pick]
+        src = view_frame[view] * objects + other
+        rows[i].yaw = (yaw[src] - heading[view] + m * yaw_std * g[1, i] + math.pi) % (2 * math.pi) - math.pi
+        rows[i].team = team[other] * observer_team[view]
+        rows[i].fallen = fallen[src]
+        rows[i].penalized = penalized[src]
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel once, on tiny inputs."""
     z, zi = np.zeros(2), np.zeros(2, np.int64)
@@ -265,9 +643,31 @@ def warm_up() -> None:
                band, 0.2)
     px, py, in_range = rim_points(z, z, zi, zi, z, z, zi, z + 1, z, 1.0)
     rim_count(px, in_range, 0.5, 2)
+    clamped_features(rows, 50.0)
+    cx, cy = camera_offsets(z, z, zi, zi, zi, z, z)
+    in_view, partial = in_view_partial(z, reach_ratio(z, z + 1), z, z + 1, 0.5, zi[:1])
+    nb = np.zeros(2, np.bool_)
+    at, jj, vv, dk, ck, near, distant, bits, xk, yk, visible = visible_pairs(zi, zi, nb, -1, zi, z, nb, z, z,
+                                                                            np.zeros(1, np.uint8), z, 2, 1, 2)
+    u, uf, table = np.zeros((4, 2)), np.ones(8), np.zeros(512)
+    realistic_misses(z, z, zi, zi, zi[:0], 1, 1, 2, zi, zi, at, jj, bits, dk, near + 1, ck, distant, -1, uf, 4, 1.0,
+                     1.0, 1.0, z, 0.1, u, True, table, np.arange(256).astype(np.uint8))
+    r, b = polar_radius_bearing(z, u, z, 1.0, 0.1, 0.1, 0.1)
+    polar_points(r, b, b)
+    feet_and_errors(ck, ck, nb, z, bits, u, u, 1.0, 0.1, 0.1, True, 1.0, 0.1, 0.1, 2)
+    i8, u8, i32 = np.zeros(2, np.int8), np.zeros(2, np.uint8), np.zeros(2, np.int32)
+    point_rows(nb, nb, at, vv, jj, zi, ck, xk, yk, z, z, bits, z, z, i8, nb, nb, z, z, i8, u8, i32, u8, 2, 2)
+    fv, fc, fr, fratio, fu2 = false_positive_draws(zi, np.zeros((3, 0)), u8, True, 0, z, z, z)
+    rows = false_positive_rows(fc, fr, fr, false_positive_bearings(fu2, fratio, 0.5))
+    dress_made_up(rows, fv, np.zeros((2, 0)), 1.0, 0.1, 0.1, z, u8, 2, zi[:0], z[:0], zi, zi, z, i8, nb, zi, zi, z, nb,
+                  nb, i8, 2)
+    observation_rewards(np.zeros((2, 3), np.bool_), zi, 1, zi[:1], 2, 3.0, 3, 0.1, 0.1, 0.1)
 
 
-__all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_by_view", "sighting_inputs", "sighting_bits",
+__all__ = ["line_clip", "line_visible", "line_miss", "line_rows", "sort_by_view", "clamped_features", "observation_rewards",
+           "camera_offsets", "reach_ratio", "in_view_partial", "visible_pairs", "realistic_misses",
+           "polar_radius_bearing", "polar_points", "feet_and_errors", "point_rows",
+           "false_positive_draws", "false_positive_bearings", "false_positive_rows", "dress_made_up", "sighting_inputs", "sighting_bits",
            "confidence_exponents", "hidden", "rim_points", "rim_count", "warm_up"]
 
 

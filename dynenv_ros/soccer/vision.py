@@ -80,7 +80,6 @@ class SoccerVision:
         self._recorded = 0
         self._views: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.teams = np.array([r.team for r in world.robots], np.int8)
-        self._diagonal = (np.arange(n), np.arange(n))
         self._landmark_index = np.flatnonzero(self.perceiver.is_landmark)
         if self._localize:
             self._reset_localization()
@@ -207,17 +206,12 @@ class SoccerVision:
 
     def observation_rewards(self, perception: Perception) -> np.ndarray:
         """(n_robots,) DynEnv's reward for looking around, from what each robot truly saw this period."""
-        n = self.world.n_robots
-        frames = len(perception) // n
-        # Frames in which each observer truly saw each object: one reduction, then integer sums of it (exact, so
-        # the same as summing per frame first).
-        counts = perception.seen.reshape(frames, n, -1).sum(axis=0)        # (observer, object)
+        # Frames in which each observer truly saw each object (integer counts, so their sums are exact in any
+        # order); per observer: other robots seen (each at most robot_cap frames), landmarks and lines a frame on
+        # average (at most landmark_cap), the ball (at most ball_cap frames), weighted. One compiled pass
+        # (soccer_kernels.observation_rewards): the same float operations as the numpy expression it replaced.
         w = self.world.config.rewards
-        robot_frames = np.minimum(w.observation_robot_cap, counts[:, :n])   # (observer, robot)
-        robot_frames[self._diagonal] = 0                                   # oneself does not count
-        landmarks = (counts[:, self._landmark_index].sum(axis=1)
-                     + perception.lines_seen.reshape(frames, n).sum(axis=0))   # over the frames
-        landmark_term = np.minimum(float(w.observation_landmark_cap), landmarks / frames)
-        ball_frames = np.minimum(w.observation_ball_cap, counts[:, n])
-        return (w.observation_robot * robot_frames.sum(axis=1) + w.observation_landmark * landmark_term
-                + w.observation_ball * ball_frames)
+        return self.perceiver._kernels.observation_rewards(
+            perception.seen, perception.lines_seen, self.world.n_robots, self._landmark_index,
+            w.observation_robot_cap, float(w.observation_landmark_cap), w.observation_ball_cap, w.observation_robot,
+            w.observation_landmark, w.observation_ball)

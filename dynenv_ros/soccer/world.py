@@ -290,53 +290,66 @@ class SoccerWorld:
         world_x, world_y = f.half_length + f.border, f.half_width + f.border
         area_front = f.half_length - f.penalty_area_length
         area_half_width = f.penalty_area_width / 2
-        for robot in self.robots:
+        # Every body's position read once (a pymunk read costs ≈ 0.7 µs) and used by the rules and the approach
+        # shaping, unless a rule moved a robot (penalty, return, getting up or falling): from then on read anew.
+        positions = [robot.body.position for robot in self.robots]
+        moved = False
+        for robot, position in zip(self.robots, positions):
             robot.head_yaw = robot.head_at(fraction)
             rules = robot.rules
             if rules.penalized:
                 rules.penalty_remaining -= dt
                 if rules.penalty_remaining <= _EPS:
                     self._unpenalize(robot)
+                    moved = True
                 continue
             if rules.fallen:
                 rules.fall_timer -= dt
                 if rules.fall_timer <= _EPS:
                     self._try_get_up(robot)
-            x, y = robot.body.position
+                    moved = True
+            x, y = robot.body.position if moved else position
             if abs(x) > world_x or abs(y) > world_y:
                 self._penalize(robot, "left the field")
+                moved = True
                 continue
             if robot.team * x < -area_front and abs(y) < area_half_width:
                 if rules.entered_own_area_tick is None:
                     rules.entered_own_area_tick = self.tick
             else:
                 rules.entered_own_area_tick = None
-        self._check_illegal_defenders()
+        moved = self._check_illegal_defenders() or moved
         s = self.state
         if s.ball_owner != 0:
             s.ball_owner_remaining -= dt
             if s.ball_owner_remaining <= _EPS:
                 s.free_ball()
-        self._approach_rewards()
+        self._approach_rewards(None if moved else positions)
 
-    def _check_illegal_defenders(self) -> None:
+    def _check_illegal_defenders(self) -> bool:
+        """Penalize the robots beyond the limit in their own penalty area; whether any was."""
         limit = self.config.penalties.max_in_own_penalty_area
         inside_any = [r for r in self.robots if r.rules.entered_own_area_tick is not None and not r.rules.penalized]
         if len(inside_any) <= limit:                   # no team can have more (the usual case: one pass)
-            return
+            return False
+        penalized = False
         for team in (TEAM_A, TEAM_B):
             inside = [r for r in inside_any if r.team == team]
             if len(inside) > limit:
                 inside.sort(key=lambda r: (r.rules.entered_own_area_tick, r.slot))
                 for robot in inside[limit:]:
                     self._penalize(robot, "illegal defender")
+                    penalized = True
+        return penalized
 
-    def _approach_rewards(self) -> None:
-        """The robot of each team closest to the ball is paid for closing in on it (docs/original.md §6.1)."""
+    def _approach_rewards(self, positions: list[Any] | None = None) -> None:
+        """The robot of each team closest to the ball is paid for closing in on it (docs/original.md §6.1).
+        ``positions``: the robots' positions now, if the caller has read them since anything moved."""
         weight = self.config.rewards.approach_per_m
         # Every body's position once (a pymunk read costs µs), kept for this instant's on_frame callback: the
         # last rule of the instant has acted, and nothing moves before the callback returns (then cleared).
-        positions = [robot.body.position for robot in self.robots]
+        if positions is None:
+            positions = [robot.body.position for robot in self.robots]
         ball = self.ball.position
         self.instant_positions = (positions, ball)
         bx, by = ball
