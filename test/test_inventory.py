@@ -64,14 +64,19 @@ def test_every_service_topic_and_parameter_of_a_node_has_a_class(name, make_node
     assert differences(name, observed) == []
 
 
-def test_a_new_service_without_a_class_fails_the_inventory(make_node, tmp_path):
+def test_a_new_service_topic_or_parameter_without_a_class_fails_the_inventory(make_node, tmp_path):
+    from dynenv_msgs.msg import Action
     from dynenv_msgs.srv import StepSimulation      # any service type: the project's own, no extra dependency
     node = _start("policy_node", make_node, tmp_path)
+    assert differences("policy_node", observe(node)) == []
     node.create_service(StepSimulation, "~/open_door", lambda request, response: response)
+    node.create_publisher(Action, "/team_a_0/side_door", 10)
+    node.create_subscription(Action, "~/back_door", lambda _: None, 10)
     node.declare_parameter("new_knob", 1)
-    assert differences("policy_node", observe(node)) == [
-        "policy_node services ~/open_door: no class (add it to dynenv_ros/graph/inventory_table.py)",
-        "policy_node parameters new_knob: no class (add it to dynenv_ros/graph/inventory_table.py)"]
+    assert sorted(differences("policy_node", observe(node))) == sorted(
+        f"policy_node {entry}: no class (add it to dynenv_ros/graph/inventory_table.py)"
+        for entry in ("services ~/open_door", "publishes /<robot>/side_door", "subscribes ~/back_door",
+                      "parameters new_knob"))
 
 
 def test_the_docs_hold_the_generated_table():
