@@ -21,7 +21,7 @@ from rclpy.parameter import Parameter
 from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.ros.operator_gate import sign_message
-from dynenv_ros.security.keys import key_id, load_private_key, load_public_key
+from dynenv_ros.security.keys import generate_key_pair, key_id, load_private_key, load_public_key
 from dynenv_ros.security.operator_requests import sign_file
 from policy_node.policy_node import PolicyNode
 from operator_helpers import operator_pair, operator_params, signed_call
@@ -208,3 +208,49 @@ def test_accept_older_weights_obeys_only_the_operator_and_no_rollback_acts(make_
     reply = signed_call(policy, executor, AcceptOlderWeights, f"{NODE}/accept_older_weights",
                         AcceptOlderWeights.Request())
     assert reply.success and "accepted, once" in reply.message, reply.message
+
+
+def test_dynenv_keys_call_exits_0_3_or_1_and_sign_request_signs_once(make_node, executor, tmp_path):
+    """docs/ros_graph.md, "Who may command a node": ``dynenv-keys call`` (a process of its own, as an operator runs
+    it) exits 0 when the service says success, 3 when it refuses (the reply says why), 1 when the service does not
+    appear; ``sign-request`` prints a signed request as YAML, obeyed once (a second send is ``replayed``)."""
+    from dynenv_ros.ros.service_call import request_from_yaml
+    _, public = key_pair(tmp_path / "keys")
+    own, _ = generate_key_pair(tmp_path / "attacker", "operator")
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)], allow_unsigned_files=False)
+    unsigned = _policy_file(tmp_path / "unsigned.safetensors", 3, 30)
+
+    def keys(*args: object) -> tuple[int, str]:
+        process = subprocess.Popen([sys.executable, "-m", "dynenv_ros.ros.keys_cli", *map(str, args)],
+                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        assert spin_until(executor, lambda: process.poll() is not None, 90.0)
+        return process.returncode, process.communicate()[0]
+
+    operator_key = ("--key", operator_pair()[0])
+    code, said = keys("call", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", *operator_key)
+    assert code == 0 and "success: true" in said, said
+    code, said = keys("call", f"{NODE}/load_policy", "dynenv_msgs/srv/LoadPolicy",
+                      f"{{checkpoint_path: {unsigned}}}", *operator_key)
+    assert code == 3 and "reason: file_unsigned" in said, said
+    code, said = keys("call", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", "--key", own)
+    assert code == 3 and "reason: untrusted_key" in said, said
+    code, said = keys("call", "/nobody/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", "--timeout", 2,
+                      *operator_key)
+    assert code == 1 and "not available" in said, said
+    code, said = keys("sign-request", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights",
+                      *operator_key)
+    assert code == 0, said
+    kind, request = request_from_yaml("dynenv_msgs/srv/AcceptOlderWeights", said.strip().splitlines()[-1])
+    caller = make_node("ros2cli")
+    executor.add_node(caller)
+    client = caller.create_client(kind, f"{NODE}/accept_older_weights")
+    assert client.wait_for_service(timeout_sec=10.0)
+    replies = []
+    for _ in range(2):
+        future = client.call_async(request)
+        assert spin_until(executor, future.done, 20.0)
+        replies.append(future.result())
+    assert replies[0].success and (replies[1].success, replies[1].reason) == (False, "replayed"), replies
+    # accepted: the two calls of accept_older_weights and the load_policy request (its file then refused)
+    assert policy.counts["operator_requests_accepted"] == 3 and policy.counts["operator_refused_untrusted_key"] == 1
+    assert policy.counts["operator_refused_file_unsigned"] == 1 and policy.counts["operator_refused_replayed"] == 1
