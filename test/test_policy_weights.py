@@ -143,6 +143,29 @@ def test_the_blob_topic_delivers_without_the_fetch_service_and_the_service_witho
     assert values["weights_blob_chunks"] == "1" and values["weights_fetch_chunks"] == "1"
 
 
+def test_a_silent_fetch_service_ends_an_attempt_as_fetch_failed_and_the_release_is_taken_when_it_answers(
+        make_node, executor, tmp_path):
+    """docs/ros_graph.md, "Who may change the weights": a chunk request unanswered for 2 s is sent again; after 5
+    retries in vain (6 requests) the attempt ends as ``fetch_failed``; the release stays wanted, is asked again
+    after the backoff, and is taken once the service answers (here the trainer's node out of the executor: a
+    server on the graph that answers nothing, and no blob)."""
+    from dynenv_ros.ros.weights_follower import MAX_TRIES
+    private, public = key_pair(tmp_path / "keys")
+    trainer = SignedTrainer(make_node, executor, private, blob=False)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    executor.remove_node(trainer.node)
+    agent = _fixed_policy()
+    data = policy_bytes(agent, {"updates": 1})
+    trainer.release(data, version=2, metadata_json=network_metadata(agent))
+    assert spin_until(executor, lambda: policy.counts["weights_refused_fetch_failed"] >= 1, 60.0), policy.counts
+    assert policy.counts["weights_fetch_retries"] == MAX_TRIES + 1 == 6, policy.counts
+    assert policy.policy_version == 0 and "failed 6 times" in policy.weights_refusal, policy.weights_refusal
+    executor.add_node(trainer.node)
+    assert spin_until(executor, lambda: policy.policy_version == 2, 60.0), policy.counts
+    assert policy.counts["weights_fetch_restarts"] >= 1 and policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
+    assert policy.weights.diagnostics()["weights_route"] == "fetch"
+
+
 def test_a_file_of_several_chunks_reaches_a_busy_node_whole_by_the_blob_topic(make_node, executor, tmp_path):
     """A 4.4 MB policy file: the manifest and 5 chunks on the blob topic, handed out in one burst when the node
     subscribes. The node's executor is busy for 3 s meanwhile (nothing spins); its reader, as deep as the release
