@@ -154,6 +154,7 @@ def test_the_deployment_profiles_nodes_say_at_start_what_is_off(make_node, execu
     said = " ".join(logs)
     assert "policy_node: no trusted_operator_keys: ~/load_policy and ~/accept_older_weights are off" in said, logs
     assert "policy_node: runtime_controls off: greedy and use_sim_time stay as started" in said, logs
+    assert "policy_node: no trusted_weights_keys: weights announced by a trainer will be refused" in said, logs
     assert "sim_node: runtime_controls off: /sim/reset and /sim/step are not offered" in said, logs
     spin_until(executor, lambda: False, 1.0)
     services = {name for name, _ in watcher.get_service_names_and_types()}
