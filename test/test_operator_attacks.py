@@ -204,10 +204,11 @@ def test_accept_older_weights_obeys_only_the_operator_and_no_rollback_acts(make_
     assert report["successes"] == 0 and report["answered"] >= 8, report
     assert set(report["reasons"]) == {"unsigned:unsigned", "own_key:untrusted_key", "borrowed_id:bad_signature",
                                       "replayed:bad_signature"}, report
-    # the operator's own signed call still opens the door once: the replayed version 1 is then taken
+    # the operator's own signed call naming version 1 still opens the door once: the refused version 1 is taken
     reply = signed_call(policy, executor, AcceptOlderWeights, f"{NODE}/accept_older_weights",
-                        AcceptOlderWeights.Request())
-    assert reply.success and "accepted, once" in reply.message, reply.message
+                        AcceptOlderWeights.Request(run_id="run", version=1))
+    assert reply.success and "version 1 of run run will be accepted once" in reply.message, reply.message
+    assert spin_until(executor, lambda: policy.weights_acting == ("run", 1), 20.0), policy.counts
 
 
 def test_dynenv_keys_call_exits_0_3_or_1_and_sign_request_signs_once(make_node, executor, tmp_path):
