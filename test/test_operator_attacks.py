@@ -11,6 +11,7 @@ import hashlib
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import torch
@@ -255,3 +256,26 @@ def test_dynenv_keys_call_exits_0_3_or_1_and_sign_request_signs_once(make_node, 
     # accepted: the two calls of accept_older_weights and the load_policy request (its file then refused)
     assert policy.counts["operator_requests_accepted"] == 3 and policy.counts["operator_refused_untrusted_key"] == 1
     assert policy.counts["operator_refused_file_unsigned"] == 1 and policy.counts["operator_refused_replayed"] == 1
+
+
+def test_refusals_are_each_counted_and_logged_at_most_once_per_5_s(make_node, executor, capfd):
+    """docs/ros_graph.md, "Who may command a node": a WARN line for a refusal, at most one per 5 s for the node's
+    operator services together (a flood of unsigned calls is counted, not a line each). 20 unsigned requests to
+    both services, then one more after the 5 s have passed: one more line."""
+    policy = _policy_node(make_node, executor)
+    capfd.readouterr()
+
+    def lines() -> list[str]:
+        return [line for line in capfd.readouterr().err.splitlines() if "refused: unsigned" in line]
+
+    started = time.monotonic()
+    for number in range(20):
+        service, kind = (("load_policy", LoadPolicy), ("accept_older_weights", AcceptOlderWeights))[number % 2]
+        assert policy.operator.refusal(service, kind.Request())[0] == "unsigned"
+    elapsed = time.monotonic() - started
+    first = lines()
+    assert policy.counts["operator_refused_unsigned"] == 20 and "WARN" in first[0], first
+    assert 1 <= len(first) <= 1 + elapsed // 5.0, (elapsed, first)        # at most one per 5 s
+    time.sleep(5.2)                                                        # past the last line's 5 s
+    policy.operator.refusal("load_policy", LoadPolicy.Request())
+    assert len(lines()) == 1 and policy.counts["operator_refused_unsigned"] == 21

@@ -113,6 +113,8 @@ class WeightsFollower:
     failure), weights_fetch_chunks, weights_blob_chunks, weights_blob_duplicate, weights_blob_unwanted,
     weights_blob_refused and weights_blob_refused_<reason>, weights_blob_resubscribes."""
 
+    stall_s = STALL_S       # an instance may be given a shorter stall bound (test_policy_weights.py's stall test)
+
     def __init__(self, node: Node, *, topic: str, blob_topic: str, accept_service: str,
                  trusted: dict[str, Ed25519PublicKey], max_bytes: int, order: ReleaseOrder,
                  fits: Callable[[str], None], install: Callable[[bytes, Announcement], str],
@@ -425,8 +427,8 @@ class WeightsFollower:
             if (not release.blob or blob_quiet > BLOB_GRACE_S) and now >= release.again_at:
                 self._begin_attempt(release)
             return
-        if now - release.progress_at > STALL_S:
-            self._fail(release, "fetch_failed", f"no chunk for {STALL_S:.0f} s (service "
+        if now - release.progress_at > self.stall_s:
+            self._fail(release, "fetch_failed", f"no chunk for {self.stall_s:.0f} s (service "
                                                 f"{release.source.fetch_service} gone or silent)")
             return
         if release.future is not None:
