@@ -229,17 +229,20 @@ def test_dynenv_keys_call_exits_0_3_or_1_and_sign_request_signs_once(make_node, 
         return process.returncode, process.communicate()[0]
 
     operator_key = ("--key", operator_pair()[0])
-    code, said = keys("call", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", *operator_key)
+    named = "{run_id: run, version: 1}"
+    code, said = keys("call", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", named,
+                      *operator_key)
     assert code == 0 and "success: true" in said, said
     code, said = keys("call", f"{NODE}/load_policy", "dynenv_msgs/srv/LoadPolicy",
                       f"{{checkpoint_path: {unsigned}}}", *operator_key)
     assert code == 3 and "reason: file_unsigned" in said, said
-    code, said = keys("call", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", "--key", own)
+    code, said = keys("call", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", named, "--key",
+                      own)
     assert code == 3 and "reason: untrusted_key" in said, said
     code, said = keys("call", "/nobody/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", "--timeout", 2,
                       *operator_key)
     assert code == 1 and "not available" in said, said
-    code, said = keys("sign-request", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights",
+    code, said = keys("sign-request", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", named,
                       *operator_key)
     assert code == 0, said
     kind, request = request_from_yaml("dynenv_msgs/srv/AcceptOlderWeights", said.strip().splitlines()[-1])
