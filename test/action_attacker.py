@@ -8,9 +8,15 @@ team's secret. For every period of ``robot`` it sees (its first frame), it publi
 - a replay of the last genuine action it captured on the topic (valid MAC, its nonce already used);
 
 and on ``/<robot>/feedback`` forged feedback for this period and the next (plausible rewards of 0.5): without a
-MAC, and tagged with the other team's secret. Runs ``seconds``, then prints what it sent."""
+MAC, and tagged with the other team's secret. Runs ``seconds``, then prints what it sent.
+
+``teammate MATE MATE_ID`` after those arguments: it sends nothing of its own making and uses no secret, only
+replays each genuine action it captures on ``/<robot>/action`` onto the team-mate's topic ``/<MATE>/action`` at
+once (so it can come before the team-mate's own action for that period), unchanged (``teammate_unchanged``: robot_id
+still ``robot``'s) and with robot_id altered to ``MATE_ID`` to fit the topic (``teammate_robot_id``; MAC kept)."""
 from __future__ import annotations
 
+import copy
 import os
 import sys
 from collections import Counter
@@ -26,6 +32,27 @@ from dynenv_ros.ros.qos import action_stream, sim_stream
 from dynenv_ros.security.action_auth import load_secret, tag_action, tag_feedback
 
 FORGED_LOG_PROB, FORGED_VALUE, FORGED_REWARD = -0.5, 1.0, 0.5
+
+
+def replay_onto_teammate(robot: str, seconds: float, mate: str, mate_id: int) -> None:
+    """The ``teammate`` mode (module docstring)."""
+    rclpy.init()
+    node = rclpy.create_node("attacker")
+    onto = node.create_publisher(Action, f"/{mate}/action", action_stream())
+    sent: Counter[str] = Counter()
+
+    def on_action(msg: Action) -> None:
+        if not len(msg.mac):
+            return
+        onto.publish(msg)                            # unchanged: robot_id names the robot it was captured from
+        sent["teammate_unchanged"] += 1
+        altered = copy.deepcopy(msg)
+        altered.robot_id = mate_id                   # fits the team-mate's topic; the MAC is the captured one
+        onto.publish(altered)
+        sent["teammate_robot_id"] += 1
+
+    node.create_subscription(Action, f"/{robot}/action", on_action, action_stream())
+    spin_then_report(node, seconds, sent)
 
 
 def main(robot: str, seconds: float, secrets_dir: str) -> None:
@@ -95,4 +122,7 @@ def main(robot: str, seconds: float, secrets_dir: str) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], float(sys.argv[2]), sys.argv[3])
+    if sys.argv[4:5] == ["teammate"]:
+        replay_onto_teammate(sys.argv[1], float(sys.argv[2]), sys.argv[5], int(sys.argv[6]))
+    else:
+        main(sys.argv[1], float(sys.argv[2]), sys.argv[3])

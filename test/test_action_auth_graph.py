@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from dynenv_msgs.msg import Action, StepFeedback
+from dynenv_msgs.msg import Action, DetectionArray, StepFeedback
 from rcl_interfaces.msg import Log
 from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
@@ -123,6 +123,64 @@ def test_the_simulator_runs_only_the_genuine_teams_actions(make_node, executor, 
     lines = [line for line in watcher.refusal_lines if line.startswith("sim_node")]
     assert lines and len(lines) < refused / 5, (len(lines), refused, output)
     assert any("mac_invalid" in line for line in lines), lines[-3:]
+
+
+def test_a_genuine_action_replayed_onto_a_team_mates_topic_never_runs(make_node, executor, tmp_path):
+    """docs/ros_graph.md, "What it protects": the attacker, a second process with no secret, replays each of
+    team_a_0's genuine actions onto team_a_1's topic as soon as it sees it, unchanged and with robot_id altered to
+    team_a_1's. The action gate checks the robot_id against the topic first: the unchanged one is ``unknown_robot``;
+    the altered one fits the topic but not its MAC (which covers topic and robot_id): ``mac_invalid``. None runs."""
+    secrets = write_game_secrets(tmp_path / "secrets", robot_names(2))
+    keys = load_game_secrets(secrets, robot_names(2), simulator=True)
+    mate_topic = "/team_a_1/action"
+    actions: list[Action] = []
+    feedback: list[StepFeedback] = []
+    bystander = make_node("bystander")
+    deep = action_stream()
+    deep.depth = 5000
+    bystander.create_subscription(Action, mate_topic, actions.append, deep)
+    bystander.create_subscription(StepFeedback, "/team_a_1/feedback", feedback.append, sim_stream())
+    for robot in ("team_b_0", "team_b_1"):            # team B stands (not controlled): its frames have a reader
+        bystander.create_subscription(DetectionArray, f"/{robot}/detections", lambda _: None, sim_stream())
+    sim = make_node(SimNode, parameter_overrides=_params(
+        players_per_team=2, seed=3, falls_enabled=False, publish_markers=False, wait_for_subscribers=1,
+        wait_for_ground_truth_subscribers=0, controlled_robots=["team_a_0", "team_a_1"],
+        secrets_dir=str(secrets)))
+    policy = make_node(PolicyNode, parameter_overrides=_params(players_per_team=2, team="a", seed=4,
+                                                               secrets_dir=str(secrets), weights_topic=""))
+    for node in (bystander, sim, policy):
+        executor.add_node(node)
+    mate_id = robot_names(2).index("team_a_1")
+    attacker = subprocess.Popen([sys.executable, str(ATTACKER), "team_a_0", "90", str(secrets), "teammate",
+                                 "team_a_1", str(mate_id)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True)
+    counts = sim.session.counts
+    try:
+        assert spin_until(executor, lambda: counts["rejected_unknown_robot"] >= 10
+                          and counts["rejected_mac_invalid"] >= 10 and sim.periods_run >= 20, 150.0), \
+            sim.diagnostics()
+    finally:
+        attacker.kill()
+        output = attacker.communicate(timeout=10)[0]
+    executor.remove_node(sim)
+    executor.remove_node(policy)
+    spin_until(executor, lambda: False, 1.0)          # what is still queued for the bystander
+    diagnostics = sim.diagnostics()
+    # each refusal as the code gives it, and nothing else refused: no replay reached the nonce check
+    assert int(diagnostics["rejected_unknown_robot"]) >= 10 and int(diagnostics["rejected_mac_invalid"]) >= 10, \
+        diagnostics
+    assert diagnostics["rejected_mac_missing"] == "0" and diagnostics["rejected_replayed"] == "0", diagnostics
+    # none ran: every period ran both team A robots' own actions, and team_a_1's signed feedback names only
+    # actions that verify on its own topic under team A's secret (the attacker's replays verify on neither)
+    assert counts["missing"] == 0 and counts["accepted"] >= 2 * sim.periods_run, diagnostics
+    replays = [a for a in actions if a.robot_id != mate_id or
+               check_action(a, mate_topic, keys.for_agent("team_a_1")) != ""]
+    assert len(replays) >= 20, (len(replays), output)
+    own = {action_digest(a, mate_topic) for a in actions if a.robot_id == mate_id and
+           check_action(a, mate_topic, keys.for_agent("team_a_1")) == ""}
+    ran = [f for f in feedback if check_feedback(f, "/team_a_1/feedback", keys.simulator) == ""
+           and f.motion_period > 0]
+    assert len(ran) >= 20 and all(bytes(f.action_digest) in own for f in ran), (len(ran), len(own))
 
 
 def test_forged_and_replayed_messages_leave_learning_going_on_genuine_experience(make_node, executor, tmp_path):

@@ -129,3 +129,18 @@ def test_a_tag_that_comes_after_the_wait_still_verifies_its_frame_and_the_others
 def test_a_gate_needs_a_secret():
     with pytest.raises(ValueError, match="secret of >= 16 bytes"):
         FrameGate(b"")
+
+
+def test_a_frame_waits_two_seconds_and_a_receiver_holds_1024_waiting():
+    """docs/ros_graph.md, "Which frames count": by default a frame waits at most 2 s and 1,024 frames for its tag."""
+    gate = FrameGate(SECRET)
+    assert gate.frame("untagged", b"untagged", now_ns=0) == []
+    gate.expire(1_999_000_000)
+    assert gate.waiting == 1 and gate.counts["frame_mac_missing"] == 0          # still waiting at 1.999 s
+    gate.expire(2_001_000_000)
+    assert gate.waiting == 0 and gate.counts["frame_mac_missing"] == 1          # refused past 2 s
+    for k in range(1024):
+        gate.frame(k, b"flood %d" % k, now_ns=3_000_000_000)
+    assert gate.waiting == 1024 and gate.counts["frame_mac_missing"] == 1
+    gate.frame("one more", b"one more", now_ns=3_000_000_000)
+    assert gate.waiting == 1024 and gate.counts["frame_mac_missing"] == 2       # the oldest pushed out

@@ -194,3 +194,14 @@ def test_authenticated_frames_need_frames_secret(make_node, tmp_path):
     with pytest.raises(ParameterException, match="authenticated_frames needs secrets_dir"):
         make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, weights_topic="",
                                                           authenticated_frames=True))
+
+
+def test_the_ros_sports_interfaces_refuse_authenticated_frames(make_node, tmp_path):
+    """docs/ros_graph.md, "Inventory": a team stack's soccer_vision_3d messages carry no tags, so a policy node on
+    the ros-sports interfaces refuses authenticated_frames at start rather than run with frames nobody checks."""
+    secrets = _secrets(tmp_path)
+    shipped = Path(__file__).resolve().parents[1] / "policy_node" / "pretrained" / "policy.onnx"
+    with pytest.raises(ParameterException, match="soccer_vision_3d messages carry no tags"):
+        make_node(PolicyNode, parameter_overrides=_params(players_per_team=1, weights_topic="",
+                                                          interfaces="ros_sports", checkpoint=str(shipped),
+                                                          secrets_dir=str(secrets), authenticated_frames=True))

@@ -3,6 +3,7 @@ on, so every entry shows) offers exactly the services, topics and parameters the
 docs/ros_graph.md holds the table as generated."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,25 @@ from dynenv_ros.soccer.config import robot_names
 DOC = Path(__file__).resolve().parents[1] / "docs" / "ros_graph.md"
 SHIPPED = Path(__file__).resolve().parents[1] / "policy_node" / "pretrained" / "policy.onnx"   # takes the pose
 BEGIN, END = "<!-- inventory:begin -->\n", "<!-- inventory:end -->\n"
+
+
+# This module's nodes run on a ROS domain of their own: the worker's (test/conftest.py: 1..100) + 100.
+OWN_DOMAIN_OFFSET = 100
+
+
+@pytest.fixture
+def ros_context():
+    """test/conftest.py's context, on a domain no other test uses. The graph API answers for a node *name*, so a
+    same-named node of another test (a half-built one not yet collected, a killed process's until its lease runs
+    out) answered in this node's place, and the recorder and the trainer subscribe to the robots' topics they find
+    on the graph: each test here must see its one node on an empty graph."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context, domain_id=int(os.environ["ROS_DOMAIN_ID"]) + OWN_DOMAIN_OFFSET)
+    yield context
+    rclpy.try_shutdown(context=context)
 
 
 def _params(**values):
@@ -59,19 +79,25 @@ def _start(name: str, make_node, tmp_path: Path):
 @pytest.mark.parametrize("name", NODES)
 def test_every_service_topic_and_parameter_of_a_node_has_a_class(name, make_node, tmp_path):
     node = _start(name, make_node, tmp_path)
+    assert node.context.get_domain_id() == int(os.environ["ROS_DOMAIN_ID"]) + OWN_DOMAIN_OFFSET
     observed = observe(node)
     assert observed["parameters"] and observed["publishes"]          # the graph API saw the node
     assert differences(name, observed) == []
 
 
-def test_a_new_service_without_a_class_fails_the_inventory(make_node, tmp_path):
+def test_a_new_service_topic_or_parameter_without_a_class_fails_the_inventory(make_node, tmp_path):
+    from dynenv_msgs.msg import Action
     from dynenv_msgs.srv import StepSimulation      # any service type: the project's own, no extra dependency
     node = _start("policy_node", make_node, tmp_path)
+    assert differences("policy_node", observe(node)) == []
     node.create_service(StepSimulation, "~/open_door", lambda request, response: response)
+    node.create_publisher(Action, "/team_a_0/side_door", 10)
+    node.create_subscription(Action, "~/back_door", lambda _: None, 10)
     node.declare_parameter("new_knob", 1)
-    assert differences("policy_node", observe(node)) == [
-        "policy_node services ~/open_door: no class (add it to dynenv_ros/graph/inventory_table.py)",
-        "policy_node parameters new_knob: no class (add it to dynenv_ros/graph/inventory_table.py)"]
+    assert sorted(differences("policy_node", observe(node))) == sorted(
+        f"policy_node {entry}: no class (add it to dynenv_ros/graph/inventory_table.py)"
+        for entry in ("services ~/open_door", "publishes /<robot>/side_door", "subscribes ~/back_door",
+                      "parameters new_knob"))
 
 
 def test_the_docs_hold_the_generated_table():

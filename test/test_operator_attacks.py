@@ -11,6 +11,7 @@ import hashlib
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import torch
@@ -21,7 +22,7 @@ from rclpy.parameter import Parameter
 from dynenv_ros.agent.checkpoint import policy_bytes
 from dynenv_ros.agent.network import DynEnvAgent
 from dynenv_ros.ros.operator_gate import sign_message
-from dynenv_ros.security.keys import key_id, load_private_key, load_public_key
+from dynenv_ros.security.keys import generate_key_pair, key_id, load_private_key, load_public_key
 from dynenv_ros.security.operator_requests import sign_file
 from policy_node.policy_node import PolicyNode
 from operator_helpers import operator_pair, operator_params, signed_call
@@ -204,7 +205,80 @@ def test_accept_older_weights_obeys_only_the_operator_and_no_rollback_acts(make_
     assert report["successes"] == 0 and report["answered"] >= 8, report
     assert set(report["reasons"]) == {"unsigned:unsigned", "own_key:untrusted_key", "borrowed_id:bad_signature",
                                       "replayed:bad_signature"}, report
-    # the operator's own signed call still opens the door once: the replayed version 1 is then taken
+    # the operator's own signed call naming version 1 still opens the door once: the refused version 1 is taken
     reply = signed_call(policy, executor, AcceptOlderWeights, f"{NODE}/accept_older_weights",
-                        AcceptOlderWeights.Request())
-    assert reply.success and "accepted, once" in reply.message, reply.message
+                        AcceptOlderWeights.Request(run_id="run", version=1))
+    assert reply.success and "version 1 of run run will be accepted once" in reply.message, reply.message
+    assert spin_until(executor, lambda: policy.weights_acting == ("run", 1), 20.0), policy.counts
+
+
+def test_dynenv_keys_call_exits_0_3_or_1_and_sign_request_signs_once(make_node, executor, tmp_path):
+    """docs/ros_graph.md, "Who may command a node": ``dynenv-keys call`` (a process of its own, as an operator runs
+    it) exits 0 when the service says success, 3 when it refuses (the reply says why), 1 when the service does not
+    appear; ``sign-request`` prints a signed request as YAML, obeyed once (a second send is ``replayed``)."""
+    from dynenv_ros.ros.service_call import request_from_yaml
+    _, public = key_pair(tmp_path / "keys")
+    own, _ = generate_key_pair(tmp_path / "attacker", "operator")
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)], allow_unsigned_files=False)
+    unsigned = _policy_file(tmp_path / "unsigned.safetensors", 3, 30)
+
+    def keys(*args: object) -> tuple[int, str]:
+        process = subprocess.Popen([sys.executable, "-m", "dynenv_ros.ros.keys_cli", *map(str, args)],
+                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        assert spin_until(executor, lambda: process.poll() is not None, 90.0)
+        return process.returncode, process.communicate()[0]
+
+    operator_key = ("--key", operator_pair()[0])
+    named = "{run_id: run, version: 1}"
+    code, said = keys("call", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", named,
+                      *operator_key)
+    assert code == 0 and "success: true" in said, said
+    code, said = keys("call", f"{NODE}/load_policy", "dynenv_msgs/srv/LoadPolicy",
+                      f"{{checkpoint_path: {unsigned}}}", *operator_key)
+    assert code == 3 and "reason: file_unsigned" in said, said
+    code, said = keys("call", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", named, "--key",
+                      own)
+    assert code == 3 and "reason: untrusted_key" in said, said
+    code, said = keys("call", "/nobody/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", "--timeout", 2,
+                      *operator_key)
+    assert code == 1 and "not available" in said, said
+    code, said = keys("sign-request", f"{NODE}/accept_older_weights", "dynenv_msgs/srv/AcceptOlderWeights", named,
+                      *operator_key)
+    assert code == 0, said
+    kind, request = request_from_yaml("dynenv_msgs/srv/AcceptOlderWeights", said.strip().splitlines()[-1])
+    caller = make_node("ros2cli")
+    executor.add_node(caller)
+    client = caller.create_client(kind, f"{NODE}/accept_older_weights")
+    assert client.wait_for_service(timeout_sec=10.0)
+    replies = []
+    for _ in range(2):
+        future = client.call_async(request)
+        assert spin_until(executor, future.done, 20.0)
+        replies.append(future.result())
+    assert replies[0].success and (replies[1].success, replies[1].reason) == (False, "replayed"), replies
+    # accepted: the two calls of accept_older_weights and the load_policy request (its file then refused)
+    assert policy.counts["operator_requests_accepted"] == 3 and policy.counts["operator_refused_untrusted_key"] == 1
+    assert policy.counts["operator_refused_file_unsigned"] == 1 and policy.counts["operator_refused_replayed"] == 1
+
+
+def test_refusals_are_each_counted_and_logged_at_most_once_per_5_s(make_node, executor, capfd):
+    """docs/ros_graph.md, "Who may command a node": a WARN line for a refusal, at most one per 5 s for the node's
+    operator services together (a flood of unsigned calls is counted, not a line each). 20 unsigned requests to
+    both services, then one more after the 5 s have passed: one more line."""
+    policy = _policy_node(make_node, executor)
+    capfd.readouterr()
+
+    def lines() -> list[str]:
+        return [line for line in capfd.readouterr().err.splitlines() if "refused: unsigned" in line]
+
+    started = time.monotonic()
+    for number in range(20):
+        service, kind = (("load_policy", LoadPolicy), ("accept_older_weights", AcceptOlderWeights))[number % 2]
+        assert policy.operator.refusal(service, kind.Request())[0] == "unsigned"
+    elapsed = time.monotonic() - started
+    first = lines()
+    assert policy.counts["operator_refused_unsigned"] == 20 and "WARN" in first[0], first
+    assert 1 <= len(first) <= 1 + elapsed // 5.0, (elapsed, first)        # at most one per 5 s
+    time.sleep(5.2)                                                        # past the last line's 5 s
+    policy.operator.refusal("load_policy", LoadPolicy.Request())
+    assert len(lines()) == 1 and policy.counts["operator_refused_unsigned"] == 21

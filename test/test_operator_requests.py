@@ -119,6 +119,8 @@ def test_unsigned_untrusted_and_malformed_requests_are_refused(operator):
                       dataclasses.replace(genuine, key_id="not-a-key-id!!!!"),
                       dataclasses.replace(genuine, stamp_nanosec=2_000_000_000)):
         assert _reason(verifier, "load_policy", FIELDS, malformed) == "malformed", malformed
+    with pytest.raises(Refused, match=r"stamp -1 s 0 ns \(want sec >= 0"):         # the message names the field
+        verifier.check("load_policy", FIELDS, dataclasses.replace(genuine, stamp_sec=-1), NOW)
     # the trusted key's id on a stranger's signature
     borrowed = dataclasses.replace(own_key, key_id=genuine.key_id)
     assert _reason(verifier, "load_policy", FIELDS, borrowed) == "bad_signature"

@@ -4,21 +4,26 @@ the announcement names: swapped in between decisions, refused with a reason and 
 delivered at once to a node that starts late). The attacks from another process are in test_weights_attacks.py."""
 from __future__ import annotations
 
+import array
 import dataclasses
 import hashlib
 import json
 import math
 import time
 
+import numpy as np
 import pytest
 import torch
+from dynenv_msgs.srv import FetchWeights
 from rclpy.parameter import Parameter
 
 from dynenv_ros.agent.checkpoint import policy_bytes, save_policy
 from dynenv_ros.agent.network import DynEnvAgent
+from dynenv_ros.ros.qos import latched
 from dynenv_ros.ros.weights_release import to_message
 from dynenv_ros.security.keys import load_private_key
 from dynenv_ros.security.weights_signing import sign
+from dynenv_ros.security.weights_source import source_of
 from ros_harness import spin_until
 from weights_helpers import SignedTrainer, key_pair, network_metadata
 from policy_node.policy_node import PolicyNode
@@ -141,6 +146,130 @@ def test_the_blob_topic_delivers_without_the_fetch_service_and_the_service_witho
     assert values["weights_source"] == "/fetch_trainer" and fetch_only.weights.served_chunks == 1
     assert policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
     assert values["weights_blob_chunks"] == "1" and values["weights_fetch_chunks"] == "1"
+
+
+def test_a_silent_fetch_service_ends_an_attempt_as_fetch_failed_and_the_release_is_taken_when_it_answers(
+        make_node, executor, tmp_path):
+    """docs/ros_graph.md, "Who may change the weights": a chunk request unanswered for 2 s is sent again; after 5
+    retries in vain (6 requests) the attempt ends as ``fetch_failed``; the release stays wanted, is asked again
+    after the backoff, and is taken once the service answers (here the trainer's node out of the executor: a
+    server on the graph that answers nothing, and no blob)."""
+    from dynenv_ros.ros.weights_follower import MAX_TRIES
+    private, public = key_pair(tmp_path / "keys")
+    trainer = SignedTrainer(make_node, executor, private, blob=False)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    executor.remove_node(trainer.node)
+    agent = _fixed_policy()
+    data = policy_bytes(agent, {"updates": 1})
+    trainer.release(data, version=2, metadata_json=network_metadata(agent))
+    assert spin_until(executor, lambda: policy.counts["weights_refused_fetch_failed"] >= 1, 60.0), policy.counts
+    assert policy.counts["weights_fetch_retries"] == MAX_TRIES + 1 == 6, policy.counts
+    assert policy.policy_version == 0 and "failed 6 times" in policy.weights_refusal, policy.weights_refusal
+    executor.add_node(trainer.node)
+    assert spin_until(executor, lambda: policy.policy_version == 2, 60.0), policy.counts
+    assert policy.counts["weights_fetch_restarts"] >= 1 and policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
+    assert policy.weights.diagnostics()["weights_route"] == "fetch"
+
+
+def test_a_release_whose_blob_never_comes_is_fetched_from_the_service(make_node, executor, tmp_path):
+    """docs/ros_graph.md: the fetch service is asked after 2 s without blob progress. The trainer's source names
+    its blob topic, but its blob writer is gone before the node takes the announcement (nothing holds the bytes
+    there): the release comes by the fetch service alone."""
+    private, public = key_pair(tmp_path / "keys")
+    trainer = SignedTrainer(make_node, executor, private)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    agent = _fixed_policy()
+    data = policy_bytes(agent, {"updates": 1})
+    announcement = trainer.release(data, version=2, metadata_json=network_metadata(agent))
+    trainer.node.destroy_publisher(trainer.weights.blob_publisher)
+    assert source_of(announcement).blob_topic == "/trainer/weights_blob"      # a blob release
+    assert spin_until(executor, lambda: policy.policy_version == 2, 30.0), policy.counts
+    values = policy.weights.diagnostics()
+    assert values["weights_route"] == "fetch" and values["weights_loaded_via_fetch"] == "1", values
+    assert values["weights_blob_chunks"] == "0" and trainer.weights.served_chunks == 1, values
+    assert policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
+
+
+def test_a_blob_release_pushed_out_of_the_reader_comes_again_after_a_resubscription(make_node, executor, tmp_path):
+    """docs/ros_graph.md: without blob progress for 5 s the node subscribes again and the trainer's writer hands the
+    release out again. While the node's executor is busy, 40 junk samples from another writer push the genuine one
+    out of its reader (4 deep for a file of one chunk), and the junk writer is gone before the node spins again; the
+    trainer's fetch service never answers (its node out of the executor), so only the resubscription can bring the
+    release."""
+    private, public = key_pair(tmp_path / "keys")
+    trainer = SignedTrainer(make_node, executor, private)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    executor.remove_node(trainer.node)
+    junk_node = make_node("junk_writer")
+    junk = junk_node.create_publisher(FetchWeights.Response, "/trainer/weights_blob", latched(64))
+    agent = _fixed_policy()
+    data = policy_bytes(agent, {"updates": 1})
+    trainer.release(data, version=2, metadata_json=network_metadata(agent))
+    assert spin_until(executor, lambda: policy.weights.wanted is not None, 20.0), policy.counts   # reader made
+    deadline = time.monotonic() + 10.0        # nothing spins from here: both writers match the new reader
+    while (junk.get_subscription_count() < 1 or trainer.weights.blob_publisher.get_subscription_count() < 1) \
+            and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)                           # the genuine sample lands in the reader first …
+    rng = np.random.default_rng(3)
+    for _ in range(40):                       # … then the junk pushes it out
+        junk.publish(FetchWeights.Response(success=True, data=array.array("B", rng.bytes(4096))))
+    time.sleep(1.0)
+    junk_node.destroy_publisher(junk)         # gone: a new reader gets the trainer's samples alone
+    assert spin_until(executor, lambda: policy.policy_version == 2, 30.0), policy.weights.diagnostics()
+    values = policy.weights.diagnostics()
+    assert int(values["weights_blob_resubscribes"]) >= 1 and int(values["weights_blob_refused"]) >= 1, values
+    assert values["weights_route"] == "blob" and trainer.weights.served_chunks == 0, values
+    assert policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
+
+
+def test_a_fetch_service_gone_ends_an_attempt_after_the_stall_bound(make_node, executor, tmp_path):
+    """docs/ros_graph.md: 30 s without progress ends a fetch attempt as ``fetch_failed`` (here the node's bound set
+    to 3 s). The trainer's fetch service is gone after the announcement and no blob is published: no chunk request
+    can go out (none is retried), the stall ends the attempt, and the release is taken once the service is back."""
+    from dynenv_ros.ros.weights_follower import WeightsFollower
+    assert WeightsFollower.stall_s == 30.0                               # the documented default
+    private, public = key_pair(tmp_path / "keys")
+    trainer = SignedTrainer(make_node, executor, private, blob=False)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    policy.weights.stall_s = 3.0
+    agent = _fixed_policy()
+    data = policy_bytes(agent, {"updates": 1})
+    trainer.release(data, version=2, metadata_json=network_metadata(agent))
+    service_name = trainer.weights.service.service_name
+    trainer.node.destroy_service(trainer.weights.service)
+    assert spin_until(executor, lambda: policy.counts["weights_refused_fetch_failed"] >= 1, 30.0), policy.counts
+    assert f"no chunk for 3 s (service {service_name} gone or silent)" in policy.weights_refusal, policy.weights_refusal
+    assert policy.counts["weights_fetch_retries"] == 0 and policy.policy_version == 0, policy.counts
+    trainer.weights.service = trainer.node.create_service(FetchWeights, service_name, trainer.weights._on_fetch)
+    assert spin_until(executor, lambda: policy.policy_version == 2, 30.0), policy.counts
+    assert policy.counts["weights_fetch_restarts"] >= 1 and policy.checkpoint_sha256 == hashlib.sha256(data).hexdigest()
+
+
+def test_a_newer_release_waits_for_the_running_attempt_and_starts_when_it_ends(make_node, executor, tmp_path):
+    """docs/ros_graph.md: a newer release announced while a service attempt runs waits, the newest only, and starts
+    when the attempt ends. Version 2 is being fetched from a trainer whose service does not answer yet (its node out
+    of the executor), versions 3 and 4 are announced meanwhile: 4 waits in 3's place; once the service answers, 2
+    is taken, then 4 — 3 never."""
+    private, public = key_pair(tmp_path / "keys")
+    trainer = SignedTrainer(make_node, executor, private, blob=False)
+    policy = _policy_node(make_node, executor, trusted_weights_keys=[str(public)])
+    executor.remove_node(trainer.node)
+    agent = _fixed_policy()
+    files = {v: policy_bytes(agent, {"updates": v}) for v in (2, 3, 4)}
+    trainer.release(files[2], version=2, metadata_json=network_metadata(agent))
+    assert spin_until(executor, lambda: policy.weights.wanted is not None and policy.weights.wanted.running,
+                      20.0), policy.counts
+    for version in (3, 4):
+        trainer.release(files[version], version=version, metadata_json=network_metadata(agent))
+        assert spin_until(executor, lambda: policy.weights.pending is not None
+                          and policy.weights.pending.version == version, 10.0), policy.counts
+        assert policy.weights.wanted.announcement.version == 2 and policy.weights.wanted.running
+    trainer.weights.held[("run", 2)] = files[2]          # the trainer holds 2 releases: keep 2 servable too
+    executor.add_node(trainer.node)
+    assert spin_until(executor, lambda: policy.policy_version == 4, 30.0), policy.counts
+    assert policy.counts["weights_loaded"] == 2 and policy.counts["weights_refused"] == 0, policy.counts
+    assert policy.checkpoint_sha256 == hashlib.sha256(files[4]).hexdigest()
 
 
 def test_a_file_of_several_chunks_reaches_a_busy_node_whole_by_the_blob_topic(make_node, executor, tmp_path):

@@ -121,7 +121,45 @@ def test_the_deployment_profile_turns_the_runtime_controls_off():
         config = SimpleNamespace(players_per_team=1, seed=1, games=1, train_minutes=1.0, train_updates=0,
                                  perception="realistic", episode_seconds=10.0)
         launches = {n.name: n for n in train_graph(config, Path(folder))}
-    for name in ("trainer", "sim_game_1"):
+    for name in ("trainer", "sim_game_1", "policy_game_1"):
         assert launches[name].parameters["runtime_controls"] is False, name
     for name in ("trainer", "sim_game_1", "policy_game_1"):
         assert launches[name].parameters["authenticated_frames"] is True, name
+
+
+def test_the_deployment_profiles_nodes_say_at_start_what_is_off(make_node, executor, tmp_path):
+    """docs/deploy.md's routes table and config/*deploy*.yaml: a robot's policy node and the 2v2 simulator started
+    from their deployment profiles say once at start which services and changes are off, and those services are
+    not on the graph."""
+    from dynenv_ros.security.action_auth import write_game_secrets
+    from dynenv_ros.soccer.config import robot_names
+    from policy_node.policy_node import PolicyNode
+    logs: list[str] = []
+    watcher = make_node("watcher")
+    watcher.create_subscription(Log, "/rosout", lambda m: logs.append(f"{m.name}: {m.msg}"), 100)
+    executor.add_node(watcher)
+    secrets = write_game_secrets(tmp_path / "secrets", robot_names(2))
+
+    def profile(name: str, **values) -> list[Parameter]:
+        loaded = yaml.safe_load((ROOT / "config" / name).read_text())["/**"]["ros__parameters"]
+        return _params(**{**loaded, "secrets_dir": str(secrets), **values})
+
+    policy = make_node(PolicyNode, parameter_overrides=profile(
+        "deploy_policy_node.yaml", players_per_team=2, team="a",
+        checkpoint=str(ROOT / "policy_node" / "pretrained" / "policy.onnx")))
+    sim = make_node(SimNode, parameter_overrides=profile("sim_2v2_deploy.yaml", publish_markers=False))
+    for node in (policy, sim):
+        executor.add_node(node)
+    assert spin_until(executor, lambda: sum("runtime_controls off" in line for line in logs) >= 2, 10.0), logs
+    said = " ".join(logs)
+    assert "policy_node: no trusted_operator_keys: ~/load_policy and ~/accept_older_weights are off" in said, logs
+    assert "policy_node: runtime_controls off: greedy and use_sim_time stay as started" in said, logs
+    assert "policy_node: no trusted_weights_keys: weights announced by a trainer will be refused" in said, logs
+    assert "sim_node: runtime_controls off: /sim/reset and /sim/step are not offered" in said, logs
+    spin_until(executor, lambda: False, 1.0)
+    services = {name for name, _ in watcher.get_service_names_and_types()}
+    assert "/policy_node/get_parameters" in services and "/sim_node/get_parameters" in services, services
+    assert not services & {"/policy_node/load_policy", "/policy_node/accept_older_weights", "/sim/reset",
+                           "/sim/step"}, services
+    assert policy.diagnostics()["operator_services"] == "off" and policy.diagnostics()["runtime_controls"] == "off"
+    assert sim.diagnostics()["runtime_controls"] == "off"

@@ -57,9 +57,9 @@ def test_a_killed_trainer_leaves_the_robots_playing_and_a_restarted_one_resumes(
         # version acting, so refused as a rollback until the operator allows it once; then it learns on
         if saved + 1 <= version:
             assert spin_until(executor, lambda: policy.counts["weights_refused_rollback"] > rollbacks, 60.0)
-            assert "accepted, once" in signed_call(policy, executor, AcceptOlderWeights,
-                                                   "/policy_node/accept_older_weights",
-                                                   AcceptOlderWeights.Request()).message
+            named = AcceptOlderWeights.Request(run_id=policy.weights_acting[0], version=saved + 1)
+            assert "will be accepted once" in signed_call(policy, executor, AcceptOlderWeights,
+                                                          "/policy_node/accept_older_weights", named).message
         assert spin_until(executor, lambda: policy.counts["weights_loaded"] > loaded, 60.0), policy.counts
         assert policy.weights_acting[1] >= saved + 1
         assert spin_until(executor, lambda: policy.policy_version > saved + 2, 120.0), policy.policy_version

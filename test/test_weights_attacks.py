@@ -114,14 +114,24 @@ def test_a_replay_or_a_rollback_is_refused_and_taken_once_after_the_operators_ca
     try:
         assert spin_until(executor, lambda: policy.counts["weights_refused_rollback"] >= 3, 40.0), policy.counts
         assert policy.policy_version == 2 and feeder.act(0)["team_a_0"].policy_version == 2
-        assert "an operator's signed call of ~/accept_older_weights allows it once" in policy.weights_refusal
-        # the operator allows one older release: the next replay of version 1 is taken (fetched from the trainer,
-        # which still holds it), and only that one
+        assert "an operator's signed call of ~/accept_older_weights naming it allows it once" in policy.weights_refusal
         operator = make_node("operator")
         executor.add_node(operator)
+        unnamed = signed_call(operator, executor, AcceptOlderWeights, "/policy_node/accept_older_weights",
+                              AcceptOlderWeights.Request())
+        assert not unnamed.success and unnamed.reason == "release_unnamed", unnamed.message
+        # the operator names another older release (version 0): the attacker's replays of version 1 stay refused
         response = signed_call(operator, executor, AcceptOlderWeights, "/policy_node/accept_older_weights",
-                               AcceptOlderWeights.Request())
-        assert response.success and "older than version 2 of run run will be accepted, once" in response.message
+                               AcceptOlderWeights.Request(run_id="run", version=0))
+        assert response.success and "version 0 of run run will be accepted once" in response.message
+        refused = policy.counts["weights_refused_rollback"]
+        assert spin_until(executor, lambda: policy.counts["weights_refused_rollback"] >= refused + 3, 40.0)
+        assert policy.policy_version == 2 and policy.weights.order.older_allowed == ("run", 0)
+        # the operator names version 1, already refused: taken at once (fetched from the trainer, which still holds
+        # it), and only that one
+        response = signed_call(operator, executor, AcceptOlderWeights, "/policy_node/accept_older_weights",
+                               AcceptOlderWeights.Request(run_id="run", version=1))
+        assert response.success and "version 1 of run run will be accepted once" in response.message
         assert spin_until(executor, lambda: policy.policy_version == 1, 20.0), policy.counts
         assert feeder.act(1)["team_a_0"].policy_version == 1
         data_3, _ = _weights(3)

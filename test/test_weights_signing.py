@@ -173,7 +173,7 @@ def test_fields_are_checked_before_any_fetch(fields, reason):
 
 
 # -- the order of releases -----------------------------------------------------------------------------------------
-def test_only_newer_releases_pass_and_an_older_one_once_after_the_call(tmp_path):
+def test_only_newer_releases_pass_and_the_older_one_an_operator_names_once(tmp_path):
     order = ReleaseOrder()
     order.check(_announcement(version=3))                         # nothing acting yet: any release
     order.accept(_announcement(version=3))
@@ -188,13 +188,16 @@ def test_only_newer_releases_pass_and_an_older_one_once_after_the_call(tmp_path)
         order.check(_announcement(run_id="run_b", version=99, stamp_sec=1_699_999_999))
     assert refused.value.reason == "older_run"
     order.check(_announcement(run_id="run_b", version=1, stamp_sec=1_700_000_001))
-    order.allow_older_once()
-    order.check(_announcement(version=1))                          # allowed, once
+    order.allow_older_once("run_a", 1)                             # the operator names version 1 of run_a
+    for other in (_announcement(version=2), _announcement(run_id="run_c", version=1, stamp_sec=1_600_000_000)):
+        with pytest.raises(Refused):                               # no other older release passes, named or not
+            order.check(other)
+    order.check(_announcement(version=1))                          # the named one, once
     with pytest.raises(Refused):
         order.check(_announcement(version=1))
-    order.allow_older_once()
+    order.allow_older_once("run_a", 2)
     order.check(_announcement(version=9))                          # a newer one does not use the allowance
-    assert order.older_allowed
+    assert order.older_allowed == ("run_a", 2)
 
 
 def test_the_high_water_mark_survives_a_restart_in_its_state_file(tmp_path):

@@ -70,7 +70,8 @@ def train_graph(config: Any, run_dir: Path) -> list[NodeLaunch]:
         nodes.append(NodeLaunch(f"policy_game_{game}", "policy_node.policy_node", {
             "players_per_team": players, "seed": config.seed + 100 + game,
             "trusted_weights_keys": [str(public_key)], "secrets_dir": secrets,
-            "authenticated_frames": True, "decision_deadline": STEPPED_GAME_DEADLINE}, namespace=namespace))
+            "authenticated_frames": True, "decision_deadline": STEPPED_GAME_DEADLINE, "runtime_controls": False},
+            namespace=namespace))
         for team in "ab":
             for slot in range(players):
                 topics += [f"{namespace}/team_{team}_{slot}/action", f"{namespace}/team_{team}_{slot}/feedback"]

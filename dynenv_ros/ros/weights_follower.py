@@ -113,6 +113,8 @@ class WeightsFollower:
     failure), weights_fetch_chunks, weights_blob_chunks, weights_blob_duplicate, weights_blob_unwanted,
     weights_blob_refused and weights_blob_refused_<reason>, weights_blob_resubscribes."""
 
+    stall_s = STALL_S       # an instance may be given a shorter stall bound (test_policy_weights.py's stall test)
+
     def __init__(self, node: Node, *, topic: str, blob_topic: str, accept_service: str,
                  trusted: dict[str, Ed25519PublicKey], max_bytes: int, order: ReleaseOrder,
                  fits: Callable[[str], None], install: Callable[[bytes, Announcement], str],
@@ -122,6 +124,9 @@ class WeightsFollower:
         self.fits, self.install, self.counts, self.note, self.run_filter = fits, install, counts, note, run_filter
         self.wanted: _Release | None = None
         self.pending: Announcement | None = None
+        # The newest trusted release refused only for its order (rollback, older_run): an operator who names it in
+        # ~/accept_older_weights gets it at once, without waiting for the trainer to announce it again.
+        self.refused_older: dict[tuple[str, int], Announcement] = {}
         self.last_refusal = ""
         self.last_route = ""
         self.last_source = ""
@@ -171,6 +176,8 @@ class WeightsFollower:
                 raise Refused("wrong_network", str(error)) from None
             self.order.check(a)
         except Refused as refusal:
+            if refusal.reason in ("rollback", "older_run"):
+                self.refused_older = {(a.run_id, a.version): a, **dict(list(self.refused_older.items())[:15])}
             self.refuse(refusal.reason, f"version {a.version} of run {a.run_id[:40]!r}: {refusal}")
             return
         if wanted is None:
@@ -191,16 +198,23 @@ class WeightsFollower:
     def _on_accept_older(self, request: AcceptOlderWeights.Request,
                          response: AcceptOlderWeights.Response) -> AcceptOlderWeights.Response:
         refused = self.operator.refusal("accept_older_weights", request)
+        if refused is None and not request.run_id:
+            refused = ("release_unnamed", "name the release to let through: run_id and version, as the refusal of "
+                                          "it says ('version 3 of run r1')")
         if refused is not None:
             response.success, response.reason = False, refused[0]
             response.message = f"refused ({refused[0]}): {refused[1]}"
             return response
-        self.order.allow_older_once()
+        self.order.allow_older_once(request.run_id, int(request.version))
         mark = self.order.mark
         acting = f"version {mark.version} of run {mark.run_id}" if mark else "no trainer release"
         response.success = True
-        response.message = f"the next signed release older than {acting} will be accepted, once"
+        response.message = (f"version {request.version} of run {request.run_id} will be accepted once, though not "
+                            f"newer than {acting}; no other older release")
         self.node.get_logger().warning(f"accept_older_weights called: {response.message}")
+        named = self.refused_older.pop((request.run_id, int(request.version)), None)
+        if named is not None:                       # already announced and refused: take it now
+            self.consider(named)
         return response
 
     # -- the release wanted ---------------------------------------------------------------------------------------
@@ -413,8 +427,8 @@ class WeightsFollower:
             if (not release.blob or blob_quiet > BLOB_GRACE_S) and now >= release.again_at:
                 self._begin_attempt(release)
             return
-        if now - release.progress_at > STALL_S:
-            self._fail(release, "fetch_failed", f"no chunk for {STALL_S:.0f} s (service "
+        if now - release.progress_at > self.stall_s:
+            self._fail(release, "fetch_failed", f"no chunk for {self.stall_s:.0f} s (service "
                                                 f"{release.source.fetch_service} gone or silent)")
             return
         if release.future is not None:

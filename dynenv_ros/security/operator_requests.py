@@ -144,7 +144,8 @@ class RequestVerifier:
                 or s.stamp_sec < 0 or not 0 <= s.stamp_nanosec < 1_000_000_000:
             raise Refused("malformed", f"signature fields malformed: key id {s.key_id[:16]!r}, nonce of "
                                        f"{len(s.nonce)} bytes (want {NONCE_BYTES}), signature of {len(s.signature)} "
-                                       f"(want {SIGNATURE_BYTES})")
+                                       f"(want {SIGNATURE_BYTES}), stamp {s.stamp_sec} s {s.stamp_nanosec} ns (want "
+                                       "sec >= 0, nanosec < 10^9)")
         key = self.trusted.get(s.key_id)
         if key is None:
             raise Refused("untrusted_key", f"signed by key {s.key_id}, which this node does not trust")
