@@ -1650,7 +1650,8 @@ def run_node(argv: list[str], scratch: Scratch, env: dict[str, str], probe: Grap
 
 
 # ------------------------------------------------------------------------------------------------ scratch views
-SCRATCH_COPIED = ("bags", "policy_node", "tools", "docs/images")   # documented commands write into these
+# documented commands write into these (the test ledger: a documented `--split test` evaluation appends its row)
+SCRATCH_COPIED = ("bags", "policy_node", "tools", "docs/images", "docs/results_data/test_ledger.jsonl")
 SCRATCH_LINKED_IN_COPIES = ("tools/bootstrap.py", "tools/lock.py")  # make's bootstrap works on the repository's venv
 SCRATCH_LEFT_OUT = ("runs", ".pytest_cache", "__pycache__")   # .git is linked: tools read the history
 
