@@ -1656,6 +1656,34 @@ SCRATCH_LINKED_IN_COPIES = ("tools/bootstrap.py", "tools/lock.py")  # make's boo
 SCRATCH_LEFT_OUT = ("runs", ".pytest_cache", "__pycache__")   # .git is linked: tools read the history
 
 
+def unshare(root: Path, output: str) -> None:
+    """Make ``output`` (relative to the scratch view ``root``) a path of the view's own: each folder on the way that
+    links into the repository becomes a folder of links, and a file there a copy. A shortened documented command that
+    writes where a committed result lies (``--out docs/results_data/…``) then writes into the view, never through a
+    link into the repository."""
+    path = Path(output)
+    if path.is_absolute() or ".." in path.parts:
+        return
+    here = root
+    for index, part in enumerate(path.parts):
+        here = here / part
+        if not here.is_symlink():
+            if not here.exists():
+                return
+            continue
+        source = here.resolve()
+        if REPO not in source.parents and source != REPO:
+            return
+        here.unlink()
+        if source.is_dir():
+            here.mkdir()
+            for child in source.iterdir():
+                (here / child.name).symlink_to(child)
+        else:
+            shutil.copy2(source, here)
+            return
+
+
 def make_scratch(root: Path) -> Path:
     """A view of the repository in ``root``: entries symlinked, except SCRATCH_COPIED (copied, so a write does not
     reach the repository through a link), a fresh runs/ and home/, and the FIXTURE_FILES."""
@@ -1882,6 +1910,8 @@ class DocRunner:
         cwd = self.scratch.cwd
         home = self.scratch.home
         args = [_resolve_ellipsis(_expand_home(w, home), cwd) for w in short]
+        for output in _paths(args, OUTPUT_OPTIONS)[1]:
+            unshare(cwd, output)
         if args[0] == "dynenv-train" and "--resume" in args:
             args = _resume_one_update(args, cwd)
         shown = shlex.join(args)
@@ -2112,6 +2142,23 @@ def test_the_docs_venv_service_calls_reach_the_node(tmp_path: Path, graph_probe:
     finally:
         _stop(process, signal.SIGINT, NODE_STOP_S)
         _stop(process, signal.SIGKILL, 5.0)
+
+
+def test_a_documented_output_where_a_committed_result_lies_is_written_in_the_scratch_view(tmp_path: Path) -> None:
+    """A shortened command's --out into docs/results_data must not reach the repository through the view's links
+    (it once overwrote committed evaluations with 1-episode ones)."""
+    root = make_scratch(tmp_path / "view")
+    committed = "docs/results_data/issue39/random_vs_random_s100-104.json"
+    before = (REPO / committed).read_bytes()
+    unshare(root, committed)
+    assert not (root / committed).is_symlink() and (root / committed).read_bytes() == before
+    (root / committed).write_text("{}")
+    new = "docs/results_data/issue39/not_committed/out.json"
+    unshare(root, new)
+    (root / new).parent.mkdir()
+    (root / new).write_text("{}")
+    assert (REPO / committed).read_bytes() == before and not (REPO / new).parent.exists()
+    assert (root / "docs" / "results_data" / "issue26").is_symlink()        # the rest of the view still links
 
 
 def test_the_venv_service_call_refuses_a_wrong_request(tmp_path: Path) -> None:
