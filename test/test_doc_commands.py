@@ -1665,7 +1665,7 @@ def unshare(root: Path, output: str) -> None:
     if path.is_absolute() or ".." in path.parts:
         return
     here = root
-    for index, part in enumerate(path.parts):
+    for part in path.parts:
         here = here / part
         if not here.is_symlink():
             if not here.exists():
