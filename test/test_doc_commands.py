@@ -2278,8 +2278,9 @@ def test_shortening_is_the_documented_table() -> None:
 
 def test_the_scratch_view_keeps_writes_out_of_the_repository(tmp_path: Path) -> None:
     root = make_scratch(tmp_path / "view")
-    for rel in SCRATCH_COPIED:
-        assert (root / rel).is_dir() and not (root / rel).is_symlink(), rel
+    for rel in SCRATCH_COPIED:                     # folders, and the ledger (a file)
+        assert (root / rel).exists() and not (root / rel).is_symlink(), rel
+    assert (root / "docs" / "results_data" / "test_ledger.jsonl").is_file()
     assert (root / "config").resolve() == REPO / "config"                         # read-only: linked
     assert (root / "tools" / "bootstrap.py").resolve() == REPO / "tools" / "bootstrap.py"
     assert not (root / "bags" / "sample_2v2_realistic_30s" / "metadata.yaml").is_symlink()
