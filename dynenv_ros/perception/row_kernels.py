@@ -37,34 +37,19 @@ def sort_by_view(rows: np.ndarray, view: np.ndarray, distance_bits: np.ndarray, 
 
 
 @numba.njit(cache=True)
-def clipped_features(rows: np.ndarray, bound: float) -> np.ndarray:
-    """``detections.as_features(rows)`` clipped to ±``bound``, in one pass (a dozen numpy calls there): the columns
-    of ``detections.FEATURE_COLUMNS``, yaw as cos/sin (0, 0 where undefined; taken in float64 and rounded, so within
-    one float32 ulp of numpy's float32 cos/sin), the low three sighting bits as 0/1."""
-    out = np.empty((len(rows), 19), np.float32)
-    for i in range(len(rows)):
-        r = rows[i]
-        out[i, 0] = r.class_id
-        out[i, 1], out[i, 2] = r.x, r.y
-        yaw = np.float64(r.yaw)
-        if np.isfinite(yaw):
-            out[i, 3], out[i, 4] = math.cos(yaw), math.sin(yaw)
-        else:
-            out[i, 3], out[i, 4] = 0.0, 0.0
-        out[i, 5], out[i, 6], out[i, 7] = r.size_x, r.size_y, r.confidence
-        out[i, 8], out[i, 9] = r.team, r.subtype
-        out[i, 10], out[i, 11] = r.fallen, r.penalized
-        out[i, 12], out[i, 13], out[i, 14], out[i, 15] = r.line_start_x, r.line_start_y, r.line_end_x, r.line_end_y
-        bits = r.sighting
-        out[i, 16], out[i, 17], out[i, 18] = bits & 1, (bits >> 1) & 1, (bits >> 2) & 1
-        for k in range(19):
-            out[i, k] = min(max(out[i, k], -bound), bound)
-    return out
+def _cos_sin(yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos/sin of the yaws taken in float64 (driving's rows: within one float32 ulp of numpy's float32 cos/sin)."""
+    cos_yaw, sin_yaw = np.empty(len(yaw)), np.empty(len(yaw))
+    for i in range(len(yaw)):
+        value = np.float64(yaw[i])
+        cos_yaw[i], sin_yaw[i] = math.cos(value), math.sin(value)
+    return cos_yaw, sin_yaw
 
 
 @numba.njit(cache=True)
-def _clamped_feature_rows(rows: np.ndarray, cos_yaw: np.ndarray, sin_yaw: np.ndarray, bound: np.float32) -> np.ndarray:
-    """The body of ``clamped_features``: every column but the yaw's cos/sin (given, numpy's) from the rows."""
+def _feature_rows(rows: np.ndarray, cos_yaw: np.ndarray, sin_yaw: np.ndarray, bound: float) -> np.ndarray:
+    """``np.clip(detections.as_features(rows), -bound, bound)`` with the yaws' cos/sin given: the columns of
+    ``detections.FEATURE_COLUMNS``, yaw as cos/sin (0, 0 where undefined), the low three sighting bits as 0/1."""
     out = np.empty((len(rows), 19), np.float32)
     for i in range(len(rows)):
         r = rows[i]
@@ -81,10 +66,17 @@ def _clamped_feature_rows(rows: np.ndarray, cos_yaw: np.ndarray, sin_yaw: np.nda
         bits = r.sighting
         out[i, 16], out[i, 17], out[i, 18] = bits & 1, (bits >> 1) & 1, (bits >> 2) & 1
         for k in range(19):
-            value = out[i, k]                       # np.clip's float32 maximum then minimum, NaN kept
+            value = out[i, k]                       # np.clip's maximum then minimum, NaN kept
             value = value if (value > -bound or value != value) else -bound
             out[i, k] = value if (value < bound or value != value) else bound
     return out
+
+
+def clipped_features(rows: np.ndarray, bound: float) -> np.ndarray:
+    """``detections.as_features(rows)`` clipped to ±``bound`` in one compiled pass, the yaws' cos/sin taken in
+    float64 and rounded (within one float32 ulp of numpy's float32 cos/sin): driving's feature rows."""
+    cos_yaw, sin_yaw = _cos_sin(rows["yaw"])
+    return _feature_rows(rows, cos_yaw, sin_yaw, float(bound))
 
 
 def clamped_features(rows: np.ndarray, bound: float) -> np.ndarray:
@@ -94,4 +86,4 @@ def clamped_features(rows: np.ndarray, bound: float) -> np.ndarray:
     bound32 = np.float32(bound)
     if float(bound32) != bound:
         raise ValueError(f"bound {bound!r} is not a float32: np.clip would compare in float64")
-    return _clamped_feature_rows(rows, np.cos(yaw), np.sin(yaw), bound32)
+    return _feature_rows(rows, np.cos(yaw), np.sin(yaw), bound32)
