@@ -47,7 +47,8 @@ def _cos_sin(yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @numba.njit(cache=True)
-def _feature_rows(rows: np.ndarray, cos_yaw: np.ndarray, sin_yaw: np.ndarray, bound: float) -> np.ndarray:
+def _feature_rows(rows: np.ndarray, cos_yaw: np.ndarray, sin_yaw: np.ndarray, bound: float | np.float32
+                  ) -> np.ndarray:
     """``np.clip(detections.as_features(rows), -bound, bound)`` with the yaws' cos/sin given: the columns of
     ``detections.FEATURE_COLUMNS``, yaw as cos/sin (0, 0 where undefined), the low three sighting bits as 0/1."""
     out = np.empty((len(rows), 19), np.float32)
