@@ -11,7 +11,8 @@ import pytest
 from dynenv_ros.evaluation.cli import main
 from dynenv_ros.evaluation.head_to_head import bootstrap_interval, head_to_head
 from dynenv_ros.evaluation.ledger import read_ledger, rows_of
-from dynenv_ros.evaluation.ratios import ratio_of_means
+from dynenv_ros.evaluation.ratios import group_mean, ratio_of_means
+from dynenv_ros.evaluation.results import FORMAT
 from dynenv_ros.evaluation.splits import SPLITS, split_of, split_seeds
 
 # The documented ranges (docs/results.md, "Seed splits"), written out here.
@@ -75,6 +76,40 @@ def test_the_ratio_is_of_means_over_the_same_seeds_with_an_interval_over_runs_an
     assert r["interval"][0] <= r["ratio"] <= r["interval"][1]
     with pytest.raises(ValueError, match="same games"):
         ratio_of_means([_result({1: 1.0, 3: 1.0})], reference)
+
+
+def _driving(per_seed: dict[int, float]) -> dict:
+    return {"per_seed": [{"seed": s, "total": v} for s, v in per_seed.items()]}
+
+
+def test_a_group_mean_is_over_runs_and_their_common_seeds_with_an_interval_over_both(tmp_path, capsys):
+    group = [_driving({1: 10.0, 2: 30.0}), _driving({1: 20.0, 2: 40.0})]      # run means 20 and 30 → 25
+    m = group_mean(group, "total")
+    assert m["group_mean"] == pytest.approx(25.0) and m["per_run_mean"] == pytest.approx([20.0, 30.0])
+    # the extremes a draw can reach: run 0 on seed 1 only (10), run 1 on seed 2 only (40)
+    assert 10.0 <= m["interval"][0] < 25.0 < m["interval"][1] <= 40.0
+    alike = group_mean([_driving({1: 5.0, 2: 5.0})] * 3, "total")
+    assert alike["interval"] == pytest.approx([5.0, 5.0])                       # no spread, no width
+    # many runs and seeds: the two-level bootstrap's half-width is about the normal one of the run means
+    rng = np.random.default_rng(3)
+    many = [_driving({s: float(v) for s, v in enumerate(rng.normal(mean, 1.0, size=50))})
+            for mean in rng.normal(20.0, 4.0, size=40)]
+    wide = group_mean(many, "total")
+    run_means = np.array(wide["per_run_mean"])
+    half = 1.96 * run_means.std(ddof=1) / math.sqrt(run_means.size)
+    assert (wide["interval"][1] - wide["interval"][0]) / 2 == pytest.approx(half, rel=0.2)
+    with pytest.raises(ValueError, match="same games"):
+        group_mean([_driving({1: 1.0, 2: 1.0}), _driving({1: 1.0, 3: 1.0})], "total")
+    # the command line says where the interval lies against the paper's figure
+    paths = []
+    for k, result in enumerate(group):
+        path = tmp_path / f"run{k}.json"
+        path.write_text(json.dumps({"format": FORMAT, **result}))
+        paths.append(str(path))
+    assert main(["mean", *paths, "--bar", "5"]) == 0
+    assert "lies above 5" in capsys.readouterr().out
+    assert main(["mean", *paths, "--bar", "26.47"]) == 0
+    assert "includes 26.47" in capsys.readouterr().out
 
 
 def _eval(tmp_path, *extra: str) -> int:

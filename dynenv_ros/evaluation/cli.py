@@ -11,6 +11,7 @@
     dynenv-eval merge pred_s0.json pred_s1.json pred_s2.json --out pred.json   # the runs as BEST's units
     dynenv-eval training-best runs/driving/pred_s0     # the paper's statistic: best moving average in training
     dynenv-eval ratio pred_s0.json pred_s1.json --reference random.json --bar 2.3   # the paper's ratio, interval
+    dynenv-eval mean pred_s0.json pred_s1.json --metric total --bar 26.47   # a group's mean, interval
 
 Seed splits (evaluation/splits.py): --split train | validation | test picks a named, disjoint seed range; choices
 are made on validation, and every --split test evaluation is appended to the test ledger
@@ -118,6 +119,37 @@ def _ratio_parser() -> argparse.ArgumentParser:
     parser.add_argument("--bar", type=float, help="say whether the interval lies above this ratio")
     parser.add_argument("--out", type=Path, help="write the ratio (JSON) here")
     return parser
+
+
+def _mean_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=f"{PROG} mean", description="A group's mean of a per-seed metric over its runs and their "
+                     "common seeds, with a bootstrap interval over runs and seeds (the paper's absolute figures, "
+                     "e.g. driving's reward per car and episode).")
+    parser.add_argument("results", type=Path, nargs="+", help="dynenv-eval result JSONs, one per training run")
+    parser.add_argument("--metric", default="total", help="per-seed metric (default total)")
+    parser.add_argument("--bar", type=float, help="say whether the interval lies above, below or around this figure")
+    parser.add_argument("--out", type=Path, help="write the mean (JSON) here")
+    return parser
+
+
+def run_mean(args: argparse.Namespace) -> int:
+    from dynenv_ros.evaluation.ratios import format_mean, group_mean
+    from dynenv_ros.evaluation.results import load_evaluation, write_json
+    try:
+        _check_folder(args.out, "--out")
+        result = group_mean([load_evaluation(p) for p in args.results], args.metric,
+                            names=[str(p) for p in args.results])
+    except (ValueError, OSError) as error:
+        return _fail(str(error))
+    print(format_mean(result, args.bar))
+    if args.out is not None:
+        try:
+            write_json({"format": "dynenv_group_mean/1", "results": [str(p) for p in args.results], **result},
+                       args.out)
+        except (ValueError, OSError) as error:
+            return _fail(f"--out {args.out}: cannot write: {error}")
+        print(f"wrote {args.out}")
+    return 0
 
 
 def run_ratio(args: argparse.Namespace) -> int:
@@ -354,6 +386,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_merge(_merge_parser().parse_args(argv[1:]))
     if argv and argv[0] == "ratio":
         return run_ratio(_ratio_parser().parse_args(argv[1:]))
+    if argv and argv[0] == "mean":
+        return run_mean(_mean_parser().parse_args(argv[1:]))
     if argv and argv[0] == "training-best":
         return run_training_best(_training_best_parser().parse_args(argv[1:]))
     return run_eval(_eval_parser().parse_args(argv))
