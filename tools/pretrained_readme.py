@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """policy_node/pretrained/README.md and policy_node/pretrained/driving/README.md from the files beside them, so that
-what they say about the shipped policies can never drift from the policies.
+what they say about the shipped policies can never drift from the policies; the same for each soccer policy shipped
+once and kept whole in a folder of its own (``ARCHIVED``).
 
 Usage::
 
-    .venv/bin/python tools/pretrained_readme.py           # write both READMEs
+    .venv/bin/python tools/pretrained_readme.py           # write every README
     .venv/bin/python tools/pretrained_readme.py --check   # exit 1 if a README is not what its files give
 
 Every figure and name in the README comes from a file: the policy file's safetensors header (the agent's config,
@@ -13,8 +14,11 @@ the training metadata: variant, training config, env steps, the code revision it
 header), the ``dynenv-eval`` results in ``eval/*.json`` (each must record the SHA-256 of this policy file: the
 evaluation of another policy is refused), the training presets of config/train/ (which one the training config is,
 and the ``--set`` overrides that make it), docs/results.md's table of runs (whether the policy is one of them), and
-git (whether the code revision it was trained at includes the fixes listed in ``FIXES``). The commands that
-reproduce each evaluation are built from the evaluation's own settings.
+git (whether the code revision it was trained at includes the fixes listed in ``FIXES``), ``train_stages.json`` (and
+the headers of the policy files its later runs started from), and the test ledger (every row of this policy's
+weights, as this file, as the training checkpoint it was written from or as a committed file with the same tensor
+data; which of issue 39's ``BARS`` they meet). The commands that reproduce each evaluation are built from the
+evaluation's own settings; the split their seeds lie in heads their table.
 
 ROS-free; torch is imported only to read the safetensors header (``agent.checkpoint``).
 """
