@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """policy_node/pretrained/README.md and policy_node/pretrained/driving/README.md from the files beside them, so that
-what they say about the shipped policies can never drift from the policies.
+what they say about the shipped policies can never drift from the policies; the same for each soccer policy shipped
+once and kept whole in a folder of its own (``ARCHIVED``).
 
 Usage::
 
-    .venv/bin/python tools/pretrained_readme.py           # write both READMEs
+    .venv/bin/python tools/pretrained_readme.py           # write every README
     .venv/bin/python tools/pretrained_readme.py --check   # exit 1 if a README is not what its files give
 
 Every figure and name in the README comes from a file: the policy file's safetensors header (the agent's config,
@@ -13,8 +14,11 @@ the training metadata: variant, training config, env steps, the code revision it
 header), the ``dynenv-eval`` results in ``eval/*.json`` (each must record the SHA-256 of this policy file: the
 evaluation of another policy is refused), the training presets of config/train/ (which one the training config is,
 and the ``--set`` overrides that make it), docs/results.md's table of runs (whether the policy is one of them), and
-git (whether the code revision it was trained at includes the fixes listed in ``FIXES``). The commands that
-reproduce each evaluation are built from the evaluation's own settings.
+git (whether the code revision it was trained at includes the fixes listed in ``FIXES``), ``train_stages.json`` (and
+the headers of the policy files its later runs started from), and the test ledger (every row of this policy's
+weights, as this file, as the training checkpoint it was written from or as a committed file with the same tensor
+data; which of issue 39's ``BARS`` they meet). The commands that reproduce each evaluation are built from the
+evaluation's own settings; the split their seeds lie in heads their table.
 
 ROS-free; torch is imported only to read the safetensors header (``agent.checkpoint``).
 """
@@ -27,7 +31,7 @@ import shlex
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, NamedTuple, Sequence
 
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
@@ -35,12 +39,29 @@ if str(ROOT) not in sys.path:
 
 FOLDER = Path("policy_node") / "pretrained"
 DRIVING_FOLDER = FOLDER / "driving"
-FOLDERS = (FOLDER, DRIVING_FOLDER)
+# Soccer policies that were shipped once, kept whole in a folder of their own (the same files as the shipped one's) so
+# that every figure about them stays true: folder -> (the README's title, what the folder is).
+ARCHIVED = {
+    Path("docs") / "results_data" / "issue26" / "shipped_2fd24e79": (
+        "The soccer policy shipped before the league policy",
+        "This folder keeps, whole, the policy that `policy_node/pretrained/` held from 27 to 29 Nov 2026 "
+        "(docs/results.md, \"Learning to play\"), so that every figure about it stays true. Issue 39's league policy "
+        "replaced it there (docs/results.md, \"Learning beyond the teacher\"); the league runs started from this "
+        "file (the `init_policy` of config/train/league.yaml, league_sizes.yaml and beyond_teacher.yaml)."),
+}
+FOLDERS = (FOLDER, DRIVING_FOLDER, *ARCHIVED)
 POLICY, ONNX = "policy.safetensors", "policy.onnx"
+POLICY_SUFFIX = ".safetensors"
 EVAL_DIR = "eval"
 RESULTS_DOC = Path("docs") / "results.md"
 PRESETS = Path("config") / "train"
 OPPONENT_ORDER = ("random", "scripted", "perceiving")
+# Issue 39's bars for the shipped soccer policy ("Done when"), each on the test split over at least MIN_BAR_GAMES
+# games: (opponent, robots per team, whether it must also win at least twice as many games as it loses, in words).
+BARS = (("perceiving", 2, True, "against `perceiving` at 2v2"),
+        ("scripted", 2, False, "against the ground-truth `scripted` team at 2v2"),
+        ("perceiving", 5, False, "at 5v5 against `perceiving`"))
+MIN_BAR_GAMES = 100
 DRIVING_POLICY_EVAL = "policy.json"      # the driving policy's evaluation; the other files: reference drivers
 PAPER_DRIVING_PRED = 26.47               # the paper's Pred, reward per car and episode (its Table 2)
 # Fixes to training that a policy trained at an earlier revision lacks: (commit, what was wrong, whether the policy's
@@ -122,31 +143,68 @@ def training_preset(root: Path, config: Mapping[str, Any]) -> tuple[str, list[st
 
 def training_stages(here: Path, config: Mapping[str, Any]) -> list[dict[str, Any]] | None:
     """The stages of ``train_stages.json`` (a run trained on after a change of settings, e.g. self-play and then
-    against another opponent), checked: the first stage's ``train`` arguments start a run (``--config``, ``--seed``,
-    ``--set``), each later one resumes it (``--resume``, ``--set``), and applying them in order gives exactly the
-    training config. None without the file."""
+    against another opponent, or a new run started from the policy the earlier stages made), checked by
+    ``stage_runs``. None without the file."""
+    runs = stage_runs(here, config)
+    return None if runs is None else [stage for run in runs for stage in run.stages]
+
+
+class StageRun(NamedTuple):
+    """One training run of ``train_stages.json``: its stages (the first starts it, the others resume it), the
+    training config they give, and the policy file it started from (``init_policy``) with that file's header meta
+    (None for the first run)."""
+    stages: list[dict[str, Any]]
+    config: dict[str, Any]
+    start: Path | None
+    start_meta: dict[str, Any] | None
+
+
+def stage_runs(here: Path, config: Mapping[str, Any]) -> list[StageRun] | None:
+    """The runs of ``train_stages.json``, checked: the first stage starts a run (``--config``, ``--seed``,
+    ``--set``); a later one resumes the run before it (``--resume``, ``--set``) or starts a new run from a policy
+    file (``--config`` with an ``init_policy``). The last run's stages, applied in order, must give exactly the
+    training config of the policy file's header; each later run must start from a committed policy file whose
+    header's training config is what the runs before gave (its own ``init_policy`` aside: that is the file the run
+    before started from, under the name it had then). None without the file."""
     from dynenv_ros.learning.config import load_config
     path = here / "train_stages.json"
     if not path.is_file():
         return None
     stages = json.loads(path.read_text())["stages"]
-    cfg = None
+    runs: list[tuple[int, list[dict[str, Any]], Any]] = []        # (its first stage's index, its stages, config)
     for k, stage in enumerate(stages):
         args = list(stage["train"])
         options = dict(zip(args[0::2], args[1::2]))
         overrides = [v for key, v in zip(args[0::2], args[1::2]) if key == "--set"]
-        if k == 0:
-            if "--config" not in options:
-                raise ReadmeError(f"{path}: the first stage must start a run with --config")
+        if "--config" in options:
             seed = [f"seed={options['--seed']}"] if "--seed" in options else []
             cfg = load_config(ROOT / PRESETS / f"{options['--config']}.yaml", [*overrides, *seed])
+            if k and not cfg.init_policy:
+                raise ReadmeError(f"{path}: stage {k + 1} starts a new run without an init_policy, so it does not "
+                                  f"carry on from the stages before it")
+            runs.append((k, [stage], cfg))
+        elif not k:
+            raise ReadmeError(f"{path}: the first stage must start a run with --config")
+        elif "--resume" in options:
+            first, stages_of_run, cfg = runs[-1]
+            runs[-1] = (first, [*stages_of_run, stage], load_config(None, overrides, base=cfg))
         else:
-            if "--resume" not in options:
-                raise ReadmeError(f"{path}: stage {k + 1} must resume the run (--resume)")
-            cfg = load_config(None, overrides, base=cfg)
-    if cfg is None or cfg.to_dict() != with_later_defaults(config):
+            raise ReadmeError(f"{path}: stage {k + 1} must resume the run (--resume) or start one (--config)")
+    if not runs or runs[-1][2].to_dict() != with_later_defaults(config):
         raise ReadmeError(f"{path}: its stages do not give the training config in {POLICY}'s header")
-    return stages
+    out = [StageRun(runs[0][1], runs[0][2].to_dict(), None, None)]
+    for (first, stages_of_run, cfg), (_, _, before) in zip(runs[1:], runs):
+        start = ROOT / cfg.init_policy
+        if not start.is_file():
+            raise ReadmeError(f"{path}: stage {first + 1} starts from {cfg.init_policy}, which is not in the "
+                              f"repository")
+        _, start_meta = policy_header(start)
+        given = {k: v for k, v in with_later_defaults(start_meta.get("config") or {}).items() if k != "init_policy"}
+        if given != {k: v for k, v in before.to_dict().items() if k != "init_policy"}:
+            raise ReadmeError(f"{path}: {cfg.init_policy}, which stage {first + 1} starts from, was not trained "
+                              f"with the config the stages before it give")
+        out.append(StageRun(stages_of_run, cfg.to_dict(), start, start_meta))
+    return out
 
 
 def with_later_defaults(config: Mapping[str, Any]) -> dict[str, Any]:
@@ -172,15 +230,27 @@ def listed_sha256s(root: Path) -> list[str]:
     return list(dict.fromkeys(re.findall(r"`([0-9a-f]{12,64})`", doc.read_text()))) if doc.is_file() else []
 
 
-def _opening(title: str, digest: str, onnx_digest: str, agent: str) -> list[str]:
-    """A README's title, its do-not-edit line and the first lines of "What it is": the files and their sha256s."""
+def _opening(title: str, digest: str, onnx_digest: str, agent: str, note: str | None = None) -> list[str]:
+    """A README's title, its do-not-edit line, ``note`` (what the folder is, for an archived policy) and the first
+    lines of "What it is": the files and their sha256s."""
     return [f"# {title}", "",
             "<!-- Written by tools/pretrained_readme.py from the files of this folder; do not edit by hand. "
             "Regenerate: .venv/bin/python tools/pretrained_readme.py -->", "",
+            *([note, ""] if note else []),
             "## What it is", "",
             f"`{POLICY}` (torch runtime; sha256 `{digest}`) and `{ONNX}` (onnxruntime; sha256 `{onnx_digest}`) hold "
             f"one trained {agent}. From the policy file's header (`train_config.json` and `train_summary.json` are "
             f"the same):", ""]
+
+
+def _league() -> str:
+    """What the league opponent is, from its members (envs.league)."""
+    from dynenv_ros.envs.league import LEAGUE_MEMBERS
+    said = {"keeper_and_chasers": "`keeper_and_chasers` (the ground-truth `scripted` team)",
+            "snapshot": "`snapshot` (a frozen copy of the learner)"}
+    members = [said.get(member, f"`{member}`") for member in LEAGUE_MEMBERS]
+    return (f"per world and episode one of {', '.join(members[:-1])} and {members[-1]}, drawn by prioritized "
+            f"fictitious self-play: envs/league.py")
 
 
 def _recipe_head(config: Mapping[str, Any], losses: Mapping[str, Any]) -> str:
@@ -188,9 +258,19 @@ def _recipe_head(config: Mapping[str, Any], losses: Mapping[str, Any]) -> str:
             f"{', '.join(f'`{k}`' for k in losses) or 'none'})")
 
 
-def _budget_line(meta: Mapping[str, Any], how: str) -> str:
-    return (f"- **{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
-            f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes {how};")
+def _budget_line(meta: Mapping[str, Any], how: str, runs: Sequence[StageRun] = ()) -> str:
+    """The env steps and minutes of training; for a policy of several runs (``stage_runs``), their sum (each
+    earlier run's share from the header of the file the next one started from) and the last run's own."""
+    own = (f"{_n(meta['env_steps'])} env steps** ({_n(meta['updates'])} updates, {_n(meta['episodes'])} "
+           f"episodes) in {_n(meta['wall_seconds'] / 60)} minutes {how}")
+    starts = [run.start_meta for run in runs if run.start_meta is not None]
+    if not starts:
+        return f"- **{own};"
+    steps = sum(m["env_steps"] for m in starts) + meta["env_steps"]
+    minutes = (sum(m["wall_seconds"] for m in starts) + meta["wall_seconds"]) / 60
+    return (f"- **{_n(steps)} env steps** in all, over {len(runs)} runs ("
+            + " + ".join(_n(m["env_steps"]) for m in [*starts, meta]) + f"), in {_n(minutes)} minutes; the last "
+            f"run's, which the header counts: **{own};")
 
 
 def recipe_and_listing(root: Path, here: Path, config: Mapping[str, Any], revision: str, digest: str) -> list[str]:
@@ -239,14 +319,57 @@ def _totals(result: Mapping[str, Any]) -> tuple[int, int]:
     return (sum(r["goals_for"] for r in result["episodes"]), sum(r["goals_against"] for r in result["episodes"]))
 
 
-def eval_command(path: str, result: Mapping[str, Any]) -> str:
-    """The ``dynenv-eval`` command that writes ``result`` to ``path`` (from its own settings)."""
+def eval_command(path: str, result: Mapping[str, Any], policy: str | None = None) -> str:
+    """The ``dynenv-eval`` command that writes ``result`` to ``path`` (from its own settings), evaluating ``policy``
+    (the file whose sha256 the result records; by default the path the result names). Seeds that are the first N
+    of a validation or test split are asked for as such (``--split S --num-seeds N``: what dynenv-eval takes for
+    those splits), others by number."""
     settings = result["settings"]
-    words = [".venv/bin/dynenv-eval", result["evaluated"]["path"], "--opponent", result["opponent"]["spec"],
-             "--episodes", str(settings["episodes"]), "--seeds", *map(str, settings["seeds"]),
+    words = [".venv/bin/dynenv-eval", policy or result["evaluated"]["path"], "--opponent", result["opponent"]["spec"],
+             "--episodes", str(settings["episodes"]), *_seed_words(settings["seeds"]),
              "--players-per-team", str(settings["players_per_team"]), *_perception_words(settings),
              "--sides", settings["sides"]]
     return shlex.join([*words, *_closing_words(path, settings)])
+
+
+def _seed_words(seeds: Sequence[int]) -> list[str]:
+    from dynenv_ros.evaluation.splits import split_of, split_seeds
+    split = split_of(seeds)
+    if split in ("validation", "test") and list(seeds) == split_seeds(split, len(seeds)):
+        return ["--split", split, "--num-seeds", str(len(seeds))]
+    return ["--seeds", *map(str, seeds)]
+
+
+def _seeds_text(seeds: Sequence[int]) -> str:
+    """Seeds as the README prints them: a range where they are consecutive, else each one."""
+    if len(seeds) > 2 and list(seeds) == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{_n(seeds[0])}–{_n(seeds[-1])}"
+    return ", ".join(map(str, seeds))
+
+
+def evaluation_split(evaluations: Sequence[tuple[Path, Mapping[str, Any]]]) -> str:
+    """The "How it plays" heading's words: which split (evaluation.splits) the evaluations' seeds lie in, and what
+    that split is for, read from the seeds of the files themselves."""
+    from dynenv_ros.evaluation.splits import split_of
+    seeds = sorted({seed for _, result in evaluations for seed in result["settings"]["seeds"]})
+    split, where = split_of(seeds), _seeds_text(seeds)
+    if split == "validation":
+        return (f"validation split, seeds {where}: the games choices are made on; the test split's are in the "
+                f"ledger below")
+    if split == "test":
+        return f"test split, seeds {where}: each of these games is also in the test ledger below"
+    if split == "train":
+        return f"seeds {where}: train split, which choices may have looked at"
+    return f"seeds {where}, of more than one split"
+
+
+def _difference(head_to_head: Mapping[str, Any] | None) -> str:
+    """A head-to-head's goal difference a game and its interval, or nothing for an evaluation without one."""
+    if not head_to_head:
+        return ""
+    interval = head_to_head.get("interval")
+    return f"{head_to_head['goal_difference_per_game']:+.2f}" + (
+        f" ({interval[0]:+.2f} to {interval[1]:+.2f})" if interval else "")
 
 
 def _perception_words(settings: Mapping[str, Any]) -> list[str]:
@@ -285,14 +408,31 @@ def training_recipe(root: Path, here: Path, config: Mapping[str, Any], revision:
                 f"git checkout {revision}",
                 shlex.join([".venv/bin/dynenv-train", "--config", preset, *arguments, "--no-progress"]),
                 "```", "", f"  {budget}", ""]
-    out = [f"- trained in {len(stages)} stages (`train_stages.json`, checked to give the training config; the "
-           f"header records code revision `{revision}`, that of the last process that trained it):", ""]
-    out += [f"  {k + 1}. {stage['why']}" for k, stage in enumerate(stages)]
+    runs = stage_runs(here, config) or []
+    out = [f"- trained in {len(stages)} stages"
+           + (f" and {len(runs)} runs, each later run started from the policy the runs before it made"
+              if len(runs) > 1 else "")
+           + f" (`train_stages.json`, checked to give the training config; the header records code revision "
+             f"`{revision}`, that of the last process that trained it):", ""]
+    number = 0
+    for run in runs:
+        for stage in run.stages:
+            number += 1
+            preset = dict(zip(stage["train"][0::2], stage["train"][1::2])).get("--config")
+            named = f"**`{preset}`** (config/train/{preset}.yaml): " if preset else ""
+            started = (f"a new run from `{run.config['init_policy']}` (its header counts "
+                       f"{_n(run.start_meta['env_steps'])} env steps); "
+                       if run.start is not None and stage is run.stages[0] else "")
+            out.append(f"  {number}. {named}{started}{stage['why']}")
     out += ["", "```bash", f"git checkout {stages[0].get('revision', revision)}"]
-    for k, stage in enumerate(stages):
-        if k and stage.get("revision"):         # a stage that needs code the header's revision lacks
-            out.append(f"git checkout {stage['revision']}")
-        out.append(shlex.join([".venv/bin/dynenv-train", *stage["train"], "--no-progress"]))
+    for k, run in enumerate(runs):
+        if run.start is not None:
+            out.append(f"# the next run starts from the run above's policy at {_n(run.start_meta['env_steps'])} env "
+                       f"steps (its init_policy, committed as {run.config['init_policy']})")
+        for stage in run.stages:
+            if (k or stage is not run.stages[0]) and stage.get("revision"):   # code the header's revision lacks
+                out.append(f"git checkout {stage['revision']}")
+            out.append(shlex.join([".venv/bin/dynenv-train", *stage["train"], "--no-progress"]))
     return out + ["```", "", "  A budget in env steps: the commands reproduce the recipe; the weights depend on the "
                   "machine's timing (the asynchronous workers' policy lag).", ""]
 
@@ -316,11 +456,78 @@ def shipped_files(here: Path) -> tuple[str, str, dict[str, Any], dict[str, Any],
 LEDGER = Path("docs") / "results_data" / "test_ledger.jsonl"
 
 
-def ledger_lines(root: Path, digest: str, driving: bool = False) -> list[str]:
-    """The test ledger's rows in which this policy played (every one, in the order they were written)."""
+class SamePolicy(NamedTuple):
+    """Another sha256 under which this policy's weights were evaluated, and what it is: the training checkpoint the
+    file was written from, or a committed policy file with the same tensor data."""
+    digest: str
+    short: str           # the ledger table's "evaluated as"
+    what: str            # the sentence above the table
+
+
+def same_policy(root: Path, here: Path, meta: Mapping[str, Any]) -> list[SamePolicy]:
+    """The other digests of this policy's weights that the test ledger may hold: the ``model.safetensors`` of the
+    training checkpoint the file was written from (its header's ``source_checkpoint``: what ``dynenv-eval`` of that
+    checkpoint records), and each committed policy file that a ledger row names whose header's ``data_sha256`` (the
+    tensor data) is this file's, found under the repository by the row's path and checked by its sha256."""
+    from dynenv_ros.agent.checkpoint import safetensors_header, sha256
+    from dynenv_ros.evaluation.ledger import read_ledger
+    out = []
+    source = meta.get("source_checkpoint") or {}
+    if source.get("model_sha256"):
+        out.append(SamePolicy(source["model_sha256"], "the training checkpoint it was written from",
+                              f"evaluated as the training checkpoint this file was written from (`{source['path']}`, "
+                              f"{_n(source['step'])} env steps; the sha256 of its `model.safetensors`, "
+                              f"`{source['model_sha256'][:12]}`, is what those rows record)"))
+    path = root / LEDGER
+    if not path.exists():
+        return out
+    mine = safetensors_header((here / POLICY).read_bytes())[0]["__metadata__"].get("data_sha256")
+    seen = {sha256(here / POLICY), *(same.digest for same in out)}
+    for row in read_ledger(path):
+        digest, spec = row["evaluated"].get("sha256"), str(row["evaluated"].get("spec", ""))
+        if not digest or digest in seen or not spec.endswith(POLICY_SUFFIX):
+            continue
+        seen.add(digest)
+        file = _committed_file(root, spec, digest)
+        if file is None:
+            continue
+        header = safetensors_header((root / file).read_bytes())[0].get("__metadata__") or {}
+        if mine and header.get("data_sha256") == mine:
+            out.append(SamePolicy(digest, f"`{file.name}`", f"evaluated as `{file}`, a committed policy file with the "
+                                  f"same weights (its header's `data_sha256` is this file's)"))
+    return out
+
+
+def _committed_file(root: Path, spec: str, digest: str) -> Path | None:
+    """The file under ``root`` that a ledger row's path names (the row may name it from another checkout: the
+    longest tail of the path that is a file here), if its sha256 is ``digest``; else None."""
+    from dynenv_ros.agent.checkpoint import sha256
+    parts = Path(spec).parts
+    for start in range(len(parts)):
+        if Path(parts[start]).is_absolute():
+            continue
+        relative = Path(*parts[start:])
+        if (root / relative).is_file():
+            return relative if sha256(root / relative) == digest else None
+    return None
+
+
+def _rows(root: Path, digests: Sequence[str]) -> list[tuple[dict[str, Any], int]]:
+    """The ledger rows in which a policy with one of ``digests`` played, in ledger order, each with the index of
+    the digest it played under."""
     from dynenv_ros.evaluation.ledger import read_ledger, rows_of
     path = root / LEDGER
-    rows = rows_of(read_ledger(path), digest) if path.exists() else []
+    if not path.exists():
+        return []
+    rows = read_ledger(path)
+    found = {id(row): k for k, digest in reversed(list(enumerate(digests))) for row in rows_of(rows, digest)}
+    return [(row, found[id(row)]) for row in rows if id(row) in found]
+
+
+def ledger_lines(root: Path, digest: str, driving: bool = False, same_policy: Sequence[SamePolicy] = ()) -> list[str]:
+    """The test ledger's rows in which this policy played (every one, in the order they were written), as this
+    file or under one of ``same_policy``'s digests (each row says which)."""
+    rows = _rows(root, [digest, *(same.digest for same in same_policy)])
     out = ["## The test ledger", "",
            "Every evaluation of this policy on the test split (seeds 20,000–29,999), as dynenv-eval's `--split test` "
            "appended it to `docs/results_data/test_ledger.jsonl`; the earlier tables are on seeds that choices "
@@ -330,48 +537,101 @@ def ledger_lines(root: Path, digest: str, driving: bool = False) -> list[str]:
     if driving:
         out += ["| date | commit | games | reward per car and episode | share of cars home | share crashed |",
                 "|---|---|---:|---:|---:|---:|"]
-        for row in rows:
+        for row, _ in rows:
             s = row["summary"]
             out.append(f"| {row['date'][:10]} | `{str(row['commit'])[:7]}` | {row['games']} | {s['total']:.2f} | "
                        f"{s['home_rate']:.2f} | {s['crash_rate']:.2f} |")
         return out + [""]
-    out += ["| date | commit | opponent | games | W/D/L | goals for : against | goal difference a game (95 % interval) "
-            "| beats it |", "|---|---|---|---:|---:|---:|---:|---|"]
-    for row in rows:
+    used = sorted({k for _, k in rows if k})
+    if used:
+        out += ["The same weights were also " + "; and ".join(same_policy[k - 1].what for k in used) + ". Those rows "
+                "are this policy's too; the column *evaluated as* says which each row is.", ""]
+    out += ["| date | commit | evaluated as | opponent | robots a side | games | W/D/L | goals for : against | goal "
+            "difference a game (95 % interval) | beats it |", "|---|---|---|---|---:|---:|---:|---:|---:|---|"]
+    for row, k in rows:
         h = row["head_to_head"]
         opponent = (row.get("opponent") or {}).get("spec", "")
         interval = "" if h["interval"] is None else f" ({h['interval'][0]:+.2f} to {h['interval'][1]:+.2f})"
-        out.append(f"| {row['date'][:10]} | `{str(row['commit'])[:7]}` | `{opponent}` | {h['games']} | "
-                   f"{h['wins']}/{h['draws']}/{h['losses']} | {h['goals_for']} : {h['goals_against']} | "
-                   f"{h['goal_difference_per_game']:+.3f}{interval} | {'yes' if h['beats'] else 'no'} |")
+        size = (row.get("settings") or {}).get("players_per_team", "")
+        out.append(f"| {row['date'][:10]} | `{str(row['commit'])[:7]}` | {same_policy[k - 1].short if k else 'this file'}"
+                   f" | `{opponent}` | {size} | {h['games']} | {h['wins']}/{h['draws']}/{h['losses']} | "
+                   f"{h['goals_for']} : {h['goals_against']} | {h['goal_difference_per_game']:+.3f}{interval} | "
+                   f"{'yes' if h['beats'] else 'no'} |")
     return out + [""]
+
+
+def bar_lines(root: Path, digest: str, same_policy: Sequence[SamePolicy] = ()) -> list[str]:
+    """Which of issue 39's bars (``BARS``) this policy meets, from its test-ledger rows (``ledger_lines``'s): a bar
+    is met when every row of its opponent and team size, over at least MIN_BAR_GAMES games, has its interval of the
+    goal difference above 0 (and, where the bar asks it, at least twice as many wins as losses); with no such row
+    it is not tried."""
+    digests = [digest, *(same.digest for same in same_policy)]
+    rows = [row for row, k in _rows(root, digests) if row["evaluated"].get("sha256") == digests[k]]  # not as opponent
+    out = ["### Issue 39's bars", "",
+           f"On the test split, over at least {MIN_BAR_GAMES} games, greedy (issue 39, \"Done when\"); from the rows "
+           f"above:", ""]
+    for opponent, size, twice, words in BARS:
+        mine = [row for row in rows if (row.get("opponent") or {}).get("spec") == opponent
+                and (row.get("settings") or {}).get("players_per_team") == size
+                and row["head_to_head"]["games"] >= MIN_BAR_GAMES]
+        if not mine:
+            out.append(f"- **not tried** — {words}: no test-split row.")
+            continue
+        verdicts = [_bar_verdict(row["head_to_head"], twice) for row in mine]
+        met = all(ok for ok, _ in verdicts)
+        out.append(f"- **{'met' if met else 'not met'}** — {words}: " + "; ".join(text for _, text in verdicts) + ".")
+    return out + [""]
+
+
+def _bar_verdict(h: Mapping[str, Any], twice: bool) -> tuple[bool, str]:
+    """(whether one row meets a bar, the row in words)."""
+    low, high = h["interval"] if h["interval"] is not None else (float("nan"), float("nan"))
+    where = ("the interval above 0" if low > 0 else "beaten: the interval below 0" if high < 0 else
+             "level: the interval includes 0")
+    text = (f"{h['wins']} wins, {h['draws']} draws, {h['losses']} losses in {h['games']} games, "
+            f"{h['goal_difference_per_game']:+.2f} goals a game ({low:+.2f} to {high:+.2f}), {where}")
+    ok = low > 0
+    if twice:
+        enough = h["wins"] >= 2 * h["losses"]
+        text += (", and at least twice as many wins as losses" if enough else
+                 ", but fewer than twice as many wins as losses")
+        ok = ok and enough
+    return ok, text
 
 
 def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
     """The README of ``root/folder``'s policy, from its files (``ReadmeError`` when they disagree): the soccer
-    README or, for a driving agent, ``render_driving``'s."""
+    README (the shipped policy's, or an archived one's: ``ARCHIVED``) or, for a driving agent, ``render_driving``'s."""
     if policy_header(root / folder / POLICY)[0].get("scenario", "robocup") == "driving":
         return render_driving(root, folder)
     from dynenv_ros.evaluation.soccer import format_table
     here = root / folder
+    archived = ARCHIVED.get(folder)
     digest, onnx_digest, agent, meta, config = shipped_files(here)
     evaluations = load_evaluations(here, digest)
-    stages = training_stages(here, config)
+    runs = stage_runs(here, config)
     revision = meta["code_revision"]
     losses = {k: v for k, v in _losses(config).as_dict().items() if v}
     teacher = config.get("teacher")
     self_play = config.get("opponent") == "self"
+    sizes = config.get("team_sizes")
 
-    out = _opening("The shipped policy", digest, onnx_digest,
-                   f"agent (feature size {agent['feature_size']}, {agent['head_mode']} head)")
+    out = _opening(archived[0] if archived else "The shipped policy", digest, onnx_digest,
+                   f"agent (feature size {agent['feature_size']}, {agent['head_mode']} head)",
+                   archived[1] if archived else None)
     out += [_recipe_head(config, losses)
             + (f", **plus imitation of the scripted `{teacher}`** (imitation weight {_n(config['imitation_coef'])}: "
                f"the {teacher} labels the states the learner reaches; not in the paper, docs/training.md)"
                if teacher else ", pure reinforcement learning (no teacher)") + ";",
-            f"- {'in stages (below)' if stages else 'self-play' if self_play else 'against ' + str(config.get('opponent'))}, "
-            f"{config['players_per_team']} per team, `{config['perception']}` perception, seed {config['seed']};",
+            f"- {'in stages (below)' if runs else 'self-play' if self_play else 'against ' + str(config.get('opponent'))}"
+            + (f"; the last run against **the league** ({_league()})" if runs and config.get("opponent") == "league"
+               else "")
+            + f", {config['players_per_team']} per team"
+            + (f" (and {', '.join(str(n) for n in sizes if n != config['players_per_team'])}: one network for every "
+               f"team size, `team_sizes`, the objects padded to the largest)" if sizes and len(sizes) > 1 else "")
+            + f", `{config['perception']}` perception, seed {config['seed']};",
             _budget_line(meta, f"on `{config['device']}` with {config['torch_threads']} torch "
-                               f"thread{'s' if config['torch_threads'] != 1 else ''}")]
+                               f"thread{'s' if config['torch_threads'] != 1 else ''}", runs or ())]
     out += recipe_and_listing(root, here, config, revision, digest)
     for fix, what, applies in FIXES:
         if applies(config) and not includes_fix(root, fix, revision):
@@ -384,14 +644,15 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
                        f"{goals_against} against in {result['counts']['episodes']} games (below).")
     out.append("")
 
-    out += ["## How it plays (seeds 100–104: train split, looked at for choices before the splits existed)", "",
+    out += [f"## How it plays ({evaluation_split(evaluations)})", "",
             "The paper's metric (positive reward minus observation reward, per robot and episode) is the headline, "
             "the total reward beside it; mean ± sd over the evaluation seeds (the unit), goals and W/D/L summed over "
-            "every game. Against `random`, the last column is the ratio of the policy's paper's metric to the "
-            "random team's in the same episodes.", "",
-            "| opponent | games (episodes × seeds) | W/D/L | goals for : against | paper's metric | total reward | "
-            "opponent's paper's metric | × random's paper's metric |",
-            "|---|---|---|---|---:|---:|---:|---:|"]
+            "every game; the goal difference a game with its 95 % interval (a bootstrap over seeds) where the "
+            "evaluation has it. Against `random`, the last column is the ratio of the policy's paper's metric to "
+            "the random team's in the same episodes.", "",
+            "| opponent | games (episodes × seeds) | W/D/L | goals for : against | goal difference a game (95 % "
+            "interval) | paper's metric | total reward | opponent's paper's metric | × random's paper's metric |",
+            "|---|---|---|---|---:|---:|---:|---:|---:|"]
     for _path, result in evaluations:
         s, counts, settings = result["summary"], result["counts"], result["settings"]
         goals_for, goals_against = _totals(result)
@@ -399,28 +660,37 @@ def render(root: Path = ROOT, folder: Path = FOLDER) -> str:
                  if result["opponent"]["spec"] == "random" else "")
         out.append(f"| `{result['opponent']['spec']}` | {counts['episodes']} ({settings['episodes']} × "
                    f"{len(settings['seeds'])}) | {counts['wins']}/{counts['draws']}/{counts['losses']} | "
-                   f"{goals_for} : {goals_against} | **{_mean_sd(s['paper_metric'])}** | {_mean_sd(s['total'])} | "
+                   f"{goals_for} : {goals_against} | {_difference(result.get('head_to_head'))} | "
+                   f"**{_mean_sd(s['paper_metric'])}** | {_mean_sd(s['total'])} | "
                    f"{_mean_sd(s['opponent_paper_metric'])} | {ratio} |")
     out += ["", "Settings of each evaluation: " + "; ".join(
-        f"`{path.name}`: seeds {', '.join(map(str, r['settings']['seeds']))}, {r['settings']['players_per_team']} "
+        f"`{path.name}`: seeds {_seeds_text(r['settings']['seeds'])}, {r['settings']['players_per_team']} "
         f"per team, `{r['settings']['perception']}` perception, sides `{r['settings']['sides']}`, "
         f"{'greedy' if r['settings']['greedy'] else 'sampled'} actions" for path, r in evaluations) + ".", ""]
 
     out += ["### Reproduce", "",
             "Each file in `eval/` is the output of one command (run from the repository root; same code, same "
             "file), and this README is regenerated from them:", "", "```bash"]
-    out += [eval_command(str(folder / EVAL_DIR / path.name), result) for path, result in evaluations]
+    out += [eval_command(str(folder / EVAL_DIR / path.name), result, str(folder / POLICY))
+            for path, result in evaluations]
     out += [".venv/bin/python tools/pretrained_readme.py", "```", "",
-            "`git log -- policy_node/pretrained/eval` gives the commit each file was made at.", "",
+            (f"`git log -- {folder / EVAL_DIR} {FOLDER / EVAL_DIR}` gives the commit each file was made at (in "
+             f"`{FOLDER / EVAL_DIR}`, while this policy was shipped; then copied here)." if archived else
+             f"`git log -- {folder / EVAL_DIR}` gives the commit each file was made at."), "",
             "### Per seed", ""]
-    for _path, result in evaluations:
-        out += [format_table(result), ""]
+    for _path, result in evaluations:       # named by this folder's file (the one whose sha256 the result records)
+        out += [format_table({**result, "evaluated": {**result["evaluated"], "spec": str(folder / POLICY)}}), ""]
 
-    out += ledger_lines(root, digest)
+    others = same_policy(root, here, meta)
+    out += ledger_lines(root, digest, same_policy=others)
+    out += bar_lines(root, digest, others)
     greedy = bool(evaluations) and all(r["settings"]["greedy"] for _, r in evaluations)
+    onnx = folder / ONNX
     out += ["## Play it", "",
-            "`make run` (team A, through the policy node and onnxruntime, against the scripted team B), or "
-            "`ros2 run dynenv_ros policy_node --ros-args -p checkpoint:=policy_node/pretrained/policy.onnx "
+            (f"`make run ARGS=\"--set team_a={onnx}\"` (team A, through the policy node and onnxruntime, against "
+             f"the scripted team B; `make run` alone plays the shipped policy, `{FOLDER}`)" if archived else
+             "`make run` (team A, through the policy node and onnxruntime, against the scripted team B)")
+            + f", or `ros2 run dynenv_ros policy_node --ros-args -p checkpoint:={onnx} "
             "-p runtime:=onnxruntime" + (" -p greedy:=true" if greedy else "") + "`."
             + (" It was evaluated on its most likely actions (`greedy`), as `make run` plays it (its `greedy` "
                "setting, true by default); sampled actions play worse (docs/results.md)." if greedy else ""), ""]

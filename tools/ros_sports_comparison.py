@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """Does the ros-sports route change results? (issue 41, done-when): the same games played twice through the main
-job's soccer graph — team A the shipped policy, team B ``perceiving`` — once on the native route (DetectionArray in,
-Action out) and once with ``interfaces=ros_sports`` (the simulator publishing soccer_vision_3d_msgs, RCGCD15 and
-joint states, the policy node answering with twists, kick requests and head commands, the motion emulator
-executing them). Same seeds, so the comparison is paired.
+job's soccer graph — team A the shipped policy (or the policy file ``--team-a`` names), team B ``perceiving`` —
+once on the native route (DetectionArray in, Action out) and once with ``interfaces=ros_sports`` (the simulator
+publishing soccer_vision_3d_msgs, RCGCD15 and joint states, the policy node answering with twists, kick requests
+and head commands, the motion emulator executing them). Same seeds, so the comparison is paired.
 
     .venv/bin/python tools/ros_sports_comparison.py --games 40
     .venv/bin/python tools/ros_sports_comparison.py --games 2 --duration 10 --output /tmp/check.json   # a smoke run
@@ -31,13 +31,15 @@ ROOT = Path(__file__).resolve().parent.parent
 ROUTES = ("native", "ros_sports")
 DEFAULT_OUTPUT = ROOT / "docs" / "results_data" / "issue41" / "ros_sports_vs_native.jsonl"
 FIRST_SEED = 10_000          # the validation split's first seed
+SHIPPED = "policy_node/pretrained/policy.onnx"     # the main job's team A by default (main_job.SHIPPED_POLICY)
 
 
-def game(route: str, seed: int, duration_s: float, players: int, work: Path) -> dict:
-    """Play one game of the main job's soccer graph; its result from the simulator's report."""
+def game(route: str, seed: int, duration_s: float, players: int, work: Path, team_a: str = SHIPPED) -> dict:
+    """Play one game of the main job's soccer graph (team A: the policy file ``team_a``); its result from the
+    simulator's report."""
     run_dir = work / f"{route}_{seed}"
-    settings = {"policy": "perceiving", "seed": seed, "duration_s": duration_s, "players_per_team": players,
-                "gif": False, "interfaces": "ros_sports" if route == "ros_sports" else "dynenv",
+    settings = {"team_a": team_a, "policy": "perceiving", "seed": seed, "duration_s": duration_s,
+                "players_per_team": players, "gif": False, "interfaces": "ros_sports" if route == "ros_sports" else "dynenv",
                 "timeout_s": max(600.0, 20 * duration_s), "domain_id": -2}
     command = [sys.executable, "-m", "dynenv_ros.main_job", "--output-dir", str(run_dir)]
     for key, value in settings.items():
@@ -46,7 +48,7 @@ def game(route: str, seed: int, duration_s: float, players: int, work: Path) -> 
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
     report_path = run_dir / "sim_report.json"
     result = {"route": route, "seed": seed, "duration_s": duration_s, "players_per_team": players,
-              "ok": done.returncode == 0, "wall_s": round(time.monotonic() - started, 1)}
+              "team_a": team_a, "ok": done.returncode == 0, "wall_s": round(time.monotonic() - started, 1)}
     if report_path.exists():
         report = json.loads(report_path.read_text())
         diagnostics = report["diagnostics"]
@@ -106,6 +108,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--players", type=int, default=2, help="robots per team (default 2)")
     parser.add_argument("--output", type=Path, default=DEFAULT_OUTPUT, help="JSON lines of per-game results "
                         "(appended; games already there are not played again)")
+    parser.add_argument("--team-a", default=SHIPPED, help="team A's policy file (default: the shipped one); the "
+                        "games already in --output must be of the same policy, since a game there is not played "
+                        "again (each game it plays records it as team_a)")
     parser.add_argument("--summary-only", action="store_true", help="print the summary of --output and stop")
     args = parser.parse_args(argv)
     if not 1 <= args.games <= 1000 or not 0.5 <= args.duration <= 3600 or not 1 <= args.players <= 5:
@@ -120,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
                 for route in ROUTES:
                     if (route, seed, args.duration, args.players) in done:
                         continue
-                    result = game(route, seed, args.duration, args.players, Path(scratch))
+                    result = game(route, seed, args.duration, args.players, Path(scratch), args.team_a)
                     results.append(result)
                     with args.output.open("a") as handle:
                         handle.write(json.dumps(result) + "\n")

@@ -105,7 +105,7 @@ class Trainer:
 
     def _policy_meta(self) -> dict[str, Any]:
         """What a policy file carries of the run (the checkpoint's meta less the generator state)."""
-        return {k: v for k, v in self._meta().items() if k != "numpy_rng"}
+        return checkpoints.policy_meta(self._meta())
 
     def save_checkpoint(self) -> Path:
         extra = {"torch_generator": self.generator.get_state()}

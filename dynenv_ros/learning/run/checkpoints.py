@@ -54,7 +54,8 @@ from dynenv_ros.learning.config import TrainConfig
 
 __all__ = ["FORMAT", "POLICY_FORMAT", "CheckpointWarning", "save_training_checkpoint", "load_training_checkpoint",
            "read_checkpoint_meta", "resolve_checkpoint", "list_checkpoints", "capture_rng_state",
-           "restore_rng_state", "save_policy", "load_policy", "sha256", "policy_from_training_checkpoint"]
+           "restore_rng_state", "save_policy", "load_policy", "sha256", "policy_from_training_checkpoint",
+           "policy_meta", "save_policy_from_training_checkpoint"]
 
 FORMAT = "dynenv_training/1"
 # the "version" of a run's meta (in its checkpoints and policy files): what wrote it
@@ -407,3 +408,24 @@ def policy_from_training_checkpoint(path: str | Path) -> tuple[DynEnvAgent, dict
     agent = make_agent(cfg)
     meta, _ = load_training_checkpoint(meta["checkpoint"]["path"], TrainingNetworks(agent, cfg.ltp_horizon))
     return agent.eval(), meta
+
+
+def policy_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """What a policy file carries of its run: a training checkpoint's meta less the generator state (a policy file
+    resumes nothing) and less the loader's record of the folder it was read from (``save_policy_from_training_
+    checkpoint`` names that as ``source_checkpoint``). The trainer's end-of-run ``policy.safetensors`` has this."""
+    return {k: v for k, v in meta.items() if k not in ("numpy_rng", "checkpoint")}
+
+
+def save_policy_from_training_checkpoint(path: str | Path, out: str | Path) -> tuple[DynEnvAgent, dict[str, Any], str]:
+    """Write the policy of a kept training checkpoint (a ``step_*`` folder, or a run folder: its latest) to ``out``
+    with the meta a run's own end-of-run policy file carries (``policy_meta``), plus ``source_checkpoint``: the
+    folder, its step, format, code revision and creation time, and the SHA-256 of its ``model.safetensors`` (the
+    digest a ``dynenv-eval`` of the checkpoint records, so its evaluations can be told apart from the file's).
+    Why: a run's best policy by validation is often one of its checkpoints, not its end. Returns (the agent, in eval
+    mode on the CPU, the meta written, the file's SHA-256); ValueError as ``policy_from_training_checkpoint``."""
+    agent, meta = policy_from_training_checkpoint(path)
+    record = meta["checkpoint"]
+    source = {**record, "model_sha256": sha256(Path(record["path"]) / MODEL_FILE)}
+    written = {**policy_meta(meta), "source_checkpoint": source}
+    return agent, written, save_policy(agent, out, written)
