@@ -1200,7 +1200,7 @@ def _short_train(args: list[str]) -> list[str]:
 
 
 def _short_eval(args: list[str]) -> list[str]:
-    if args[:1] in (["merge"], ["training-best"], ["ratio"]):     # reads files only: fast as written
+    if args[:1] in (["merge"], ["training-best"], ["ratio"], ["mean"]):     # reads files only: fast as written
         return args
     if args[:1] == ["compare"]:   # one chain: PyMC samples it in this process (two: a process each, 15 s)
         return _replace(_replace(_replace(args, "--draws", ["100"]), "--tune", ["100"]), "--chains", ["1"])
@@ -1275,7 +1275,7 @@ SHORTER: dict[tuple[str, ...], Shorter] = {
                                "also --set workers=1); --from-bag: --epochs 1; --resume: one update more than the "
                                "run holds", _short_train),
     ("dynenv-eval",): Shorter("--episodes 1 --episode-seconds 2; compare: --draws 100 --tune 100 --chains 1; "
-                              "merge, training-best: as written",
+                              "merge, training-best, ratio, mean: as written",
                               _short_eval),
     ("dynenv-bench",): Shorter("each suite's smallest run (BENCH_SHORT): e.g. sim --steps 10 --repeat 1",
                                _short_bench),
