@@ -55,6 +55,15 @@ def test_train_figures_are_the_async_presets(tool) -> None:
         tool.train_figures({"results": {"ppo": obj["results"]["async"]}})
 
 
+def test_learner_figures_are_its_rate_and_fraction_and_not_a_default_suite(tool) -> None:
+    obj = {"config": "async", "flops_per_robot_step": 10.9e6, "robot_steps_per_cpu_second": figure(2253.0, 2170.0, 2351.0),
+           "fraction_of_gemm": figure(0.28, 0.27, 0.30), "cpu_seconds_per_update": figure(0.9, 0.87, 0.95)}
+    assert tool.learner_figures(obj) == {"robot_steps_per_cpu_second": 2253.0, "fraction_of_gemm": 0.28}
+    with pytest.raises(ValueError, match="no 'fraction_of_gemm'"):
+        tool.learner_figures({"robot_steps_per_cpu_second": 1.0})
+    assert "learner" in tool.SUITES and "learner" not in tool.DEFAULT_SUITES
+
+
 def test_policy_figures_name_each_runtime_and_robot_count(tool) -> None:
     obj = {"decisions": 300, "cases": [
         {"robots": 10, "runtime": "torch", "decisions_per_s": figure(74.0, 70.0, 75.5),

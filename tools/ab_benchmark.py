@@ -133,6 +133,12 @@ def policy_figures(obj: Mapping[str, Any]) -> dict[str, float]:
     return figures
 
 
+def learner_figures(obj: Mapping[str, Any]) -> dict[str, float]:
+    """``dynenv-bench learner --json``: the update's rate by CPU time and its fraction of the FLOP limit."""
+    return {name: median_of(_field(obj, name, "learner"), f"learner {name}")
+            for name in ("robot_steps_per_cpu_second", "fraction_of_gemm")}
+
+
 @dataclass(frozen=True)
 class Suite:
     name: str
@@ -156,7 +162,11 @@ SUITES: dict[str, Suite] = {
                                          "--json"], policy_figures,
                     ["policy", "--robots", "10", "--decisions", "200", "--warmup", "0", "--repeat", "1", "--threads",
                      "1", "--cores", "1", "--json"]),
+    # not in the default set (issue 42's learner changes: --suites learner): one PPO update of the async preset
+    "learner": Suite("learner", lambda a: ["learner", "--repeat", "3", "--json"], learner_figures,
+                     ["learner", "--repeat", "1", "--set", "num_envs=4", "--json"]),
 }
+DEFAULT_SUITES = ("sim", "train", "policy")
 
 
 # ------------------------------------------------------------------------------------------------ spread, verdict
@@ -399,7 +409,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--base", help="the commit measured against (e.g. 3cd871e, the one before issue 40)")
     parser.add_argument("--head", default="HEAD", help="the commit measured (default HEAD)")
     parser.add_argument("--rounds", type=int, default=3, help="rounds, each every suite on both commits (default 3)")
-    parser.add_argument("--suites", nargs="+", choices=list(SUITES), default=list(SUITES),
+    parser.add_argument("--suites", nargs="+", choices=list(SUITES), default=list(DEFAULT_SUITES),
                         help="the suites (default all: sim, train = train --config async, policy)")
     parser.add_argument("--out", type=Path, required=True, help="folder of runs.jsonl, raw/ and summary.md")
     parser.add_argument("--worktrees", type=Path, default=Path("runs/ab/worktrees"),
