@@ -567,3 +567,23 @@ def test_embedding_refuses_an_unknown_class_on_a_real_row():
     padded = torch.tensor([[False, False, True], [False, False, False]])
     out = embedding(features, kind, padded)                  # the same index on a padded row is ignored
     assert out.shape == (2, 3, 8) and (out[0, 2] == 0).all() and (out[1].abs().sum(-1) > 0).all()
+
+
+def test_the_short_row_softmax_is_torchs_softmax_forward_and_backward():
+    from dynenv_ros.agent.network import short_row_softmax
+    generator = torch.Generator().manual_seed(5)
+    scores = torch.randn(300, 6, 9, generator=generator, dtype=torch.float64)
+    scores[:, :, 3] = float("-inf")                                   # a masked key: weight exactly 0
+    scores[:7, :, :8] = float("-inf")                                 # rows with only the bias slot left
+    ours = short_row_softmax(scores)
+    assert torch.allclose(ours, torch.softmax(scores, dim=-1), rtol=0, atol=1e-12)
+    assert bool((ours[:, :, 3] == 0).all()) and torch.allclose(ours[:7, :, 8], torch.ones(7, 6, dtype=torch.float64))
+    finite = torch.randn(40, 3, 5, generator=generator, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(short_row_softmax, (finite,))
+    upstream = torch.randn(300, 6, 9, generator=generator, dtype=torch.float64)
+    a, b = scores.clone().requires_grad_(), scores.clone().requires_grad_()
+    (short_row_softmax(a) * upstream).sum().backward()
+    (torch.softmax(b, dim=-1) * upstream).sum().backward()
+    assert torch.allclose(a.grad, b.grad, rtol=0, atol=1e-12)
+    with torch.inference_mode():                                      # acting: no graph, the same weights
+        assert torch.allclose(short_row_softmax(scores.float()), torch.softmax(scores.float(), dim=-1), atol=1e-6)

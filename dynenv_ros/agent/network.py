@@ -153,6 +153,34 @@ def trim(batch: StreamBatch) -> StreamBatch:
     return StreamBatch(batch.features[..., :kept, :], batch.kind[..., :kept], mask[..., :kept])
 
 
+class _ShortRowSoftmax(torch.autograd.Function):
+    """Softmax over the last axis, written out: a max shift, exp, a row sum, a division; backward y·(g − Σ g·y).
+
+    Why: ``torch.softmax`` on CPU handles a short last axis (the attention's N + 1 ≤ 13 keys) row by row, about 5x
+    slower forward and 3x slower forward + backward than these whole-tensor element-wise passes (docs/benchmarks.md,
+    "The learner against its FLOP limit"). The same function up to float rounding (a masked key, −inf, gets exactly
+    0; the bias slot is never masked, so no row is all −inf)."""
+
+    @staticmethod
+    def forward(ctx: Any, scores: torch.Tensor) -> torch.Tensor:
+        weights = (scores - scores.amax(-1, keepdim=True)).exp_()
+        weights = weights.div_(weights.sum(-1, keepdim=True))
+        ctx.save_for_backward(weights)
+        return weights
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> torch.Tensor:
+        (weights,) = ctx.saved_tensors
+        return cast(torch.Tensor, weights * (grad - (grad * weights).sum(-1, keepdim=True)))
+
+
+def short_row_softmax(scores: torch.Tensor) -> torch.Tensor:
+    """Softmax over the last axis (``_ShortRowSoftmax``); under the ONNX tracer torch's own (one Softmax node)."""
+    if _tracing():
+        return torch.softmax(scores, dim=-1)
+    return cast(torch.Tensor, _ShortRowSoftmax.apply(scores))  # type: ignore[no-untyped-call]
+
+
 def _bias_slot(x: torch.Tensor) -> torch.Tensor:
     """The extra key slot [0, …, 0, 1] of ``_with_bias_slot``, (1, 1, D + 1), to build once per call."""
     return nn.functional.pad(x.new_ones(1, 1, 1), (x.shape[-1], 0))
@@ -185,9 +213,9 @@ class SingleHeadAttention(nn.Module):
     negligible) are formed once per forward pass. Exact up to float rounding (the tests hold outputs and gradients
     to the unfolded computation). No dropout, no attention weights returned (the RTA needs neither).
 
-    The attention itself is baddbmm (scores plus the additive key mask) → softmax → bmm, which measured faster on
-    one CPU core than ``scaled_dot_product_attention`` at these sizes, forward and backward (docs/benchmarks.md,
-    "Agent forward/backward"); it is also a handful of plain ONNX nodes."""
+    The attention itself is baddbmm (scores plus the additive key mask) → softmax (``short_row_softmax``) → bmm,
+    which measured faster on one CPU core than ``scaled_dot_product_attention`` at these sizes, forward and backward
+    (docs/benchmarks.md, "Agent forward/backward"); it is also a handful of plain ONNX nodes."""
 
     def __init__(self, size: int) -> None:
         super().__init__()
@@ -226,7 +254,7 @@ class SingleHeadAttention(nn.Module):
     def attend(query: torch.Tensor, keys: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """query (S, L, D+1) folded, keys (S, N+1, D+1) from ``_with_bias_slot``, mask (S, 1, N+1) from
         ``key_mask`` → (S, L, D+1), the attention-weighted keys (input of the folded output projection)."""
-        return torch.bmm(torch.softmax(torch.baddbmm(mask, query, keys.transpose(1, 2)), dim=-1), keys)
+        return torch.bmm(short_row_softmax(torch.baddbmm(mask, query, keys.transpose(1, 2))), keys)
 
     def forward(self, query: torch.Tensor, key: torch.Tensor | None = None,
                 key_padding_mask: torch.Tensor | None = None) -> torch.Tensor:
