@@ -77,6 +77,22 @@ def test_an_attack_start_puts_the_ball_and_the_attackers_where_its_settings_say(
             assert abs(math.remainder(robot.yaw - facing, math.tau)) <= YAW_JITTER + 1e-6
 
 
+@pytest.mark.parametrize("low, high", [(0.5, 0.5), (8.7, 8.7), (0.5, 8.7)])
+@pytest.mark.parametrize("defenders", ["present", "absent"])
+def test_every_start_within_the_bounds_finds_room_for_five_a_side(low, high, defenders):
+    """The bounds' corners (docs/soccer.md): the ball 0.5 m from the goal or 8.7 m (0.3 m before the own goal line),
+    bearings up to 90°, five attackers within 0.75 m: 100 resets, each scene keeping its distances."""
+    world = SoccerWorld(attack(5, ball_distance_min=low, ball_distance_max=high, ball_max_angle=math.pi / 2,
+                               attacker_distance=0.75, defenders=defenders), seed=7)
+    for _ in range(100):
+        world.reset()
+        bx, by = world.ball_xy
+        on_field = [r for r in world.robots if not r.rules.absent]
+        assert len(on_field) == (10 if defenders == "present" else 5)
+        assert all(math.hypot(r.x - bx, r.y - by) >= 0.25 - 1e-9 for r in on_field)
+        assert all(math.hypot(a.x - b.x, a.y - b.y) >= 0.3 - 1e-9 for a in on_field for b in on_field if a is not b)
+
+
 def test_an_attack_start_is_reproducible_for_a_seed_and_differs_between_seeds():
     config = attack(2, ball_distance_min=1.0, ball_distance_max=3.0)
     first, again, other = (SoccerWorld(config, seed=s) for s in (5, 5, 6))
