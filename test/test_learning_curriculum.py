@@ -16,6 +16,7 @@ from dynenv_ros.learning.config import ConfigError, TrainConfig, load_config
 from dynenv_ros.learning.curriculum import stage_at
 from dynenv_ros.learning.distributed.rollout_worker import RolloutWorker
 from dynenv_ros.learning.distributed.worker_pool import ProcessPool
+from dynenv_ros.learning.messages.message_trainer import MessageTrainer
 from dynenv_ros.learning.train_cli import main
 from dynenv_ros.learning.trainer import Trainer
 
@@ -73,6 +74,12 @@ def test_driving_has_no_curriculum_and_bad_overrides_are_refused_by_the_cli(tmp_
                  "--set", "curriculum=[{until: 100, start: attack, ball_distance: [4, 2]}, {start: kickoff}]"])
     assert code == 2 and "curriculum: stage 0: ball_distance [4, 2] is inverted" in capsys.readouterr().err
     assert not (tmp_path / "run" / "checkpoints").exists()
+
+
+def test_learning_from_messages_or_bags_refuses_a_curriculum_it_could_not_follow(tmp_path):
+    with pytest.raises(ConfigError) as error:
+        MessageTrainer(small(curriculum=TWO_STAGES), tmp_path / "run", log=False)
+    assert error.value.key == "curriculum" and not (tmp_path / "run").exists()
 
 
 def test_a_curriculum_survives_json_and_a_set_override():
