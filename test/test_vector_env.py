@@ -331,3 +331,41 @@ def test_scripted_team_b_refuses_unknown_kinds():
         SoccerVectorEnv(1, backend="inprocess", scripted_team_b="random")
     with pytest.raises(ValueError, match="needs observation='padded'"):
         SoccerVectorEnv(1, backend="inprocess", observation="full", scripted_team_b="perceiving")
+
+
+# configure: a curriculum's next start (docs/soccer.md "Start states"), taken by each world at its next episode only
+ATTACK_NEXT = {"players_per_team": 1, "episode_seconds": 2.0,
+               "start": {"kind": "attack", "ball_distance_min": 1.0, "ball_distance_max": 2.0, "defenders": "absent"}}
+
+
+def _configured_run(backend):
+    """2-s episodes (4 periods): configured after the first period, the worlds finish their kickoff (the ball stays
+    on the centre spot, nobody moves), and the next episode (the worlds' second since the reset: team A's turn to
+    attack) starts with the ball 1-2 m from the goal team A attacks, at (4.5, 0), and team B's robot out of play."""
+    penalized = list(PaddedLayout.for_players(1, 5).spec.proprioception_columns).index("penalized")
+    with SoccerVectorEnv(3, backend=backend, workers=2, config={**ATTACK_NEXT, "start": {"kind": "kickoff"}},
+                         targets=True, perception="none") as env:
+        env.reset(seed=4)
+        idle = np.zeros((3, 2, 4), np.int64)
+        idle[..., 3] = 3                                                   # head index 3: no head turn
+        results = [env.step(idle)]
+        env.configure(ATTACK_NEXT)
+        results += [env.step(idle) for _ in range(3)]
+        for result in results[:-1]:                                        # the kickoff episode goes on
+            assert not result.truncated.any()
+            np.testing.assert_allclose(result.targets["ball"][..., :2], 0.0, atol=1e-9)
+        last = results[-1]
+        assert last.truncated.all()                                        # then the next one starts
+        ball = last.targets["ball"][:, 0, :2]                              # team A's frame = the field frame
+        distance = np.hypot(ball[:, 0] - 4.5, ball[:, 1])
+        assert ((distance >= 1.0) & (distance <= 2.0)).all()
+        assert (last.observations["proprioception"][:, 1, -1, penalized] == 1.0).all()
+        assert (last.observations["proprioception"][:, 0, -1, penalized] == 0.0).all()
+        with pytest.raises(ValueError, match="only start and episode_seconds"):
+            env.configure({**ATTACK_NEXT, "players_per_team": 2})
+    return [(r.observations, r.reward_terms, r.targets) for r in results]
+
+
+def test_configure_changes_the_start_at_each_worlds_next_episode_only_in_both_backends_alike():
+    runs = [_configured_run(backend) for backend in ("inprocess", "subprocess")]
+    assert_identical(runs[0], runs[1])

@@ -115,6 +115,11 @@ class SoccerObservations:
         self._teams = np.where(np.arange(config.n_robots) < config.players_per_team, 1.0, -1.0)   # A +1, B -1
 
     def reset(self, world: SoccerWorld) -> None:
+        if world.config is not self.config and world.config != self.config:
+            # the world's settings changed between episodes (SoccerWorld.reset(config=...): a curriculum's start or
+            # episode length); the ground truth's clock follows them, the layout stays
+            self.config = world.config
+            self.ground_truth = GroundTruthEncoder(world.config)
         self.world = world
         if self.mode != "full":
             if self.vision is None:

@@ -34,7 +34,7 @@ import multiprocessing as mp
 import os
 import pickle
 import weakref
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from multiprocessing import shared_memory
 from multiprocessing.connection import Connection
@@ -232,6 +232,9 @@ class InProcessBatch:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         self.settings = settings
         self.config = settings.config
+        # what each world's next episode is played with (``configure``: a curriculum's stage); the same team size,
+        # actions and layout as ``config``
+        self.episode_config = settings.config
         self.padded = settings.observation == "padded"
         self._scripted: list[Any] = []
         self._scripted_robots = range(0)
@@ -307,12 +310,25 @@ class InProcessBatch:
             teacher.reset()
         teacher.label(self.worlds[e], self.arrays["teacher"][e], self._obs[e], self.observers[e])
 
+    def configure(self, config: Any) -> None:
+        """Each world's next episode, and every one after, is played with ``config`` (``VectorEnv.configure``);
+        the episodes under way finish as they began."""
+        self.episode_config = config
+
+    def _new_episode(self, world: Any, seed: int | None) -> None:
+        """``world``'s next episode, with the settings ``configure`` gave (only when they changed: a world keeps its
+        settings object, and so its exact behaviour, otherwise)."""
+        if world.config is self.episode_config:
+            world.reset(seed=seed)
+        else:
+            world.reset(seed=seed, config=self.episode_config)
+
     def reset(self, seeds: list[int | None]) -> None:
         if self.settings.scripted_team_b == LEAGUE and self.league is None:
             known = [int(s) for s in seeds if s is not None]
             self.league = League(LEAGUE_MEMBERS, np.random.default_rng(np.random.SeedSequence(known or None)))
         for e, (world, seed) in enumerate(zip(self.worlds, seeds)):
-            world.reset(seed=seed)
+            self._new_episode(world, seed)
             self._observe_initial(e)
         self.arrays["dropped"][:] = 0
 
@@ -338,7 +354,7 @@ class InProcessBatch:
                     final[...] = self._obs[e][key]
                 for key, final in self._final_targets[e].items():
                     final[...] = self._targets[e][key]
-                world.reset(seed=int(world.rng.integers(2**63)))
+                self._new_episode(world, int(world.rng.integers(2**63)))
                 self._observe_initial(e)
             else:
                 self._label(e)
@@ -501,7 +517,8 @@ def _worker(conn: Connection, blocks: dict[str, tuple[str, tuple[int, ...], str]
                     if command == "close":
                         conn.send_bytes(OK)
                         return
-                    {"reset": batch.reset, "step": batch.step}[command](payload)   # seeds / parsed actions
+                    # seeds / parsed actions / the settings of the next episodes
+                    {"reset": batch.reset, "step": batch.step, "configure": batch.configure}[command](payload)
                 conn.send_bytes(OK)
             except Exception as exc:     # report to the parent, keep serving
                 try:
@@ -640,6 +657,11 @@ class SubprocessBatch:
 
     def reset(self, seeds: list[int | None]) -> None:
         self._command("reset", seeds)
+
+    def configure(self, config: Any) -> None:
+        """Every shard's worlds play their next episodes with ``config`` (``InProcessBatch.configure``)."""
+        local = partial(self._local.configure, config) if self._local is not None else None
+        self._call([pickle.dumps(("configure", config))] * len(self._conns), local)
 
     def step(self, actions: Any) -> None:
         if isinstance(actions, np.ndarray):       # numeric and valid: through shared memory
@@ -838,6 +860,19 @@ class SoccerVectorEnv(VectorEnv):
         self._start(settings, observations, num_envs, backend, workers, pin_workers, parent_steps, copy)
         self.target_shapes: dict[str, tuple[int, ...]] | None = \
             target_shapes(self.config.players_per_team) if targets else None
+
+    def configure(self, config: SoccerConfig | Mapping[str, Any]) -> None:
+        """From each world's next episode on, play with ``config`` (a ``SoccerConfig``, or settings as a mapping)
+        instead of the settings the env was made with: another start (``start``, docs/soccer.md "Start states") or
+        episode length (``episode_seconds``) — a curriculum's next stage. Everything else (team size, rates,
+        motions, rules, rewards) must stay as it is: observations, actions and spaces do not change. The episodes
+        under way finish as they began."""
+        new = config if isinstance(config, SoccerConfig) else SoccerConfig.from_mapping(config)
+        if replace(new, start=self.config.start, episode_seconds=self.config.episode_seconds) != self.config:
+            raise ValueError("configure changes only start and episode_seconds of the settings the env was made "
+                             "with (team size, rates, motions, rules and rewards stay)")
+        self._check_open()
+        self._batch.configure(new)
 
     def __enter__(self) -> "SoccerVectorEnv":
         return self

@@ -39,6 +39,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import yaml
 
+from dynenv_ros.learning.curriculum import CurriculumError, CurriculumStage, parse_curriculum, stage_at
+
 if TYPE_CHECKING:        # the registry is imported where a config's scenario is asked (it loads torch)
     from dynenv_ros.scenarios import Scenario
 
@@ -180,6 +182,12 @@ class TrainConfig:
 
     episode_seconds: float | None = _f(None, "Episode length in seconds; null = the world's own (soccer 120, driving "
                                              "60). Shorter episodes make curricula and small test tasks.")
+    curriculum: tuple[CurriculumStage, ...] | None = _f(
+        None, "Soccer: how training episodes start, stage by stage (docs/training.md, 'A curriculum of start "
+              "states'): a list of {until: env steps at which the stage ends (left out on the last, which lasts to "
+              "the run's end), start: kickoff | attack, ball_distance: [min, max] m from the attacked goal, "
+              "attacker_distance: m, defenders: present | absent, episode_seconds}; the worlds change stage between "
+              "episodes once the learner's env steps reach a stage's until. null = every episode a kickoff.")
     reward_weights: tuple = _f((1.0, 1.0, 1.0, 1.0), "Weights of the four reward terms [primary, rule, auxiliary, "
                                                      "observation] in the reward learnt; [1, 1, 1, 1] = the world's "
                                                      "total. Logged episode returns and terms stay unweighted.")
@@ -332,6 +340,10 @@ class TrainConfig:
     def env_steps_per_update(self) -> int:
         return self.num_envs * self.rollout_length
 
+    def curriculum_stage(self, env_steps: int) -> int:
+        """The curriculum's stage after ``env_steps`` of the learner's (0 = the first; 0 without a curriculum)."""
+        return stage_at(self.curriculum, env_steps)
+
     def imitation_weight(self, env_steps: int) -> float:
         """The imitation loss's weight after ``env_steps``: imitation_coef, linearly to imitation_final_coef."""
         if self.imitation_decay_env_steps <= 0:
@@ -340,10 +352,21 @@ class TrainConfig:
         return self.imitation_coef + done * (self.imitation_final_coef - self.imitation_coef)
 
     def _validate_soccer(self) -> None:
-        """Driving-only settings refused for soccer."""
+        """Driving-only settings refused for soccer; each curriculum stage's world settings checked by the world's
+        own config (distances inside the field, room for the attackers)."""
         for key, default in (("n_cars", 2), ("action_mode", "discrete")):
             if getattr(self, key) != default:
                 raise ConfigError(key, f"applies to scenario 'driving' only (scenario is {self.scenario!r})")
+        from dynenv_ros.soccer.config import SoccerConfig
+        base: dict[str, Any] = {"players_per_team": self.players_per_team}
+        if self.episode_seconds is not None:
+            base["episode_seconds"] = self.episode_seconds
+        for i, stage in enumerate(self.curriculum or ()):
+            try:
+                SoccerConfig.from_mapping({**base, **stage.soccer_settings()})
+            except ValueError as error:         # named by the stage's keys, not the world's
+                reason = str(error).replace("start.ball_distance_min/max", "ball_distance").replace("start.", "")
+                raise ConfigError("curriculum", f"stage {i}: {reason}") from None
 
     def _validate_driving(self) -> None:
         """Soccer-only settings refused for driving, each with its key (module docstring)."""
@@ -366,6 +389,8 @@ class TrainConfig:
             raise ConfigError("localization", why + "has no self-localization estimate (keep localization: none)")
         if self.privileged_pose_seeding:
             raise ConfigError("privileged_pose_seeding", why + "has no pose")
+        if self.curriculum is not None:
+            raise ConfigError("curriculum", why + "starts every episode with its own traffic (no start states)")
 
     def _validate_runner(self) -> None:
         """The asynchronous runner's settings (machine-dependent limits are checked where the run starts:
@@ -403,8 +428,7 @@ class TrainConfig:
     # -- JSON --------------------------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """Every field, JSON-ready (str, int, float, bool, None only)."""
-        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
-                for f in dataclasses.fields(self)}
+        return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> TrainConfig:
@@ -533,6 +557,13 @@ class TrainConfig:
                                                        f"{self.variant!r} does not train")
 
 
+def _plain(value: Any) -> Any:
+    """A field's value as JSON: tuples as lists, curriculum stages as mappings."""
+    if isinstance(value, tuple):
+        return [v.as_dict() if isinstance(v, CurriculumStage) else v for v in value]
+    return value
+
+
 # -- type checking -------------------------------------------------------------------------------------------------
 # (base type, None allowed) per field, from the annotations (strings under `from __future__ import annotations`).
 _BASE_TYPES = {"int": int, "float": float, "bool": bool, "str": str}
@@ -543,6 +574,8 @@ def _parse_annotation(annotation: str) -> tuple[type, bool]:
         return tuple, False
     if str(annotation) == "tuple | None":           # a list of distinct team sizes (team_sizes)
         return list, True
+    if str(annotation) == "tuple[CurriculumStage, ...] | None":     # a list of stages (curriculum)
+        return CurriculumStage, True
     parts = [p.strip() for p in str(annotation).split("|")]
     optional = "None" in parts
     (base,) = [p for p in parts if p != "None"]
@@ -560,6 +593,11 @@ def _check_type(key: str, value: Any, expected: tuple[type, bool]) -> Any:
             return None
         raise ConfigError(key, f"expected {kind.__name__}, got null")
     described = f"{type(value).__name__} {value!r}"
+    if kind is CurriculumStage:
+        try:
+            return parse_curriculum(value)
+        except CurriculumError as error:
+            raise ConfigError(key, str(error)) from None
     if kind is list:
         if not isinstance(value, (list, tuple)) or not value or len(set(value)) != len(value) or \
                 any(isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_PLAYERS_PER_TEAM

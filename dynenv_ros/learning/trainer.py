@@ -86,22 +86,28 @@ class Trainer:
                                 if resume else BestPolicy(cfg.best_policy_window))
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
         self.source: InProcessSource | PoolSource
+        # a resumed run's worlds start in the curriculum stage its env steps are in (the checkpoint's: _resume)
         if cfg.runner == "async":
-            self.source = PoolSource(cfg, self.networks, self.progress.updates, self.device, self._log_line)
+            self.source = PoolSource(cfg, self.networks, self.progress.updates, self.device, self._log_line,
+                                     first_env_steps=self.progress.env_steps)
         else:       # the worlds restart with fresh episodes seeded from (seed, update)
             self.source = InProcessSource(cfg, self.networks, self.generator, self.rng,
-                                          self.env_seed + self.progress.updates, self.device)
+                                          self.env_seed + self.progress.updates, self.device,
+                                          env_steps=self.progress.env_steps)
         self.layout_shapes = self.source.layout_shapes    # async: known once a worker said hello
         self.logger = RunLogger(self.run_dir)
 
     # -- checkpoints ------------------------------------------------------------------------------------------
     def _meta(self) -> dict[str, Any]:
-        return {"version": checkpoints.META_VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
+        meta = {"version": checkpoints.META_VERSION, "config": self.cfg.to_dict(), "variant": self.cfg.variant,
                 "algorithm": self.cfg.algorithm, "env_steps": self.progress.env_steps,
                 "updates": self.progress.updates, "episodes": self.progress.episodes,
                 "wall_seconds": self.wall_before + self._elapsed(), "observation_layout": self.layout_shapes,
                 "numpy_rng": self.rng.bit_generator.state, "code_revision": checkpoints.code_revision(),
                 "compute": self.compute.record(self.progress.env_steps)}
+        if self.cfg.curriculum:             # the stage the run's worlds were in (docs/training.md, curriculum)
+            meta["curriculum_stage"] = self.cfg.curriculum_stage(self.progress.env_steps)
+        return meta
 
     def _policy_meta(self) -> dict[str, Any]:
         """What a policy file carries of the run (the checkpoint's meta less the generator state)."""
@@ -121,6 +127,19 @@ class Trainer:
         self._earlier_compute = list(meta.get("compute", {}).get("segments", []))
         if "torch_generator" in extra:
             self.generator.set_state(extra["torch_generator"])
+        if self.cfg.curriculum:
+            self._resume_curriculum(meta.get("curriculum_stage"))
+
+    def _resume_curriculum(self, saved: Any) -> None:
+        """Say which curriculum stage the resumed run goes on in: the checkpoint's, which its env steps give again,
+        unless the curriculum was changed (``--set curriculum=...``): then the new one's at those env steps."""
+        stage = self.cfg.curriculum_stage(self.progress.env_steps)
+        last = len(self.cfg.curriculum or ()) - 1
+        if saved is None or int(saved) == stage:
+            self._log_line(f"resuming at {self.progress.env_steps} env steps in curriculum stage {stage} (of 0..{last})")
+        else:
+            self._log_line(f"the checkpoint was in curriculum stage {saved}; this run's curriculum puts "
+                           f"{self.progress.env_steps} env steps in stage {stage} (of 0..{last}): going on there")
 
     def _load_encoder(self, path: str) -> None:
         """The localization and object streams (and reconstruction head) of a pretrained policy file."""
@@ -247,6 +266,8 @@ class Trainer:
         scalars["speed/learn_seconds_per_update"] = window["learn"] / updates
         for key, values in window["extra"].items():
             scalars[key] = float(np.max(values)) if key.endswith("_max") else float(np.mean(values))
+        if self.cfg.curriculum:             # the stage the worlds are told to start their next episodes in
+            scalars["curriculum/stage"] = float(self.cfg.curriculum_stage(self.progress.env_steps))
         if returns:
             for key in returns[0]:
                 scalars[f"episode/{key}"] = float(np.mean([r[key] for r in returns]))

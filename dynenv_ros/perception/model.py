@@ -157,6 +157,17 @@ class Perceiver:
         self._n = len(cls)
         self._layouts: dict[tuple[bytes, bytes], _Layout] = {}
 
+    def leave_out(self, objects: np.ndarray | list[int]) -> None:
+        """Objects that are not in the scene (soccer's robots out of play for an episode): never in view, so never
+        detected, seen or made up at their place, and never hiding or crowding another object. Their views, if they
+        observe, are still computed."""
+        index = np.asarray(objects, np.intp)
+        self.max_range = self.max_range.copy()
+        self.max_range[index] = -1.0                       # no distance is within it
+        self.occluder_index = np.setdiff1d(self.occluder_index, index)
+        self.dynamic_index = np.setdiff1d(self.dynamic_index, index)
+        self._layouts.clear()                              # the index tables are built from the three above
+
     # ------------------------------------------------------------------------------------------------------------
     def perceive(self, frames: SceneFrames, views: Views, rng: np.random.Generator,
                  observer_team: np.ndarray) -> Perception:

@@ -16,6 +16,11 @@ from dynenv_ros.soccer.field import FieldGeometry
 
 MAX_PLAYERS_PER_TEAM = 5
 SCENARIO_SOCCER = 0                        # WorldState.SCENARIO_SOCCER
+START_KINDS = ("kickoff", "attack")        # StartConfig.kind
+DEFENDERS = ("present", "absent")          # StartConfig.defenders
+START_MARGIN = 0.3                         # m: an attack start's ball stays this far inside every line
+MIN_BALL_DISTANCE = 0.5                    # m: the least StartConfig.ball_distance_min (clear of the keeper's spot)
+MIN_ATTACKER_DISTANCE = 0.75               # m: the least StartConfig.attacker_distance (room for 5 robots)
 
 
 def is_soccer_world(code: int) -> bool:
@@ -118,6 +123,42 @@ class RewardConfig:
 
 
 @dataclass(frozen=True)
+class StartConfig:
+    """How every episode starts (docs/soccer.md, "Start states"). ``kickoff``: the game's own start. ``attack``: a
+    scene near one goal, for curricula that start near success (Google Research Football's academy, reverse
+    curricula): the ball ``ball_distance_min``..``ball_distance_max`` from the centre of the goal one team attacks,
+    at most ``ball_max_angle`` off that goal's axis and ``START_MARGIN`` inside the lines; the attacking team's robots
+    behind the ball within ``attacker_distance`` of it, facing the goal; the defenders at their kickoff spots
+    (keeper in its goal area) or, ``defenders: absent``, out of play for the whole episode."""
+    kind: str = "kickoff"
+    ball_distance_min: float = 1.0         # m from the attacked goal's centre (the middle of its goal line)
+    ball_distance_max: float = 3.0         # m
+    ball_max_angle: float = math.radians(60.0)   # rad off the goal's axis (the line through both goals' centres)
+    attacker_distance: float = 1.0         # m: each attacker at most this far from the ball
+    defenders: str = "present"             # or "absent"
+
+    def check(self, field: FieldGeometry) -> None:
+        """ValueError naming the ``start.`` key that cannot work on ``field``."""
+        if self.kind not in START_KINDS:
+            raise ValueError(f"start.kind must be one of {', '.join(START_KINDS)}, got {self.kind!r}")
+        if self.defenders not in DEFENDERS:
+            raise ValueError(f"start.defenders must be one of {', '.join(DEFENDERS)}, got {self.defenders!r}")
+        low, high = self.ball_distance_min, self.ball_distance_max
+        if low > high:
+            raise ValueError(f"start.ball_distance_min ({low} m) is beyond start.ball_distance_max ({high} m)")
+        farthest = field.length - START_MARGIN     # the ball on the goals' axis, START_MARGIN before the own line
+        if low < MIN_BALL_DISTANCE or high > farthest:
+            raise ValueError(f"start.ball_distance_min/max must lie in [{MIN_BALL_DISTANCE}, {farthest:g}] m (the "
+                             f"ball inside the field, {START_MARGIN} m from its lines), got [{low}, {high}]")
+        if not 0.0 <= self.ball_max_angle <= math.pi / 2:
+            raise ValueError(f"start.ball_max_angle must be in [0, pi/2] rad (in front of the goal), got "
+                             f"{self.ball_max_angle}")
+        if self.attacker_distance < MIN_ATTACKER_DISTANCE:
+            raise ValueError(f"start.attacker_distance must be at least {MIN_ATTACKER_DISTANCE} m (room behind the "
+                             f"ball for a whole team), got {self.attacker_distance}")
+
+
+@dataclass(frozen=True)
 class SoccerConfig:
     players_per_team: int = 2
     episode_seconds: float = 120.0
@@ -129,6 +170,7 @@ class SoccerConfig:
     penalties: PenaltyConfig = _default(default_factory=PenaltyConfig)
     ball: BallConfig = _default(default_factory=BallConfig)
     rewards: RewardConfig = _default(default_factory=RewardConfig)
+    start: StartConfig = _default(default_factory=StartConfig)
     head_mode: str = "discrete"        # or "continuous"
     robot_mass: float = 5.2            # kg (NAO)
 
@@ -158,6 +200,7 @@ class SoccerConfig:
         for name in ("contact_base", "contact_base_pusher", "goalpost_base"):
             if not 0.0 < getattr(self.falls, name) <= 1.0:
                 raise ValueError(f"falls.{name} must be in (0, 1]")
+        self.start.check(self.field)
 
     @property
     def robot_names(self) -> list[str]:
@@ -182,4 +225,5 @@ class SoccerConfig:
 
 
 __all__ = ["robot_names", "SoccerConfig", "MotionConfig", "KickConfig", "FallConfig", "PenaltyConfig", "BallConfig",
-           "RewardConfig", "MAX_PLAYERS_PER_TEAM", "SCENARIO_SOCCER", "is_soccer_world", "replace"]
+           "RewardConfig", "StartConfig", "MAX_PLAYERS_PER_TEAM", "SCENARIO_SOCCER", "START_KINDS", "DEFENDERS",
+           "is_soccer_world", "replace"]

@@ -17,14 +17,15 @@ def share_ball_value(ledger: RewardLedger, term: RewardTerm, value_team_a: float
                      chain: Sequence[int], ball_xy: tuple[float, float], weights: RewardConfig) -> None:
     """Share a ball event worth ``value_team_a`` to team A (and its negative to team B).
 
-    Every robot gets ``team_share`` of its team's value; the i-th most recent toucher gets ``chain_decay**i`` of
+    Every robot in play gets ``team_share`` of its team's value; the i-th most recent toucher gets ``chain_decay**i`` of
     it; robots outside the chain that are their team's closest to the ball or within ``bystander_radius`` share
     only losses (``bystander_share`` of a negative value), as in DynEnv.
     """
     if value_team_a == 0.0:
         return
     for robot in robots:
-        ledger.add(term, robot.index, weights.team_share * value_team_a * robot.team)
+        if not robot.rules.absent:         # out of play for the episode: no share of anything
+            ledger.add(term, robot.index, weights.team_share * value_team_a * robot.team)
     in_chain = set()
     for i, index in enumerate(chain):
         robot = robots[index]

@@ -59,6 +59,7 @@ class RobotRules:
     last_ball_distance: float | None = None
     approach_candidate: float = 0.0
     penalty_reasons: list[str] = field(default_factory=list)
+    absent: bool = False        # out of play for the whole episode (an attack start without defenders); penalized too
 
 
 class Robot:

@@ -65,6 +65,10 @@ class SoccerVision:
         world = self.world
         self.objects = soccer_scene(world)
         self.perceiver = Perceiver(self.objects, self.params)
+        # robots out of play for the episode (an attack start without defenders): nobody sees them, they earn nothing
+        self._absent = np.array([r.index for r in world.robots if r.rules.absent], np.intp)
+        if len(self._absent):
+            self.perceiver.leave_out(self._absent)
         frames = world.config.rates.frames_per_period
         n, total = world.n_robots, len(self.objects.class_id)
         f = world.config.field
@@ -211,7 +215,9 @@ class SoccerVision:
         # average (at most landmark_cap), the ball (at most ball_cap frames), weighted. One compiled pass
         # (soccer_kernels.observation_rewards): the same float operations as the numpy expression it replaced.
         w = self.world.config.rewards
-        return self.perceiver._kernels.observation_rewards(
+        rewards: np.ndarray = self.perceiver._kernels.observation_rewards(
             perception.seen, perception.lines_seen, self.world.n_robots, self._landmark_index,
             w.observation_robot_cap, float(w.observation_landmark_cap), w.observation_ball_cap, w.observation_robot,
             w.observation_landmark, w.observation_ball)
+        rewards[self._absent] = 0.0
+        return rewards

@@ -20,7 +20,7 @@ from dynenv_ros.sim.scenario import FrameCallback, GameEvent, PeriodResult
 from dynenv_ros.soccer.actions import IDLE, Kick, SoccerAction, parse_action
 from dynenv_ros.soccer.config import SCENARIO_SOCCER as SCENARIO_SOCCER   # its home is the config's, kept here too
 from dynenv_ros.soccer.config import SoccerConfig
-from dynenv_ros.soccer.placement import free_spot, kickoff_poses, sideline_spots
+from dynenv_ros.soccer.placement import absent_spot, attack_scene, free_spot, kickoff_poses, sideline_spots
 from dynenv_ros.soccer.referee import GameState, Phase, decide_out
 from dynenv_ros.soccer.rewards import share_ball_value
 from dynenv_ros.soccer.robot import BODY_RADIUS, Category, CollisionType, Robot
@@ -38,20 +38,32 @@ class SoccerWorld:
         self.config = config or SoccerConfig()
         self.rng = np.random.default_rng(seed)
         self.episode_id = 0
-        self._build(kickoff_team=TEAM_A)
+        self._build(None)
 
     # -- episode -----------------------------------------------------------------------------------------------
-    def reset(self, seed: int | None = None, kickoff_team: int = TEAM_A) -> None:
-        """A fresh episode. A seed re-seeds the world's only random generator."""
-        if kickoff_team not in (TEAM_A, TEAM_B):
+    def reset(self, seed: int | None = None, kickoff_team: int | None = None,
+              config: SoccerConfig | None = None) -> None:
+        """A fresh episode. A seed re-seeds the world's only random generator. ``kickoff_team``: the team that starts
+        with the ball (None: team A at a kickoff; at an attack start, team A in even episodes and team B in odd ones,
+        so the two teams attack by turns). ``config``: the settings from this episode on, e.g. a curriculum's next
+        start (``config.start``) or episode length; the number of robots stays."""
+        if kickoff_team is not None and kickoff_team not in (TEAM_A, TEAM_B):
             raise ValueError(f"kickoff_team must be 1 (team A) or -1 (team B), got {kickoff_team!r}")
+        if config is not None:
+            if config.players_per_team != self.config.players_per_team:
+                raise ValueError(f"reset(config=...) keeps the world's {self.config.players_per_team} robots a "
+                                 f"side, got players_per_team={config.players_per_team}")
+            self.config = config
         if seed is not None:
             self.rng = np.random.default_rng(seed)
         self.episode_id += 1
         self._build(kickoff_team)
 
-    def _build(self, kickoff_team: int) -> None:
+    def _build(self, kickoff_team: int | None) -> None:
         c = self.config
+        if kickoff_team is None:
+            attack = c.start.kind == "attack"
+            kickoff_team = TEAM_B if attack and self.episode_id % 2 else TEAM_A
         self._tick_seconds = c.rates.tick_seconds
         self._vision_seconds = c.rates.vision_period_ticks * self._tick_seconds
         self._period_seconds = c.period_seconds
@@ -78,7 +90,10 @@ class SoccerWorld:
         self._add_ball(space)
         self._add_out_sensors(space)
         self._add_handlers(space)
-        self._kickoff(kickoff_team)
+        if c.start.kind == "attack":
+            self._attack_start(kickoff_team)
+        else:
+            self._kickoff(kickoff_team)
 
     def _add_goalposts(self, space: pymunk.Space) -> None:
         f = self.config.field
@@ -578,6 +593,31 @@ class SoccerWorld:
         self.state.chain.clear()
         self.place_ball(0.0, 0.0)
         self.state.give_ball(kicking_team, c.ball.kickoff_ownership_seconds, Phase.KICKOFF)
+
+    def _attack_start(self, attacking_team: int) -> None:
+        """The ball near the goal ``attacking_team`` attacks, its robots behind the ball, the defenders at their
+        kickoff spots or out of play; the ball free (docs/soccer.md, "Start states")."""
+        c = self.config
+        ball, attackers, defenders = attack_scene(self.rng, c.field, c.start, c.players_per_team, attacking_team)
+        for robot in self.robots:
+            if robot.team == attacking_team:
+                robot.place(*attackers[robot.slot])
+            elif defenders is not None:
+                robot.place(*defenders[robot.slot])
+            else:
+                self._take_out(robot)
+        self.place_ball(*ball)
+        self.state.free_ball()
+
+    def _take_out(self, robot: Robot) -> None:
+        """Out of play for the rest of the episode (``defenders: absent``): off the physics world and the carpet,
+        penalized for longer than the episode lasts (so it never acts, returns or earns, and the rules and the
+        robots' perception pass it by: ``rules.absent``), without a penalty's cost or event."""
+        robot.remove_from(self.physics.space)
+        rules = robot.rules
+        rules.absent = rules.penalized = True
+        rules.penalty_remaining = self._episode_seconds + self._period_seconds
+        robot.place(*absent_spot(self.config.field, robot.team, robot.slot))
 
     # -- bookkeeping ---------------------------------------------------------------------------------------------
     def _flush_progress(self) -> None:

@@ -40,20 +40,22 @@ class PoolSource:
     wait_scalar = "speed/learner_wait_seconds_per_update"
 
     def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, first_update: int, device: torch.device,
-                 log: Callable[[str], None]) -> None:
+                 log: Callable[[str], None], first_env_steps: int = 0) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
         self.dropped = 0
         self.generated_steps = 0
         self.layout_shapes: dict[str, list[int]] | None = None      # known once a worker said hello
         self._pending: list[Delivery] = []
-        self._env_steps = 0                     # the learner's count, which the workers' teacher-driven worlds follow
+        # the learner's count, which the workers' teacher-driven worlds and curriculum stage follow
+        self._env_steps = first_env_steps
         self.pool: Any = None
         if cfg.backend == "ray":
             from dynenv_ros.learning.distributed.ray_pool import RayPool
-            self.pool = RayPool(cfg, networks, first_update=first_update, log=log)
+            self.pool = RayPool(cfg, networks, first_update=first_update, log=log, first_env_steps=first_env_steps)
         else:
             from dynenv_ros.learning.distributed.worker_pool import ProcessPool
-            self.pool = ProcessPool(cfg, networks, resolve_workers(cfg), first_update=first_update, log=log)
+            self.pool = ProcessPool(cfg, networks, resolve_workers(cfg), first_update=first_update, log=log,
+                                    first_env_steps=first_env_steps)
 
     def next(self, progress: Progress, deadline: float) -> Experience | None:
         """``rollouts_per_update`` fresh rollouts joined; None when the deadline passes while waiting for them."""

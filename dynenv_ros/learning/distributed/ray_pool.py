@@ -70,7 +70,7 @@ class RayPool:
     """``workers`` Ray actors (default: the cluster's CPUs, less one when the learner's CPU is one of them)."""
 
     def __init__(self, cfg: TrainConfig, networks: torch.nn.Module, first_update: int,
-                 log: Callable[[str], None] = print) -> None:
+                 log: Callable[[str], None] = print, first_env_steps: int = 0) -> None:
         self.cfg, self.log, self.first_update = cfg, log, first_update
         self.deaths = self.restarts = 0
         self.layout_shapes: dict[str, list[int]] | None = None
@@ -98,7 +98,7 @@ class RayPool:
         self._actors = [_Actor(i, a, n) for i, (a, n) in enumerate(shard_sizes(cfg.num_envs, workers))]
         self._calls: dict[Any, int] = {}
         self.publish(networks, first_update)
-        self._env_steps = 0
+        self._env_steps = first_env_steps       # the learner's count the actors' next rollouts follow
         for actor in self._actors:
             self._start(actor)
 

@@ -27,7 +27,7 @@ from dynenv_ros.learning.config import TrainConfig
 from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.distributed.inference_server import ServerActing
 from dynenv_ros.learning.distributed.rollout_transfer import flatten
-from dynenv_ros.learning.sampling.worlds import Worlds, make_worlds, teacher_driven_share
+from dynenv_ros.learning.sampling.worlds import Worlds, follow_curriculum, make_worlds, teacher_driven_share
 
 
 def usable_cores() -> int:
@@ -86,7 +86,7 @@ class RolloutWorker:
 
     @property
     def layout_shapes(self) -> dict[str, list[int]]:
-        self._ensure_worlds()
+        self._ensure_worlds(0)
         return {k: list(v) for k, v in self.worlds.env.layout.shapes().items()}
 
     @property
@@ -105,13 +105,15 @@ class RolloutWorker:
                 self.worlds.opponent.refresh(self.networks.agent)
                 self._snapshots = due
 
-    def _ensure_worlds(self) -> None:
+    def _ensure_worlds(self, env_steps: int) -> None:
+        """The worlds, made on first use; their first episodes start in the curriculum stage of ``env_steps``."""
         if self.worlds is None:
             if self.version < 0:
                 raise RuntimeError("a rollout worker needs the learner's weights before its first rollout")
             self._snapshots = self.version // self.cfg.snapshot_every_updates
             self.worlds = make_worlds(self.cfg, self.networks, self.num_envs, "inprocess", self.generator, self.rng,
-                                      seed=self.world_seed, acting=self._served if self.server is not None else None)
+                                      seed=self.world_seed, acting=self._served if self.server is not None else None,
+                                      env_steps=env_steps)
 
     def _served(self, obs: Mapping[str, np.ndarray], with_teacher: bool, seeding: bool) -> ServerActing:
         """The collector's acting on the inference server (registered with this worker's first observations)."""
@@ -120,10 +122,11 @@ class RolloutWorker:
 
     def collect(self, env_steps: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """The next rollout (``flatten``'s arrays) and what the learner logs of it; ``env_steps``: the learner's count,
-        which decides the teacher-driven worlds."""
-        self._ensure_worlds()
+        which decides the teacher-driven worlds and the curriculum stage of the worlds' next episodes."""
+        self._ensure_worlds(env_steps)
         collector = self.worlds.collector
         collector.drive_with_teacher(teacher_driven_share(self.cfg, env_steps, self.first_world, self.num_envs))
+        follow_curriculum(self.worlds, self.cfg, env_steps)
         started = time.perf_counter()
         served = collector.acting if isinstance(collector.acting, ServerActing) else None
         if served is not None:
@@ -135,7 +138,8 @@ class RolloutWorker:
         info = {"version": version, "worker": self.index, "env_steps": self.num_envs * self.cfg.rollout_length,
                 "finished": finished, "collect_seconds": time.perf_counter() - started,
                 "cpu_seconds": time.process_time() - self._cpu_started, "pid": os.getpid(),
-                "league": self.worlds.env.league_stats() if self.cfg.opponent == "league" else {}}
+                "league": self.worlds.env.league_stats() if self.cfg.opponent == "league" else {},
+                "curriculum_stage": self.worlds.stage}
         return flatten(rollout), info
 
     def close(self) -> None:

@@ -78,9 +78,10 @@ def replace_or_go_on(pool: Any, label: str, why: str, replace: Callable[[], None
 
 def worker_main(conn: Connection, cfg_dict: dict[str, Any], index: int, first_world: int, num_envs: int,
                 incarnation: int, first_update: int, weights_names: dict[str, Any],
-                server: Connection | None = None) -> None:
+                server: Connection | None = None, first_env_steps: int = 0) -> None:
     """A worker process: its first rollout, the handshake, then rollouts into free slots until told to stop
-    (``server``: its pipe to the inference server, with ``inference: server``)."""
+    (``server``: its pipe to the inference server, with ``inference: server``; ``first_env_steps``: the learner's
+    count when the pool started, e.g. a resumed run's, until the learner sends a newer one)."""
     die_with_parent()
     worker = slots = weights = None
     try:
@@ -88,7 +89,7 @@ def worker_main(conn: Connection, cfg_dict: dict[str, Any], index: int, first_wo
         worker = RolloutWorker(cfg, index, first_world, num_envs, incarnation, first_update, server)
         weights = AttachedWeights(weights_names, worker.networks)
         worker.adopt(weights.load_into(worker.networks, -1))
-        env_steps = 0
+        env_steps = first_env_steps
         arrays, info = worker.collect(env_steps)
         conn.send(("hello", spec_of(arrays), worker.layout_shapes, worker.layout_spec))
         _, names, free = conn.recv()
@@ -142,9 +143,10 @@ class ProcessPool:
     """``workers`` worker processes over ``cfg.num_envs`` worlds; ``get`` returns the next rollout."""
 
     def __init__(self, cfg: TrainConfig, networks: torch.nn.Module, workers: int, first_update: int,
-                 log: Callable[[str], None] = print) -> None:
+                 log: Callable[[str], None] = print, first_env_steps: int = 0) -> None:
         self.cfg, self.log = cfg, log
         self.first_update = first_update
+        self._env_steps = first_env_steps        # the learner's count last sent: a replacement worker starts there
         self.slots_per_worker = max(2, math.ceil(cfg.rollouts_per_update / workers) + 1)
         self.deaths = self.restarts = 0
         self.layout_shapes: dict[str, list[int]] | None = None
@@ -175,7 +177,7 @@ class ProcessPool:
         process = self._context.Process(
             target=worker_main, name=f"dynenv-rollout-{handle.index}", daemon=True,
             args=(child, self.cfg.to_dict(), handle.index, handle.first_world, handle.num_envs, handle.incarnation,
-                  self.first_update, self._weights.names(), served))
+                  self.first_update, self._weights.names(), served, self._env_steps))
         process.start()
         child.close()
         if served is not None:
@@ -277,6 +279,7 @@ class ProcessPool:
         """The learner is done with the delivery's arrays: its slot goes back to its worker."""
         handle = self._handles[delivery.worker]
         handle.held.discard(delivery.slot)
+        self._env_steps = max(self._env_steps, env_steps)
         if handle.alive and handle.conn is not None:
             try:
                 handle.conn.send(("free", delivery.slot, env_steps))

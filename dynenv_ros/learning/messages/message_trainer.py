@@ -67,6 +67,10 @@ class MessageTrainer:
             raise ConfigError("localization", "'estimate' trains on the simulator's pose estimates; experience "
                                               "over ROS (the trainer node, --from-bag) carries none yet: use "
                                               "localization: none here")
+        if cfg.curriculum is not None:
+            raise ConfigError("curriculum", "the trainer node and --from-bag learn from episodes that the simulator "
+                                            "or the bag started; a curriculum of start states applies to "
+                                            "dynenv-train's runners (in-process, async): use null here")
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.batch_sequences, self.max_policy_lag = batch_sequences, max_policy_lag

@@ -11,7 +11,7 @@ import torch
 from dynenv_ros.learning.algo.experience import Experience, Progress
 from dynenv_ros.learning.algo.networks import TrainingNetworks
 from dynenv_ros.learning.config import TrainConfig
-from dynenv_ros.learning.sampling.worlds import make_worlds, teacher_driven_share
+from dynenv_ros.learning.sampling.worlds import follow_curriculum, make_worlds, teacher_driven_share
 
 
 class InProcessSource:
@@ -22,9 +22,10 @@ class InProcessSource:
     wait_scalar = "speed/rollout_seconds_per_update"
 
     def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, generator: torch.Generator, rng: Any, seed: int,
-                 device: torch.device) -> None:
+                 device: torch.device, env_steps: int = 0) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
-        worlds = make_worlds(cfg, networks, cfg.num_envs, cfg.backend, generator, rng, seed=seed)
+        self.worlds = worlds = make_worlds(cfg, networks, cfg.num_envs, cfg.backend, generator, rng, seed=seed,
+                                           env_steps=env_steps)
         self.env, self.opponent, self.collector = worlds.env, worlds.opponent, worlds.collector
         self.layout_shapes: dict[str, list[int]] | None = {k: list(v) for k, v in self.env.layout.shapes().items()}
         self._closed = False
@@ -34,6 +35,7 @@ class InProcessSource:
         cfg = self.cfg
         self.networks.eval()
         self.collector.drive_with_teacher(teacher_driven_share(cfg, progress.env_steps, 0, cfg.num_envs))
+        follow_curriculum(self.worlds, cfg, progress.env_steps)
         rollout = self.collector.collect(cfg.rollout_length)
         finished, self.collector.finished = self.collector.finished, []
         return Experience(rollout.as_tensors(self.device), cfg.num_envs * cfg.rollout_length, finished,

@@ -24,10 +24,14 @@ from dynenv_ros.soccer.config import SoccerConfig
 SEED_NOISE = np.array([0.26, 0.26, 0.05, 0.05, 0.05, 0.05], np.float32)
 
 
-def soccer_config(cfg: TrainConfig) -> SoccerConfig:
+def soccer_config(cfg: TrainConfig, stage: int | None = None) -> SoccerConfig:
+    """The worlds' settings: the run's, with curriculum stage ``stage``'s start and episode length (None: the plain
+    kickoff game, the settings without a curriculum)."""
     settings: dict[str, Any] = {"players_per_team": cfg.players_per_team, "head_mode": cfg.head_mode}
     if cfg.episode_seconds is not None:
         settings["episode_seconds"] = cfg.episode_seconds
+    if stage is not None and cfg.curriculum:
+        settings.update(cfg.curriculum[stage].soccer_settings())
     return SoccerConfig.from_mapping(settings)
 
 
@@ -54,12 +58,13 @@ def padded_objects(cfg: TrainConfig) -> int | None:
     return PaddedLayout.for_players(max(cfg.team_sizes), 1).max_objects
 
 
-def make_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.ndarray]:
-    """The vector env of ``cfg``'s scenario (padded observations) and the robots (cars) of each world that learn."""
-    return _VECTOR_ENVS[cfg.world.name](cfg, num_envs, backend)
+def make_env(cfg: TrainConfig, num_envs: int, backend: str, stage: int = 0) -> tuple[Any, np.ndarray]:
+    """The vector env of ``cfg``'s scenario (padded observations) and the robots (cars) of each world that learn;
+    soccer's worlds start in curriculum stage ``stage`` (``follow_curriculum`` moves them on)."""
+    return _VECTOR_ENVS[cfg.world.name](cfg, num_envs, backend, stage)
 
 
-def _driving_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.ndarray]:
+def _driving_env(cfg: TrainConfig, num_envs: int, backend: str, stage: int) -> tuple[Any, np.ndarray]:
     driving: dict[str, Any] = {"n_cars": cfg.n_cars, "action_mode": cfg.action_mode}
     if cfg.episode_seconds is not None:
         driving["episode_seconds"] = cfg.episode_seconds
@@ -68,8 +73,9 @@ def _driving_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np
     return env, np.arange(cfg.n_cars)
 
 
-def _soccer_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.ndarray]:
-    env = SoccerVectorEnv(num_envs, backend=backend, config=soccer_config(cfg), observation="padded",
+def _soccer_env(cfg: TrainConfig, num_envs: int, backend: str, stage: int) -> tuple[Any, np.ndarray]:
+    env = SoccerVectorEnv(num_envs, backend=backend, config=soccer_config(cfg, stage if cfg.curriculum else None),
+                          observation="padded",
                           perception=cfg.perception, targets=needs_targets(cfg),
                           scripted_team_b=IN_WORLD_TEAMS.get(cfg.opponent), teacher=cfg.teacher,
                           localization=cfg.localization, max_objects=padded_objects(cfg))
@@ -79,7 +85,7 @@ def _soccer_env(cfg: TrainConfig, num_envs: int, backend: str) -> tuple[Any, np.
 
 # Each scenario's vector env, by its name: the registry sits below learning/ and cannot build them (docs/decisions.md,
 # "A scenario registry").
-_VECTOR_ENVS: dict[str, Callable[[TrainConfig, int, str], tuple[Any, np.ndarray]]] = {
+_VECTOR_ENVS: dict[str, Callable[[TrainConfig, int, str, int], tuple[Any, np.ndarray]]] = {
     SOCCER.name: _soccer_env, DRIVING.name: _driving_env}
 
 
@@ -93,16 +99,29 @@ class Worlds:
     learning_robots: np.ndarray  # robot (car) indices of each world that the learner controls
     opponent: Any                # who plays the other robots (None: nobody else)
     collector: RolloutCollector
+    stage: int = 0               # the curriculum stage the worlds' next episodes start in (follow_curriculum)
+
+
+def follow_curriculum(worlds: Worlds, cfg: TrainConfig, env_steps: int) -> int:
+    """Move the worlds to the curriculum stage of the learner's ``env_steps`` once it differs from theirs: each world
+    changes at its next episode boundary, the episodes under way finish as they began. Returns the stage."""
+    stage = cfg.curriculum_stage(env_steps)
+    if stage != worlds.stage:
+        worlds.env.configure(soccer_config(cfg, stage))
+        worlds.stage = stage
+    return stage
 
 
 def make_worlds(cfg: TrainConfig, networks: TrainingNetworks, num_envs: int, backend: str, generator: torch.Generator,
-                rng: np.random.Generator, seed: int, acting: ActingFactory | None = None) -> Worlds:
+                rng: np.random.Generator, seed: int, acting: ActingFactory | None = None, env_steps: int = 0) -> Worlds:
     """``num_envs`` worlds of ``cfg``'s scenario stepped by ``networks.agent`` (``backend``: the vector env's), the
     opponent the config names and the collector; ``generator`` samples actions (and a snapshot opponent's), ``rng``
     draws random opponents and seeding noise, ``seed`` seeds the worlds; ``acting``: how the learning robots act
-    (default: here, with ``networks``; a rollout worker of ``inference: server`` passes the server's)."""
+    (default: here, with ``networks``; a rollout worker of ``inference: server`` passes the server's); ``env_steps``:
+    the learner's count, whose curriculum stage the first episodes start in (a resumed run's)."""
     agent = networks.agent
-    env, learning = make_env(cfg, num_envs, backend)
+    stage = cfg.curriculum_stage(env_steps)
+    env, learning = make_env(cfg, num_envs, backend, stage)
     if cfg.world.layout_follows_settings:
         agent.layout_spec = env.layout.spec
     opponent: Any = None
@@ -121,7 +140,7 @@ def make_worlds(cfg: TrainConfig, networks: TrainingNetworks, num_envs: int, bac
     except BaseException:
         env.close()
         raise
-    return Worlds(env, learning, opponent, collector)
+    return Worlds(env, learning, opponent, collector, stage)
 
 
 def teacher_driven_share(cfg: TrainConfig, env_steps: int, first_world: int, num_envs: int) -> int:
