@@ -68,7 +68,6 @@ COVERED_BY = {
     "dynenv_ros/learning/algo/auxiliary.py": "test_learning_teacher.py",
     "dynenv_ros/learning/algo/experience.py": "test_algo_loop.py",
     "dynenv_ros/learning/algo/networks.py": "test_learning_update.py",
-    "dynenv_ros/learning/algo/policy.py": "test_learning_update.py",
     "dynenv_ros/learning/distributed/child_process.py": "test_async_trainer.py",
     "dynenv_ros/learning/distributed/pool_source.py": "test_async_trainer.py",
     "dynenv_ros/learning/distributed/ray_connection.py": "test_ray_cluster.py",
