@@ -110,6 +110,11 @@ def test_a_group_mean_is_over_runs_and_their_common_seeds_with_an_interval_over_
     assert "lies above 5" in capsys.readouterr().out
     assert main(["mean", *paths, "--bar", "26.47"]) == 0
     assert "includes 26.47" in capsys.readouterr().out
+    written = tmp_path / "mean.json"
+    assert main(["mean", *paths, "--out", str(written)]) == 0
+    summary = json.loads(written.read_text())
+    assert summary["format"] == "dynenv_group_mean/1" and summary["group_mean"] == pytest.approx(25.0)
+    assert main(["mean", *paths, "--out", str(tmp_path / "missing" / "mean.json")]) != 0    # no folder: refused
 
 
 def _eval(tmp_path, *extra: str) -> int:

@@ -132,9 +132,22 @@ def _mean_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _write_summary(out: Path | None, summary: dict[str, Any]) -> int:
+    """Write a group summary (ratio, mean) to ``--out`` when given; the exit status."""
+    from dynenv_ros.evaluation.results import write_json
+    if out is None:
+        return 0
+    try:
+        write_json(summary, out)
+    except (ValueError, OSError) as error:
+        return _fail(f"--out {out}: cannot write: {error}")
+    print(f"wrote {out}")
+    return 0
+
+
 def run_mean(args: argparse.Namespace) -> int:
     from dynenv_ros.evaluation.ratios import format_mean, group_mean
-    from dynenv_ros.evaluation.results import load_evaluation, write_json
+    from dynenv_ros.evaluation.results import load_evaluation
     try:
         _check_folder(args.out, "--out")
         result = group_mean([load_evaluation(p) for p in args.results], args.metric,
@@ -142,19 +155,13 @@ def run_mean(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as error:
         return _fail(str(error))
     print(format_mean(result, args.bar))
-    if args.out is not None:
-        try:
-            write_json({"format": "dynenv_group_mean/1", "results": [str(p) for p in args.results], **result},
-                       args.out)
-        except (ValueError, OSError) as error:
-            return _fail(f"--out {args.out}: cannot write: {error}")
-        print(f"wrote {args.out}")
-    return 0
+    return _write_summary(args.out, {"format": "dynenv_group_mean/1", "results": [str(p) for p in args.results],
+                                     **result})
 
 
 def run_ratio(args: argparse.Namespace) -> int:
     from dynenv_ros.evaluation.ratios import format_ratio, ratio_of_means
-    from dynenv_ros.evaluation.results import load_evaluation, write_json
+    from dynenv_ros.evaluation.results import load_evaluation
     try:
         _check_folder(args.out, "--out")
         group = [load_evaluation(p) for p in args.results]
@@ -163,14 +170,8 @@ def run_ratio(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as error:
         return _fail(str(error))
     print(format_ratio(result, args.bar))
-    if args.out is not None:
-        try:
-            write_json({"format": "dynenv_ratio/1", "results": [str(p) for p in args.results],
-                        "reference": str(args.reference), **result}, args.out)
-        except (ValueError, OSError) as error:
-            return _fail(f"--out {args.out}: cannot write: {error}")
-        print(f"wrote {args.out}")
-    return 0
+    return _write_summary(args.out, {"format": "dynenv_ratio/1", "results": [str(p) for p in args.results],
+                                     "reference": str(args.reference), **result})
 
 
 def _training_best_parser() -> argparse.ArgumentParser:
