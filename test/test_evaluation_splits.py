@@ -179,3 +179,15 @@ def test_a_driving_test_split_evaluation_is_in_the_ledger_too(tmp_path):
     (row,) = read_ledger(ledger)
     assert row["scenario"] == "driving" and row["seeds"] == [20_000, 20_001] and row["opponent"] is None
     assert "home_rate" in row["summary"] and "head_to_head" not in row
+
+
+def test_seeds_take_inclusive_ranges_and_refuse_bad_or_repeated_ones(tmp_path, capsys):
+    ledger = tmp_path / "ledger.jsonl"
+    assert _eval(tmp_path, "--split", "test", "--seeds", "20003-20005", "20009", "--ledger", str(ledger)) == 0
+    assert read_ledger(ledger)[0]["seeds"] == [20_003, 20_004, 20_005, 20_009]
+    for bad in ("20005-20003", "a-b", "1-2-3"):
+        with pytest.raises(SystemExit):
+            _eval(tmp_path, "--split", "validation", "--seeds", bad)
+        assert "--seeds" in capsys.readouterr().err
+    assert _eval(tmp_path, "--split", "validation", "--seeds", "10000-10002", "10001") == 2
+    assert "twice: [10001]" in capsys.readouterr().err

@@ -63,8 +63,8 @@ def _eval_parser() -> argparse.ArgumentParser:
     parser.add_argument("--action-mode", choices=("discrete", "continuous"),
                         help="driving: the env's action mode for random / scripted (a checkpoint brings its own)")
     parser.add_argument("--episodes", type=int, default=4, help="episodes per seed (default 4)")
-    parser.add_argument("--seeds", type=int, nargs="+", help="seeds (default 0 1 2, or the split's first "
-                        "--num-seeds); each the statistical unit")
+    parser.add_argument("--seeds", type=seed_items, nargs="+", help="seeds, each N or an inclusive range A-B "
+                        "(default 0 1 2, or the split's first --num-seeds); each the statistical unit")
     parser.add_argument("--split", choices=("train", "validation", "test"),
                         help="evaluate on this named seed range (train 0-9999, validation 10000-19999, test "
                              "20000-29999); --split test appends a row to the test ledger")
@@ -282,10 +282,29 @@ def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
         torch_threads=args.torch_threads), format_driving_table, _ledger(args)[0])
 
 
+def seed_items(text: str) -> list[int]:
+    """One ``--seeds`` item: a seed ``N`` or an inclusive range ``A-B`` (``10100-10124``: 25 seeds), so that a
+    block of a split is written as it is meant, not as 25 numbers."""
+    first, dash, last = text.partition("-")
+    try:
+        if not dash:
+            return [int(text)]
+        low, high = int(first), int(last)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a seed nor a range A-B of seeds") from None
+    if high < low:
+        raise argparse.ArgumentTypeError(f"range {text!r} ends before it starts")
+    return list(range(low, high + 1))
+
+
 def _resolve_seeds(args: argparse.Namespace) -> str | None:
     """``args.seeds`` from ``--split`` / ``--num-seeds`` / ``--seeds``; None, or the reason they are refused. Seeds
     of the test split are evaluated only under ``--split test``, which the ledger records."""
     from dynenv_ros.evaluation.splits import SPLITS, check_in_split, split_seeds
+    if args.seeds is not None:          # items of seed_items: one list each
+        args.seeds = [seed for item in args.seeds for seed in item]
+        if len(set(args.seeds)) != len(args.seeds):
+            return f"--seeds names a seed twice: {sorted({s for s in args.seeds if args.seeds.count(s) > 1})}"
     if args.num_seeds is not None and (args.split is None or args.seeds is not None):
         return "--num-seeds takes the first seeds of --split; give it with --split and without --seeds"
     try:
