@@ -185,7 +185,7 @@ def test_seeds_take_inclusive_ranges_and_refuse_bad_or_repeated_ones(tmp_path, c
     ledger = tmp_path / "ledger.jsonl"
     assert _eval(tmp_path, "--split", "test", "--seeds", "20003-20005", "20009", "--ledger", str(ledger)) == 0
     assert read_ledger(ledger)[0]["seeds"] == [20_003, 20_004, 20_005, 20_009]
-    for bad in ("20005-20003", "a-b", "1-2-3"):
+    for bad in ("20005-20003", "a-b", "1-2-3", "-3"):
         with pytest.raises(SystemExit):
             _eval(tmp_path, "--split", "validation", "--seeds", bad)
         assert "--seeds" in capsys.readouterr().err

@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import Any, Callable, Mapping, NoReturn, Sequence
 
@@ -285,6 +286,8 @@ def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
 def seed_items(text: str) -> list[int]:
     """One ``--seeds`` item: a seed ``N`` or an inclusive range ``A-B`` (``10100-10124``: 25 seeds), so that a
     block of a split is written as it is meant, not as 25 numbers."""
+    if text.startswith("-"):
+        raise argparse.ArgumentTypeError(f"seeds are non-negative, got {text}")
     first, dash, last = text.partition("-")
     try:
         if not dash:
@@ -303,8 +306,9 @@ def _resolve_seeds(args: argparse.Namespace) -> str | None:
     from dynenv_ros.evaluation.splits import SPLITS, check_in_split, split_seeds
     if args.seeds is not None:          # items of seed_items: one list each
         args.seeds = [seed for item in args.seeds for seed in item]
-        if len(set(args.seeds)) != len(args.seeds):
-            return f"--seeds names a seed twice: {sorted({s for s in args.seeds if args.seeds.count(s) > 1})}"
+        repeated = sorted(seed for seed, n in Counter(args.seeds).items() if n > 1)
+        if repeated:
+            return f"--seeds names a seed twice: {repeated}"
     if args.num_seeds is not None and (args.split is None or args.seeds is not None):
         return "--num-seeds takes the first seeds of --split; give it with --split and without --seeds"
     try:
@@ -349,8 +353,6 @@ def run_eval(args: argparse.Namespace) -> int:
         return _fail(f"--episodes must be at least 1, got {args.episodes}")
     if args.torch_threads < 1:
         return _fail(f"--torch-threads must be at least 1, got {args.torch_threads}")
-    if any(s < 0 for s in args.seeds):
-        return _fail(f"--seeds must be non-negative, got {args.seeds}")
     perception = args.perception if args.noise_magnitude is None else {
         "preset": args.perception, "noise_magnitude": args.noise_magnitude}
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
