@@ -1088,10 +1088,11 @@ PARSE_ONLY: list[tuple[str, str]] = [
     (r"graph=train", "the training graph's exit status says whether the policy learnt in its train_updates (3-6 "
                      "minutes); shortened it cannot learn and fails by design (44 s at one update); test_main_job.py::"
                      "test_the_train_graph_runs_games_policies_and_the_trainer_and_summarises runs it for 3 updates"),
-    (r"^dynenv-train --config league_(sizes|anchor|light_anchor|5v5) ",
+    (r"^dynenv-train (--config league_(sizes|anchor|light_anchor|5v5)|--resume runs/issue39/league_light_anchor_s0) ",
      "two rollout worker processes, one playing 5v5, and the learner: about 22 s each even at one update (the full "
      "suite of 29 Nov 2026 took 152 s for docs/results.md with them, 108 s without); --config league (the same "
-     "runner with the league and an init policy) runs, and test/test_league.py trains with two team sizes on two workers"),
+     "runner with the league and an init policy) runs, and test/test_league.py trains with two team sizes on two "
+     "workers; the --resume continues the league_light_anchor run (parse-only here, so there is nothing to resume)"),
     (r"^python tools/average_policies\.py ", "its inputs are the kept checkpoints of a league_anchor run (that "
                                           "training is parse-only, above); the averages it made are committed and "
                                           "evaluated by the commands after it; test/test_average_policies_tool.py "
