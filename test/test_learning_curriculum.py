@@ -1,7 +1,8 @@
 """The training curriculum of start states (``TrainConfig.curriculum``, docs/training.md "A curriculum of start
 states"): stages end at the stated env steps; bad curricula are refused naming the key; a worker's worlds change
 stage only between episodes; the run logs the stage, saves it in its checkpoints and goes on in it after --resume;
-the ``async_curriculum`` preset is the pure-RL async setting with the stated stages, and trains end to end."""
+the ``async_curriculum`` preset is the pure-RL async setting with the stated stages, and trains end to end; so does
+``async_curriculum_mix``, keeping its policies at the stated marks."""
 from __future__ import annotations
 
 import csv
@@ -57,6 +58,10 @@ def test_a_stage_lasts_until_its_env_steps_and_the_last_to_the_end():
     ([{"until": 10, "start": "attack", "goals": 2}, {}], "unknown key 'goals'"),
     ([{"until": 0}, {}], "until must be a whole number of env steps >= 1"),
     ([{"until": 10, "episode_seconds": 0}, {}], "episode_seconds must be in"),
+    ([{"until": 10, "start": "attack", "kickoff_share": 1.2}, {}], "kickoff_share must be a share of episodes"),
+    ([{"until": 10, "start": "attack", "kickoff_share": 0.5, "defenders": "absent"}, {}],
+     "kickoff_share needs defenders present"),
+    ([{"until": 10, "kickoff_share": 0.5}, {}], "kickoff_share applies to start: attack only"),
     ([], "expected a list of stages"),
     ("attack", "expected a list of stages"),
 ])
@@ -101,6 +106,18 @@ def test_the_preset_is_the_pure_rl_async_setting_with_the_stated_stages():
     assert stages == [(300_000, "attack", (1.0, 3.0), "absent", 20.0), (600_000, "attack", (2.0, 6.0), "absent", 30.0),
                       (900_000, "attack", (2.0, 6.0), "present", 30.0), (None, "kickoff", None, None, None)]
     assert cfg.total_env_steps == 2_880_000
+
+
+def test_the_mixed_preset_is_async_curriculum_with_a_mixed_last_stage_a_shorter_budget_and_kept_policies():
+    cfg = load_config(ROOT / "config/train/async_curriculum_mix.yaml")
+    plain = load_config(ROOT / "config/train/async_curriculum.yaml")
+    assert cfg.curriculum[:3] == plain.curriculum[:3]
+    last = cfg.curriculum[3]
+    assert (last.until, last.start, last.ball_distance, last.defenders, last.kickoff_share, last.episode_seconds) == \
+        (None, "attack", (2.0, 6.0), "present", 0.5, 120.0)
+    assert (cfg.total_env_steps, cfg.keep_policy_every_env_steps) == (1_500_000, 250_000)
+    assert cfg.replace(curriculum=plain.curriculum, total_env_steps=plain.total_env_steps,
+                       keep_policy_every_env_steps=None) == plain
 
 
 def _world_starts(worker: RolloutWorker) -> list[tuple[str, int]]:
@@ -193,3 +210,20 @@ def test_the_async_curriculum_preset_trains_across_a_stage_end(tmp_path, capsys)
     config = json.loads((run_dir / "config.json").read_text())
     assert config["curriculum"][0] == {"until": 32, "start": "attack", "ball_distance": [1.0, 3.0],
                                        "defenders": "absent", "episode_seconds": 4.0}
+
+
+def test_the_mixed_preset_trains_and_keeps_a_policy_at_each_mark(tmp_path, capsys):
+    """dynenv-train --config async_curriculum_mix scaled down: 32 env steps an update, a policy kept every 64 env
+    steps, 160 in all: marks 64 and 128 are passed (at 64 and 128), 192 is not."""
+    from dynenv_ros.agent.checkpoint import load_policy
+    run_dir = tmp_path / "run"
+    code = main(["--config", "async_curriculum_mix", "--run-dir", str(run_dir), "--no-progress",
+                 "--set", "num_envs=2", "--set", "workers=1", "--set", "total_env_steps=160",
+                 "--set", "keep_policy_every_env_steps=64",
+                 "--set", "curriculum=[{until: 32, start: attack, defenders: absent, episode_seconds: 4}, "
+                          "{start: attack, kickoff_share: 0.5, episode_seconds: 4}]"])
+    assert code == 0, capsys.readouterr().err
+    kept = sorted(p.name for p in (run_dir / "kept_policies").iterdir())
+    assert kept == ["step_000000000064.safetensors", "step_000000000128.safetensors"]
+    _, meta = load_policy(run_dir / "kept_policies" / kept[1])
+    assert meta["kept_at_mark"] == 128 and meta["config"]["keep_policy_every_env_steps"] == 64

@@ -1,7 +1,8 @@
 """Start states of the soccer world (``SoccerConfig.start``, docs/soccer.md "Start states"): the kickoff start stays
 the default and unchanged; an attack start puts the ball and the attackers where its settings say, reproducibly per
 seed; defenders out of play (``defenders: absent``) neither act, collide, appear in anyone's perception nor earn;
-a chaser walks the ball into the empty goal; the team that attacks alternates; a goal restarts with a kickoff."""
+a chaser walks the ball into the empty goal; the team that attacks alternates; a goal restarts with a kickoff;
+``kickoff_share`` mixes kickoffs into attack starts in that share of episodes."""
 from __future__ import annotations
 
 import math
@@ -255,7 +256,43 @@ def test_absent_defenders_are_left_out_of_the_ground_truth_and_the_learning_targ
     ({"kind": "attack", "ball_max_angle": 2.0}, "start.ball_max_angle"),
     ({"kind": "attack", "attacker_distance": 0.5}, "start.attacker_distance"),         # below 0.75 m
     ({"kind": "attack", "unknown": 1}, "start.unknown"),
+    ({"kind": "attack", "kickoff_share": 1.5}, "start.kickoff_share must be in"),
+    ({"kind": "attack", "kickoff_share": -0.1}, "start.kickoff_share must not be negative"),
+    ({"kind": "attack", "kickoff_share": float("nan")}, "start.kickoff_share"),
+    ({"kind": "kickoff", "kickoff_share": 0.5}, "start.kickoff_share mixes"),
+    ({"kind": "attack", "kickoff_share": 0.5, "defenders": "absent"}, "start.kickoff_share needs"),
 ])
 def test_start_settings_that_cannot_work_are_refused_naming_the_key(start, message):
     with pytest.raises(ValueError, match=message.replace(".", r"\.").replace("/", "/")):
         SoccerConfig.from_mapping({"start": start})
+
+
+def test_a_kickoff_share_mixes_kickoffs_into_attack_starts_in_that_share_of_episodes():
+    """kickoff_share 0.3 over 400 episodes: the kickoffs are Binomial(400, 0.3), mean 120, sd 9.2; 5 sd either side
+    is 74..166. A kickoff episode is the game's own start (the ball on the centre spot, team A to kick off); an
+    attack episode has the ball 2-6 m from the goal its team attacks."""
+    world = SoccerWorld(attack(2, ball_distance_min=2.0, ball_distance_max=6.0, kickoff_share=0.3), seed=21)
+    kinds = []
+    for _ in range(400):
+        world.reset()
+        kinds.append(world.start_kind)
+        if world.start_kind == "kickoff":
+            assert world.ball_xy == (0.0, 0.0) and world.state.phase == Phase.KICKOFF
+            assert world.state.ball_owner == TEAM_A
+        else:
+            team = TEAM_B if world.episode_id % 2 else TEAM_A
+            gx, gy = attacked_goal(team)
+            distance = math.hypot(world.ball_xy[0] - gx, world.ball_xy[1] - gy)
+            assert 2.0 - 1e-9 <= distance <= 6.0 + 1e-9 and world.state.phase == Phase.PLAYING
+    assert set(kinds) == {"attack", "kickoff"} and 74 <= kinds.count("kickoff") <= 166
+
+
+def test_kickoff_shares_of_0_and_1_are_pure_attacks_and_pure_kickoffs_and_0_draws_nothing():
+    plain = SoccerWorld(attack(2), seed=5)
+    zero = SoccerWorld(attack(2, kickoff_share=0.0), seed=5)
+    every = SoccerWorld(attack(2, kickoff_share=1.0), seed=5)
+    for _ in range(20):
+        for world in (plain, zero, every):
+            world.reset()
+        assert plain.start_kind == zero.start_kind == "attack" and every.start_kind == "kickoff"
+        assert plain.snapshot() == zero.snapshot()           # the same random stream: no draw for a share of 0

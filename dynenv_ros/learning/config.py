@@ -79,6 +79,7 @@ SIZE_BOUNDS: dict[str, tuple[int, int]] = {
     "snapshot_pool": (1, 100),
     "keep_checkpoints": (1, 100),
     "best_policy_window": (1, 100_000),
+    "keep_policy_every_env_steps": (1, 10**12),
 }
 
 
@@ -310,6 +311,10 @@ class TrainConfig:
                                               "of this many logged episode returns so far (the training curve's "
                                               "peak, what dynenv-eval training-best --window reads), for a "
                                               "held-out evaluation of it; null: only the last policy.")
+    keep_policy_every_env_steps: int | None = _f(None, "Keep the policy each time the learner's env steps pass a "
+                                                       "multiple of this, as kept_policies/step_<env steps>."
+                                                       "safetensors, never deleted: the copies a validation "
+                                                       "chooses among (learning/run/kept_policies.py); null: none.")
 
     def __post_init__(self) -> None:
         self.validate()

@@ -11,8 +11,11 @@ A stage as YAML (every key but ``until`` optional; ``until`` absent on the last 
     {until: 300_000, start: attack, ball_distance: [1.0, 3.0], attacker_distance: 1.0, defenders: absent,
      episode_seconds: 20}
 
-``ball_distance``, ``attacker_distance`` and ``defenders`` apply to ``start: attack`` only (a kickoff stage that
-names them is refused); left out, they take ``StartConfig``'s defaults (1–3 m, 1 m, present). ``episode_seconds``
+``ball_distance``, ``attacker_distance``, ``defenders`` and ``kickoff_share`` apply to ``start: attack`` only (a
+kickoff stage that names them is refused); left out, they take ``StartConfig``'s defaults (1–3 m, 1 m, present, 0).
+``kickoff_share`` mixes kickoffs into an attack stage (that share of its episodes, drawn per episode by each world),
+so that a last stage can keep the attack scenes while the game from the kickoff is learnt: a curriculum that moves
+wholly to kickoffs can forget how to score (docs/training.md). ``episode_seconds``
 left out: the run's own (``TrainConfig.episode_seconds``, else the world's 120 s).
 """
 from __future__ import annotations
@@ -23,8 +26,8 @@ from typing import Any, Mapping
 
 from dynenv_ros.soccer.config import DEFENDERS, START_KINDS
 
-STAGE_KEYS = ("until", "start", "ball_distance", "attacker_distance", "defenders", "episode_seconds")
-ATTACK_KEYS = ("ball_distance", "attacker_distance", "defenders")
+STAGE_KEYS = ("until", "start", "ball_distance", "attacker_distance", "defenders", "kickoff_share", "episode_seconds")
+ATTACK_KEYS = ("ball_distance", "attacker_distance", "defenders", "kickoff_share")
 MAX_EPISODE_SECONDS = 3600.0
 
 
@@ -40,12 +43,13 @@ class CurriculumStage:
     ball_distance: tuple[float, float] | None = None       # m from the attacked goal's centre, [min, max]
     attacker_distance: float | None = None                 # m
     defenders: str | None = None                           # "present" or "absent"
+    kickoff_share: float | None = None                     # share of the stage's episodes that are kickoffs instead
     episode_seconds: float | None = None                   # s; None: the run's
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready, the keys set only (what ``parse_curriculum`` reads back)."""
         out: dict[str, Any] = {"until": self.until, "start": self.start}
-        for key in ("ball_distance", "attacker_distance", "defenders", "episode_seconds"):
+        for key in ("ball_distance", "attacker_distance", "defenders", "kickoff_share", "episode_seconds"):
             value = getattr(self, key)
             if value is not None:
                 out[key] = list(value) if isinstance(value, tuple) else value
@@ -60,6 +64,8 @@ class CurriculumStage:
             start["attacker_distance"] = self.attacker_distance
         if self.defenders is not None:
             start["defenders"] = self.defenders
+        if self.kickoff_share is not None:
+            start["kickoff_share"] = self.kickoff_share
         settings: dict[str, Any] = {"start": start}
         if self.episode_seconds is not None:
             settings["episode_seconds"] = self.episode_seconds
@@ -126,13 +132,21 @@ def _stage(i: int, item: Any) -> CurriculumStage:
     defenders = item.get("defenders")
     if defenders is not None and defenders not in DEFENDERS:
         raise CurriculumError(f"stage {i}: unknown defenders {defenders!r}; expected one of {', '.join(DEFENDERS)}")
+    share = item.get("kickoff_share")
+    if share is not None:
+        if not _number(share) or not 0.0 <= share <= 1.0:
+            raise CurriculumError(f"stage {i}: kickoff_share must be a share of episodes in [0, 1], got {share!r}")
+        if share > 0.0 and defenders == "absent":
+            raise CurriculumError(f"stage {i}: kickoff_share needs defenders present (a kickoff is played by both "
+                                  f"teams)")
+        share = float(share)
     seconds = item.get("episode_seconds")
     if seconds is not None:
         if not _number(seconds) or not 0.0 < seconds <= MAX_EPISODE_SECONDS:
             raise CurriculumError(f"stage {i}: episode_seconds must be in (0, {MAX_EPISODE_SECONDS:g}], got "
                                   f"{seconds!r}")
         seconds = float(seconds)
-    return CurriculumStage(until, start, distance, reach, defenders, seconds)
+    return CurriculumStage(until, start, distance, reach, defenders, share, seconds)
 
 
 def _number(value: Any) -> bool:

@@ -7,10 +7,10 @@ checkpoints and resumption — no ROS. The trainer node learns from messages wit
 A run directory holds: ``config.json`` (the resolved config), ``metrics.csv`` and ``tensorboard/`` (every scalar),
 ``checkpoints/`` (the last few, safetensors + JSON, see ``checkpoints``), and at the end ``policy.safetensors``,
 ``policy.onnx``, ``curves.png`` and ``summary.json`` (with ``best_policy_window``, also ``best_policy.safetensors``:
-``learning.run.best_policy``). Resuming (``--resume RUN_DIR``) restores the networks, the
-optimiser, the step counters and the random generators from the latest checkpoint; the worlds restart with fresh
-episodes seeded from (seed, update), since a world's physics state is not checkpointed — an episode cut by a kill
-is simply not counted.
+``learning.run.best_policy``; with ``keep_policy_every_env_steps``, ``kept_policies/``:
+``learning.run.kept_policies``). Resuming (``--resume RUN_DIR``) restores the networks, the optimiser, the step
+counters and the random generators from the latest checkpoint; the worlds restart with fresh episodes seeded from
+(seed, update), since a world's physics state is not checkpointed — an episode cut by a kill is simply not counted.
 
 ``scenario: driving``: the driving agent (``DynEnvAgent(scenario='driving', action_mode)``) on ``DrivingVectorEnv``
 with ``n_cars`` cars per world, every car learning (no opponent); the same run directory. Episode scalars are per
@@ -38,6 +38,7 @@ from dynenv_ros.learning.distributed.pool_source import PoolSource
 from dynenv_ros.learning.distributed.worker_pool import WorkerPoolError
 from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.run.best_policy import BestPolicy
+from dynenv_ros.learning.run.kept_policies import KeptPolicies
 from dynenv_ros.learning.run.compute import ComputeMeter
 from dynenv_ros.learning.run.metrics import RunLogger, as_logged, plot_curves
 from dynenv_ros.learning.sampling.in_process import InProcessSource
@@ -84,6 +85,8 @@ class Trainer:
         if cfg.best_policy_window is not None:
             self.best_policy = (BestPolicy.resume(self.run_dir, cfg.best_policy_window, self.progress.env_steps)
                                 if resume else BestPolicy(cfg.best_policy_window))
+        self.kept_policies = (KeptPolicies(cfg.keep_policy_every_env_steps, self.progress.env_steps)
+                              if cfg.keep_policy_every_env_steps is not None else None)
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
         self.source: InProcessSource | PoolSource
         # a resumed run's worlds start in the curriculum stage its env steps are in (the checkpoint's: _resume)
@@ -248,6 +251,9 @@ class Trainer:
             self._log(stats, window, self._returns, self._bar)
             self._returns = []
             self._window = self._new_window()
+        if self.kept_policies is not None:
+            self.kept_policies.after_update(self.run_dir, self.progress.env_steps, self.networks.agent,
+                                            self._policy_meta())
         if time.perf_counter() - self._last_checkpoint > self.cfg.checkpoint_every_minutes * 60.0:
             self.save_checkpoint()
             self._last_checkpoint = time.perf_counter()

@@ -129,18 +129,28 @@ class StartConfig:
     curricula): the ball ``ball_distance_min``..``ball_distance_max`` from the centre of the goal one team attacks,
     at most ``ball_max_angle`` off that goal's axis and ``START_MARGIN`` inside the lines; the attacking team's robots
     behind the ball within ``attacker_distance`` of it, facing the goal; the defenders at their kickoff spots
-    (keeper in its goal area) or, ``defenders: absent``, out of play for the whole episode."""
+    (keeper in its goal area) or, ``defenders: absent``, out of play for the whole episode. ``kickoff_share``: the
+    share of an attack start's episodes that start from the kickoff instead (drawn per episode with the world's own
+    generator), so that a curriculum can keep its attack scenes while the game itself is learnt."""
     kind: str = "kickoff"
     ball_distance_min: float = 1.0         # m from the attacked goal's centre (the middle of its goal line)
     ball_distance_max: float = 3.0         # m
     ball_max_angle: float = math.radians(60.0)   # rad off the goal's axis (the line through both goals' centres)
     attacker_distance: float = 1.0         # m: each attacker at most this far from the ball
     defenders: str = "present"             # or "absent"
+    kickoff_share: float = 0.0             # attack only: this share of episodes starts from the kickoff instead
 
     def check(self, field: FieldGeometry) -> None:
         """ValueError naming the ``start.`` key that cannot work on ``field``."""
         if self.kind not in START_KINDS:
             raise ValueError(f"start.kind must be one of {', '.join(START_KINDS)}, got {self.kind!r}")
+        if not 0.0 <= self.kickoff_share <= 1.0:        # False for NaN too
+            raise ValueError(f"start.kickoff_share must be in [0, 1] (a share of episodes), got {self.kickoff_share}")
+        if self.kickoff_share > 0.0 and self.kind != "attack":
+            raise ValueError(f"start.kickoff_share mixes kickoffs into attack starts: it needs start.kind attack, "
+                             f"got {self.kind!r}")
+        if self.kickoff_share > 0.0 and self.defenders == "absent":
+            raise ValueError("start.kickoff_share needs start.defenders present: a kickoff is played by both teams")
         if self.defenders not in DEFENDERS:
             raise ValueError(f"start.defenders must be one of {', '.join(DEFENDERS)}, got {self.defenders!r}")
         low, high = self.ball_distance_min, self.ball_distance_max

@@ -61,8 +61,11 @@ class SoccerWorld:
 
     def _build(self, kickoff_team: int | None) -> None:
         c = self.config
+        attack = c.start.kind == "attack"
+        if attack and c.start.kickoff_share > 0.0:     # drawn only then: other settings keep their random streams
+            attack = bool(self.rng.random() >= c.start.kickoff_share)
+        self.start_kind = "attack" if attack else "kickoff"     # how this episode started
         if kickoff_team is None:
-            attack = c.start.kind == "attack"
             kickoff_team = TEAM_B if attack and self.episode_id % 2 else TEAM_A
         self._tick_seconds = c.rates.tick_seconds
         self._vision_seconds = c.rates.vision_period_ticks * self._tick_seconds
@@ -90,7 +93,7 @@ class SoccerWorld:
         self._add_ball(space)
         self._add_out_sensors(space)
         self._add_handlers(space)
-        if c.start.kind == "attack":
+        if attack:
             self._attack_start(kickoff_team)
         else:
             self._kickoff(kickoff_team)

@@ -3,7 +3,7 @@ refused up front (``core.writable.check_free_space``) instead of stopping at its
 
 A checkpoint holds the learner's parameters (the policy and the learning heads) and Adam's two moments of every
 trainable one, float32; the run also writes the policy file and its ONNX export, and logs (metrics, TensorBoard),
-which ``LOG_BYTES`` bounds generously. ``keep_checkpoints + 1`` checkpoints exist at once: the new one is written
+which ``LOG_BYTES`` bounds generously, and the kept policies of ``keep_policy_every_env_steps``. ``keep_checkpoints + 1`` checkpoints exist at once: the new one is written
 before the oldest is removed. The sizes come from the network built on torch's meta device: no memory is used.
 """
 from __future__ import annotations
@@ -28,6 +28,8 @@ def run_disk_bytes(cfg: TrainConfig) -> tuple[int, str]:
     checkpoint = FLOAT_BYTES * (parameters + 2 * trainable)
     copies = cfg.keep_checkpoints + 1
     policy_files = 2 + (cfg.best_policy_window is not None)        # safetensors, ONNX, best_policy.safetensors
+    if cfg.keep_policy_every_env_steps is not None:                # kept_policies/, one per multiple passed
+        policy_files += cfg.total_env_steps // cfg.keep_policy_every_env_steps
     total = copies * checkpoint + policy_files * FLOAT_BYTES * policy + LOG_BYTES
     return total, (f"{copies} checkpoints of {checkpoint / 2**20:.1f} MB, the policy files and "
                    f"{LOG_BYTES // 2**20} MB of logs")
