@@ -52,6 +52,13 @@ def test_unknown_preset_and_cuda_without_gpu_are_refused(tmp_path, capsys):
         assert "CUDA" in capsys.readouterr().err
 
 
+def _latest_step(run_dir) -> int:
+    try:
+        return int(checkpoints.read_checkpoint_meta(run_dir)["env_steps"])
+    except (ValueError, OSError, KeyError):       # not written yet
+        return 0
+
+
 def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
     run_dir = tmp_path / "run"
     command = [sys.executable, "-m", "dynenv_ros.learning.train_cli", "--config", "quick", "--run-dir",
@@ -63,7 +70,10 @@ def test_sigkill_then_resume_from_the_last_checkpoint(tmp_path):
         while time.monotonic() < deadline:
             found = checkpoints.list_checkpoints(run_dir / "checkpoints") if (run_dir / "checkpoints").exists() \
                 else []
-            if len(found) >= 2:
+            # a checkpoint folder appears before `latest` names it (rename, then the pointer's atomic write): kill
+            # only once the pointer has moved past the first checkpoint (step 0), or a loaded machine can land the
+            # kill between the two and the run resumes, correctly, from step 0
+            if len(found) >= 2 and _latest_step(run_dir) > 0:
                 break
             assert process.poll() is None, process.stderr.read().decode()
             time.sleep(0.2)
