@@ -1088,6 +1088,10 @@ PARSE_ONLY: list[tuple[str, str]] = [
     (r"graph=train", "the training graph's exit status says whether the policy learnt in its train_updates (3-6 "
                      "minutes); shortened it cannot learn and fails by design (44 s at one update); test_main_job.py::"
                      "test_the_train_graph_runs_games_policies_and_the_trainer_and_summarises runs it for 3 updates"),
+    (r"^dynenv-eval runs/issue39/\S+/kept_policies/step_",
+     "a copy kept by a full-length run (kept_policies/, one per 250,000 env steps): the shortened run of the command "
+     "before keeps none; test/test_kept_policies.py and test/test_learning_curriculum.py keep and load such copies, "
+     "and each run's chosen copy is committed and evaluated by a command that runs"),
     (r"^dynenv-train (--config league_(sizes|anchor|light_anchor|5v5)|--resume runs/issue39/league_light_anchor_s0) ",
      "two rollout worker processes, one playing 5v5, and the learner: about 22 s each even at one update (the full "
      "suite of 29 Nov 2026 took 152 s for docs/results.md with them, 108 s without); --config league (the same "
