@@ -90,6 +90,13 @@ class Probe:
                 self.executor.spin_once(timeout_sec=pause)
                 pause = sent + 0.2 - time.monotonic()
 
+    def counters(self, after: float, timeout: float) -> None:
+        """Spins until the simulator has sent its counters after `after`: a short phase on a loaded machine may
+        hold no diagnostics message of its own (they come about once a second)."""
+        deadline = time.monotonic() + timeout
+        while not any(t > after and "accepted" in d for t, d in self.diagnostics) and time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.05)
+
     def close(self) -> None:
         self.executor.shutdown()
         self.node.destroy_node()
@@ -97,7 +104,15 @@ class Probe:
 
 
 def phase_figures(probe: Probe, start: float, end: float, latencies: list[float], sim_cpu_s: float) -> dict[str, Any]:
-    window = [(t, d) for t, d in probe.diagnostics if start <= t <= end and "accepted" in d]
+    """The counters' change from the last message before the phase to the first one after it (the phase's own
+    messages in between give the frame rate)."""
+    counted = [(t, d) for t, d in probe.diagnostics if "accepted" in d]
+    before = [(t, d) for t, d in counted if t <= start][-1:]
+    after = [(t, d) for t, d in counted if t > end][:1]
+    window = before + [(t, d) for t, d in counted if start < t <= end] + after
+    if len(window) < 2:
+        raise RuntimeError(f"the simulator sent {len(window)} diagnostics message(s) around a "
+                           f"{end - start:.1f}-s phase; its counters need one before and one after")
     first, last = window[0][1], window[-1][1]
     periods = int(last["periods_run"]) - int(first["periods_run"])
     accepted = int(last["accepted"]) - int(first["accepted"])
@@ -131,9 +146,12 @@ def measure(args: Any, work: Path) -> dict[str, Any]:
         latencies: list[float] = []
         start, cpu = time.monotonic(), process_cpu_seconds(sim_pid)
         probe.spin(seconds, latencies)
-        return phase_figures(probe, start, time.monotonic(), latencies, process_cpu_seconds(sim_pid) - cpu)
+        end, cpu = time.monotonic(), process_cpu_seconds(sim_pid) - cpu
+        probe.counters(after=end, timeout=10.0)
+        return phase_figures(probe, start, end, latencies, cpu)
     try:
         probe.spin(5.0, [])                                   # start-up and discovery
+        probe.counters(after=0.0, timeout=20.0)
         phases = {"before": phase(args.calm_s)}
         flooders = [subprocess.Popen([sys.executable, "-m", "benchmarks.flood", "--flood-process",
                                       str(args.flood_s)], env=env, stdout=subprocess.PIPE, text=True)
