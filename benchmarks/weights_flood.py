@@ -124,11 +124,14 @@ def measure(args: Any, work: Path) -> dict[str, Any]:
         start, cpu = time.monotonic(), process_cpu_seconds(sim_pid)
         with _PeakMemory(policy_pid) as memory:
             probe.spin(seconds, latencies)
-        figures = phase_figures(probe, start, time.monotonic(), latencies, process_cpu_seconds(sim_pid) - cpu)
-        return {"policy_rss_mb_end": round(process_rss_mib(policy_pid), 1), "policy_rss_mb_peak": round(memory.peak, 1),
+        end, cpu, rss_end = time.monotonic(), process_cpu_seconds(sim_pid) - cpu, process_rss_mib(policy_pid)
+        probe.counters(after=end, timeout=10.0)
+        figures = phase_figures(probe, start, end, latencies, cpu)
+        return {"policy_rss_mb_end": round(rss_end, 1), "policy_rss_mb_peak": round(max(memory.peak, rss_end), 1),
                 **{k: figures[k] for k in ("periods", "accepted_share", "frames_per_s")}}
     try:
         probe.spin(10.0, [])                                  # start-up (torch), discovery
+        probe.counters(after=0.0, timeout=20.0)
         if any(p.poll() is not None for p in processes):
             raise RuntimeError(f"a node exited during start-up (logs in {work})")
         phases = {"before": phase(args.calm_s)}
