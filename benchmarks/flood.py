@@ -109,7 +109,8 @@ def phase_figures(probe: Probe, start: float, end: float, latencies: list[float]
     counted = [(t, d) for t, d in probe.diagnostics if "accepted" in d]
     before = [(t, d) for t, d in counted if t <= start][-1:]
     after = [(t, d) for t, d in counted if t > end][:1]
-    window = before + [(t, d) for t, d in counted if start < t <= end] + after
+    own = [(t, d) for t, d in counted if start < t <= end]
+    window = before + own + after
     if len(window) < 2:
         raise RuntimeError(f"the simulator sent {len(window)} diagnostics message(s) around a "
                            f"{end - start:.1f}-s phase; its counters need one before and one after")
@@ -119,7 +120,7 @@ def phase_figures(probe: Probe, start: float, end: float, latencies: list[float]
     refused = sum(int(last[k]) - int(first[k]) for k in last if k.startswith("rejected_"))
     ordered = sorted(latencies)
     return {"periods": periods, "accepted_share": round(accepted / max(1, 2 * periods), 3), "refused": refused,
-            "frames_per_s": statistics.median(float(d["vision_frames_per_s"]) for _, d in window),
+            "frames_per_s": statistics.median(float(d["vision_frames_per_s"]) for _, d in (own or window)),
             "service_ms_median": round(statistics.median(ordered), 2),
             "service_ms_p99": round(ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))], 2),
             "service_ms_max": round(ordered[-1], 2), "sim_cpu_share_of_one_core": round(sim_cpu_s / (end - start), 4)}
