@@ -133,7 +133,8 @@ SHELL_SYNTAX: dict[str, str] = {
     "[": "test (evaluated for the assignment that follows it)", "export": "environment setting",
 }
 # Shell tools a documented block uses, run as they are (in the scratch view).
-SHELL_TOOLS: dict[str, str] = {"mkdir": "creates the folder later commands write into"}
+SHELL_TOOLS: dict[str, str] = {"mkdir": "creates the folder later commands write into",
+                               "zgrep": "reads the lines of a committed, gzip-compressed training log"}
 # Inline spans that are prose, not commands (exact text) and why.
 MENTIONS: dict[str, str] = {
     "pytest": "the dependency's name in the README's dependency table",
@@ -929,6 +930,15 @@ def makefile() -> tuple[dict[str, str], dict[str, list[str]]]:
     return variables, targets
 
 
+def check_zgrep(args: list[str]) -> str:
+    """A documented zgrep reads a committed log: the file is there and the pattern finds its lines."""
+    done = subprocess.run(["zgrep", "-c", *args], cwd=REPO, capture_output=True, text=True, timeout=60)
+    if done.returncode != 0:
+        _refuse(f"zgrep {' '.join(args)}: exit status {done.returncode} (no matching line, or no such file) "
+                f"{done.stderr.strip()}")
+    return f"zgrep: {done.stdout.strip()} matching lines"
+
+
 def check_make(args: list[str], inline: bool) -> str:
     variables, targets = makefile()
     assigned: dict[str, str] = {}
@@ -1001,6 +1011,8 @@ def plan(argv: list[str], inline: bool) -> Plan:
         return Plan("check", "venv script", lambda: _refuse(f"{program} does not exist (the bootstrap installs it)"))
     if program == "make":
         return Plan("check", "make target", lambda: check_make(args, inline))
+    if program == "zgrep" and not inline:
+        return Plan("check", SHELL_TOOLS[program], lambda: check_zgrep(args))
     if program in SHELL_TOOLS and not inline:
         return Plan("check", SHELL_TOOLS[program], lambda: "shell tool")
     if name in TOOLS:
