@@ -133,7 +133,7 @@ def _stage(i: int, item: Any) -> CurriculumStage:
     if defenders is not None and defenders not in DEFENDERS:
         raise CurriculumError(f"stage {i}: unknown defenders {defenders!r}; expected one of {', '.join(DEFENDERS)}")
     share = item.get("kickoff_share")
-    if share is not None:               # its range and the defenders it needs: StartConfig.check, as every stage's
+    if share is not None:               # range and defenders: StartConfig.check, with every other start setting
         if not _number(share):
             raise CurriculumError(f"stage {i}: kickoff_share must be a number (a share of episodes), got {share!r}")
         share = float(share)
