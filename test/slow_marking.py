@@ -56,6 +56,7 @@ MEASURED: dict[str, float] = {
     "test_inference_server.py::test_every_kind_of_run_trains_with_the_server": 10,
     "test_inference_server.py::test_worker_processes_served_by_the_server_make_the_rollouts_they_make_acting_themselves": 18,
     "test_layout.py::test_the_trainer_and_the_ros_graph_import_without_ray": 50,
+    "test_league.py::test_a_resumed_league_run_carries_on_each_workers_league[async]": 17,
     "test_league.py::test_a_run_against_the_league_trains_and_logs_the_members": 88,
     "test_league.py::test_a_run_over_two_team_sizes_trains": 93,
     "test_learning_driving.py::test_ppo_learns_to_drive_towards_the_destination_within_seconds": 127,

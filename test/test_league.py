@@ -136,3 +136,82 @@ def test_a_run_over_two_team_sizes_trains(tmp_path):
     cfg = TrainConfig(**{**SMALL, "runner": "async", "team_sizes": [1, 2], "workers": 2, "total_env_steps": 48})
     summary = Trainer(cfg, tmp_path, progress=False).run()
     assert summary["env_steps"] >= 48 and summary["worker_deaths"] == 0
+
+
+# -- the league across --resume: the trainer checkpoints each worker's league (scores and game counts) -----------
+
+def test_a_league_state_round_trips_and_a_misfit_changes_nothing():
+    league = League(LEAGUE_MEMBERS, np.random.default_rng(0))
+    for _ in range(3):
+        league.record("perceiving", 0, 1)
+    league.record("snapshot", 2, 0)
+    again = League(LEAGUE_MEMBERS, np.random.default_rng(1))
+    again.restore(league.state())
+    # 3 losses: running mean ½ → 0 after the first game (rate 1), so 0; one win against the snapshot: 1
+    assert again.scores.tolist() == [0.0, 0.5, 0.5, 1.0] and again.games.tolist() == [3, 0, 0, 1]
+    bad = [{**league.state(), "members": ["perceiving", "snapshot"]},
+           {**league.state(), "scores": [0.0, 0.5, 1.5, 1.0]},
+           {**league.state(), "scores": [0.0, float("nan"), 0.5, 1.0]},
+           {**league.state(), "games": [3, -1, 0, 1]},
+           {**league.state(), "games": [3, 0.5, 0, 1]},
+           {**league.state(), "games": [3, 0, 0]},
+           {"members": list(LEAGUE_MEMBERS)}]
+    fresh = League(LEAGUE_MEMBERS, np.random.default_rng(2))
+    for state in bad:
+        with pytest.raises(ValueError, match="league"):
+            fresh.restore(state)
+        assert fresh.scores.tolist() == [0.5] * 4 and fresh.games.tolist() == [0] * 4
+
+
+def test_league_worlds_carry_on_a_given_league_before_or_after_reset():
+    saved = {"members": list(LEAGUE_MEMBERS), "scores": [0.1, 0.2, 0.3, 0.9], "games": [50, 40, 30, 20]}
+    env = SoccerVectorEnv(1, backend="inprocess", config={"players_per_team": 1}, scripted_team_b="league")
+    env.start_league_from(saved)              # before reset: the league is made there
+    env.reset(seed=0)
+    assert env.league_state() == saved
+    env.start_league_from({**saved, "scores": [0.5] * 4})     # after: at once
+    assert env.league_state()["scores"] == [0.5] * 4
+    env.close()
+    plain = SoccerVectorEnv(1, backend="inprocess", config={"players_per_team": 1}, scripted_team_b="perceiving")
+    with pytest.raises(ValueError, match="not the league"):
+        plain.start_league_from(saved)
+    plain.close()
+
+
+def _checkpoint_league(run_dir) -> dict:
+    import json
+    latest = (run_dir / "checkpoints" / "latest").read_text().strip()
+    return json.loads((run_dir / "checkpoints" / latest / "meta.json").read_text())["meta"].get("league", {})
+
+
+@pytest.mark.parametrize("runner", ["sync", "async"])
+def test_a_resumed_league_run_carries_on_each_workers_league(tmp_path, runner):
+    """Two worlds of 2-second episodes (5 periods each): 48 env steps play about ten games, all checkpointed; one
+    more update after --resume plays at most a game or two, so a league started again from nothing would hold far
+    fewer games than the checkpoint's."""
+    extra = {"backend": "inprocess"} if runner == "sync" else {"runner": "async", "workers": 1}
+    cfg = TrainConfig(**{**SMALL, **extra, "total_env_steps": 48})
+    Trainer(cfg, tmp_path, progress=False).run()
+    saved = _checkpoint_league(tmp_path)
+    assert list(saved) == ["0"] and saved["0"]["members"] == list(LEAGUE_MEMBERS)
+    saved_games = sum(saved["0"]["games"])
+    assert saved_games >= 6
+    lines: list[str] = []
+    resumed = Trainer(cfg.replace(total_env_steps=56), tmp_path, resume=True, progress=False, log=lines.append)
+    assert "resuming the league of 1 worker(s) from the checkpoint" in lines
+    resumed.run()
+    after = _checkpoint_league(tmp_path)["0"]
+    assert sum(after["games"]) >= saved_games
+    assert all(a >= s for a, s in zip(after["games"], saved["0"]["games"]))
+
+
+def test_a_checkpoint_whose_league_does_not_fit_stops_the_resume_with_the_reason(tmp_path):
+    import json
+    cfg = TrainConfig(**{**SMALL, "backend": "inprocess", "total_env_steps": 8})
+    Trainer(cfg, tmp_path, progress=False).run()
+    latest = tmp_path / "checkpoints" / (tmp_path / "checkpoints" / "latest").read_text().strip()
+    record = json.loads((latest / "meta.json").read_text())
+    record["meta"]["league"] = {"0": {"members": ["perceiving"], "scores": [0.5], "games": [1]}}
+    (latest / "meta.json").write_text(json.dumps(record))
+    with pytest.raises(ValueError, match="worker 0's league"):
+        Trainer(cfg.replace(total_env_steps=16), tmp_path, resume=True, progress=False)

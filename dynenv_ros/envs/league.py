@@ -7,11 +7,13 @@ learnt against one is not forgotten.
 Members: the scripted teams played inside the worlds — ``perceiving`` (keeper and chasers on each robot's own
 detections and pose estimate), ``perceiving_chasers`` (chasers in every slot), ``keeper_and_chasers`` (the
 ground-truth team) — and ``snapshot``: a frozen copy of the learner, whose actions the trainer sends for team B.
-The score is a moving average over each member's last games (``memory``), starting from ½.
+The score is a moving average over each member's last games (``memory``), starting from ½. ``state`` and
+``restore`` carry the scores and game counts across a resumed run (the trainer checkpoints them), so a resume does
+not send the learner back to uniform draws.
 """
 from __future__ import annotations
 
-from typing import Iterable
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -64,3 +66,28 @@ class League:
             out[f"league/{member}_share"] = float(weight)
             out[f"league/{member}_games"] = float(games)
         return out
+
+    def state(self) -> dict[str, Any]:
+        """What ``restore`` needs: the members, the learner's score against each and the games counted (JSON)."""
+        return {"members": list(self.members), "scores": [float(x) for x in self.scores],
+                "games": [int(n) for n in self.games]}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Scores and game counts from ``state`` (a checkpoint's); ValueError, and nothing changed, unless its
+        members are these and every score lies in [0, 1] and every count is a whole number ≥ 0."""
+        try:
+            members = [str(m) for m in state["members"]]
+            scores = np.asarray(state["scores"], dtype=np.float64)
+            games = np.asarray(state["games"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError) as error:
+            raise ValueError(f"a league state needs members, scores and games lists: {error}") from None
+        if members != list(self.members):
+            raise ValueError(f"the league state's members {members} are not this league's {list(self.members)}")
+        if scores.shape != (len(members),) or games.shape != (len(members),):
+            raise ValueError(f"a league state needs one score and one game count per member ({len(members)})")
+        if not np.all(np.isfinite(scores)) or np.any((scores < 0.0) | (scores > 1.0)):
+            raise ValueError(f"league scores must lie in [0, 1], got {scores.tolist()}")
+        if not np.all(np.isfinite(games)) or np.any(games < 0) or np.any(games != np.round(games)):
+            raise ValueError(f"league game counts must be whole numbers >= 0, got {games.tolist()}")
+        self.scores = scores.copy()
+        self.games = games.astype(np.int64)

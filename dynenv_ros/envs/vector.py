@@ -243,6 +243,7 @@ class InProcessBatch:
         self._perceiving_chasers: list[list[Any]] = []
         # a league run: the member playing team B in each world this episode, drawn at each episode's start
         self.league: League | None = None
+        self._league_start: dict[str, Any] | None = None     # a resumed run's league state (``start_league_from``)
         self._team_b: list[str | None] = [settings.scripted_team_b] * num_envs
         if settings.scripted_team_b is not None:
             n = self.config.players_per_team
@@ -327,6 +328,8 @@ class InProcessBatch:
         if self.settings.scripted_team_b == LEAGUE and self.league is None:
             known = [int(s) for s in seeds if s is not None]
             self.league = League(LEAGUE_MEMBERS, np.random.default_rng(np.random.SeedSequence(known or None)))
+            if self._league_start is not None:
+                self.league.restore(self._league_start)
         for e, (world, seed) in enumerate(zip(self.worlds, seeds)):
             self._new_episode(world, seed)
             self._observe_initial(e)
@@ -378,6 +381,21 @@ class InProcessBatch:
     def league_stats(self) -> dict[str, float]:
         """The league's per-member scores and shares ({} unless team B is the league)."""
         return {} if self.league is None else self.league.stats()
+
+    def league_state(self) -> dict[str, Any] | None:
+        """The league's scores and game counts (``League.state``; None unless team B is the league, or before reset)."""
+        return None if self.league is None else self.league.state()
+
+    def start_league_from(self, state: dict[str, Any]) -> None:
+        """Carry on a league from ``state`` (a resumed run's, ``League.state``): now if it exists, else at ``reset``.
+        ValueError, and nothing changed, when the state does not fit."""
+        if getattr(self.settings, "scripted_team_b", None) != LEAGUE:
+            raise ValueError("a league state was given, but team B of these worlds is not the league")
+        League(LEAGUE_MEMBERS, np.random.default_rng(0)).restore(state)       # refuse a misfit now, not at reset
+        if self.league is not None:
+            self.league.restore(state)
+        else:
+            self._league_start = state
 
     def close(self) -> None:
         pass
@@ -741,6 +759,16 @@ class VectorEnv:
     def league_stats(self) -> dict[str, float]:
         """A league run's per-member scores and shares, from worlds stepped in this process ({} otherwise)."""
         return self._batch.league_stats() if isinstance(self._batch, InProcessBatch) else {}
+
+    def league_state(self) -> dict[str, Any] | None:
+        """A league run's scores and game counts, to checkpoint (worlds stepped in this process; None otherwise)."""
+        return self._batch.league_state() if isinstance(self._batch, InProcessBatch) else None
+
+    def start_league_from(self, state: dict[str, Any]) -> None:
+        """Carry on the league of a resumed run (worlds stepped in this process only: ValueError otherwise)."""
+        if not isinstance(self._batch, InProcessBatch):
+            raise ValueError("a league state can be restored only in worlds stepped in this process")
+        self._batch.start_league_from(state)
 
     def _check_open(self) -> None:
         if self._closed:

@@ -9,7 +9,7 @@ A run directory holds: ``config.json`` (the resolved config), ``metrics.csv`` an
 ``policy.onnx``, ``curves.png`` and ``summary.json`` (with ``best_policy_window``, also ``best_policy.safetensors``:
 ``learning.run.best_policy``; with ``keep_policy_every_env_steps``, ``kept_policies/``:
 ``learning.run.kept_policies``). Resuming (``--resume RUN_DIR``) restores the networks, the optimiser, the step
-counters and the random generators from the latest checkpoint; the worlds restart with fresh episodes seeded from
+counters, the random generators and a league run's league scores from the latest checkpoint; the worlds restart with fresh episodes seeded from
 (seed, update), since a world's physics state is not checkpointed — an episode cut by a kill is simply not counted.
 
 ``scenario: driving``: the driving agent (``DynEnvAgent(scenario='driving', action_mode)``) on ``DrivingVectorEnv``
@@ -72,6 +72,7 @@ class Trainer:
         self.stop_reason = ""
         self._started = time.perf_counter()
         self._earlier_compute: list[dict[str, Any]] = []
+        self._league_states: dict[int, dict[str, Any]] = {}        # a resumed league run's, by worker
         if cfg.torch_compile:
             compiled.compile_hot_paths()
         if resume:
@@ -92,11 +93,13 @@ class Trainer:
         # a resumed run's worlds start in the curriculum stage its env steps are in (the checkpoint's: _resume)
         if cfg.runner == "async":
             self.source = PoolSource(cfg, self.networks, self.progress.updates, self.device, self._log_line,
-                                     first_env_steps=self.progress.env_steps)
+                                     first_env_steps=self.progress.env_steps, league_states=self._league_states)
         else:       # the worlds restart with fresh episodes seeded from (seed, update)
             self.source = InProcessSource(cfg, self.networks, self.generator, self.rng,
                                           self.env_seed + self.progress.updates, self.device,
-                                          env_steps=self.progress.env_steps)
+                                          env_steps=self.progress.env_steps,
+                                          league_state=next(iter(self._league_states.values()), None),
+                                          log=self._log_line)
         self.layout_shapes = self.source.layout_shapes    # async: known once a worker said hello
         self.logger = RunLogger(self.run_dir)
 
@@ -110,6 +113,9 @@ class Trainer:
                 "compute": self.compute.record(self.progress.env_steps)}
         if self.cfg.curriculum:             # the stage the run's worlds were in (docs/training.md, curriculum)
             meta["curriculum_stage"] = self.cfg.curriculum_stage(self.progress.env_steps)
+        leagues = self.source.league_states if hasattr(self, "source") else self._league_states
+        if leagues:                         # a league run: each worker's league, carried on by --resume
+            meta["league"] = {str(worker): state for worker, state in sorted(leagues.items())}
         return meta
 
     def _policy_meta(self) -> dict[str, Any]:
@@ -128,10 +134,27 @@ class Trainer:
         self.wall_before = float(meta.get("wall_seconds", 0.0))
         self.rng.bit_generator.state = meta["numpy_rng"]
         self._earlier_compute = list(meta.get("compute", {}).get("segments", []))
+        self._league_states = self._checkpoint_leagues(meta.get("league"))
         if "torch_generator" in extra:
             self.generator.set_state(extra["torch_generator"])
         if self.cfg.curriculum:
             self._resume_curriculum(meta.get("curriculum_stage"))
+
+    def _checkpoint_leagues(self, saved: Any) -> dict[int, dict[str, Any]]:
+        """The checkpoint's leagues by worker (none before they were checkpointed, or when the run is no league:
+        then the league starts again from even scores, as it always did)."""
+        if not saved or self.cfg.opponent != "league":
+            return {}
+        if not isinstance(saved, dict) or not all(str(k).isdigit() and isinstance(v, dict) for k, v in saved.items()):
+            raise ValueError(f"checkpoint of {self.run_dir}: its league entry is not worker -> league state")
+        from dynenv_ros.envs.league import LEAGUE_MEMBERS, League
+        for worker, state in saved.items():        # a misfit stops the resume here, not in every worker
+            try:
+                League(LEAGUE_MEMBERS, np.random.default_rng(0)).restore(state)
+            except ValueError as error:
+                raise ValueError(f"checkpoint of {self.run_dir}: worker {worker}'s league: {error}") from None
+        self._log_line(f"resuming the league of {len(saved)} worker(s) from the checkpoint")
+        return {int(k): v for k, v in saved.items()}
 
     def _resume_curriculum(self, saved: Any) -> None:
         """Say which curriculum stage the resumed run goes on in: the checkpoint's, which its env steps give again,

@@ -12,8 +12,9 @@ the simulation nor the learner waits for the other (Sample Factory's APPO, IMPAL
 - Env steps count what the learner learnt from; ``env_steps_generated`` (in the summary) also counts dropped
   rollouts.
 
-The workers hold nothing worth checkpointing: after ``--resume`` or a SIGKILL they start fresh episodes, as the
-in-process worlds do.
+The workers hold nothing worth checkpointing but a league run's league: after ``--resume`` or a SIGKILL they start
+fresh episodes, as the in-process worlds do, and each worker's league carries on from its last delivery's
+``league_states``, which the trainer checkpoints.
 """
 from __future__ import annotations
 
@@ -40,8 +41,11 @@ class PoolSource:
     wait_scalar = "speed/learner_wait_seconds_per_update"
 
     def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, first_update: int, device: torch.device,
-                 log: Callable[[str], None], first_env_steps: int = 0) -> None:
+                 log: Callable[[str], None], first_env_steps: int = 0,
+                 league_states: dict[int, dict[str, Any]] | None = None) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
+        # worker index -> its league (League.state) as last delivered: the pool starts workers with it
+        self.league_states: dict[int, dict[str, Any]] = dict(league_states or {})
         self.dropped = 0
         self.generated_steps = 0
         self.layout_shapes: dict[str, list[int]] | None = None      # known once a worker said hello
@@ -51,11 +55,12 @@ class PoolSource:
         self.pool: Any = None
         if cfg.backend == "ray":
             from dynenv_ros.learning.distributed.ray_pool import RayPool
-            self.pool = RayPool(cfg, networks, first_update=first_update, log=log, first_env_steps=first_env_steps)
+            self.pool = RayPool(cfg, networks, first_update=first_update, log=log, first_env_steps=first_env_steps,
+                                league_states=self.league_states)
         else:
             from dynenv_ros.learning.distributed.worker_pool import ProcessPool
             self.pool = ProcessPool(cfg, networks, resolve_workers(cfg), first_update=first_update, log=log,
-                                    first_env_steps=first_env_steps)
+                                    first_env_steps=first_env_steps, league_states=self.league_states)
 
     def next(self, progress: Progress, deadline: float) -> Experience | None:
         """``rollouts_per_update`` fresh rollouts joined; None when the deadline passes while waiting for them."""
@@ -72,6 +77,8 @@ class PoolSource:
                 if delivery is None:
                     continue
                 self.generated_steps += int(delivery.info["env_steps"])
+                if delivery.info.get("league_state") is not None:
+                    self.league_states[int(delivery.info["worker"])] = delivery.info["league_state"]
                 if progress.updates - int(delivery.info["version"]) > cfg.max_policy_lag:
                     self.dropped += 1
                     self.pool.release(delivery, progress.env_steps)

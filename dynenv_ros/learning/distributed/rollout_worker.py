@@ -61,10 +61,13 @@ def shard_sizes(num_envs: int, workers: int) -> list[tuple[int, int]]:
 
 
 class RolloutWorker:
-    """Builds its worlds once it holds the learner's weights (a snapshot opponent starts as a copy of them)."""
+    """Builds its worlds once it holds the learner's weights (a snapshot opponent starts as a copy of them);
+    ``league_state``: the league this worker's worlds carry on (a resumed run's, or a dead worker's last, as its
+    deliveries reported it; ``League.state``)."""
 
     def __init__(self, cfg: TrainConfig, index: int, first_world: int, num_envs: int, incarnation: int = 0,
-                 first_update: int = 0, server: Connection | None = None) -> None:
+                 first_update: int = 0, server: Connection | None = None,
+                 league_state: dict[str, Any] | None = None) -> None:
         cfg = worker_config(cfg, index)
         self.cfg, self.index, self.first_world, self.num_envs = cfg, index, first_world, num_envs
         torch.set_num_threads(1)                # one core per worker: intra-op threads would fight the others
@@ -82,6 +85,7 @@ class RolloutWorker:
         self.version = -1                       # the learner's update count of the weights acted with
         self.worlds: Worlds | None = None
         self._snapshots = 0
+        self.league_state = league_state
         self._cpu_started = time.process_time()
 
     @property
@@ -114,6 +118,8 @@ class RolloutWorker:
             self.worlds = make_worlds(self.cfg, self.networks, self.num_envs, "inprocess", self.generator, self.rng,
                                       seed=self.world_seed, acting=self._served if self.server is not None else None,
                                       env_steps=env_steps)
+            if self.league_state is not None and self.cfg.opponent == "league":
+                self.worlds.env.start_league_from(self.league_state)
 
     def _served(self, obs: Mapping[str, np.ndarray], with_teacher: bool, seeding: bool) -> ServerActing:
         """The collector's acting on the inference server (registered with this worker's first observations)."""
@@ -139,6 +145,7 @@ class RolloutWorker:
                 "finished": finished, "collect_seconds": time.perf_counter() - started,
                 "cpu_seconds": time.process_time() - self._cpu_started, "pid": os.getpid(),
                 "league": self.worlds.env.league_stats() if self.cfg.opponent == "league" else {},
+                "league_state": self.worlds.env.league_state() if self.cfg.opponent == "league" else None,
                 "curriculum_stage": self.worlds.stage}
         return flatten(rollout), info
 

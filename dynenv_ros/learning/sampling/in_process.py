@@ -4,7 +4,7 @@ rollout per update (the worlds' physics may run in the vector env's worker proce
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import torch
 
@@ -22,11 +22,17 @@ class InProcessSource:
     wait_scalar = "speed/rollout_seconds_per_update"
 
     def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, generator: torch.Generator, rng: Any, seed: int,
-                 device: torch.device, env_steps: int = 0) -> None:
+                 device: torch.device, env_steps: int = 0, league_state: dict[str, Any] | None = None,
+                 log: Callable[[str], None] = print) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
         self.worlds = worlds = make_worlds(cfg, networks, cfg.num_envs, cfg.backend, generator, rng, seed=seed,
                                            env_steps=env_steps)
         self.env, self.opponent, self.collector = worlds.env, worlds.opponent, worlds.collector
+        if league_state is not None and cfg.opponent == "league":
+            try:
+                self.env.start_league_from(league_state)
+            except ValueError as error:     # e.g. resumed with the worlds in worker processes: they keep their own
+                log(f"the checkpoint's league is not carried on ({error}); it starts again from even scores")
         self.layout_shapes: dict[str, list[int]] | None = {k: list(v) for k, v in self.env.layout.shapes().items()}
         self._closed = False
 
@@ -46,6 +52,12 @@ class InProcessSource:
         if self.opponent is not None and self.cfg.opponent in ("snapshot", "league") \
                 and progress.updates % self.cfg.snapshot_every_updates == 0:
             self.opponent.refresh(self.networks.agent)
+
+    @property
+    def league_states(self) -> dict[int, dict[str, Any]]:
+        """A league run's league (as ``PoolSource``'s, one 'worker': this process), to checkpoint; {} otherwise."""
+        state = self.env.league_state() if self.cfg.opponent == "league" else None
+        return {} if state is None else {0: state}
 
     def summary(self) -> dict[str, Any]:
         """What the run's summary adds of this source: nothing."""
