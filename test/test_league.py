@@ -215,3 +215,31 @@ def test_a_checkpoint_whose_league_does_not_fit_stops_the_resume_with_the_reason
     (latest / "meta.json").write_text(json.dumps(record))
     with pytest.raises(ValueError, match="worker 0's league"):
         Trainer(cfg.replace(total_env_steps=16), tmp_path, resume=True, progress=False)
+
+
+def test_league_members_narrow_the_draws_and_are_checked():
+    env = SoccerVectorEnv(2, backend="inprocess", config={"players_per_team": 1, "episode_seconds": 2},
+                          scripted_team_b="league", league_members=["perceiving", "keeper_and_chasers"])
+    env.reset(seed=3)
+    drawn = set()
+    for _ in range(30):                       # 5 periods an episode: 6 episodes per world
+        drawn.update(env._batch._team_b)
+        env.step(np.zeros((2, 2, 4), np.int64))
+    assert drawn == {"perceiving", "keeper_and_chasers"}
+    assert env.league_state()["members"] == ["perceiving", "keeper_and_chasers"]
+    with pytest.raises(ValueError, match="members"):       # a full league's state does not fit this one
+        env.start_league_from({"members": list(LEAGUE_MEMBERS), "scores": [0.5] * 4, "games": [0] * 4})
+    env.close()
+    with pytest.raises(ValueError, match="league members"):
+        SoccerVectorEnv(1, backend="inprocess", config={"players_per_team": 1}, scripted_team_b="league",
+                        league_members=["perceiving", "nobody"])
+    with pytest.raises(ValueError, match="league_members"):
+        SoccerVectorEnv(1, backend="inprocess", config={"players_per_team": 1}, scripted_team_b="perceiving",
+                        league_members=["perceiving"])
+    with pytest.raises(ConfigError, match="league_members"):
+        TrainConfig(**{**SMALL, "league_members": ["perceiving", "nobody"]})
+    with pytest.raises(ConfigError, match="league_members"):
+        TrainConfig(**{**SMALL, "league_members": ["perceiving", "perceiving"]})
+    with pytest.raises(ConfigError, match="league_members"):
+        TrainConfig(**{**SMALL, "opponent": "perceiving", "league_members": ["perceiving"]})
+    assert TrainConfig(**{**SMALL, "league_members": ["snapshot"]}).league_members == ("snapshot",)

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field, replace
 from functools import partial
 from multiprocessing import shared_memory
 from multiprocessing.connection import Connection
-from typing import Any, Callable, Mapping, Union
+from typing import Any, Callable, Mapping, Sequence, Union
 
 import numpy as np
 
@@ -110,6 +110,7 @@ class _Settings:
     scripted_team_b: str | None = None
     teacher: str | None = None
     localization: str = "none"   # "estimate": the observations gain pose_estimate (envs.pose_features)
+    league_members: tuple[str, ...] = LEAGUE_MEMBERS     # scripted_team_b="league": whom the league draws from
     scenario = "soccer"
     action_width = 4             # [walk, turn, kick, head]
     teacher_dtype = np.dtype(np.int64)
@@ -327,7 +328,8 @@ class InProcessBatch:
     def reset(self, seeds: list[int | None]) -> None:
         if self.settings.scripted_team_b == LEAGUE and self.league is None:
             known = [int(s) for s in seeds if s is not None]
-            self.league = League(LEAGUE_MEMBERS, np.random.default_rng(np.random.SeedSequence(known or None)))
+            self.league = League(self.settings.league_members,
+                                 np.random.default_rng(np.random.SeedSequence(known or None)))
             if self._league_start is not None:
                 self.league.restore(self._league_start)
         for e, (world, seed) in enumerate(zip(self.worlds, seeds)):
@@ -391,7 +393,7 @@ class InProcessBatch:
         ValueError, and nothing changed, when the state does not fit."""
         if getattr(self.settings, "scripted_team_b", None) != LEAGUE:
             raise ValueError("a league state was given, but team B of these worlds is not the league")
-        League(LEAGUE_MEMBERS, np.random.default_rng(0)).restore(state)       # refuse a misfit now, not at reset
+        League(self.settings.league_members, np.random.default_rng(0)).restore(state)   # a misfit: now, not at reset
         if self.league is not None:
             self.league.restore(state)
         else:
@@ -837,7 +839,8 @@ class SoccerVectorEnv(VectorEnv):
     would otherwise have to cross the process boundary every step. ``"perceiving"`` (padded only): team B is the
     perceiving keeper_and_chasers team (``soccer.perceiving``), each robot acting on its own padded observation of
     the last period and its pose estimate, with a ball memory per world that starts afresh each episode; the
-    self-localization runs for it.
+    self-localization runs for it. ``"league"`` (padded only): each world's team B is drawn every episode from the
+    league's members (``envs.league``; ``league_members``: some of them, default all).
 
     ``localization="estimate"`` (padded only): every world runs the emulated self-localization and the observations
     gain ``pose_estimate`` (E, A, 7), the team-frame pose estimate of the period's last frame (``envs.pose_features``);
@@ -857,8 +860,13 @@ class SoccerVectorEnv(VectorEnv):
                  perception: str | Mapping[str, Any] | PerceptionParams = "realistic",
                  max_landmarks: int | None = None, max_objects: int | None = None, copy: bool = True,
                  pin_workers: bool = False, targets: bool = False, scripted_team_b: str | None = None,
-                 teacher: str | None = None, parent_steps: bool = True, localization: str = "none") -> None:
+                 teacher: str | None = None, parent_steps: bool = True, localization: str = "none",
+                 league_members: Sequence[str] | None = None) -> None:
         self.config = config if isinstance(config, SoccerConfig) else SoccerConfig.from_mapping(config)
+        members = LEAGUE_MEMBERS if league_members is None else tuple(league_members)
+        if league_members is not None and scripted_team_b != LEAGUE:
+            raise ValueError(f"league_members applies to scripted_team_b='league', got {scripted_team_b!r}")
+        League(members, np.random.default_rng(0))         # unknown or no members: ValueError now
         if observation not in VECTOR_OBSERVATIONS:
             raise ValueError(f"observation must be one of {VECTOR_OBSERVATIONS}, got {observation!r}")
         if num_envs < 1:
@@ -883,7 +891,7 @@ class SoccerVectorEnv(VectorEnv):
         if localization not in LOCALIZATION_OPTIONS:
             raise ValueError(f"localization must be one of {LOCALIZATION_OPTIONS}, got {localization!r}")
         settings = _Settings(self.config, observation, perception_params(perception), max_landmarks, max_objects,
-                             bool(targets), scripted_team_b, teacher, localization)
+                             bool(targets), scripted_team_b, teacher, localization, members)
         observations = settings.observations()      # checks the layout maxima; gives the spaces
         self._start(settings, observations, num_envs, backend, workers, pin_workers, parent_steps, copy)
         self.target_shapes: dict[str, tuple[int, ...]] | None = \

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import yaml
 
+from dynenv_ros.envs.league import LEAGUE_MEMBERS
 from dynenv_ros.learning.curriculum import CurriculumError, CurriculumStage, parse_curriculum, stage_at
 
 if TYPE_CHECKING:        # the registry is imported where a config's scenario is asked (it loads torch)
@@ -262,6 +263,9 @@ class TrainConfig:
                                "drawn by prioritized fictitious self-play: envs.league), 'random'.")
     snapshot_every_updates: int = _f(200, "Opponent 'snapshot' (and the league's snapshot): add a frozen copy every this many updates.")
     snapshot_pool: int = _f(5, "Opponent 'snapshot': most recent copies kept to play against.")
+    league_members: tuple[str, ...] | None = _f(None, "Opponent 'league': the members drawn from, some of "
+                                                      "perceiving, perceiving_chasers, keeper_and_chasers (the "
+                                                      "ground-truth team) and snapshot; null = all four.")
 
     # -- asynchronous actor-learner (runner: async; docs/training.md "Three ways to train") -------------------
     runner: str = _f("sync", "'sync': one process collects a rollout, then learns from it (the worlds may step in "
@@ -557,6 +561,13 @@ class TrainConfig:
             if self.workers is not None and self.workers < len(self.team_sizes):
                 raise ConfigError("workers", f"{self.workers} workers cannot play {len(self.team_sizes)} team sizes "
                                              f"(each worker plays one)")
+        if self.league_members is not None:
+            if self.opponent != "league":
+                raise ConfigError("league_members", f"applies to opponent: league only (opponent is {self.opponent!r})")
+            unknown = [m for m in self.league_members if m not in LEAGUE_MEMBERS]
+            if unknown:
+                raise ConfigError("league_members", f"unknown member(s) {unknown}; expected some of "
+                                                    f"{', '.join(LEAGUE_MEMBERS)}")
         if self.intrinsic_reward_coef > 0.0 and not losses.forward:
             raise ConfigError("intrinsic_reward_coef", f"> 0 needs a forward model, which variant "
                                                        f"{self.variant!r} does not train")
@@ -570,6 +581,10 @@ def _plain(value: Any) -> Any:
 
 
 # -- type checking -------------------------------------------------------------------------------------------------
+class _Names(tuple):
+    """The kind of a field that is a list of distinct names (``league_members``)."""
+
+
 # (base type, None allowed) per field, from the annotations (strings under `from __future__ import annotations`).
 _BASE_TYPES = {"int": int, "float": float, "bool": bool, "str": str}
 
@@ -579,6 +594,8 @@ def _parse_annotation(annotation: str) -> tuple[type, bool]:
         return tuple, False
     if str(annotation) == "tuple | None":           # a list of distinct team sizes (team_sizes)
         return list, True
+    if str(annotation) == "tuple[str, ...] | None":   # a list of distinct names (league_members)
+        return _Names, True
     if str(annotation) == "tuple[CurriculumStage, ...] | None":     # a list of stages (curriculum)
         return CurriculumStage, True
     parts = [p.strip() for p in str(annotation).split("|")]
@@ -603,6 +620,11 @@ def _check_type(key: str, value: Any, expected: tuple[type, bool]) -> Any:
             return parse_curriculum(value)
         except CurriculumError as error:
             raise ConfigError(key, str(error)) from None
+    if kind is _Names:
+        if not isinstance(value, (list, tuple)) or not value or len(set(value)) != len(value) or \
+                any(not isinstance(v, str) for v in value):
+            raise ConfigError(key, f"expected a list of distinct names, got {described}")
+        return tuple(value)
     if kind is list:
         if not isinstance(value, (list, tuple)) or not value or len(set(value)) != len(value) or \
                 any(isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_PLAYERS_PER_TEAM

@@ -150,7 +150,7 @@ class Trainer:
         from dynenv_ros.envs.league import LEAGUE_MEMBERS, League
         for worker, state in saved.items():        # a misfit stops the resume here, not in every worker
             try:
-                League(LEAGUE_MEMBERS, np.random.default_rng(0)).restore(state)
+                League(self.cfg.league_members or LEAGUE_MEMBERS, np.random.default_rng(0)).restore(state)
             except ValueError as error:
                 raise ValueError(f"checkpoint of {self.run_dir}: worker {worker}'s league: {error}") from None
         self._log_line(f"resuming the league of {len(saved)} worker(s) from the checkpoint")

@@ -78,7 +78,8 @@ def _soccer_env(cfg: TrainConfig, num_envs: int, backend: str, stage: int) -> tu
                           observation="padded",
                           perception=cfg.perception, targets=needs_targets(cfg),
                           scripted_team_b=IN_WORLD_TEAMS.get(cfg.opponent), teacher=cfg.teacher,
-                          localization=cfg.localization, max_objects=padded_objects(cfg))
+                          localization=cfg.localization, max_objects=padded_objects(cfg),
+                          league_members=cfg.league_members if cfg.opponent == "league" else None)
     n = cfg.players_per_team
     return env, (np.arange(2 * n) if cfg.opponent == "self" else np.arange(n))
 
