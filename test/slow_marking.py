@@ -22,6 +22,7 @@ MEASURED: dict[str, float] = {
     "test_action_auth_graph.py::test_every_policy_node_tags_what_it_sends[driving]": 28,
     "test_action_auth_graph.py::test_the_simulator_runs_only_the_genuine_teams_actions": 21,
     "test_async_trainer.py::test_a_killed_worker_is_counted_and_replaced_then_the_run_stops_cleanly_when_none_is_left": 22,
+    "test_async_trainer.py::test_a_resumed_async_runs_summary_counts_the_whole_run": 28,
     "test_async_trainer.py::test_a_worker_process_delivers_what_the_same_worker_makes_in_process": 20,
     "test_async_trainer.py::test_an_async_run_learns_within_its_lag_bound_and_writes_a_whole_run_directory": 31,
     "test_async_trainer.py::test_every_kind_of_run_trains_asynchronously": 45,

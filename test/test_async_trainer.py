@@ -233,6 +233,18 @@ def test_an_async_run_learns_within_its_lag_bound_and_writes_a_whole_run_directo
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["updates"] == summary["updates"]
 
 
+def test_a_resumed_async_runs_summary_counts_the_whole_run(tmp_path):
+    """Two worlds x rollout 4 = 8 env steps a rollout: 64 env steps generate at least 64; one more update after
+    --resume generates at least 8 more, and the summary adds them to the checkpoint's, not in their place."""
+    cfg = small(runner="async", workers=1, total_env_steps=64, num_envs=2)
+    first = Trainer(cfg, tmp_path / "run", progress=False).run()
+    assert first["env_steps_generated"] >= 64
+    again = Trainer(cfg.replace(total_env_steps=first["env_steps"] + 1), tmp_path / "run", resume=True,
+                    progress=False).run()
+    assert again["env_steps_generated"] >= first["env_steps_generated"] + 8
+    assert again["dropped_rollouts"] >= first["dropped_rollouts"] and again["worker_deaths"] == 0
+
+
 def test_the_learner_killed_takes_its_workers_and_resumes_from_its_checkpoint(tmp_path):
     run_dir = tmp_path / "run"
     command = [sys.executable, "-m", "dynenv_ros.learning.train_cli", "--config", "async", "--run-dir",

@@ -73,6 +73,7 @@ class Trainer:
         self._started = time.perf_counter()
         self._earlier_compute: list[dict[str, Any]] = []
         self._league_states: dict[int, dict[str, Any]] = {}        # a resumed league run's, by worker
+        self._async_counts: dict[str, int] = {}                    # a resumed async run's, before this segment
         if cfg.torch_compile:
             compiled.compile_hot_paths()
         if resume:
@@ -93,7 +94,8 @@ class Trainer:
         # a resumed run's worlds start in the curriculum stage its env steps are in (the checkpoint's: _resume)
         if cfg.runner == "async":
             self.source = PoolSource(cfg, self.networks, self.progress.updates, self.device, self._log_line,
-                                     first_env_steps=self.progress.env_steps, league_states=self._league_states)
+                                     first_env_steps=self.progress.env_steps, league_states=self._league_states,
+                                     earlier_counts=self._async_counts)
         else:       # the worlds restart with fresh episodes seeded from (seed, update)
             self.source = InProcessSource(cfg, self.networks, self.generator, self.rng,
                                           self.env_seed + self.progress.updates, self.device,
@@ -116,6 +118,9 @@ class Trainer:
         leagues = self.source.league_states if hasattr(self, "source") else self._league_states
         if leagues:                         # a league run: each worker's league, carried on by --resume
             meta["league"] = {str(worker): state for worker, state in sorted(leagues.items())}
+        counts = getattr(self.source, "counts", None) if hasattr(self, "source") else None
+        if counts is not None:              # async: the summary's counts go on across --resume
+            meta["async_counts"] = counts()
         return meta
 
     def _policy_meta(self) -> dict[str, Any]:
@@ -135,6 +140,10 @@ class Trainer:
         self.rng.bit_generator.state = meta["numpy_rng"]
         self._earlier_compute = list(meta.get("compute", {}).get("segments", []))
         self._league_states = self._checkpoint_leagues(meta.get("league"))
+        saved_counts = meta.get("async_counts")
+        if isinstance(saved_counts, dict):
+            self._async_counts = {k: int(v) for k, v in saved_counts.items()
+                                  if isinstance(v, int) and not isinstance(v, bool) and v >= 0}
         if "torch_generator" in extra:
             self.generator.set_state(extra["torch_generator"])
         if self.cfg.curriculum:

@@ -30,6 +30,7 @@ from dynenv_ros.learning.distributed.rollout_transfer import join
 from dynenv_ros.learning.distributed.rollout_worker import resolve_workers
 from dynenv_ros.learning.distributed.worker_pool import Delivery, WorkerPoolError
 
+COUNTS = ("dropped_rollouts", "worker_deaths", "env_steps_generated")     # summed over a run's segments
 WAIT_POLL_S = 1.0            # how often a waiting learner checks its deadline and its workers
 
 
@@ -42,8 +43,11 @@ class PoolSource:
 
     def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, first_update: int, device: torch.device,
                  log: Callable[[str], None], first_env_steps: int = 0,
-                 league_states: dict[int, dict[str, Any]] | None = None) -> None:
+                 league_states: dict[int, dict[str, Any]] | None = None,
+                 earlier_counts: dict[str, int] | None = None) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
+        # a resumed run's counts before this segment (``counts``, from its checkpoint), so the summary is the run's
+        self.earlier = {key: int((earlier_counts or {}).get(key, 0)) for key in COUNTS}
         # worker index -> its league (League.state) as last delivered: the pool starts workers with it
         self.league_states: dict[int, dict[str, Any]] = dict(league_states or {})
         self.dropped = 0
@@ -117,11 +121,15 @@ class PoolSource:
             self.pool.release(delivery, progress.env_steps)
         self._pending = []
 
+    def counts(self) -> dict[str, int]:
+        """The run's dropped rollouts, worker deaths and env steps generated, earlier segments included."""
+        now = {"dropped_rollouts": self.dropped, "worker_deaths": self.pool.deaths if self.pool is not None else 0,
+               "env_steps_generated": self.generated_steps}
+        return {key: self.earlier[key] + int(now[key]) for key in COUNTS}
+
     def summary(self) -> dict[str, Any]:
-        """What the run's summary adds of the workers."""
-        summary: dict[str, Any] = {"runner": "async", "dropped_rollouts": self.dropped,
-                                   "worker_deaths": self.pool.deaths if self.pool is not None else 0,
-                                   "env_steps_generated": self.generated_steps}
+        """What the run's summary adds of the workers (over the whole run, ``--resume``d segments included)."""
+        summary: dict[str, Any] = {"runner": "async", **self.counts()}
         if getattr(self.pool, "rollouts_by_node", None) is not None:
             summary["rollouts_by_node"] = dict(self.pool.rollouts_by_node)
         return summary
