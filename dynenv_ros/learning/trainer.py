@@ -39,6 +39,7 @@ from dynenv_ros.learning.distributed.worker_pool import WorkerPoolError
 from dynenv_ros.learning.run import checkpoints
 from dynenv_ros.learning.run.best_policy import BestPolicy
 from dynenv_ros.learning.run.kept_policies import KeptPolicies
+from dynenv_ros.learning.run.snapshot_history import SnapshotHistory
 from dynenv_ros.learning.run.compute import ComputeMeter
 from dynenv_ros.learning.run.metrics import RunLogger, as_logged, plot_curves
 from dynenv_ros.learning.sampling.in_process import InProcessSource
@@ -89,19 +90,28 @@ class Trainer:
                                 if resume else BestPolicy(cfg.best_policy_window))
         self.kept_policies = (KeptPolicies(cfg.keep_policy_every_env_steps, self.progress.env_steps)
                               if cfg.keep_policy_every_env_steps is not None else None)
+        # the snapshot opponent's pool as the worlds hold it, checkpointed (run.snapshot_history)
+        self.snapshots: SnapshotHistory | None = None
+        if cfg.opponent in ("snapshot", "league"):
+            self.snapshots = (SnapshotHistory.from_checkpoint(self._resume_extra, cfg.snapshot_every_updates,
+                                                              cfg.snapshot_pool, self.networks.agent)
+                              if resume else SnapshotHistory(cfg.snapshot_every_updates, cfg.snapshot_pool))
+            if not self.snapshots.states:       # a fresh run, or a checkpoint from before the pool was kept
+                self.snapshots.take(self.networks.agent)
         (self.run_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
         self.source: InProcessSource | PoolSource
         # a resumed run's worlds start in the curriculum stage its env steps are in (the checkpoint's: _resume)
         if cfg.runner == "async":
             self.source = PoolSource(cfg, self.networks, self.progress.updates, self.device, self._log_line,
                                      first_env_steps=self.progress.env_steps, league_states=self._league_states,
-                                     earlier_counts=self._async_counts)
+                                     earlier_counts=self._async_counts, snapshots=self.snapshots)
         else:       # the worlds restart with fresh episodes seeded from (seed, update)
             self.source = InProcessSource(cfg, self.networks, self.generator, self.rng,
                                           self.env_seed + self.progress.updates, self.device,
                                           env_steps=self.progress.env_steps,
                                           league_state=next(iter(self._league_states.values()), None),
-                                          log=self._log_line)
+                                          log=self._log_line,
+                                          snapshot_states=self.snapshots.states if self.snapshots else None)
         self.layout_shapes = self.source.layout_shapes    # async: known once a worker said hello
         self.logger = RunLogger(self.run_dir)
 
@@ -129,12 +139,15 @@ class Trainer:
 
     def save_checkpoint(self) -> Path:
         extra = {"torch_generator": self.generator.get_state()}
+        if getattr(self, "snapshots", None) is not None:
+            extra.update(self.snapshots.tensors())
         return checkpoints.save_training_checkpoint(self.run_dir, self.progress.env_steps, self.networks,
                                                     self.optimizer, self._meta(), extra,
                                                     keep=self.cfg.keep_checkpoints)
 
     def _resume(self) -> None:
         meta, extra = checkpoints.load_training_checkpoint(self.run_dir, self.networks, self.optimizer)
+        self._resume_extra = extra
         self.progress = Progress(int(meta["env_steps"]), int(meta["updates"]), int(meta.get("episodes", 0)))
         self.wall_before = float(meta.get("wall_seconds", 0.0))
         self.rng.bit_generator.state = meta["numpy_rng"]
@@ -283,6 +296,8 @@ class Trainer:
             self._log(stats, window, self._returns, self._bar)
             self._returns = []
             self._window = self._new_window()
+        if self.snapshots is not None:
+            self.snapshots.after_update(self.progress.updates, self.networks.agent)
         if self.kept_policies is not None:
             self.kept_policies.after_update(self.run_dir, self.progress.env_steps, self.networks.agent,
                                             self._policy_meta())

@@ -14,7 +14,8 @@ the simulation nor the learner waits for the other (Sample Factory's APPO, IMPAL
 
 The workers hold nothing worth checkpointing but a league run's league: after ``--resume`` or a SIGKILL they start
 fresh episodes, as the in-process worlds do, and each worker's league carries on from its last delivery's
-``league_states``, which the trainer checkpoints.
+``league_states``, which the trainer checkpoints, as it does the snapshot opponent's pool (``snapshots``: the
+learner's ``run.snapshot_history``, handed to every worker that starts).
 """
 from __future__ import annotations
 
@@ -44,7 +45,7 @@ class PoolSource:
     def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, first_update: int, device: torch.device,
                  log: Callable[[str], None], first_env_steps: int = 0,
                  league_states: dict[int, dict[str, Any]] | None = None,
-                 earlier_counts: dict[str, int] | None = None) -> None:
+                 earlier_counts: dict[str, int] | None = None, snapshots: Any = None) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
         # a resumed run's counts before this segment (``counts``, from its checkpoint), so the summary is the run's
         self.earlier = {key: int((earlier_counts or {}).get(key, 0)) for key in COUNTS}
@@ -60,11 +61,12 @@ class PoolSource:
         if cfg.backend == "ray":
             from dynenv_ros.learning.distributed.ray_pool import RayPool
             self.pool = RayPool(cfg, networks, first_update=first_update, log=log, first_env_steps=first_env_steps,
-                                league_states=self.league_states)
+                                league_states=self.league_states, snapshots=snapshots)
         else:
             from dynenv_ros.learning.distributed.worker_pool import ProcessPool
             self.pool = ProcessPool(cfg, networks, resolve_workers(cfg), first_update=first_update, log=log,
-                                    first_env_steps=first_env_steps, league_states=self.league_states)
+                                    first_env_steps=first_env_steps, league_states=self.league_states,
+                                    snapshots=snapshots)
 
     def next(self, progress: Progress, deadline: float) -> Experience | None:
         """``rollouts_per_update`` fresh rollouts joined; None when the deadline passes while waiting for them."""

@@ -35,9 +35,10 @@ class RolloutActor:
     """A ``RolloutWorker`` behind Ray's actor interface (wrapped with ``ray.remote`` by the pool)."""
 
     def __init__(self, cfg_dict: dict[str, Any], index: int, first_world: int, num_envs: int, incarnation: int,
-                 first_update: int, league_state: dict[str, Any] | None = None) -> None:
+                 first_update: int, league_state: dict[str, Any] | None = None,
+                 snapshot_states: list[Any] | None = None) -> None:
         self.worker = RolloutWorker(TrainConfig.from_dict(cfg_dict), index, first_world, num_envs, incarnation,
-                                    first_update, league_state=league_state)
+                                    first_update, league_state=league_state, snapshot_states=snapshot_states)
 
     def node_id(self) -> str:
         import ray
@@ -71,9 +72,10 @@ class RayPool:
 
     def __init__(self, cfg: TrainConfig, networks: torch.nn.Module, first_update: int,
                  log: Callable[[str], None] = print, first_env_steps: int = 0,
-                 league_states: dict[int, dict[str, Any]] | None = None) -> None:
+                 league_states: dict[int, dict[str, Any]] | None = None, snapshots: Any = None) -> None:
         self.cfg, self.log, self.first_update = cfg, log, first_update
         self.league_states = league_states if league_states is not None else {}   # as ProcessPool's
+        self.snapshots = snapshots
         self.deaths = self.restarts = 0
         self.layout_shapes: dict[str, list[int]] | None = None
         self.layout_spec: Any = None
@@ -119,7 +121,8 @@ class RayPool:
     def _start(self, actor: _Actor) -> None:
         actor.handle = self._remote.remote(self.cfg.to_dict(), actor.index, actor.first_world, actor.num_envs,
                                            actor.incarnation, self.first_update,
-                                           self.league_states.get(actor.index))
+                                           self.league_states.get(actor.index),
+                                           self.snapshots.states if self.snapshots else None)
         actor.alive, actor.queued = True, 0
         for _ in range(QUEUED_CALLS):
             self._queue(actor)

@@ -63,11 +63,13 @@ def shard_sizes(num_envs: int, workers: int) -> list[tuple[int, int]]:
 class RolloutWorker:
     """Builds its worlds once it holds the learner's weights (a snapshot opponent starts as a copy of them);
     ``league_state``: the league this worker's worlds carry on (a resumed run's, or a dead worker's last, as its
-    deliveries reported it; ``League.state``)."""
+    deliveries reported it; ``League.state``); ``snapshot_states``: the snapshot opponent's pool to start from (the
+    learner's, ``run.snapshot_history``; default: a copy of the weights it is first given)."""
 
     def __init__(self, cfg: TrainConfig, index: int, first_world: int, num_envs: int, incarnation: int = 0,
                  first_update: int = 0, server: Connection | None = None,
-                 league_state: dict[str, Any] | None = None) -> None:
+                 league_state: dict[str, Any] | None = None,
+                 snapshot_states: list[dict[str, np.ndarray]] | None = None) -> None:
         cfg = worker_config(cfg, index)
         self.cfg, self.index, self.first_world, self.num_envs = cfg, index, first_world, num_envs
         torch.set_num_threads(1)                # one core per worker: intra-op threads would fight the others
@@ -86,6 +88,7 @@ class RolloutWorker:
         self.worlds: Worlds | None = None
         self._snapshots = 0
         self.league_state = league_state
+        self.snapshot_states = snapshot_states
         self._cpu_started = time.process_time()
 
     @property
@@ -118,6 +121,8 @@ class RolloutWorker:
             self.worlds = make_worlds(self.cfg, self.networks, self.num_envs, "inprocess", self.generator, self.rng,
                                       seed=self.world_seed, acting=self._served if self.server is not None else None,
                                       env_steps=env_steps)
+            if self.snapshot_states and self.cfg.opponent in ("snapshot", "league"):
+                self.worlds.opponent.load_pool(self.snapshot_states)
             if self.league_state is not None and self.cfg.opponent == "league":
                 self.worlds.env.start_league_from(self.league_state)
 

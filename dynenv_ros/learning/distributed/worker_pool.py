@@ -79,16 +79,17 @@ def replace_or_go_on(pool: Any, label: str, why: str, replace: Callable[[], None
 def worker_main(conn: Connection, cfg_dict: dict[str, Any], index: int, first_world: int, num_envs: int,
                 incarnation: int, first_update: int, weights_names: dict[str, Any],
                 server: Connection | None = None, first_env_steps: int = 0,
-                league_state: dict[str, Any] | None = None) -> None:
+                league_state: dict[str, Any] | None = None, snapshot_states: list[Any] | None = None) -> None:
     """A worker process: its first rollout, the handshake, then rollouts into free slots until told to stop
     (``server``: its pipe to the inference server, with ``inference: server``; ``first_env_steps``: the learner's
     count when the pool started, e.g. a resumed run's, until the learner sends a newer one; ``league_state``: the
-    league its worlds carry on)."""
+    league its worlds carry on; ``snapshot_states``: the snapshot opponent's pool to start from)."""
     die_with_parent()
     worker = slots = weights = None
     try:
         cfg = TrainConfig.from_dict(cfg_dict)
-        worker = RolloutWorker(cfg, index, first_world, num_envs, incarnation, first_update, server, league_state)
+        worker = RolloutWorker(cfg, index, first_world, num_envs, incarnation, first_update, server, league_state,
+                               snapshot_states)
         weights = AttachedWeights(weights_names, worker.networks)
         worker.adopt(weights.load_into(worker.networks, -1))
         env_steps = first_env_steps
@@ -143,14 +144,15 @@ class _Handle:
 
 class ProcessPool:
     """``workers`` worker processes over ``cfg.num_envs`` worlds; ``get`` returns the next rollout.
-    ``league_states``: worker index → the league it carries on (read whenever a worker starts, a replacement
-    included; ``PoolSource`` keeps it up to date)."""
+    ``league_states``: worker index → the league it carries on, and ``snapshots``: the learner's snapshot pool
+    (``run.snapshot_history``), both read whenever a worker starts, a replacement included."""
 
     def __init__(self, cfg: TrainConfig, networks: torch.nn.Module, workers: int, first_update: int,
                  log: Callable[[str], None] = print, first_env_steps: int = 0,
-                 league_states: dict[int, dict[str, Any]] | None = None) -> None:
+                 league_states: dict[int, dict[str, Any]] | None = None, snapshots: Any = None) -> None:
         self.cfg, self.log = cfg, log
         self.league_states = league_states if league_states is not None else {}
+        self.snapshots = snapshots
         self.first_update = first_update
         self._env_steps = first_env_steps        # the learner's count last sent: a replacement worker starts there
         self.slots_per_worker = max(2, math.ceil(cfg.rollouts_per_update / workers) + 1)
@@ -184,7 +186,7 @@ class ProcessPool:
             target=worker_main, name=f"dynenv-rollout-{handle.index}", daemon=True,
             args=(child, self.cfg.to_dict(), handle.index, handle.first_world, handle.num_envs, handle.incarnation,
                   self.first_update, self._weights.names(), served, self._env_steps,
-                  self.league_states.get(handle.index)))
+                  self.league_states.get(handle.index), self.snapshots.states if self.snapshots else None))
         process.start()
         child.close()
         if served is not None:

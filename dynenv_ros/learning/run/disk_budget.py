@@ -2,7 +2,7 @@
 refused up front (``core.writable.check_free_space``) instead of stopping at its first or fifth checkpoint.
 
 A checkpoint holds the learner's parameters (the policy and the learning heads) and Adam's two moments of every
-trainable one, float32; the run also writes the policy file and its ONNX export, and logs (metrics, TensorBoard),
+trainable one, float32, and against snapshots (or the league) the pool of ``snapshot_pool`` policy copies; the run also writes the policy file and its ONNX export, and logs (metrics, TensorBoard),
 which ``LOG_BYTES`` bounds generously, and the kept policies of ``keep_policy_every_env_steps``. ``keep_checkpoints + 1`` checkpoints exist at once: the new one is written
 before the oldest is removed. The sizes come from the network built on torch's meta device: no memory is used.
 """
@@ -26,6 +26,8 @@ def run_disk_bytes(cfg: TrainConfig) -> tuple[int, str]:
     trainable = sum(p.numel() for p in networks.parameters() if p.requires_grad)
     policy = sum(p.numel() for p in networks.agent.parameters())
     checkpoint = FLOAT_BYTES * (parameters + 2 * trainable)
+    if cfg.opponent in ("snapshot", "league"):      # the snapshot pool (run.snapshot_history)
+        checkpoint += FLOAT_BYTES * cfg.snapshot_pool * sum(p.numel() for p in networks.agent.state_dict().values())
     copies = cfg.keep_checkpoints + 1
     policy_files = 2 + (cfg.best_policy_window is not None)        # safetensors, ONNX, best_policy.safetensors
     if cfg.keep_policy_every_env_steps is not None:                # kept_policies/, one per multiple passed

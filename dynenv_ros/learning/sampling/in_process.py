@@ -23,11 +23,13 @@ class InProcessSource:
 
     def __init__(self, cfg: TrainConfig, networks: TrainingNetworks, generator: torch.Generator, rng: Any, seed: int,
                  device: torch.device, env_steps: int = 0, league_state: dict[str, Any] | None = None,
-                 log: Callable[[str], None] = print) -> None:
+                 log: Callable[[str], None] = print, snapshot_states: list[Any] | None = None) -> None:
         self.cfg, self.networks, self.device = cfg, networks, device
         self.worlds = worlds = make_worlds(cfg, networks, cfg.num_envs, cfg.backend, generator, rng, seed=seed,
                                            env_steps=env_steps)
         self.env, self.opponent, self.collector = worlds.env, worlds.opponent, worlds.collector
+        if snapshot_states and cfg.opponent in ("snapshot", "league"):      # a resumed run's pool
+            self.opponent.load_pool(snapshot_states)
         if league_state is not None and cfg.opponent == "league":
             try:
                 self.env.start_league_from(league_state)

@@ -56,6 +56,20 @@ class SnapshotOpponent(Opponent):
         self.pool = (self.pool + [frozen])[-self.pool_size:]
         self.playing = self.pool[int(self.rng.integers(len(self.pool)))]
 
+    def load_pool(self, states: list[Mapping[str, np.ndarray]]) -> None:
+        """The pool as a resumed run's checkpoint had it (``run.snapshot_history``: oldest first), replacing what
+        ``__init__`` took; the member that plays is drawn again."""
+        if not states:
+            return
+        template = self.pool[-1]
+        pool = []
+        for state in states[-self.pool_size:]:
+            frozen = copy.deepcopy(template)
+            frozen.load_state_dict({name: torch.as_tensor(value) for name, value in state.items()})
+            pool.append(frozen)
+        self.pool, self.state = pool, None
+        self.playing = self.pool[int(self.rng.integers(len(self.pool)))]
+
     @torch.no_grad()
     def act(self, obs: Mapping[str, np.ndarray], starts: np.ndarray) -> np.ndarray:
         E, k = starts.shape
