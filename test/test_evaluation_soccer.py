@@ -176,6 +176,35 @@ def test_untrained_agent_plays_on_both_sides_and_greedy_is_deterministic():
     assert alone["episodes"][1] == result["episodes"][1]
 
 
+def test_games_played_at_once_give_the_records_of_games_played_one_by_one(monkeypatch):
+    """games_at_once plays the same games: each keeps its env seed and its teams' generators, whatever is played
+    beside it (sampled actions, so the generators matter; one game more than fits in one round, so the last round
+    is a smaller one; both sides checkpoints, so one forward serves both teams of a game)."""
+    forwards = []
+    real = DynEnvAgent.forward
+
+    def counted(self, landmarks, *args):
+        forwards.append(landmarks.mask.shape[0])
+        return real(self, landmarks, *args)
+    monkeypatch.setattr(DynEnvAgent, "forward", counted)
+
+    def run(at_once, opponent):
+        forwards.clear()
+        return evaluate(AgentTeam(untrained_agent(1)), opponent, episodes=2, seeds=[5, 6, 7], players_per_team=2,
+                        perception="realistic", env_config=SHORT, games_at_once=at_once)
+    one_by_one = run(1, "perceiving")
+    assert forwards == [2] * 6 * 10                 # a team of two a period, 10 periods, 6 games
+    together = run(4, "perceiving")
+    assert forwards == [8] * 10 + [4] * 10          # four games, then the two left
+    assert together["episodes"] == one_by_one["episodes"]
+    assert together["settings"]["games_at_once"] == 4 and "games_at_once" not in one_by_one["settings"]
+    both_sides = run(6, AgentTeam(untrained_agent(1), greedy=True))
+    assert forwards == [12, 12] * 10                # each network: its six teams of two in one forward
+    assert both_sides["episodes"] == run(1, AgentTeam(untrained_agent(1), greedy=True))["episodes"]
+    with pytest.raises(ValueError, match="games_at_once"):
+        evaluate("random", "random", episodes=1, seeds=[0], games_at_once=0)
+
+
 def test_random_team_samples_the_continuous_head_space():
     result = evaluate("random", "chaser", episodes=1, seeds=[0], players_per_team=1, perception="none",
                       env_config={"episode_seconds": 2.0, "head_mode": "continuous"})
@@ -226,7 +255,8 @@ def _exit_code(argv) -> int:
 @pytest.mark.parametrize("argv", [["missing.safetensors"], ["random", "--opponent", "missing.safetensors"],
                                   ["CORRUPT"], ["random", "--episodes", "0"], ["random", "--episodes", "x"],
                                   ["random", "--perception", "perfect"], ["random", "--seeds", "-3"],
-                                  ["random", "--out", "no/such/folder/r.json"]])
+                                  ["random", "--out", "no/such/folder/r.json"], ["random", "--games-at-once", "0"],
+                                  ["random", "--scenario", "driving", "--games-at-once", "2"]])
 def test_cli_bad_arguments_exit_2_with_one_line(argv, tmp_path, capsys):
     corrupt = tmp_path / "corrupt.safetensors"
     corrupt.write_bytes(b"\x00\x01 this is not a policy file")

@@ -82,6 +82,10 @@ def _eval_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, help="write the full result (JSON) here")
     parser.add_argument("--torch-threads", type=int, default=1,
                         help="torch threads while a checkpoint plays (default 1: a team's batch is tiny)")
+    parser.add_argument("--games-at-once", type=int, default=1,
+                        help="robocup: games played side by side, a checkpoint's robots of all of them in one "
+                             "forward (default 1; 20 at once took 2.5x less CPU time; the same games, up to the "
+                             "float rounding of a larger batch)")
     parser.add_argument("--quiet", action="store_true", help="no per-episode progress on stderr")
     return parser
 
@@ -273,6 +277,8 @@ def run_driving_eval(args: argparse.Namespace, perception, progress) -> int:
     for flag, value in (("--players-per-team", args.players_per_team), ("--sides", args.sides)):
         if value is not None:
             return _fail(f"{flag} applies to --scenario robocup only (driving: --cars)")
+    if args.games_at_once != 1:
+        return _fail("--games-at-once applies to --scenario robocup only (driving plays its episodes one by one)")
     cars = 2 if args.cars is None else args.cars
     if not 1 <= cars <= 10:
         return _fail(f"--cars must be in 1..10, got {cars}")
@@ -353,6 +359,8 @@ def run_eval(args: argparse.Namespace) -> int:
         return _fail(f"--episodes must be at least 1, got {args.episodes}")
     if args.torch_threads < 1:
         return _fail(f"--torch-threads must be at least 1, got {args.torch_threads}")
+    if args.games_at_once < 1:
+        return _fail(f"--games-at-once must be at least 1, got {args.games_at_once}")
     perception = args.perception if args.noise_magnitude is None else {
         "preset": args.perception, "noise_magnitude": args.noise_magnitude}
     progress = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
@@ -369,7 +377,7 @@ def run_soccer_eval(args: argparse.Namespace, perception: Any, progress: Any, le
         args.policy, args.opponent or "scripted", episodes=args.episodes, seeds=args.seeds,
         players_per_team=2 if args.players_per_team is None else args.players_per_team, perception=perception,
         sides=args.sides or "alternate", greedy=args.greedy, env_config=env_config, progress=progress,
-        torch_threads=args.torch_threads), format_table, ledger)
+        torch_threads=args.torch_threads, games_at_once=args.games_at_once), format_table, ledger)
 
 
 # Each scenario's games, by the spelling --scenario takes (docs/decisions.md, "A scenario registry").

@@ -37,7 +37,9 @@ episodes; the summary gives the mean and standard deviation over seeds.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Iterable, Mapping, Sequence
+import copy
+from types import SimpleNamespace
+from typing import Any, Callable, Hashable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -106,6 +108,22 @@ class TeamPolicy:
 
     def act(self, env: Any, observations: Sequence[Mapping[str, np.ndarray]]) -> list[Any]:
         raise NotImplementedError
+
+    def for_another_game(self) -> "TeamPolicy":
+        """The same team for a game played at the same time as this one's (``evaluate``'s ``games_at_once``):
+        a shallow copy, sharing what never changes (a checkpoint's network) and getting its own per-game state from
+        its own ``reset``."""
+        return copy.copy(self)
+
+    def batch_key(self) -> Hashable | None:
+        """Teams with one key (not None) act in one ``act_together`` call when their games are played at once."""
+        return None
+
+    @classmethod
+    def act_together(cls, teams: Sequence["TeamPolicy"], envs: Sequence[Any],
+                     observations: Sequence[Sequence[Mapping[str, np.ndarray]]]) -> list[list[Any]]:
+        """Each team's ``act`` for its own game; a team with a ``batch_key`` does it in one call for them all."""
+        return [team.act(env, obs) for team, env, obs in zip(teams, envs, observations)]
 
 
 class RandomTeam(TeamPolicy):
@@ -206,22 +224,51 @@ class AgentTeam(TeamPolicy):
         self.env_head_max = float(env.config.motion.head_max_delta)
 
     def act(self, env, observations):
+        return AgentTeam.act_together([self], [env], [observations])[0]
+
+    def batch_key(self):
+        return (id(self.model), self.greedy, self.observes_pose)
+
+    @classmethod
+    def act_together(cls, teams, envs, observations):
+        """One forward of every team's robots (teams sharing one network: ``batch_key``), then each team's actions
+        drawn from its own generator over its own rows, as its own ``act`` would: a game's actions do not depend on
+        which games are played beside it (up to the float rounding of a larger batch's products)."""
         import torch
         from dynenv_ros.agent.inputs import side_inputs, streams_from_padded
-        from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk
-        if len(observations) != self.n:
-            raise ValueError(f"AgentTeam drives {self.n} robots, got {len(observations)} observations")
-        if not all(isinstance(o, Mapping) and "landmarks" in o for o in observations):
-            raise ValueError("AgentTeam needs padded observations (robocup_v0 observation='padded')")
-        batch = {key: np.stack([np.asarray(o[key]) for o in observations]) for key in observations[0]}
-        head_max = float(self.model.head_max)
+        from dynenv_ros.learning.algo.policy import head_outputs
+        teams = list(teams)
+        if len({team.batch_key() for team in teams}) != 1:
+            raise ValueError("AgentTeam.act_together needs teams of one network (one batch_key)")
+        for team, obs in zip(teams, observations):
+            if len(obs) != team.n:
+                raise ValueError(f"AgentTeam drives {team.n} robots, got {len(obs)} observations")
+            if not all(isinstance(o, Mapping) and "landmarks" in o for o in obs):
+                raise ValueError("AgentTeam needs padded observations (robocup_v0 observation='padded')")
+        first, rows = teams[0], [o for obs in observations for o in obs]
+        batch = {key: np.stack([np.asarray(o[key]) for o in rows]) for key in rows[0]}
+        head_max = float(first.model.head_max)
+        sizes = [team.n for team in teams]
+        state = tuple(torch.cat(parts) for parts in zip(*(team.state for team in teams))) if len(teams) > 1 \
+            else first.state
         with torch.inference_mode():
             landmarks, objects = streams_from_padded(batch)
-            previous, proprioception = side_inputs(batch, head_max, pose=self.observes_pose)
-            step = self.model(landmarks, objects, previous, proprioception, self.state)
-            actions = self.model.act(step, generator=self.generator, greedy=self.greedy).numpy()
-        self.state = step.state
-        units = _head_units(self.model, step)
+            previous, proprioception = side_inputs(batch, head_max, pose=first.observes_pose)
+            step = first.model(landmarks, objects, previous, proprioception, state)
+            heads = vars(head_outputs(step))
+            units = _head_units(first.model, step)
+            out, start = [], 0
+            for team, states in zip(teams, zip(*(s.split(sizes) for s in step.state))):
+                rows_of = slice(start, start + team.n)
+                start += team.n
+                own = SimpleNamespace(**{k: None if v is None else v[rows_of] for k, v in heads.items()})
+                actions = first.model.act(own, generator=team.generator, greedy=team.greedy).numpy()
+                team.state = tuple(states) if len(teams) > 1 else step.state
+                out.append(team._soccer_actions(actions, units, head_max))
+        return out
+
+    def _soccer_actions(self, actions: np.ndarray, units: int, head_max: float) -> list[Any]:
+        from dynenv_ros.soccer.actions import Kick, SoccerAction, Turn, Walk
         result = []
         for walk, turn, kick, head in actions:
             # The checkpoint's own head discretisation: index 0..2u ↦ (index − u)·head_max/u rad per period.
@@ -266,54 +313,100 @@ def make_team_policy(spec: str | TeamPolicy, greedy: bool = False) -> TeamPolicy
 
 
 # -- one episode -------------------------------------------------------------------------------------------------
+class _Game:
+    """One episode in progress: its env, its two teams and what is counted of it (``play_episode``'s numbers)."""
+
+    def __init__(self, env: Any, team_a: TeamPolicy, team_b: TeamPolicy, env_seed: int,
+                 seed_a: np.random.SeedSequence, seed_b: np.random.SeedSequence, kickoff: str = "a") -> None:
+        self.env = env
+        n = env.config.players_per_team
+        self.robots = {"a": list(range(n)), "b": list(range(n, 2 * n))}
+        self.observations, _ = env.reset(seed=env_seed, options={"kickoff_team": kickoff})
+        self.names = names = env.possible_agents
+        team_a.reset(env, self.robots["a"], seed_a)
+        team_b.reset(env, self.robots["b"], seed_b)
+        self.teams = {"a": team_a, "b": team_b}
+        self.terms = np.zeros((len(names), len(TERMS)))
+        self.positive = np.zeros(len(names))
+        self.falls = np.zeros(len(names), np.int64)
+        self.penalties = np.zeros(len(names), np.int64)
+        self.periods = 0
+        self.actions: dict[str, Any] = {}
+
+    @property
+    def over(self) -> bool:
+        return not self.env.agents
+
+    def observed_by(self, side: str) -> list[Mapping[str, np.ndarray]]:
+        return [self.observations[self.names[i]] for i in self.robots[side]]
+
+    def chose(self, side: str, chosen: Sequence[Any]) -> None:
+        n = len(self.robots[side])
+        if len(chosen) != n:
+            raise ValueError(f"team {side} returned {len(chosen)} actions for {n} robots")
+        self.actions.update({self.names[i]: a for i, a in zip(self.robots[side], chosen)})
+
+    def step(self) -> None:
+        """The env step of both sides' chosen actions, and its counts."""
+        self.observations, _, _, _, infos = self.env.step(self.actions)
+        self.actions = {}
+        self.periods += 1
+        for i, name in enumerate(self.names):
+            step_terms = {t: float(infos[name]["reward_terms"][t]) for t in TERMS}
+            self.terms[i] += list(step_terms.values())
+            self.positive[i] += positive_part(step_terms)
+        for event in self.env.world.events:
+            if event.robot is not None and event.kind == "fall":
+                self.falls[event.robot] += 1
+            elif event.robot is not None and event.kind == "penalty":
+                self.penalties[event.robot] += 1
+
+    def outcome(self) -> dict[str, Any]:
+        snapshot = self.env.world.snapshot()
+        goals = {"a": int(snapshot.score_team_a), "b": int(snapshot.score_team_b)}
+        observation = self.terms[:, TERMS.index(OBSERVATION)]
+        out: dict[str, Any] = {"periods": self.periods}
+        for side, other in (("a", "b"), ("b", "a")):
+            idx = self.robots[side]
+            out[side] = {"terms": {t: float(self.terms[idx, k].mean()) for k, t in enumerate(TERMS)},
+                         "total": float(self.terms[idx].sum(axis=1).mean()),
+                         "positive": float(self.positive[idx].mean()),
+                         "paper_metric": float((self.positive[idx] - observation[idx]).mean()),
+                         "goals_for": goals[side], "goals_against": goals[other],
+                         "falls": int(self.falls[idx].sum()), "penalties": int(self.penalties[idx].sum())}
+        return out
+
+
+def play_games(games: Sequence[_Game]) -> list[dict[str, Any]]:
+    """Step every game, period by period, until each is over; each period the teams that share a ``batch_key``
+    act in one call (one forward of a network for every game's robots). Gives each game's ``play_episode`` record."""
+    games = list(games)
+    while True:
+        live = [game for game in games if not game.over]
+        if not live:
+            break
+        requests = [(game, side) for game in live for side in ("a", "b")]
+        groups: dict[Any, list[tuple[_Game, str]]] = {}
+        for game, side in requests:
+            key = game.teams[side].batch_key()
+            groups.setdefault(("alone", id(game), side) if key is None else ("together", key), []).append((game, side))
+        for members in groups.values():
+            teams = [game.teams[side] for game, side in members]
+            chosen = type(teams[0]).act_together(teams, [game.env for game, _ in members],
+                                                 [game.observed_by(side) for game, side in members])
+            for (game, side), actions in zip(members, chosen):
+                game.chose(side, actions)
+        for game in live:
+            game.step()
+    return [game.outcome() for game in games]
+
+
 def play_episode(env: Any, team_a: TeamPolicy, team_b: TeamPolicy, env_seed: int,
                  seed_a: np.random.SeedSequence, seed_b: np.random.SeedSequence,
                  kickoff: str = "a") -> dict[str, Any]:
     """One episode of ``team_a`` (robots 0..n-1) against ``team_b``; per side: terms, total, positive and paper
     metric (each summed over the episode, averaged over the side's robots), goals, falls and penalties."""
-    n = env.config.players_per_team
-    robots = {"a": list(range(n)), "b": list(range(n, 2 * n))}
-    observations, _ = env.reset(seed=env_seed, options={"kickoff_team": kickoff})
-    names = env.possible_agents
-    team_a.reset(env, robots["a"], seed_a)
-    team_b.reset(env, robots["b"], seed_b)
-    teams = {"a": team_a, "b": team_b}
-    terms = np.zeros((len(names), len(TERMS)))
-    positive = np.zeros(len(names))
-    falls = np.zeros(len(names), np.int64)
-    penalties = np.zeros(len(names), np.int64)
-    periods = 0
-    while env.agents:
-        actions: dict[str, Any] = {}
-        for side, team in teams.items():
-            chosen = team.act(env, [observations[names[i]] for i in robots[side]])
-            if len(chosen) != n:
-                raise ValueError(f"team {side} returned {len(chosen)} actions for {n} robots")
-            actions.update({names[i]: a for i, a in zip(robots[side], chosen)})
-        observations, _, _, _, infos = env.step(actions)
-        periods += 1
-        for i, name in enumerate(names):
-            step_terms = {t: float(infos[name]["reward_terms"][t]) for t in TERMS}
-            terms[i] += list(step_terms.values())
-            positive[i] += positive_part(step_terms)
-        for event in env.world.events:
-            if event.robot is not None and event.kind == "fall":
-                falls[event.robot] += 1
-            elif event.robot is not None and event.kind == "penalty":
-                penalties[event.robot] += 1
-    snapshot = env.world.snapshot()
-    goals = {"a": int(snapshot.score_team_a), "b": int(snapshot.score_team_b)}
-    observation = terms[:, TERMS.index(OBSERVATION)]
-    out: dict[str, Any] = {"periods": periods}
-    for side, other in (("a", "b"), ("b", "a")):
-        idx = robots[side]
-        out[side] = {"terms": {t: float(terms[idx, k].mean()) for k, t in enumerate(TERMS)},
-                     "total": float(terms[idx].sum(axis=1).mean()),
-                     "positive": float(positive[idx].mean()),
-                     "paper_metric": float((positive[idx] - observation[idx]).mean()),
-                     "goals_for": goals[side], "goals_against": goals[other],
-                     "falls": int(falls[idx].sum()), "penalties": int(penalties[idx].sum())}
-    return out
+    return play_games([_Game(env, team_a, team_b, env_seed, seed_a, seed_b, kickoff)])[0]
 
 
 def _result(goals_for: int, goals_against: int) -> str:
@@ -324,7 +417,8 @@ def _result(goals_for: int, goals_against: int) -> str:
 def evaluate(evaluated: str | TeamPolicy, opponent: str | TeamPolicy, *, episodes: int = 4,
              seeds: Sequence[int] = (0, 1, 2), players_per_team: int = 2, perception: Any = "realistic",
              sides: str = "alternate", greedy: bool = False, env_config: Mapping[str, Any] | None = None,
-             progress: Callable[[str], None] | None = None, torch_threads: int | None = 1) -> dict[str, Any]:
+             progress: Callable[[str], None] | None = None, torch_threads: int | None = 1,
+             games_at_once: int = 1) -> dict[str, Any]:
     """Play ``episodes`` episodes per seed of ``evaluated`` against ``opponent`` (specs for ``make_team_policy``
     or TeamPolicy instances; ``greedy`` applies to checkpoints given by path). ``env_config``: further
     ``SoccerConfig`` settings (e.g. ``{"episode_seconds": 30}``). Returns the JSON-ready result: ``settings``,
@@ -334,7 +428,15 @@ def evaluate(evaluated: str | TeamPolicy, opponent: str | TeamPolicy, *, episode
 
     ``torch_threads``: torch's intra-op threads while a checkpoint plays (restored afterwards; None leaves them
     alone). One thread is the default: a period's batch is a team of robots, far too small to split, and on busy
-    cores several threads made each decision 50 times slower (200 ms instead of 4 ms)."""
+    cores several threads made each decision 50 times slower (200 ms instead of 4 ms).
+
+    ``games_at_once``: how many of the games (in their order: seed by seed, episode by episode) are played side by
+    side, each in its own env, a checkpoint's robots of all of them in one forward per period. The games and their
+    records are the same (each game keeps its own env seed and generators); only the float rounding of the larger
+    batch's products differs, which could tip a near-tie between two actions (none has been seen: the records so far
+    were equal to the last digit). A checkpoint's forward of a team of two costs nearly as much as one of forty
+    robots: 20 games at once took 2.5 times less CPU time than one by one (docs/benchmarks.md, "Evaluation: games at
+    once")."""
     if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) or episodes < 1:
         raise ValueError(f"episodes must be a positive integer, got {episodes!r}")
     seeds = list(seeds)
@@ -347,6 +449,8 @@ def evaluate(evaluated: str | TeamPolicy, opponent: str | TeamPolicy, *, episode
         raise ValueError(f"seeds must be distinct, got {seeds}")
     if sides not in SIDES:
         raise ValueError(f"sides must be one of {', '.join(SIDES)}, got {sides!r}")
+    if isinstance(games_at_once, bool) or not isinstance(games_at_once, (int, np.integer)) or games_at_once < 1:
+        raise ValueError(f"games_at_once must be a positive integer, got {games_at_once!r}")
     config = dict(env_config or {})
     for key in ("players_per_team", "observation", "perception", "render_mode", "localization"):
         if key in config:
@@ -360,32 +464,40 @@ def evaluate(evaluated: str | TeamPolicy, opponent: str | TeamPolicy, *, episode
         torch.set_num_threads(int(torch_threads))
         try:
             return _evaluate(ours, theirs, evaluated, opponent, episodes, seeds, players_per_team, perception,
-                             sides, greedy, config, progress)
+                             sides, greedy, config, progress, int(games_at_once))
         finally:
             torch.set_num_threads(threads)
     return _evaluate(ours, theirs, evaluated, opponent, episodes, seeds, players_per_team, perception, sides, greedy,
-                     config, progress)
+                     config, progress, int(games_at_once))
 
 
 def _evaluate(ours: TeamPolicy, theirs: TeamPolicy, evaluated: str | TeamPolicy, opponent: str | TeamPolicy,
               episodes: int, seeds: list[int], players_per_team: int, perception: Any, sides: str, greedy: bool,
-              config: dict[str, Any], progress: Callable[[str], None] | None) -> dict[str, Any]:
+              config: dict[str, Any], progress: Callable[[str], None] | None, games_at_once: int) -> dict[str, Any]:
     from dynenv_ros.envs.robocup_v0 import parallel_env
     observed = ours.observes_pose or theirs.observes_pose
-    env = parallel_env(players_per_team=players_per_team, observation="padded", perception=perception,
-                       localization="estimate" if observed else "none", **config)
-    env.observations.localization = ours.needs_localization or theirs.needs_localization or observed
+    jobs = [(int(seed), episode) for seed in seeds for episode in range(int(episodes))]
+    at_once = min(games_at_once, len(jobs))
+    envs = []
+    for _ in range(at_once):
+        env = parallel_env(players_per_team=players_per_team, observation="padded", perception=perception,
+                           localization="estimate" if observed else "none", **config)
+        env.observations.localization = ours.needs_localization or theirs.needs_localization or observed
+        envs.append(env)
+    # one pair of teams per env: a team holds its game's state between reset and the game's end
+    pairs = [(ours, theirs)] + [(ours.for_another_game(), theirs.for_another_game()) for _ in range(at_once - 1)]
     records = []
-    for seed in seeds:
-        for episode in range(int(episodes)):
-            env_seed, our_seed, their_seed = episode_seeds(int(seed), episode)
+    for first in range(0, len(jobs), at_once):
+        games, sides_of = [], []
+        for (seed, episode), env, (evaluated_team, opponent_team) in zip(jobs[first:first + at_once], envs, pairs):
+            env_seed, our_seed, their_seed = episode_seeds(seed, episode)
             side = sides if sides != "alternate" else ("a" if episode % 2 == 0 else "b")
-            if side == "a":
-                game = play_episode(env, ours, theirs, env_seed, our_seed, their_seed)
-            else:
-                game = play_episode(env, theirs, ours, env_seed, their_seed, our_seed)
+            games.append(_Game(env, evaluated_team, opponent_team, env_seed, our_seed, their_seed) if side == "a"
+                         else _Game(env, opponent_team, evaluated_team, env_seed, their_seed, our_seed))
+            sides_of.append((seed, episode, side, env_seed))
+        for (seed, episode, side, env_seed), game in zip(sides_of, play_games(games)):
             mine, other = game[side], game["b" if side == "a" else "a"]
-            record = {"seed": int(seed), "episode": episode, "side": side, "env_seed": env_seed, "kickoff": "a",
+            record = {"seed": seed, "episode": episode, "side": side, "env_seed": env_seed, "kickoff": "a",
                       "periods": game["periods"], **mine,
                       "result": _result(mine["goals_for"], mine["goals_against"]),
                       "opponent": {k: other[k] for k in ("terms", "total", "positive", "paper_metric", "falls",
@@ -399,6 +511,8 @@ def _evaluate(ours: TeamPolicy, theirs: TeamPolicy, evaluated: str | TeamPolicy,
                 "perception": perception, "sides": sides, "greedy": bool(greedy), "env_config": config,
                 "scripted_default": DEFAULT_SCRIPTED,
                 "seeding": "SeedSequence(seed, spawn_key=(episode,)).spawn(3) -> env, evaluated, opponent"}
+    if games_at_once > 1:
+        settings["games_at_once"] = games_at_once
     return {"format": FORMAT, "settings": settings,
             "evaluated": {"spec": _spec_name(evaluated), **ours.describe()},
             "opponent": {"spec": _spec_name(opponent), **theirs.describe()},
@@ -461,6 +575,6 @@ def _mean_sd(stats: Mapping[str, float]) -> str:
 
 
 __all__ = ["TeamPolicy", "RandomTeam", "ScriptedTeam", "AgentTeam", "PerceivingTeam",
-           "PerceivingChasersTeam", "make_team_policy", "play_episode", "evaluate",
+           "PerceivingChasersTeam", "make_team_policy", "play_episode", "play_games", "evaluate",
            "seed_means", "format_table", "positive_part", "positive_reward", "paper_metric", "SEED_METRICS", "RESULTS",
            "SIDES"]
