@@ -73,3 +73,24 @@ def test_a_folder_that_does_not_exist_or_a_missing_checkpoint_is_one_line(tool, 
     assert f"folder {tmp_path / 'absent'} does not exist" in capsys.readouterr().err
     assert tool.main([str(tmp_path / "no_run"), str(tmp_path)]) == 2
     assert f"checkpoint {tmp_path / 'no_run'} does not exist" in capsys.readouterr().err
+
+
+def test_a_kept_policy_file_is_copied_as_it_is_beside_the_files_it_implies(tool, run, tmp_path, capsys):
+    """A run's kept copy (a policy file the trainer wrote) ships byte for byte, so the SHA-256 its evaluations recorded
+    stays its own; the config and counters come from its header. A policy file without a training config (one saved
+    by hand) is refused in one line."""
+    folder, summary = run
+    out = tmp_path / "shipped"
+    out.mkdir()
+    assert tool.main([str(folder / "policy.safetensors"), str(out)]) == 0
+    assert sha256(out / "policy.safetensors") == sha256(folder / "policy.safetensors")
+    assert json.loads((out / "train_config.json").read_text()) == json.loads((folder / "config.json").read_text())
+    counters = json.loads((out / "train_summary.json").read_text())
+    assert {k: counters[k] for k in ("env_steps", "updates", "episodes")} == \
+        {k: summary[k] for k in ("env_steps", "updates", "episodes")}
+    assert (out / "policy.onnx").stat().st_size > 0
+    from dynenv_ros.agent.checkpoint import load_policy, save_policy
+    bare = tmp_path / "bare.safetensors"
+    save_policy(load_policy(folder / "policy.safetensors")[0], bare)
+    assert tool.main([str(bare), str(out)]) == 2
+    assert "carries no training config in its header" in capsys.readouterr().err

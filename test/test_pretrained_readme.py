@@ -22,10 +22,12 @@ def folder(tool):
     return tool.ROOT / tool.FOLDER
 
 
-SOCCER_FOLDERS = [Path("policy_node/pretrained"), Path("docs/results_data/issue26/shipped_2fd24e79")]
+SOCCER_FOLDERS = [Path("policy_node/pretrained"), Path("docs/results_data/issue26/shipped_2fd24e79"),
+                  Path("docs/results_data/issue39/shipped_ca882145")]
+IDS = ["shipped", "archived_first", "archived_league"]
 
 
-@pytest.mark.parametrize("relative", SOCCER_FOLDERS, ids=["shipped", "archived"])
+@pytest.mark.parametrize("relative", SOCCER_FOLDERS, ids=IDS)
 def test_the_committed_readme_is_what_the_files_give(tool, relative):
     try:
         expected = tool.render(tool.ROOT, relative)
@@ -35,7 +37,7 @@ def test_the_committed_readme_is_what_the_files_give(tool, relative):
         "run .venv/bin/python tools/pretrained_readme.py"
 
 
-@pytest.mark.parametrize("relative", SOCCER_FOLDERS, ids=["shipped", "archived"])
+@pytest.mark.parametrize("relative", SOCCER_FOLDERS, ids=IDS)
 def test_the_readme_names_the_policy_files_sha256_and_its_evaluations_are_of_that_file(tool, relative):
     here = tool.ROOT / relative
     digest, text = sha256(here / tool.POLICY), (here / "README.md").read_text()
@@ -49,13 +51,33 @@ def test_the_readme_names_the_policy_files_sha256_and_its_evaluations_are_of_tha
 
 
 def test_the_shipped_readme_plays_on_validation_and_says_which_of_issue_39s_bars_it_meets(tool, folder):
-    """The shipped policy (issue 39's league_anchor_s0 at +270,592 env steps) is evaluated on the validation split,
-    and its test-ledger rows — two as the training checkpoint it was written from, one as the committed policy
-    file with its weights — give the bars: docs/results.md reports +0.21 (+0.04 to +0.38, 34 wins to 17 losses)
-    against perceiving, +0.09 (−0.09 to +0.28) against the ground-truth team, −0.09 (−0.24 to +0.06) at 5v5."""
+    """The shipped policy (issue 39's league_privileged_5v5_s0 at its end, +400,128 env steps) is evaluated on the
+    validation split, and its two test-ledger rows, as this very file, give the bars: docs/results.md reports
+    +0.235 (+0.158 to +0.313; 146 wins, 192 draws, 62 losses in 400 games) against perceiving and +0.103 (+0.028 to
+    +0.183; 114 / 203 / 83) against the ground-truth team; no 5v5 test row."""
     text = (folder / "README.md").read_text()
     assert "## How it plays (validation split, seeds 10,000–10,024:" in text
     assert "--split validation --num-seeds 25" in text and "--seeds" not in text
+    assert "trained in 7 stages and 5 runs" in text
+    # league_anchor_s0_271k.safetensors holds weights alone: the recipe comes from its committed twin's header
+    assert ("from `docs/results_data/issue39/policies/league_anchor_s0_271k.safetensors` (its weights alone are in "
+            "that file; the header of `docs/results_data/issue39/shipped_ca882145/policy.safetensors`, the same "
+            "weights, counts 270,592 env steps)") in text
+    assert text.count("| this file |") == 2 and "the training checkpoint it was written from" not in text
+    assert ("- **met** — against `perceiving` at 2v2: 146 wins, 192 draws, 62 losses in 400 games, +0.23 goals a game "
+            "(+0.16 to +0.31), the interval above 0, and at least twice as many wins as losses.") in text
+    assert ("- **met** — against the ground-truth `scripted` team at 2v2: 114 wins, 203 draws, 83 losses in 400 "
+            "games, +0.10 goals a game (+0.03 to +0.18), the interval above 0.") in text
+    assert "- **not tried** — at 5v5 against `perceiving`: no test-split row." in text
+
+
+def test_the_archived_league_readme_keeps_its_ledger_rows_and_bars(tool):
+    """The league policy shipped 29-30 Nov (league_anchor_s0 at +270,592 env steps) keeps its README: its test-ledger
+    rows — two as the training checkpoint it was written from, one as the committed policy file with its weights —
+    give the bars: docs/results.md reports +0.21 (+0.04 to +0.38, 34 wins to 17 losses) against perceiving, +0.09
+    (−0.09 to +0.28) against the ground-truth team, −0.09 (−0.24 to +0.06) at 5v5."""
+    text = (tool.ROOT / SOCCER_FOLDERS[2] / "README.md").read_text()
+    assert text.startswith("# The league policy shipped before the privileged league's")
     assert "trained in 5 stages and 3 runs" in text
     assert "evaluated as the training checkpoint this file was written from" in text
     assert text.count("| the training checkpoint it was written from |") == 2

@@ -1,9 +1,10 @@
 """The shipped soccer policy's two files are one policy: onnxruntime on ``policy.onnx`` gives what torch gives on
 ``policy.safetensors`` (to 1e-4) on real observations of a 2v2 game, the recurrent state carried over periods; the
-same for the policy shipped before it, kept in its archive folder (docs/results_data/issue26/shipped_2fd24e79/).
-And the shipped file, written from a kept training checkpoint, names that checkpoint and holds the weights of the
-policy file committed for it in docs/results_data/issue39/policies/ (docs/results.md, "Learning beyond the
-teacher")."""
+same for the policies shipped before it, each kept in its archive folder (docs/results_data/issue26/shipped_2fd24e79/,
+docs/results_data/issue39/shipped_ca882145/). The shipped file is the kept copy that met the test split, byte for
+byte (the digest its test-ledger rows record); the one shipped before it, written from a kept training checkpoint,
+names that checkpoint and holds the weights of the policy file committed for it (docs/results.md, "Learning beyond
+the teacher")."""
 from __future__ import annotations
 
 import json
@@ -22,8 +23,12 @@ from dynenv_ros.envs.robocup_v0 import parallel_env  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "policy_node" / "pretrained"
 ARCHIVED = ROOT / "docs" / "results_data" / "issue26" / "shipped_2fd24e79"
-# the policy file committed for league_anchor_s0's checkpoint at +270,592 env steps, the one that met the test split
-CHOSEN = ROOT / "docs" / "results_data" / "issue39" / "policies" / "league_anchor_s0_271k.safetensors"
+LEAGUE_ARCHIVED = ROOT / "docs" / "results_data" / "issue39" / "shipped_ca882145"
+POLICIES = ROOT / "docs" / "results_data" / "issue39" / "policies"
+# league_privileged_5v5_s0's kept copy at its end (+400,128 env steps), the one that met both 2v2 bars on test
+CHOSEN = POLICIES / "league_privileged_5v5_s0_400k.safetensors"
+# the policy file committed for league_anchor_s0's checkpoint at +270,592 env steps, shipped 29-30 Nov 2026
+LEAGUE_CHOSEN = POLICIES / "league_anchor_s0_271k.safetensors"
 PERIODS = 4
 
 
@@ -43,7 +48,7 @@ def _observations(seed: int) -> list[dict[str, np.ndarray]]:
     return out
 
 
-@pytest.mark.parametrize("folder", [SHIPPED, ARCHIVED], ids=["shipped", "archived"])
+@pytest.mark.parametrize("folder", [SHIPPED, LEAGUE_ARCHIVED, ARCHIVED], ids=["shipped", "archived", "archived_first"])
 def test_the_onnx_file_acts_as_the_safetensors_file(folder):
     model, _ = load_policy(folder / "policy.safetensors")
     onnx_policy, torch_policy = OnnxPolicy(folder / "policy.onnx"), TorchPolicy(model.eval())
@@ -61,9 +66,16 @@ def test_the_onnx_file_acts_as_the_safetensors_file(folder):
         state_onnx, state_torch = a.state, b.state
 
 
-def test_the_shipped_file_names_its_checkpoint_and_holds_the_chosen_policys_weights():
+def test_the_shipped_file_is_the_chosen_kept_copy_byte_for_byte():
+    assert (SHIPPED / "policy.safetensors").read_bytes() == CHOSEN.read_bytes()
+    meta = json.loads(safetensors_header(CHOSEN.read_bytes())[0]["__metadata__"]["meta"])
+    assert meta["env_steps"] == 400_128 and meta["config"]["players_per_team"] == 5
+    assert "source_checkpoint" not in meta and "numpy_rng" not in meta
+
+
+def test_the_archived_league_file_names_its_checkpoint_and_holds_the_chosen_policys_weights():
     shipped, chosen = (safetensors_header((path).read_bytes())[0]["__metadata__"]
-                       for path in (SHIPPED / "policy.safetensors", CHOSEN))
+                       for path in (LEAGUE_ARCHIVED / "policy.safetensors", LEAGUE_CHOSEN))
     assert shipped["data_sha256"] == chosen["data_sha256"]           # the tensor data, byte for byte
     assert json.loads(shipped["config"]) == json.loads(chosen["config"])
     meta = json.loads(shipped["meta"])

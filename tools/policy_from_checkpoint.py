@@ -7,7 +7,9 @@ Usage::
 
     .venv/bin/python tools/policy_from_checkpoint.py CHECKPOINT FOLDER
 
-CHECKPOINT is a ``step_*`` folder of a run (or a run folder: its latest checkpoint); it is only read. Why a tool:
+CHECKPOINT is a ``step_*`` folder of a run (or a run folder: its latest checkpoint), or a kept policy file
+(``kept_policies/step_*.safetensors``, or its committed copy: a policy file the trainer wrote, meta and all, which is
+copied byte for byte, so that its SHA-256 stays the one its evaluations recorded); it is only read. Why a tool:
 the best policy by validation is often one of a run's kept checkpoints, not its end (docs/results.md, "Learning
 beyond the teacher"), and the folder it ships in must carry what a run's own end-of-run files carry, so that
 tools/pretrained_readme.py can describe it from its files:
@@ -49,6 +51,17 @@ def training_summary(meta: dict[str, Any], root: Path = ROOT) -> dict[str, Any]:
     return summary
 
 
+def copy_kept_policy(path: Path, out: Path) -> tuple[Any, dict[str, Any], str]:
+    """A kept policy file copied to ``out`` as it is: (the agent, its header's training meta, its SHA-256). Refused
+    when it lacks the training meta a run's policy file carries (its config above all: the README needs it)."""
+    from dynenv_ros.agent.checkpoint import load_policy, sha256
+    agent, meta = load_policy(path)
+    if not (meta or {}).get("config"):
+        raise ValueError(f"{path} carries no training config in its header: not a policy file a run wrote")
+    out.write_bytes(path.read_bytes())
+    return agent, meta, sha256(out)
+
+
 def write_folder(checkpoint: Path, folder: Path) -> dict[str, str]:
     """Write the four files into ``folder`` (which must exist); their SHA-256s by name."""
     from dynenv_ros.agent.checkpoint import sha256
@@ -57,7 +70,10 @@ def write_folder(checkpoint: Path, folder: Path) -> dict[str, str]:
     if not folder.is_dir():
         raise ValueError(f"folder {folder} does not exist")
     summary_path, config_path = folder / "train_summary.json", folder / "train_config.json"
-    agent, meta, digest = save_policy_from_training_checkpoint(checkpoint, folder / "policy.safetensors")
+    if checkpoint.is_file():
+        agent, meta, digest = copy_kept_policy(checkpoint, folder / "policy.safetensors")
+    else:
+        agent, meta, digest = save_policy_from_training_checkpoint(checkpoint, folder / "policy.safetensors")
     summary = training_summary(meta)
     export_onnx(agent, folder / "policy.onnx")
     config_path.write_text(json.dumps(meta["config"], indent=2) + "\n")
@@ -68,7 +84,8 @@ def write_folder(checkpoint: Path, folder: Path) -> dict[str, str]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("checkpoint", type=Path, help="a training checkpoint (step_* folder) or a run folder")
+    parser.add_argument("checkpoint", type=Path, help="a training checkpoint (step_* folder), a run folder, or a kept "
+                                                      "policy file (copied as it is)")
     parser.add_argument("folder", type=Path, help="where the files go (an existing folder)")
     args = parser.parse_args(argv)
     try:

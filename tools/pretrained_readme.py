@@ -48,6 +48,14 @@ ARCHIVED = {
         "(docs/results.md, \"Learning to play\"), so that every figure about it stays true. Issue 39's league policy "
         "replaced it there (docs/results.md, \"Learning beyond the teacher\"); the league runs started from this "
         "file (the `init_policy` of config/train/league.yaml, league_sizes.yaml and beyond_teacher.yaml)."),
+    Path("docs") / "results_data" / "issue39" / "shipped_ca882145": (
+        "The league policy shipped before the privileged league's",
+        "This folder keeps, whole, the policy that `policy_node/pretrained/` held from 29 to 30 Nov 2026 "
+        "(`league_anchor_s0` at +270,592 env steps; docs/results.md, \"Learning beyond the teacher\"), so that every "
+        "figure about it stays true. It met the 2v2 bar against `perceiving` on the test split, not the one against "
+        "the ground-truth team; `league_privileged_5v5_s0`'s end, which met both, replaced it there. The privileged "
+        "league runs started from its weights (`docs/results_data/issue39/policies/league_anchor_s0_271k.safetensors`, "
+        "the `init_policy` of config/train/league_privileged.yaml)."),
 }
 FOLDERS = (FOLDER, DRIVING_FOLDER, *ARCHIVED)
 POLICY, ONNX = "policy.safetensors", "policy.onnx"
@@ -157,6 +165,7 @@ class StageRun(NamedTuple):
     config: dict[str, Any]
     start: Path | None
     start_meta: dict[str, Any] | None
+    start_meta_from: Path | None = None     # the file whose header gave start_meta (``recipe_meta``)
 
 
 def stage_runs(here: Path, config: Mapping[str, Any]) -> list[StageRun] | None:
@@ -198,13 +207,35 @@ def stage_runs(here: Path, config: Mapping[str, Any]) -> list[StageRun] | None:
         if not start.is_file():
             raise ReadmeError(f"{path}: stage {first + 1} starts from {cfg.init_policy}, which is not in the "
                               f"repository")
-        _, start_meta = policy_header(start)
+        start_meta, meta_from = recipe_meta(start)
         given = {k: v for k, v in with_later_defaults(start_meta.get("config") or {}).items() if k != "init_policy"}
         if given != {k: v for k, v in before.to_dict().items() if k != "init_policy"}:
             raise ReadmeError(f"{path}: {cfg.init_policy}, which stage {first + 1} starts from, was not trained "
                               f"with the config the stages before it give")
-        out.append(StageRun(stages_of_run, cfg.to_dict(), start, start_meta))
+        out.append(StageRun(stages_of_run, cfg.to_dict(), start, start_meta, meta_from))
     return out
+
+
+def recipe_meta(path: Path) -> tuple[dict[str, Any], Path]:
+    """(The training meta of the policy file ``path``, the file whose header holds it): its own header's, or — for a
+    file saved with its weights alone (its meta names no training config) — that of a committed policy file with the
+    same tensor data (the header's ``data_sha256``) that carries one, such as the shipped file written from the same
+    checkpoint. Searched in docs/results_data/ and the shipped folder; the file's own meta where none is found."""
+    from dynenv_ros.agent.checkpoint import safetensors_header
+    _, meta = policy_header(path)
+    if meta.get("config"):
+        return meta, path
+    mine = safetensors_header(path.read_bytes())[0].get("__metadata__", {}).get("data_sha256")
+    if not mine:
+        return meta, path
+    for candidate in sorted([*(ROOT / "docs" / "results_data").rglob("*.safetensors"),
+                             *(ROOT / FOLDER).rglob("*.safetensors")]):
+        header = safetensors_header(candidate.read_bytes())[0].get("__metadata__") or {}
+        if candidate != path and header.get("data_sha256") == mine:
+            twin = policy_header(candidate)[1]
+            if twin.get("config"):
+                return twin, candidate
+    return meta, path
 
 
 def with_later_defaults(config: Mapping[str, Any]) -> dict[str, Any]:
@@ -389,6 +420,8 @@ def _closing_words(path: str, settings: Mapping[str, Any]) -> list[str]:
         raise ReadmeError(f"{path}: env_config {sorted(env_config)} has no dynenv-eval option")
     if settings.get("greedy"):
         words.append("--greedy")
+    if settings.get("games_at_once", 1) > 1:
+        words += ["--games-at-once", str(settings["games_at_once"])]
     return [*words, "--quiet", "--out", path]
 
 
@@ -420,7 +453,10 @@ def training_recipe(root: Path, here: Path, config: Mapping[str, Any], revision:
             number += 1
             preset = dict(zip(stage["train"][0::2], stage["train"][1::2])).get("--config")
             named = f"**`{preset}`** (config/train/{preset}.yaml): " if preset else ""
-            started = (f"a new run from `{run.config['init_policy']}` (its header counts "
+            counted = ("its header counts" if run.start_meta_from in (None, run.start) else
+                       f"its weights alone are in that file; the header of "
+                       f"`{run.start_meta_from.relative_to(ROOT)}`, the same weights, counts")
+            started = (f"a new run from `{run.config['init_policy']}` ({counted} "
                        f"{_n(run.start_meta['env_steps'])} env steps); "
                        if run.start is not None and stage is run.stages[0] else "")
             out.append(f"  {number}. {named}{started}{stage['why']}")
