@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import shlex
 import subprocess
@@ -228,14 +229,21 @@ def recipe_meta(path: Path) -> tuple[dict[str, Any], Path]:
     mine = safetensors_header(path.read_bytes())[0].get("__metadata__", {}).get("data_sha256")
     if not mine:
         return meta, path
-    for candidate in sorted([*(ROOT / "docs" / "results_data").rglob("*.safetensors"),
-                             *(ROOT / FOLDER).rglob("*.safetensors")]):
+    for candidate in _policy_files(ROOT / "docs" / "results_data", ROOT / FOLDER):
         header = safetensors_header(candidate.read_bytes())[0].get("__metadata__") or {}
         if candidate != path and header.get("data_sha256") == mine:
             twin = policy_header(candidate)[1]
             if twin.get("config"):
                 return twin, candidate
     return meta, path
+
+
+def _policy_files(*folders: Path) -> list[Path]:
+    """Every ``*.safetensors`` under ``folders``, sorted; linked folders followed (``Path.rglob`` does not follow
+    them, and a checkout may link its data folders in, as the doc tests' scratch views do)."""
+    found = [Path(top) / name for folder in folders for top, _, names in os.walk(folder, followlinks=True)
+             for name in names if name.endswith(".safetensors")]
+    return sorted(found)
 
 
 def with_later_defaults(config: Mapping[str, Any]) -> dict[str, Any]:
