@@ -101,6 +101,14 @@ def policy_header(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     return json.loads(metadata["config"]), json.loads(metadata.get("meta", "{}"))
 
 
+def data_sha256(path: Path) -> str | None:
+    """The SHA-256 of a policy file's tensor data, as its safetensors header records it (None where it records
+    none): two files with the same one hold the same weights."""
+    from dynenv_ros.agent.checkpoint import safetensors_header
+    metadata = safetensors_header(path.read_bytes())[0].get("__metadata__") or {}
+    return metadata.get("data_sha256")
+
+
 def load_evaluations(folder: Path, digest: str) -> list[tuple[Path, dict[str, Any]]]:
     """The ``dynenv-eval`` soccer results in ``folder/eval`` (random, scripted, perceiving first), each checked to
     be an evaluation of the policy file whose SHA-256 is ``digest``."""
@@ -222,16 +230,14 @@ def recipe_meta(path: Path) -> tuple[dict[str, Any], Path]:
     file saved with its weights alone (its meta names no training config) — that of a committed policy file with the
     same tensor data (the header's ``data_sha256``) that carries one, such as the shipped file written from the same
     checkpoint. Searched in docs/results_data/ and the shipped folder; the file's own meta where none is found."""
-    from dynenv_ros.agent.checkpoint import safetensors_header
     _, meta = policy_header(path)
     if meta.get("config"):
         return meta, path
-    mine = safetensors_header(path.read_bytes())[0].get("__metadata__", {}).get("data_sha256")
+    mine = data_sha256(path)
     if not mine:
         return meta, path
     for candidate in _policy_files(ROOT / "docs" / "results_data", ROOT / FOLDER):
-        header = safetensors_header(candidate.read_bytes())[0].get("__metadata__") or {}
-        if candidate != path and header.get("data_sha256") == mine:
+        if candidate != path and data_sha256(candidate) == mine:
             twin = policy_header(candidate)[1]
             if twin.get("config"):
                 return twin, candidate
@@ -513,7 +519,7 @@ def same_policy(root: Path, here: Path, meta: Mapping[str, Any]) -> list[SamePol
     training checkpoint the file was written from (its header's ``source_checkpoint``: what ``dynenv-eval`` of that
     checkpoint records), and each committed policy file that a ledger row names whose header's ``data_sha256`` (the
     tensor data) is this file's, found under the repository by the row's path and checked by its sha256."""
-    from dynenv_ros.agent.checkpoint import safetensors_header, sha256
+    from dynenv_ros.agent.checkpoint import sha256
     from dynenv_ros.evaluation.ledger import read_ledger
     out = []
     source = meta.get("source_checkpoint") or {}
@@ -525,7 +531,7 @@ def same_policy(root: Path, here: Path, meta: Mapping[str, Any]) -> list[SamePol
     path = root / LEDGER
     if not path.exists():
         return out
-    mine = safetensors_header((here / POLICY).read_bytes())[0]["__metadata__"].get("data_sha256")
+    mine = data_sha256(here / POLICY)
     seen = {sha256(here / POLICY), *(same.digest for same in out)}
     for row in read_ledger(path):
         digest, spec = row["evaluated"].get("sha256"), str(row["evaluated"].get("spec", ""))
@@ -535,8 +541,7 @@ def same_policy(root: Path, here: Path, meta: Mapping[str, Any]) -> list[SamePol
         file = _committed_file(root, spec, digest)
         if file is None:
             continue
-        header = safetensors_header((root / file).read_bytes())[0].get("__metadata__") or {}
-        if mine and header.get("data_sha256") == mine:
+        if mine and data_sha256(root / file) == mine:
             out.append(SamePolicy(digest, f"`{file.name}`", f"evaluated as `{file}`, a committed policy file with the "
                                   f"same weights (its header's `data_sha256` is this file's)"))
     return out
