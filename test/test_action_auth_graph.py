@@ -86,14 +86,14 @@ def test_the_simulator_runs_only_the_genuine_teams_actions(make_node, executor, 
                                                                        secrets_dir=str(secrets)))
     for node in (sim, policy, keeper):
         executor.add_node(node)
-    attacker = _attacker(secrets, 90)
+    attacker = _attacker(secrets, 600)               # outlives the wait below: the test kills it
     counts = sim.session.counts
     try:
         assert spin_until(executor, lambda: counts["rejected_mac_missing"] >= 10 and counts["rejected_mac_invalid"]
-                          >= 30 and counts["rejected_replayed"] >= 5 and sim.periods_run >= 20, 150.0), \
-            sim.diagnostics()
+                          >= 30 and counts["rejected_replayed"] >= 5 and sim.periods_run >= 20, 300.0), \
+            (dict(counts), sim.periods_run, sim.diagnostics())
         periods = sim.periods_run
-        assert spin_until(executor, lambda: sim.periods_run >= periods + 5, 30.0)     # the game goes on
+        assert spin_until(executor, lambda: sim.periods_run >= periods + 5, 90.0)     # the game goes on
         spin_until(executor, lambda: False, 1.5)      # the last diagnostics period's log line
     finally:
         attacker.kill()
@@ -151,14 +151,15 @@ def test_a_genuine_action_replayed_onto_a_team_mates_topic_never_runs(make_node,
     for node in (bystander, sim, policy):
         executor.add_node(node)
     mate_id = robot_names(2).index("team_a_1")
-    attacker = subprocess.Popen([sys.executable, str(ATTACKER), "team_a_0", "90", str(secrets), "teammate",
+    # the attacker outlives the wait below (the test kills it): on a loaded machine a period can take seconds
+    attacker = subprocess.Popen([sys.executable, str(ATTACKER), "team_a_0", "600", str(secrets), "teammate",
                                  "team_a_1", str(mate_id)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True)
     counts = sim.session.counts
     try:
         assert spin_until(executor, lambda: counts["rejected_unknown_robot"] >= 10
-                          and counts["rejected_mac_invalid"] >= 10 and sim.periods_run >= 20, 150.0), \
-            sim.diagnostics()
+                          and counts["rejected_mac_invalid"] >= 10 and sim.periods_run >= 20, 300.0), \
+            (dict(counts), sim.periods_run, sim.diagnostics())
     finally:
         attacker.kill()
         output = attacker.communicate(timeout=10)[0]
@@ -202,12 +203,12 @@ def test_forged_and_replayed_messages_leave_learning_going_on_genuine_experience
                                                                trusted_weights_keys=[str(public)]))
     for node in (trainer, sim, policy):
         executor.add_node(node)
-    attacker = _attacker(secrets, 150)
+    attacker = _attacker(secrets, 600)               # outlives the wait below: the test kills it
     counts = trainer.assembler.counts
     try:
         assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 5 and counts["action_mac_invalid"] >= 20
                           and counts["action_mac_missing"] >= 5 and counts["feedback_mac_missing"] >= 5
-                          and counts["feedback_mac_invalid"] >= 5, 200.0), trainer.diagnostics()
+                          and counts["feedback_mac_invalid"] >= 5, 300.0), (dict(counts), trainer.diagnostics())
         spin_until(executor, lambda: False, 1.5)
     finally:
         attacker.kill()

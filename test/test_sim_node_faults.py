@@ -517,3 +517,36 @@ def test_a_sigint_while_the_realtime_simulator_starts_stops_it_cleanly(point, tm
                             timeout=90, cwd=tmp_path)
     assert result.returncode == 0, (result.returncode, result.stderr[-2000:])
     assert "terminate called" not in result.stderr and "Traceback" not in result.stderr, result.stderr[-2000:]
+
+
+def test_a_sigint_delivered_inside_the_runners_error_handling_is_a_clean_stop():
+    """CI run of 30 Nov 2026: sim_node exited by SIGINT with a traceback. rclpy's signal thread had shut the context
+    down (an RCLError in the executor), and Python raised the same signal's KeyboardInterrupt inside the handler
+    that tells such a stop from a failure. That is still the stop asked for: exit status 0, the context shut down and
+    rclpy's signal handlers given back. Played in a process of its own (the runner owns rclpy's default context)."""
+    import subprocess
+    import sys
+    script = (
+        "import rclpy, signal\n"
+        "from rclpy.node import Node\n"
+        "from dynenv_ros.ros import node_runner\n"
+        "class RCLError(Exception):\n"
+        "    pass\n"
+        "class Stopped(Node):\n"
+        "    def __init__(self):\n"
+        "        super().__init__('stopped')\n"
+        "        raise RCLError('the given context is not valid')\n"
+        "real_ok = rclpy.ok\n"
+        "calls = []\n"
+        "def ok_then_signal(*a, **k):\n"
+        "    calls.append(1)\n"
+        "    if len(calls) == 1:\n"
+        "        raise KeyboardInterrupt\n"
+        "    return real_ok(*a, **k)\n"
+        "node_runner.rclpy.ok = ok_then_signal\n"
+        "status = node_runner.run_node(Stopped, ['stopped'])\n"
+        "node_runner.rclpy.ok = real_ok\n"
+        "print('status', status, 'ok', rclpy.ok(), 'sigint', signal.getsignal(signal.SIGINT) is signal.default_int_handler)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "status 0 ok False sigint True", (done.stdout, done.stderr[-2000:])

@@ -41,31 +41,46 @@ def run_node(make_node: Callable[[], Node], args: Sequence[str] | None = None) -
     node = None
     status = 0
     try:
-        node = make_node()
-        refuse_unknown_overrides(node)
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except NodeExit as stop:
-        status = stop.status
-    except ParameterException as error:  # out of range or wrong type: refuse with the reason
-        print(f"parameter error: {error}", file=sys.stderr, flush=True)
-        status = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
+        try:
+            node = make_node()
+            refuse_unknown_overrides(node)
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            executor.spin()
+        except NodeExit as stop:
+            status = stop.status
+        except ParameterException as error:  # out of range or wrong type: refuse with the reason
+            print(f"parameter error: {error}", file=sys.stderr, flush=True)
+            status = 2
+        except ExternalShutdownException:
+            pass
+        except Exception as error:
+            # A signal during start-up or a callback: what ran next found the context already shut down. A stop
+            # asked for, not a failure; any other error is one.
+            if type(error).__name__ != "RCLError" or rclpy.ok():
+                raise
+    except KeyboardInterrupt:
+        # SIGINT: rclpy's signal thread shuts the context down, and Python raises KeyboardInterrupt in this thread
+        # at its next check, which may fall in spin or in one of the handlers above (after an RCLError).
         pass
-    except Exception as error:
-        # A signal during start-up or a callback: what ran next found the context already shut down. A stop asked
-        # for, not a failure; any other error is one.
-        if type(error).__name__ != "RCLError" or rclpy.ok():
-            raise
     finally:
-        if node is not None:
-            node.destroy_node()
-        shutdown_quietly()
-        # rclpy.shutdown would also uninstall rclpy's signal handlers, try_shutdown does not: without them a signal
-        # after the node is gone gets Python's own handling, and rclpy's signal thread does not outlive the node.
-        uninstall_signal_handlers()
+        stop_cleanly(node)
     return status
+
+
+def stop_cleanly(node: Node | None) -> None:
+    """Destroy ``node``, shut rclpy down and give the signals back, each step carried out even if the SIGINT that
+    asked for the stop is delivered to Python (KeyboardInterrupt) in the middle of it."""
+    steps = [node.destroy_node] if node is not None else []
+    # rclpy.shutdown would also uninstall rclpy's signal handlers, try_shutdown does not: without them a signal
+    # after the node is gone gets Python's own handling, and rclpy's signal thread does not outlive the node.
+    for step in (*steps, shutdown_quietly, uninstall_signal_handlers):
+        for _attempt in range(3):
+            try:
+                step()
+                break
+            except KeyboardInterrupt:
+                continue
 
 
 def shutdown_quietly(context: Context | None = None) -> None:
