@@ -86,12 +86,12 @@ def test_no_forged_frame_reaches_the_policys_decisions_or_the_trainers_experienc
                                 sim_stream())
     for node in (trainer, sim, policy, watcher):
         executor.add_node(node)
-    attacker = _attacker(secrets, 150)
+    attacker = _attacker(secrets, 600)               # outlives the wait below: the test kills it
     gate, learner_gate = policy.frame_gate.gate, trainer.readers.frame_gate.gate
     try:
         assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 3 and gate.counts["frame_replayed"] >= 5
                           and gate.counts["frame_mac_missing"] >= 30 and learner_gate.counts["frame_mac_missing"]
-                          >= 30 and sim.periods_run >= 20, 200.0), \
+                          >= 30 and sim.periods_run >= 20, 300.0), \
             (policy.diagnostics(), trainer.diagnostics())
     finally:
         attacker.kill()
@@ -177,9 +177,9 @@ def test_without_authenticated_frames_the_attackers_frames_reach_the_policy(make
     acted_on = _record(policy, "_store")
     for node in (sim, policy, keeper):
         executor.add_node(node)
-    attacker = _attacker(secrets, 60)
+    attacker = _attacker(secrets, 600)               # outlives the wait below: the test kills it
     try:
-        assert spin_until(executor, lambda: _forged(acted_on) >= 5, 60.0), policy.diagnostics()
+        assert spin_until(executor, lambda: _forged(acted_on) >= 5, 150.0), policy.diagnostics()
     finally:
         attacker.kill()
         attacker.communicate(timeout=10)
