@@ -91,11 +91,21 @@ class GitUnknown(ReadmeError):
 
 
 # -- reading the files -------------------------------------------------------------------------------------------
+def header_metadata(path: Path) -> dict[str, Any]:
+    """A policy file's safetensors ``__metadata__``, read from the header alone (the tools scan every committed
+    policy file for its ``data_sha256``; the tensor data is never needed)."""
+    import struct
+    from dynenv_ros.agent.checkpoint import safetensors_header
+    with path.open("rb") as file:
+        first = file.read(8)
+        data = first + (file.read(struct.unpack("<Q", first)[0]) if len(first) == 8 else b"")
+    return safetensors_header(data)[0].get("__metadata__") or {}
+
+
 def policy_header(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     """(agent config, training meta) from a policy file's safetensors header."""
-    from dynenv_ros.agent.checkpoint import FORMAT, safetensors_header
-    header, _ = safetensors_header(path.read_bytes())
-    metadata = header.get("__metadata__") or {}
+    from dynenv_ros.agent.checkpoint import FORMAT
+    metadata = header_metadata(path)
     if metadata.get("format") != FORMAT:
         raise ReadmeError(f"{path} is not a {FORMAT} policy file")
     return json.loads(metadata["config"]), json.loads(metadata.get("meta", "{}"))
@@ -104,9 +114,7 @@ def policy_header(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
 def data_sha256(path: Path) -> str | None:
     """The SHA-256 of a policy file's tensor data, as its safetensors header records it (None where it records
     none): two files with the same one hold the same weights."""
-    from dynenv_ros.agent.checkpoint import safetensors_header
-    metadata = safetensors_header(path.read_bytes())[0].get("__metadata__") or {}
-    return metadata.get("data_sha256")
+    return header_metadata(path).get("data_sha256")
 
 
 def load_evaluations(folder: Path, digest: str) -> list[tuple[Path, dict[str, Any]]]:
