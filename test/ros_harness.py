@@ -7,6 +7,10 @@ from typing import Any
 
 from rclpy.executors import Executor
 
+# How long an attacker process (test/*_attacker.py) runs when its test kills it after its wait: longer than any
+# wait, so on a loaded machine, where a motion period can take seconds, the attacker is still there when it counts.
+ATTACKER_OUTLIVES_THE_TEST_S = 600
+
 
 def spin_until(executor: Executor, condition: Callable[[], bool], timeout_s: float = 10.0,
                step_s: float = 0.02) -> bool:

@@ -25,7 +25,7 @@ from dynenv_ros.security.action_auth import (action_digest, check_action, check_
 from dynenv_ros.soccer.config import robot_names
 from policy_node.policy_node import PolicyNode
 from policy_node.scripted_policy import ScriptedPolicyNode
-from ros_harness import spin_until
+from ros_harness import ATTACKER_OUTLIVES_THE_TEST_S, spin_until
 
 ATTACKER = Path(__file__).with_name("action_attacker.py")
 FORGED_LOG_PROB, FORGED_REWARD = -0.5, 0.5          # action_attacker.py's plausible values
@@ -86,7 +86,7 @@ def test_the_simulator_runs_only_the_genuine_teams_actions(make_node, executor, 
                                                                        secrets_dir=str(secrets)))
     for node in (sim, policy, keeper):
         executor.add_node(node)
-    attacker = _attacker(secrets, 600)               # outlives the wait below: the test kills it
+    attacker = _attacker(secrets, ATTACKER_OUTLIVES_THE_TEST_S)
     counts = sim.session.counts
     try:
         assert spin_until(executor, lambda: counts["rejected_mac_missing"] >= 10 and counts["rejected_mac_invalid"]
@@ -151,8 +151,8 @@ def test_a_genuine_action_replayed_onto_a_team_mates_topic_never_runs(make_node,
     for node in (bystander, sim, policy):
         executor.add_node(node)
     mate_id = robot_names(2).index("team_a_1")
-    # the attacker outlives the wait below (the test kills it): on a loaded machine a period can take seconds
-    attacker = subprocess.Popen([sys.executable, str(ATTACKER), "team_a_0", "600", str(secrets), "teammate",
+    attacker = subprocess.Popen([sys.executable, str(ATTACKER), "team_a_0", str(ATTACKER_OUTLIVES_THE_TEST_S),
+                                 str(secrets), "teammate",
                                  "team_a_1", str(mate_id)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 text=True)
     counts = sim.session.counts
@@ -203,7 +203,7 @@ def test_forged_and_replayed_messages_leave_learning_going_on_genuine_experience
                                                                trusted_weights_keys=[str(public)]))
     for node in (trainer, sim, policy):
         executor.add_node(node)
-    attacker = _attacker(secrets, 600)               # outlives the wait below: the test kills it
+    attacker = _attacker(secrets, ATTACKER_OUTLIVES_THE_TEST_S)
     counts = trainer.assembler.counts
     try:
         assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 5 and counts["action_mac_invalid"] >= 20

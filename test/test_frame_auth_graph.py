@@ -25,7 +25,7 @@ from dynenv_ros.security.frame_auth import FRAMES, FrameGate, detection_array_by
 from dynenv_ros.soccer.config import robot_names
 from policy_node.policy_node import PolicyNode
 from policy_node.scripted_policy import ScriptedPolicyNode
-from ros_harness import spin_until
+from ros_harness import ATTACKER_OUTLIVES_THE_TEST_S, spin_until
 
 ATTACKER = Path(__file__).with_name("frame_attacker.py")
 MARK = 0.987654                                  # frame_attacker.py's forged height (genuine: z = 0)
@@ -86,7 +86,7 @@ def test_no_forged_frame_reaches_the_policys_decisions_or_the_trainers_experienc
                                 sim_stream())
     for node in (trainer, sim, policy, watcher):
         executor.add_node(node)
-    attacker = _attacker(secrets, 600)               # outlives the wait below: the test kills it
+    attacker = _attacker(secrets, ATTACKER_OUTLIVES_THE_TEST_S)
     gate, learner_gate = policy.frame_gate.gate, trainer.readers.frame_gate.gate
     try:
         assert spin_until(executor, lambda: trainer.message_trainer.progress.updates >= 3 and gate.counts["frame_replayed"] >= 5
@@ -177,7 +177,7 @@ def test_without_authenticated_frames_the_attackers_frames_reach_the_policy(make
     acted_on = _record(policy, "_store")
     for node in (sim, policy, keeper):
         executor.add_node(node)
-    attacker = _attacker(secrets, 600)               # outlives the wait below: the test kills it
+    attacker = _attacker(secrets, ATTACKER_OUTLIVES_THE_TEST_S)
     try:
         assert spin_until(executor, lambda: _forged(acted_on) >= 5, 150.0), policy.diagnostics()
     finally:

@@ -14,7 +14,7 @@ import torch
 
 from dynenv_ros.agent.checkpoint import load_policy
 from dynenv_ros.learning.run import checkpoints
-from ros_harness import spin_until
+from ros_harness import ATTACKER_OUTLIVES_THE_TEST_S, spin_until
 from test_trainer_node import _game, _trainer
 
 ATTACKER = Path(__file__).with_name("poison_attacker.py")
@@ -41,9 +41,8 @@ def test_forged_actions_and_rewards_from_another_process_cannot_kill_learning(ma
     learnt = []
     put = trainer.background.put
     trainer.background.put = lambda sequences: (learnt.extend(sequences), put(sequences))[1]
-    # the attacker outlives the wait below (the test kills it): on a loaded machine a period can take seconds
-    attacker = subprocess.Popen([sys.executable, str(ATTACKER), "team_a_0", "600"], stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, text=True)
+    attacker = subprocess.Popen([sys.executable, str(ATTACKER), "team_a_0", str(ATTACKER_OUTLIVES_THE_TEST_S)],
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         sim, _ = _game(make_node, executor, seed=5, trusted=tmp_path / "keys")
         ran = _executed(sim)
